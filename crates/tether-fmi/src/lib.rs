@@ -1,1 +1,73 @@
 //! FMI 2.0 co-simulation import.
+//!
+//! # Layers
+//!
+//! - **Files** — [`archive`] unpacks a `.fmu` safely (no `..`, absolute paths or
+//!   symlinks; stored/deflate only; a size budget against decompression bombs) into a
+//!   temporary directory that lives as long as anything made from it.
+//! - **Description** — [`model_description`] peeks at `fmiVersion`, then parses
+//!   `modelDescription.xml` completely for co-simulation, applying the FMI 2.0 defaults;
+//!   errors name the file and line.
+//! - **Raw** — [`raw`] mirrors the C API one-to-one (types, `fmi2CallbackFunctions`,
+//!   the function table [`raw::Fmi2Functions`]); a crate-private component wrapper calls
+//!   the functions under their C names, each through one status check that logs the call
+//!   at trace level and turns statuses into [`Error`]s. The variadic logger callback is a
+//!   small C shim forwarding to the `log` facade (target `fmu::<instance>`).
+//! - **Safe** — [`Fmu`] (open, describe, instantiate), [`Instance`] (the co-simulation
+//!   calls, `Send`) and [`FmuState`] (owned states, freed on drop).
+//!
+//! # Lifetimes
+//!
+//! An [`Instance`] shares the unpacked directory and the loaded library with its
+//! [`Fmu`] through `Arc`s, so dropping the `Fmu` is harmless. An [`FmuState`] shares
+//! the instance's core, so it may outlive the `Instance` value; `fmi2FreeInstance` runs
+//! when the last of them is dropped. After any call returns `fmi2Fatal`, every further
+//! call on every instance of that FMU is refused and nothing is freed (the standard
+//! forbids further calls).
+//!
+//! ```no_run
+//! use tether_fmi::{Fmu, InstanceOptions};
+//!
+//! # fn main() -> Result<(), tether_fmi::Error> {
+//! let fmu = Fmu::open("oscillator.fmu")?;
+//! let md = fmu.model_description();
+//! let x = md.value_reference("x")?;
+//! let mut a = fmu.instantiate("a", InstanceOptions::default())?;
+//! a.setup_experiment(None, 0.0, Some(1.0))?;
+//! a.enter_initialization_mode()?;
+//! a.exit_initialization_mode()?;
+//! let saved = a.get_fmu_state()?;
+//! a.do_step(0.0, 1e-3, false)?;
+//! a.set_fmu_state(&saved)?;
+//! let mut out = [0.0];
+//! a.get_real(&[x], &mut out)?;
+//! # Ok(())
+//! # }
+//! ```
+
+pub mod archive;
+mod error;
+mod fmu;
+mod instance;
+mod library;
+mod logger;
+pub mod model_description;
+pub mod raw;
+mod state;
+mod uri;
+mod xml;
+
+pub use archive::ExtractLimits;
+pub use error::{Error, Result};
+pub use fmu::{Fmu, InstanceOptions, OpenOptions};
+pub use instance::{Instance, StatusKind};
+pub use library::PLATFORM;
+pub use model_description::{
+    BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
+    DependencyKind, DisplayUnit, EnumerationItem, Initial, IntegerType, IntegerVariable,
+    LogCategory, ModelDescription, ModelStructure, RealType, RealVariable, ScalarVariable,
+    SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown, ValueReference, Variability,
+    VariableKind, VariableNamingConvention,
+};
+pub use raw::Status;
+pub use state::FmuState;

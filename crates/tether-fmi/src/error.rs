@@ -1,0 +1,389 @@
+//! The crate's error type: one enum, every variant carrying the context needed to act on it.
+
+use std::fmt;
+use std::path::PathBuf;
+
+/// Result alias used throughout the crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong when importing or driving an FMI 2.0 FMU.
+///
+/// `Display` is always a single line naming the culprit (file, entry, instance, function,
+/// time or variable).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A file or directory could not be read or written.
+    #[error("cannot access '{}': {source}", path.display())]
+    Io {
+        /// The path being accessed.
+        path: PathBuf,
+        /// The underlying I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// The path is neither a readable zip archive nor an unpacked FMU directory.
+    #[error("'{}' is not an FMU archive (not a valid zip file: {reason})", path.display())]
+    NotAnArchive {
+        /// The offending path.
+        path: PathBuf,
+        /// Why the zip reader rejected it.
+        reason: String,
+    },
+
+    /// An archive entry would be extracted outside the target directory (`..`).
+    #[error("FMU archive '{}' has entry '{entry}' that escapes the extraction directory", archive.display())]
+    EntryEscapes {
+        /// The archive.
+        archive: PathBuf,
+        /// The entry name as stored in the archive.
+        entry: String,
+    },
+
+    /// An archive entry has an absolute path.
+    #[error("FMU archive '{}' has entry '{entry}' with an absolute path", archive.display())]
+    AbsoluteEntry {
+        /// The archive.
+        archive: PathBuf,
+        /// The entry name as stored in the archive.
+        entry: String,
+    },
+
+    /// An archive entry is a symbolic link (refused: it could point anywhere).
+    #[error("FMU archive '{}' has entry '{entry}' that is a symbolic link", archive.display())]
+    SymlinkEntry {
+        /// The archive.
+        archive: PathBuf,
+        /// The entry name as stored in the archive.
+        entry: String,
+    },
+
+    /// An archive entry cannot be extracted safely for another reason (encryption,
+    /// compression method other than stored/deflate, duplicate name, NUL byte in the name).
+    #[error("FMU archive '{}' has entry '{entry}' that cannot be extracted: {reason}", archive.display())]
+    UnsupportedEntry {
+        /// The archive.
+        archive: PathBuf,
+        /// The entry name as stored in the archive.
+        entry: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+
+    /// Extraction would exceed the configured size or entry-count limit
+    /// (decompression bomb guard).
+    #[error("FMU archive '{}' exceeds the extraction limit at entry '{entry}': {reason}", archive.display())]
+    ArchiveTooLarge {
+        /// The archive.
+        archive: PathBuf,
+        /// The entry at which the limit was hit.
+        entry: String,
+        /// Which limit, with numbers.
+        reason: String,
+    },
+
+    /// The FMU has no `modelDescription.xml` at its root.
+    #[error("'{}' has no modelDescription.xml at its root", path.display())]
+    MissingModelDescription {
+        /// The FMU (archive or directory).
+        path: PathBuf,
+    },
+
+    /// `modelDescription.xml` is not well-formed XML.
+    #[error("malformed XML in '{}' at line {line}, column {column}: {message}", file.display())]
+    MalformedXml {
+        /// The XML file.
+        file: PathBuf,
+        /// 1-based line of the problem.
+        line: usize,
+        /// 1-based column (in characters) of the problem.
+        column: usize,
+        /// What the parser found.
+        message: String,
+    },
+
+    /// `modelDescription.xml` is well-formed but violates the FMI 2.0 schema or rules.
+    #[error("invalid model description '{}' at line {line}: {message}", file.display())]
+    InvalidModelDescription {
+        /// The XML file.
+        file: PathBuf,
+        /// 1-based line of the offending element.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+
+    /// The FMU is not an FMI 2.0 FMU.
+    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 co-simulation only", path.display())]
+    UnsupportedFmiVersion {
+        /// The FMU.
+        path: PathBuf,
+        /// The `fmiVersion` found (or a description when the attribute is absent).
+        version: String,
+    },
+
+    /// The FMU implements model exchange only.
+    #[error("'{}' (model '{model}') is a model-exchange-only FMU; Tether supports FMI 2.0 co-simulation only", path.display())]
+    NotCoSimulation {
+        /// The FMU.
+        path: PathBuf,
+        /// The model name.
+        model: String,
+    },
+
+    /// The FMU ships no binary for this platform.
+    #[error("FMU '{model}' has no linux64 binary: expected '{}'", expected.display())]
+    MissingBinary {
+        /// The model name.
+        model: String,
+        /// Where the shared library was expected.
+        expected: PathBuf,
+    },
+
+    /// The shared library could not be loaded.
+    #[error("cannot load FMU library '{}': {}", path.display(), one_line(message))]
+    LibraryLoad {
+        /// The shared library.
+        path: PathBuf,
+        /// The loader's message.
+        message: String,
+    },
+
+    /// The shared library lacks a function of the FMI 2.0 co-simulation API.
+    #[error("FMU library '{}' lacks the FMI 2.0 function '{symbol}'", library.display())]
+    MissingSymbol {
+        /// The shared library.
+        library: PathBuf,
+        /// The first missing symbol.
+        symbol: &'static str,
+    },
+
+    /// The shared library reports a different FMI version or types platform.
+    #[error("FMU library '{}': {function} returned '{found}', expected '{expected}'", library.display())]
+    IncompatibleLibrary {
+        /// The shared library.
+        library: PathBuf,
+        /// `fmi2GetVersion` or `fmi2GetTypesPlatform`.
+        function: &'static str,
+        /// What the library returned.
+        found: String,
+        /// What Tether needs.
+        expected: &'static str,
+    },
+
+    /// No variable of that name exists; close matches are suggested.
+    #[error("no variable '{name}' in model '{model}'{}", Suggestions(suggestions))]
+    UnknownVariable {
+        /// The model name.
+        model: String,
+        /// The name asked for.
+        name: String,
+        /// Close matches (edit distance or prefix), best first.
+        suggestions: Vec<String>,
+    },
+
+    /// The FMU does not declare a capability the requested operation needs.
+    #[error("model '{model}' does not declare {capability}=\"true\", which {operation} needs")]
+    MissingCapability {
+        /// The model name.
+        model: String,
+        /// The capability flag, spelled as in modelDescription.xml.
+        capability: &'static str,
+        /// The operation that needs it.
+        operation: &'static str,
+    },
+
+    /// `fmi2Instantiate` returned NULL.
+    #[error("fmi2Instantiate failed for instance '{instance}' of model '{model}'")]
+    InstantiationFailed {
+        /// The model name.
+        model: String,
+        /// The requested instance name.
+        instance: String,
+    },
+
+    /// A function returned `fmi2Discard`.
+    #[error("{function} returned fmi2Discard on instance '{instance}' at t={time}")]
+    Discard {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// The instance's communication time when the call was made.
+        time: f64,
+    },
+
+    /// A function returned `fmi2Error`.
+    #[error("{function} returned fmi2Error on instance '{instance}' at t={time}")]
+    Failed {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// The instance's communication time when the call was made.
+        time: f64,
+    },
+
+    /// A function returned `fmi2Fatal`; the FMU is unusable from now on.
+    #[error("{function} returned fmi2Fatal on instance '{instance}' at t={time}")]
+    Fatal {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// The instance's communication time when the call was made.
+        time: f64,
+    },
+
+    /// A function returned `fmi2Pending` (asynchronous stepping is not supported).
+    #[error("{function} returned fmi2Pending on instance '{instance}' at t={time}")]
+    Pending {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// The instance's communication time when the call was made.
+        time: f64,
+    },
+
+    /// A function returned a status code outside the FMI 2.0 range.
+    #[error(
+        "{function} returned the unknown status code {code} on instance '{instance}' at t={time}"
+    )]
+    UnknownStatus {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// The instance's communication time when the call was made.
+        time: f64,
+        /// The raw status code.
+        code: i32,
+    },
+
+    /// A call was refused because an earlier call of this FMU returned `fmi2Fatal`.
+    #[error("{function} refused on instance '{instance}' at t={time}: the FMU returned fmi2Fatal earlier")]
+    FmuDead {
+        /// The FMI function that was not called.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// The instance's communication time.
+        time: f64,
+    },
+
+    /// An FMU state was used with an instance it does not belong to.
+    #[error("{function} on instance '{instance}': the FMU state belongs to instance '{owner}'")]
+    ForeignState {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance the call was made on.
+        instance: String,
+        /// The instance that created the state.
+        owner: String,
+    },
+
+    /// Slices passed to a get/set function differ in length.
+    #[error("{function} on instance '{instance}': {what} has {got} entries, expected {expected}")]
+    LengthMismatch {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// Which argument.
+        what: &'static str,
+        /// The length required.
+        expected: usize,
+        /// The length passed.
+        got: usize,
+    },
+
+    /// An argument cannot be passed to (or a result cannot be taken from) the C API,
+    /// e.g. a string with an interior NUL byte or a non-UTF-8 string from the FMU.
+    #[error("{function} on instance '{instance}': {message}")]
+    InvalidArgument {
+        /// The FMI function.
+        function: &'static str,
+        /// The instance name.
+        instance: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl Error {
+    /// The FMI function named by a status or call error, if this is one.
+    pub fn function(&self) -> Option<&'static str> {
+        match self {
+            Error::Discard { function, .. }
+            | Error::Failed { function, .. }
+            | Error::Fatal { function, .. }
+            | Error::Pending { function, .. }
+            | Error::UnknownStatus { function, .. }
+            | Error::FmuDead { function, .. }
+            | Error::ForeignState { function, .. }
+            | Error::LengthMismatch { function, .. }
+            | Error::InvalidArgument { function, .. } => Some(function),
+            _ => None,
+        }
+    }
+}
+
+/// Collapses whitespace runs (including newlines) so messages from other libraries stay
+/// on one line.
+pub(crate) fn one_line(message: &str) -> String {
+    message.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// Renders "; did you mean 'a', 'b'?" or nothing.
+struct Suggestions<'a>(&'a [String]);
+
+impl fmt::Display for Suggestions<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let Some((first, rest)) = self.0.split_first() else {
+            return Ok(());
+        };
+        write!(f, "; did you mean '{first}'")?;
+        for s in rest {
+            write!(f, ", '{s}'")?;
+        }
+        f.write_str("?")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_variable_message_lists_suggestions() {
+        let e = Error::UnknownVariable {
+            model: "oscillator".into(),
+            name: "xx".into(),
+            suggestions: vec!["x".into()],
+        };
+        assert_eq!(
+            e.to_string(),
+            "no variable 'xx' in model 'oscillator'; did you mean 'x'?"
+        );
+        let e = Error::UnknownVariable {
+            model: "m".into(),
+            name: "q".into(),
+            suggestions: vec![],
+        };
+        assert_eq!(e.to_string(), "no variable 'q' in model 'm'");
+    }
+
+    #[test]
+    fn loader_messages_are_collapsed_to_one_line() {
+        let e = Error::LibraryLoad {
+            path: "/a.so".into(),
+            message: "first\n  second".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "cannot load FMU library '/a.so': first second"
+        );
+    }
+}

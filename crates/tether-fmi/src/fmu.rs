@@ -1,0 +1,166 @@
+//! [`Fmu`]: an opened FMU (unpacked files, parsed model description, loaded library).
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use crate::archive::{self, ExtractLimits, FmuDir};
+use crate::error::{Error, Result};
+use crate::instance::Instance;
+use crate::library::{binary_path, Library};
+use crate::model_description::{self, ModelDescription};
+use crate::raw::component::{InstantiateArgs, RawComponent};
+use crate::uri::file_uri;
+
+/// Options for [`Fmu::open_with`].
+#[derive(Debug, Clone, Default)]
+pub struct OpenOptions {
+    /// Limits applied when unpacking a `.fmu` archive.
+    pub limits: ExtractLimits,
+}
+
+/// Options for [`Fmu::instantiate`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct InstanceOptions {
+    /// `loggingOn` of `fmi2Instantiate`: whether the FMU sends debug messages.
+    pub logging_on: bool,
+    /// `visible` of `fmi2Instantiate` (Tether runs FMUs headless: default false).
+    pub visible: bool,
+}
+
+impl InstanceOptions {
+    /// Options with FMU debug logging switched on.
+    pub fn with_logging(mut self, logging_on: bool) -> Self {
+        self.logging_on = logging_on;
+        self
+    }
+}
+
+/// What every instance of an FMU shares: the files, the description, the code.
+#[derive(Debug)]
+pub(crate) struct FmuShared {
+    pub origin: PathBuf,
+    pub dir: Arc<FmuDir>,
+    pub model_description: ModelDescription,
+    pub library: Arc<Library>,
+}
+
+/// An opened FMI 2.0 co-simulation FMU.
+///
+/// Dropping the `Fmu` does not invalidate instances made from it: they share the
+/// unpacked directory and the loaded library, which go away with the last holder.
+#[derive(Debug, Clone)]
+pub struct Fmu {
+    shared: Arc<FmuShared>,
+}
+
+impl Fmu {
+    /// Opens a `.fmu` archive (unpacked into a private temporary directory) or an
+    /// already-unpacked FMU directory, with default [`OpenOptions`].
+    pub fn open(path: impl AsRef<Path>) -> Result<Fmu> {
+        Fmu::open_with(path, &OpenOptions::default())
+    }
+
+    /// Opens an FMU with explicit options.
+    ///
+    /// Checks, in order: the archive is a safe zip (see [`ExtractLimits`]);
+    /// `modelDescription.xml` exists; its `fmiVersion` is 2.x (a cheap peek before the full
+    /// parse); it is well-formed and valid and declares `CoSimulation`;
+    /// `binaries/linux64/<modelIdentifier>.so` exists, loads, exports every FMI 2.0
+    /// co-simulation function and reports version "2.0" and platform "default".
+    pub fn open_with(path: impl AsRef<Path>, options: &OpenOptions) -> Result<Fmu> {
+        let origin = path.as_ref().to_owned();
+        let metadata = std::fs::metadata(&origin).map_err(|source| Error::Io {
+            path: origin.clone(),
+            source,
+        })?;
+        let dir = if metadata.is_dir() {
+            FmuDir::existing(&origin)?
+        } else {
+            archive::extract(&origin, &options.limits)?
+        };
+        let xml_path = dir.root().join("modelDescription.xml");
+        if !xml_path.is_file() {
+            return Err(Error::MissingModelDescription { path: origin });
+        }
+        let bytes = std::fs::read(&xml_path).map_err(|source| Error::Io {
+            path: xml_path.clone(),
+            source,
+        })?;
+        // Errors name the file as the user sees it: inside the archive or the directory.
+        let shown = origin.join("modelDescription.xml");
+        let model_description = model_description::parse_bytes(&bytes, &shown, &origin)?;
+        let so = binary_path(
+            dir.root(),
+            &model_description.co_simulation.model_identifier,
+        );
+        if !so.is_file() {
+            let expected = if metadata.is_dir() {
+                so
+            } else {
+                origin.join(so.strip_prefix(dir.root()).unwrap_or(&so))
+            };
+            return Err(Error::MissingBinary {
+                model: model_description.model_name.clone(),
+                expected,
+            });
+        }
+        let library = Library::load(&so)?;
+        Ok(Fmu {
+            shared: Arc::new(FmuShared {
+                origin,
+                dir: Arc::new(dir),
+                model_description,
+                library: Arc::new(library),
+            }),
+        })
+    }
+
+    /// The parsed model description.
+    pub fn model_description(&self) -> &ModelDescription {
+        &self.shared.model_description
+    }
+
+    /// The path the FMU was opened from.
+    pub fn path(&self) -> &Path {
+        &self.shared.origin
+    }
+
+    /// The directory holding the unpacked FMU.
+    pub fn directory(&self) -> &Path {
+        self.shared.dir.root()
+    }
+
+    /// The loaded shared library's path.
+    pub fn library_path(&self) -> &Path {
+        self.shared.library.path()
+    }
+
+    /// The `fmuResourceLocation` passed to `fmi2Instantiate`: a percent-encoded
+    /// `file://` URI of the FMU's `resources/` directory.
+    pub fn resource_location(&self) -> String {
+        file_uri(&self.shared.dir.resources())
+    }
+
+    /// Creates a co-simulation instance (`fmi2Instantiate` with the model description's
+    /// GUID). The instance is in the *instantiated* state; call
+    /// [`Instance::setup_experiment`] and the initialization-mode functions next.
+    pub fn instantiate(&self, instance_name: &str, options: InstanceOptions) -> Result<Instance> {
+        let md = &self.shared.model_description;
+        let raw = RawComponent::fmi2Instantiate(
+            Arc::clone(&self.shared.library),
+            Arc::clone(&self.shared.dir),
+            &InstantiateArgs {
+                model: &md.model_name,
+                instance_name,
+                guid: &md.guid,
+                resource_location: &self.resource_location(),
+                visible: options.visible,
+                logging_on: options.logging_on,
+            },
+        )?;
+        Ok(Instance::new(
+            Arc::new(Mutex::new(raw)),
+            Arc::clone(&self.shared),
+        ))
+    }
+}

@@ -1,0 +1,312 @@
+//! [`Instance`]: the safe co-simulation API of one FMU instance.
+
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+
+use crate::error::{Error, Result};
+use crate::fmu::FmuShared;
+use crate::model_description::{ModelDescription, ScalarVariable, ValueReference};
+use crate::raw::component::RawComponent;
+use crate::raw::{self, Status};
+
+/// The shared core of an instance: the raw component behind a mutex, so that
+/// [`FmuState`](crate::FmuState)s can keep it alive and free themselves after the
+/// `Instance` value is gone. `fmi2FreeInstance` runs when the last holder drops.
+pub(crate) type Core = Arc<Mutex<RawComponent>>;
+
+/// Locks a core; a poisoned lock is still usable (no FMI call panics midway).
+pub(crate) fn lock(core: &Core) -> MutexGuard<'_, RawComponent> {
+    core.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Which status `fmi2Get*Status` reports (`fmi2StatusKind`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum StatusKind {
+    /// `fmi2DoStepStatus`.
+    DoStepStatus,
+    /// `fmi2PendingStatus`.
+    PendingStatus,
+    /// `fmi2LastSuccessfulTime`.
+    LastSuccessfulTime,
+    /// `fmi2Terminated`.
+    Terminated,
+}
+
+impl StatusKind {
+    fn raw(self) -> raw::fmi2StatusKind {
+        match self {
+            StatusKind::DoStepStatus => raw::fmi2DoStepStatus,
+            StatusKind::PendingStatus => raw::fmi2PendingStatus,
+            StatusKind::LastSuccessfulTime => raw::fmi2LastSuccessfulTime,
+            StatusKind::Terminated => raw::fmi2Terminated,
+        }
+    }
+}
+
+/// One co-simulation instance of an FMU.
+///
+/// `Instance` is `Send`: it can be moved to a worker thread (calls on one instance are
+/// serialised). It keeps the FMU's files and library alive, so it may outlive the
+/// [`Fmu`](crate::Fmu) it came from. Errors name the function, the instance and its
+/// current communication time, which the instance tracks from `setup_experiment` and
+/// `do_step`.
+#[derive(Debug)]
+pub struct Instance {
+    pub(crate) core: Core,
+    pub(crate) fmu: Arc<FmuShared>,
+    name: Arc<str>,
+}
+
+impl Instance {
+    pub(crate) fn new(core: Core, fmu: Arc<FmuShared>) -> Instance {
+        let name = Arc::from(lock(&core).name());
+        Instance { core, fmu, name }
+    }
+
+    pub(crate) fn lock(&self) -> MutexGuard<'_, RawComponent> {
+        lock(&self.core)
+    }
+
+    /// The instance name given to `fmi2Instantiate`.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The model description of the FMU this instance belongs to.
+    pub fn model_description(&self) -> &ModelDescription {
+        &self.fmu.model_description
+    }
+
+    /// The variable called `name` ([`Error::UnknownVariable`] with suggestions otherwise).
+    pub fn variable(&self, name: &str) -> Result<&ScalarVariable> {
+        self.fmu.model_description.variable(name)
+    }
+
+    /// The value reference of the variable called `name`.
+    pub fn value_reference(&self, name: &str) -> Result<ValueReference> {
+        self.fmu.model_description.value_reference(name)
+    }
+
+    /// The current communication time as tracked by this instance.
+    pub fn time(&self) -> f64 {
+        self.lock().time
+    }
+
+    /// Whether this FMU returned `fmi2Fatal` (every further call is refused).
+    pub fn is_fatal(&self) -> bool {
+        self.lock().is_fatal()
+    }
+
+    pub(crate) fn require(
+        &self,
+        flag: bool,
+        capability: &'static str,
+        operation: &'static str,
+    ) -> Result<()> {
+        if flag {
+            Ok(())
+        } else {
+            Err(Error::MissingCapability {
+                model: self.fmu.model_description.model_name.clone(),
+                capability,
+                operation,
+            })
+        }
+    }
+
+    /// `fmi2SetDebugLogging`.
+    pub fn set_debug_logging(&mut self, logging_on: bool, categories: &[&str]) -> Result<()> {
+        self.lock().fmi2SetDebugLogging(logging_on, categories)
+    }
+
+    /// `fmi2SetupExperiment`; the tracked time becomes `start`.
+    pub fn setup_experiment(
+        &mut self,
+        tolerance: Option<f64>,
+        start: f64,
+        stop: Option<f64>,
+    ) -> Result<()> {
+        let mut raw = self.lock();
+        raw.fmi2SetupExperiment(tolerance, start, stop)?;
+        raw.time = start;
+        Ok(())
+    }
+
+    /// `fmi2EnterInitializationMode`.
+    pub fn enter_initialization_mode(&mut self) -> Result<()> {
+        self.lock().fmi2EnterInitializationMode()
+    }
+
+    /// `fmi2ExitInitializationMode`.
+    pub fn exit_initialization_mode(&mut self) -> Result<()> {
+        self.lock().fmi2ExitInitializationMode()
+    }
+
+    /// `fmi2GetReal` into `out` (same length as `vrs`; no allocation).
+    pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
+        self.lock().fmi2GetReal(vrs, out)
+    }
+
+    /// `fmi2GetInteger` into `out`.
+    pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+        self.lock().fmi2GetInteger(vrs, out)
+    }
+
+    /// `fmi2GetBoolean` into `out`.
+    pub fn get_boolean(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
+        self.lock().fmi2GetBoolean(vrs, out)
+    }
+
+    /// `fmi2GetString` into `out` (the strings' buffers are reused).
+    pub fn get_string(&mut self, vrs: &[ValueReference], out: &mut [String]) -> Result<()> {
+        self.lock().fmi2GetString(vrs, out)
+    }
+
+    /// `fmi2SetReal`.
+    pub fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
+        self.lock().fmi2SetReal(vrs, values)
+    }
+
+    /// `fmi2SetInteger`.
+    pub fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
+        self.lock().fmi2SetInteger(vrs, values)
+    }
+
+    /// `fmi2SetBoolean`.
+    pub fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
+        self.lock().fmi2SetBoolean(vrs, values)
+    }
+
+    /// `fmi2SetString`.
+    pub fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
+        self.lock().fmi2SetString(vrs, values)
+    }
+
+    /// `fmi2SetRealInputDerivatives`: `values[i]` is the `orders[i]`-th time derivative
+    /// of input `vrs[i]` at the current communication point. Needs
+    /// `canInterpolateInputs`.
+    pub fn set_real_input_derivatives(
+        &mut self,
+        vrs: &[ValueReference],
+        orders: &[i32],
+        values: &[f64],
+    ) -> Result<()> {
+        self.require(
+            self.fmu
+                .model_description
+                .co_simulation
+                .can_interpolate_inputs,
+            "canInterpolateInputs",
+            "fmi2SetRealInputDerivatives",
+        )?;
+        self.lock().fmi2SetRealInputDerivatives(vrs, orders, values)
+    }
+
+    /// `fmi2GetRealOutputDerivatives` into `out`.
+    pub fn get_real_output_derivatives(
+        &mut self,
+        vrs: &[ValueReference],
+        orders: &[i32],
+        out: &mut [f64],
+    ) -> Result<()> {
+        self.lock().fmi2GetRealOutputDerivatives(vrs, orders, out)
+    }
+
+    /// `fmi2GetDirectionalDerivative`: `dv_unknown = J · dv_known`. Needs
+    /// `providesDirectionalDerivative`.
+    pub fn get_directional_derivative(
+        &mut self,
+        unknowns: &[ValueReference],
+        knowns: &[ValueReference],
+        dv_known: &[f64],
+        dv_unknown: &mut [f64],
+    ) -> Result<()> {
+        self.require(
+            self.fmu
+                .model_description
+                .co_simulation
+                .provides_directional_derivative,
+            "providesDirectionalDerivative",
+            "fmi2GetDirectionalDerivative",
+        )?;
+        self.lock()
+            .fmi2GetDirectionalDerivative(unknowns, knowns, dv_known, dv_unknown)
+    }
+
+    /// `fmi2DoStep` from `current_communication_point` over `step`. On success the tracked
+    /// time becomes `current_communication_point + step`.
+    pub fn do_step(
+        &mut self,
+        current_communication_point: f64,
+        step: f64,
+        no_set_fmu_state_prior: bool,
+    ) -> Result<()> {
+        let mut raw = self.lock();
+        raw.time = current_communication_point;
+        raw.fmi2DoStep(current_communication_point, step, no_set_fmu_state_prior)?;
+        raw.time = current_communication_point + step;
+        Ok(())
+    }
+
+    /// `fmi2CancelStep`.
+    pub fn cancel_step(&mut self) -> Result<()> {
+        self.lock().fmi2CancelStep()
+    }
+
+    /// `fmi2Terminate`.
+    pub fn terminate(&mut self) -> Result<()> {
+        self.lock().fmi2Terminate()
+    }
+
+    /// `fmi2Reset`: back to the instantiated state.
+    pub fn reset(&mut self) -> Result<()> {
+        self.lock().fmi2Reset()
+    }
+
+    /// `fmi2GetStatus`.
+    pub fn get_status(&mut self, kind: StatusKind) -> Result<Status> {
+        self.lock().fmi2GetStatus(kind.raw())
+    }
+
+    /// `fmi2GetRealStatus`.
+    pub fn get_real_status(&mut self, kind: StatusKind) -> Result<f64> {
+        self.lock().fmi2GetRealStatus(kind.raw())
+    }
+
+    /// `fmi2GetIntegerStatus`.
+    pub fn get_integer_status(&mut self, kind: StatusKind) -> Result<i32> {
+        self.lock().fmi2GetIntegerStatus(kind.raw())
+    }
+
+    /// `fmi2GetBooleanStatus`.
+    pub fn get_boolean_status(&mut self, kind: StatusKind) -> Result<bool> {
+        self.lock().fmi2GetBooleanStatus(kind.raw())
+    }
+
+    /// `fmi2GetStringStatus`.
+    pub fn get_string_status(&mut self, kind: StatusKind) -> Result<String> {
+        self.lock().fmi2GetStringStatus(kind.raw())
+    }
+
+    /// `fmi2GetStatus(fmi2DoStepStatus)`.
+    pub fn do_step_status(&mut self) -> Result<Status> {
+        self.get_status(StatusKind::DoStepStatus)
+    }
+
+    /// `fmi2GetRealStatus(fmi2LastSuccessfulTime)`.
+    pub fn last_successful_time(&mut self) -> Result<f64> {
+        self.get_real_status(StatusKind::LastSuccessfulTime)
+    }
+
+    /// `fmi2GetBooleanStatus(fmi2Terminated)`.
+    pub fn terminated(&mut self) -> Result<bool> {
+        self.get_boolean_status(StatusKind::Terminated)
+    }
+}
+
+/// Compile-time proof that instances and states can cross threads.
+const _: () = {
+    const fn assert_send<T: Send>() {}
+    assert_send::<Instance>();
+    assert_send::<crate::FmuState>();
+    assert_send::<crate::Fmu>();
+};

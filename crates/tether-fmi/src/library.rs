@@ -1,0 +1,134 @@
+//! Loading an FMU's shared library and resolving the FMI 2.0 co-simulation API.
+
+use std::ffi::CStr;
+use std::mem::ManuallyDrop;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::error::{one_line, Error, Result};
+use crate::raw::Fmi2Functions;
+
+/// The platform directory under `binaries/` this build loads from.
+pub const PLATFORM: &str = "linux64";
+
+/// A loaded FMU shared library with its resolved function table.
+///
+/// Shared (in an `Arc`) by the [`Fmu`](crate::Fmu) and every instance, so the code stays
+/// mapped while anything can still call it.
+pub(crate) struct Library {
+    path: PathBuf,
+    functions: Fmi2Functions,
+    handle: ManuallyDrop<libloading::Library>,
+    /// Set once any call returned fmi2Fatal: per the standard no further function of
+    /// any instance of this FMU may be called.
+    fatal: AtomicBool,
+}
+
+impl std::fmt::Debug for Library {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Library")
+            .field("path", &self.path)
+            .field("fatal", &self.is_fatal())
+            .finish_non_exhaustive()
+    }
+}
+
+/// The expected path of the shared library inside an FMU directory.
+pub(crate) fn binary_path(root: &Path, model_identifier: &str) -> PathBuf {
+    root.join("binaries")
+        .join(PLATFORM)
+        .join(format!("{model_identifier}.so"))
+}
+
+impl Library {
+    /// Loads `path` (binding all symbols now) and resolves every FMI 2.0 function.
+    pub(crate) fn load(path: &Path) -> Result<Library> {
+        use libloading::os::unix::{Library as UnixLibrary, RTLD_LOCAL, RTLD_NOW};
+        // SAFETY: loading a library runs its initialisers; an FMU's shared library is
+        // trusted code by the nature of co-simulation (we are about to call into it).
+        // RTLD_NOW makes unresolved dependencies fail here instead of at a later call.
+        let handle =
+            unsafe { UnixLibrary::open(Some(path), RTLD_NOW | RTLD_LOCAL) }.map_err(|e| {
+                Error::LibraryLoad {
+                    path: path.to_owned(),
+                    message: one_line(&e.to_string()),
+                }
+            })?;
+        let handle = libloading::Library::from(handle);
+        let functions = Fmi2Functions::resolve(&handle, path)?;
+        let library = Library {
+            path: path.to_owned(),
+            functions,
+            handle: ManuallyDrop::new(handle),
+            fatal: AtomicBool::new(false),
+        };
+        library.check_identity()?;
+        Ok(library)
+    }
+
+    /// Checks `fmi2GetVersion` = "2.0" and `fmi2GetTypesPlatform` = "default".
+    fn check_identity(&self) -> Result<()> {
+        // SAFETY: both functions take no arguments and may be called before any instance
+        // exists (FMI 2.0, section 2.1.4).
+        let (version, platform) = unsafe {
+            (
+                (self.functions.fmi2GetVersion)(),
+                (self.functions.fmi2GetTypesPlatform)(),
+            )
+        };
+        for (function, ptr, expected) in [
+            ("fmi2GetVersion", version, "2.0"),
+            ("fmi2GetTypesPlatform", platform, "default"),
+        ] {
+            let found = if ptr.is_null() {
+                String::from("(NULL)")
+            } else {
+                // SAFETY: the standard requires a static NUL-terminated string.
+                unsafe { CStr::from_ptr(ptr) }
+                    .to_string_lossy()
+                    .into_owned()
+            };
+            if found != expected {
+                return Err(Error::IncompatibleLibrary {
+                    library: self.path.clone(),
+                    function,
+                    found,
+                    expected,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The resolved function table.
+    pub(crate) fn functions(&self) -> &Fmi2Functions {
+        &self.functions
+    }
+
+    /// The library's path.
+    pub(crate) fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Records that a call returned fmi2Fatal.
+    pub(crate) fn mark_fatal(&self) {
+        self.fatal.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether a call returned fmi2Fatal.
+    pub(crate) fn is_fatal(&self) -> bool {
+        self.fatal.load(Ordering::SeqCst)
+    }
+}
+
+impl Drop for Library {
+    fn drop(&mut self) {
+        if self.is_fatal() {
+            // A fatal FMU may have left threads or callbacks behind: keep its code mapped.
+            return;
+        }
+        // SAFETY: the handle is dropped exactly once, here; no instance remains, since
+        // each holds an `Arc<Library>`.
+        unsafe { ManuallyDrop::drop(&mut self.handle) };
+    }
+}

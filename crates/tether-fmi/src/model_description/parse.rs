@@ -1,0 +1,339 @@
+//! Maps the element tree of modelDescription.xml onto [`ModelDescription`].
+
+use std::collections::HashMap;
+
+use super::attrs::Attrs;
+use super::types::*;
+use super::variables::parse_variables;
+use crate::error::Result;
+use crate::xml::Element;
+
+/// Builds the model description from the parsed root element.
+pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDescription> {
+    if root.name != "fmiModelDescription" {
+        return Err(at.invalid(
+            root,
+            format!(
+                "root element is <{}>, expected <fmiModelDescription>",
+                root.name
+            ),
+        ));
+    }
+    let co_simulation = match root.child("CoSimulation") {
+        Some(cs) => co_simulation(at, cs)?,
+        None => {
+            return Err(at.invalid(root, "no <CoSimulation> element"));
+        }
+    };
+    let model_exchange = match root.child("ModelExchange") {
+        Some(me) => Some(at.required(me, "modelIdentifier")?),
+        None => None,
+    };
+    let unit_definitions = match root.child("UnitDefinitions") {
+        Some(units) => units
+            .children_named("Unit")
+            .map(|u| unit(at, u))
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
+    let type_definitions: Vec<SimpleType> = match root.child("TypeDefinitions") {
+        Some(types) => types
+            .children_named("SimpleType")
+            .map(|t| simple_type(at, t))
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
+    let log_categories = match root.child("LogCategories") {
+        Some(cats) => cats
+            .children_named("Category")
+            .map(|c| {
+                Ok(LogCategory {
+                    name: at.required(c, "name")?,
+                    description: at.string(c, "description"),
+                })
+            })
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
+    let default_experiment = match root.child("DefaultExperiment") {
+        Some(d) => Some(DefaultExperiment {
+            start_time: at.parsed(d, "startTime")?,
+            stop_time: at.parsed(d, "stopTime")?,
+            tolerance: at.parsed(d, "tolerance")?,
+            step_size: at.parsed(d, "stepSize")?,
+        }),
+        None => None,
+    };
+    let Some(variables_element) = root.child("ModelVariables") else {
+        return Err(at.invalid(root, "no <ModelVariables> element"));
+    };
+    let model_variables = parse_variables(at, variables_element, &type_definitions)?;
+    let mut by_name = HashMap::with_capacity(model_variables.len());
+    for (i, v) in model_variables.iter().enumerate() {
+        if by_name.insert(v.name.clone(), i).is_some() {
+            return Err(at.invalid_at(v.line, format!("duplicate variable name '{}'", v.name)));
+        }
+    }
+    let model_structure = match root.child("ModelStructure") {
+        Some(s) => model_structure(at, s, &model_variables)?,
+        None => return Err(at.invalid(root, "no <ModelStructure> element")),
+    };
+    let naming = at.choice(
+        root,
+        "variableNamingConvention",
+        &[
+            ("flat", VariableNamingConvention::Flat),
+            ("structured", VariableNamingConvention::Structured),
+        ],
+    )?;
+    Ok(ModelDescription {
+        fmi_version: at.required(root, "fmiVersion")?,
+        model_name: at.required(root, "modelName")?,
+        guid: at.required(root, "guid")?,
+        description: at.string(root, "description"),
+        author: at.string(root, "author"),
+        version: at.string(root, "version"),
+        copyright: at.string(root, "copyright"),
+        license: at.string(root, "license"),
+        generation_tool: at.string(root, "generationTool"),
+        generation_date_and_time: at.string(root, "generationDateAndTime"),
+        variable_naming_convention: naming.unwrap_or_default(),
+        number_of_event_indicators: at.parsed(root, "numberOfEventIndicators")?,
+        co_simulation,
+        model_exchange,
+        unit_definitions,
+        type_definitions,
+        log_categories,
+        default_experiment,
+        model_variables,
+        model_structure,
+        by_name,
+    })
+}
+
+fn co_simulation(at: Attrs<'_>, cs: &Element) -> Result<CoSimulation> {
+    Ok(CoSimulation {
+        model_identifier: at.required(cs, "modelIdentifier")?,
+        needs_execution_tool: at.flag(cs, "needsExecutionTool", false)?,
+        can_handle_variable_communication_step_size: at.flag(
+            cs,
+            "canHandleVariableCommunicationStepSize",
+            false,
+        )?,
+        can_interpolate_inputs: at.flag(cs, "canInterpolateInputs", false)?,
+        max_output_derivative_order: at.parsed(cs, "maxOutputDerivativeOrder")?.unwrap_or(0),
+        can_run_asynchronuously: at.flag(cs, "canRunAsynchronuously", false)?,
+        can_be_instantiated_only_once_per_process: at.flag(
+            cs,
+            "canBeInstantiatedOnlyOncePerProcess",
+            false,
+        )?,
+        can_not_use_memory_management_functions: at.flag(
+            cs,
+            "canNotUseMemoryManagementFunctions",
+            false,
+        )?,
+        can_get_and_set_fmu_state: at.flag(cs, "canGetAndSetFMUstate", false)?,
+        can_serialize_fmu_state: at.flag(cs, "canSerializeFMUstate", false)?,
+        provides_directional_derivative: at.flag(cs, "providesDirectionalDerivative", false)?,
+    })
+}
+
+fn unit(at: Attrs<'_>, u: &Element) -> Result<Unit> {
+    let base_unit = match u.child("BaseUnit") {
+        Some(b) => {
+            let exp = |key| -> Result<i32> { Ok(at.parsed(b, key)?.unwrap_or(0)) };
+            Some(BaseUnit {
+                kg: exp("kg")?,
+                m: exp("m")?,
+                s: exp("s")?,
+                A: exp("A")?,
+                K: exp("K")?,
+                mol: exp("mol")?,
+                cd: exp("cd")?,
+                rad: exp("rad")?,
+                factor: at.parsed(b, "factor")?.unwrap_or(1.0),
+                offset: at.parsed(b, "offset")?.unwrap_or(0.0),
+            })
+        }
+        None => None,
+    };
+    let display_units = u
+        .children_named("DisplayUnit")
+        .map(|d| {
+            Ok(DisplayUnit {
+                name: at.required(d, "name")?,
+                factor: at.parsed(d, "factor")?.unwrap_or(1.0),
+                offset: at.parsed(d, "offset")?.unwrap_or(0.0),
+            })
+        })
+        .collect::<Result<_>>()?;
+    Ok(Unit {
+        name: at.required(u, "name")?,
+        base_unit,
+        display_units,
+    })
+}
+
+/// Reads the Real attributes of a type definition or variable element.
+pub(crate) fn real_type(at: Attrs<'_>, e: &Element, base: Option<&RealType>) -> Result<RealType> {
+    let base = base.cloned().unwrap_or_default();
+    Ok(RealType {
+        quantity: at.string(e, "quantity").or(base.quantity),
+        unit: at.string(e, "unit").or(base.unit),
+        display_unit: at.string(e, "displayUnit").or(base.display_unit),
+        relative_quantity: at
+            .boolean(e, "relativeQuantity")?
+            .unwrap_or(base.relative_quantity),
+        min: at.parsed(e, "min")?.or(base.min),
+        max: at.parsed(e, "max")?.or(base.max),
+        nominal: at.parsed(e, "nominal")?.or(base.nominal),
+        unbounded: at.boolean(e, "unbounded")?.unwrap_or(base.unbounded),
+    })
+}
+
+/// Reads the Integer/Enumeration attributes of a type definition or variable element.
+pub(crate) fn integer_type(
+    at: Attrs<'_>,
+    e: &Element,
+    base: Option<&IntegerType>,
+) -> Result<IntegerType> {
+    let base = base.cloned().unwrap_or_default();
+    Ok(IntegerType {
+        quantity: at.string(e, "quantity").or(base.quantity),
+        min: at.parsed(e, "min")?.or(base.min),
+        max: at.parsed(e, "max")?.or(base.max),
+    })
+}
+
+fn simple_type(at: Attrs<'_>, t: &Element) -> Result<SimpleType> {
+    let Some(element) = t.children.first() else {
+        return Err(at.invalid(t, "<SimpleType> has no type element"));
+    };
+    let kind = match element.name.as_str() {
+        "Real" => SimpleTypeKind::Real(real_type(at, element, None)?),
+        "Integer" => SimpleTypeKind::Integer(integer_type(at, element, None)?),
+        "Boolean" => SimpleTypeKind::Boolean,
+        "String" => SimpleTypeKind::String,
+        "Enumeration" => SimpleTypeKind::Enumeration {
+            quantity: at.string(element, "quantity"),
+            items: element
+                .children_named("Item")
+                .map(|i| {
+                    Ok(EnumerationItem {
+                        name: at.required(i, "name")?,
+                        value: at
+                            .parsed(i, "value")?
+                            .ok_or_else(|| at.invalid(i, "<Item> lacks the attribute 'value'"))?,
+                        description: at.string(i, "description"),
+                    })
+                })
+                .collect::<Result<_>>()?,
+        },
+        other => {
+            return Err(at.invalid(element, format!("unknown type element <{other}>")));
+        }
+    };
+    Ok(SimpleType {
+        name: at.required(t, "name")?,
+        description: at.string(t, "description"),
+        kind,
+    })
+}
+
+fn model_structure(
+    at: Attrs<'_>,
+    s: &Element,
+    variables: &[ScalarVariable],
+) -> Result<ModelStructure> {
+    let list = |name: &str| -> Result<Vec<Unknown>> {
+        match s.child(name) {
+            Some(section) => section
+                .children_named("Unknown")
+                .map(|u| unknown(at, u, variables))
+                .collect(),
+            None => Ok(Vec::new()),
+        }
+    };
+    let structure = ModelStructure {
+        outputs: list("Outputs")?,
+        derivatives: list("Derivatives")?,
+        initial_unknowns: list("InitialUnknowns")?,
+    };
+    if let Some(outputs) = s.child("Outputs") {
+        for (u, e) in structure
+            .outputs
+            .iter()
+            .zip(outputs.children_named("Unknown"))
+        {
+            let v = &variables[u.index - 1];
+            if v.causality != Causality::Output {
+                return Err(at.invalid(
+                    e,
+                    format!(
+                        "<Outputs> lists variable {} ('{}') whose causality is not output",
+                        u.index, v.name
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(structure)
+}
+
+fn unknown(at: Attrs<'_>, u: &Element, variables: &[ScalarVariable]) -> Result<Unknown> {
+    let n = variables.len();
+    let in_range = |i: usize| (1..=n).contains(&i);
+    let index: usize = at
+        .parsed(u, "index")?
+        .ok_or_else(|| at.invalid(u, "<Unknown> lacks the attribute 'index'"))?;
+    if !in_range(index) {
+        return Err(at.invalid(u, format!("<Unknown> index {index} is outside 1..={n}")));
+    }
+    let dependencies: Option<Vec<usize>> = at.list(u, "dependencies")?;
+    if let Some(bad) = dependencies.iter().flatten().find(|&&d| !in_range(d)) {
+        return Err(at.invalid(
+            u,
+            format!("<Unknown index=\"{index}\"> dependency {bad} is outside 1..={n}"),
+        ));
+    }
+    let dependencies_kind = match at.list::<String>(u, "dependenciesKind")? {
+        None => None,
+        Some(kinds) => Some(
+            kinds
+                .iter()
+                .map(|k| {
+                    Ok(match k.as_str() {
+                        "dependent" => DependencyKind::Dependent,
+                        "constant" => DependencyKind::Constant,
+                        "fixed" => DependencyKind::Fixed,
+                        "tunable" => DependencyKind::Tunable,
+                        "discrete" => DependencyKind::Discrete,
+                        other => {
+                            return Err(
+                                at.invalid(u, format!("unknown dependenciesKind \"{other}\""))
+                            )
+                        }
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?,
+        ),
+    };
+    if let (Some(d), Some(k)) = (&dependencies, &dependencies_kind) {
+        if d.len() != k.len() {
+            return Err(at.invalid(
+                u,
+                format!(
+                    "<Unknown index=\"{index}\"> has {} dependencies but {} dependenciesKind entries",
+                    d.len(),
+                    k.len()
+                ),
+            ));
+        }
+    }
+    Ok(Unknown {
+        index,
+        dependencies,
+        dependencies_kind,
+    })
+}
