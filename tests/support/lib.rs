@@ -1,1 +1,4 @@
 //! Shared helpers for the integration tests in tests/.
+
+pub mod fmi;
+pub mod fmpy;

@@ -1,1 +1,328 @@
-//! Build and package FMUs.
+//! Build workspace FMU crates and package them as `.fmu` archives.
+//!
+//! - [`package`]: a built FMU cdylib → `<out_dir>/<modelIdentifier>.fmu`.
+//! - [`workspace_fmu`]: `cargo build --release -p <name>` into a separate target dir
+//!   (`target/fmu-build`, so it works from inside `cargo test`), then [`package`] into
+//!   `target/fmus/`. Cached per process, serialized across processes by a file lock.
+//! - [`workspace_fmus`]: the same for every crate under `fmus/`.
+
+use std::collections::HashMap;
+use std::ffi::{c_char, CStr};
+use std::fs::{self, File};
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Mutex, OnceLock};
+
+use zip::write::SimpleFileOptions;
+use zip::{CompressionMethod, DateTime, ZipWriter};
+
+/// Name of the symbol every kit-built FMU exports.
+pub const MODEL_DESCRIPTION_SYMBOL: &str = "tether_fmu_kit_model_description";
+
+/// The FMI platform folder and library suffix of this host.
+pub const PLATFORM: (&str, &str) = if cfg!(all(target_os = "linux", target_pointer_width = "64")) {
+    ("linux64", "so")
+} else if cfg!(target_os = "macos") {
+    ("darwin64", "dylib")
+} else if cfg!(all(windows, target_pointer_width = "64")) {
+    ("win64", "dll")
+} else {
+    ("unknown", "so")
+};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("cannot load FMU library {path}: {source}")]
+    Load {
+        path: PathBuf,
+        source: libloading::Error,
+    },
+    #[error("{path} does not export {MODEL_DESCRIPTION_SYMBOL} (not built with tether-fmu-kit?): {source}")]
+    Symbol {
+        path: PathBuf,
+        source: libloading::Error,
+    },
+    #[error("{path}: {MODEL_DESCRIPTION_SYMBOL} returned no description (invalid model declaration, see stderr)")]
+    NoDescription { path: PathBuf },
+    #[error("{path}: modelDescription.xml has no valid modelIdentifier")]
+    NoIdentifier { path: PathBuf },
+    #[error("{action} {path}: {source}")]
+    Io {
+        action: &'static str,
+        path: PathBuf,
+        source: io::Error,
+    },
+    #[error("cannot write FMU archive {path}: {source}")]
+    Zip {
+        path: PathBuf,
+        source: zip::result::ZipError,
+    },
+    #[error("no Cargo.toml with [workspace] in {start} or above")]
+    NoWorkspace { start: PathBuf },
+    #[error("cannot run `{command}`: {source}")]
+    Spawn { command: String, source: io::Error },
+    #[error("building FMU crate {name} failed: `{command}` exited with {status}: {stderr_tail}")]
+    Build {
+        name: String,
+        command: String,
+        status: std::process::ExitStatus,
+        stderr_tail: String,
+    },
+    #[error("building FMU crate {name} produced no library at {path}")]
+    MissingLibrary { name: String, path: PathBuf },
+}
+
+fn io_error<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(io::Error) -> Error + 'a {
+    move |source| Error::Io {
+        action,
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Reads the model description out of a built FMU library.
+pub fn model_description(cdylib: &Path) -> Result<String, Error> {
+    // SAFETY: loading a library runs its initializers; this is a library built with
+    // tether-fmu-kit, whose initializers are Rust's (none with side effects).
+    let library = unsafe { libloading::Library::new(cdylib) }.map_err(|source| Error::Load {
+        path: cdylib.to_path_buf(),
+        source,
+    })?;
+    type Describe = unsafe extern "C" fn() -> *const c_char;
+    // SAFETY: the kit exports this symbol with exactly this signature.
+    let describe = unsafe { library.get::<Describe>(MODEL_DESCRIPTION_SYMBOL.as_bytes()) }
+        .map_err(|source| Error::Symbol {
+            path: cdylib.to_path_buf(),
+            source,
+        })?;
+    // SAFETY: the function takes no arguments and returns null or a static C string.
+    let text = unsafe { describe() };
+    if text.is_null() {
+        return Err(Error::NoDescription {
+            path: cdylib.to_path_buf(),
+        });
+    }
+    // SAFETY: non-null, NUL-terminated and static for as long as `library` is loaded;
+    // it is copied before the library is dropped.
+    let xml = unsafe { CStr::from_ptr(text) }
+        .to_string_lossy()
+        .into_owned();
+    Ok(xml)
+}
+
+/// The `modelIdentifier` attribute of the `<CoSimulation>` element.
+pub fn model_identifier(xml: &str) -> Option<&str> {
+    let start = xml.find("modelIdentifier=\"")? + "modelIdentifier=\"".len();
+    let id = &xml[start..start + xml[start..].find('"')?];
+    let valid = !id.is_empty() && id.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+    valid.then_some(id)
+}
+
+/// Packages a built FMU library as `<out_dir>/<modelIdentifier>.fmu` (deflate zip with
+/// `modelDescription.xml` and `binaries/<platform>/<modelIdentifier>.<suffix>`),
+/// written to a temporary file and renamed into place.
+pub fn package(cdylib: &Path, out_dir: &Path) -> Result<PathBuf, Error> {
+    let xml = model_description(cdylib)?;
+    let id = model_identifier(&xml).ok_or_else(|| Error::NoIdentifier {
+        path: cdylib.to_path_buf(),
+    })?;
+    let binary = fs::read(cdylib).map_err(io_error("cannot read", cdylib))?;
+    fs::create_dir_all(out_dir).map_err(io_error("cannot create", out_dir))?;
+    let target = out_dir.join(format!("{id}.fmu"));
+    let temp = out_dir.join(format!(
+        ".{id}.fmu.{}.{:?}.tmp",
+        std::process::id(),
+        std::thread::current().id()
+    ));
+    let written = write_zip(&temp, &xml, id, &binary)
+        .and_then(|()| fs::rename(&temp, &target).map_err(io_error("cannot rename into", &target)));
+    if written.is_err() {
+        let _ = fs::remove_file(&temp);
+    }
+    written.map(|()| target)
+}
+
+fn write_zip(path: &Path, xml: &str, id: &str, binary: &[u8]) -> Result<(), Error> {
+    let file = File::create(path).map_err(io_error("cannot create", path))?;
+    let zip_error = |source| Error::Zip {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut zip = ZipWriter::new(file);
+    // A fixed timestamp makes the archive a function of its contents.
+    let options = SimpleFileOptions::default()
+        .compression_method(CompressionMethod::Deflated)
+        .last_modified_time(DateTime::default());
+    let (platform, suffix) = PLATFORM;
+    zip.start_file("modelDescription.xml", options.unix_permissions(0o644))
+        .map_err(zip_error)?;
+    zip.write_all(xml.as_bytes())
+        .map_err(io_error("cannot write", path))?;
+    zip.start_file(
+        format!("binaries/{platform}/{id}.{suffix}"),
+        options.unix_permissions(0o755),
+    )
+    .map_err(zip_error)?;
+    zip.write_all(binary)
+        .map_err(io_error("cannot write", path))?;
+    let file = zip.finish().map_err(zip_error)?;
+    file.sync_all().map_err(io_error("cannot sync", path))
+}
+
+/// The workspace root: the nearest directory at or above `CARGO_MANIFEST_DIR` (or the
+/// current directory) whose Cargo.toml has a `[workspace]` table.
+pub fn workspace_root() -> Result<PathBuf, Error> {
+    let start = match std::env::var_os("CARGO_MANIFEST_DIR") {
+        Some(dir) => PathBuf::from(dir),
+        None => std::env::current_dir().map_err(io_error("cannot read", Path::new(".")))?,
+    };
+    let is_workspace = |dir: &Path| {
+        fs::read_to_string(dir.join("Cargo.toml"))
+            .is_ok_and(|text| text.lines().any(|line| line.trim() == "[workspace]"))
+    };
+    start
+        .ancestors()
+        .find(|dir| is_workspace(dir))
+        .map(Path::to_path_buf)
+        .ok_or(Error::NoWorkspace { start })
+}
+
+/// Builds the workspace crate `name` in release mode and packages it into
+/// `<root>/target/fmus/`. Cached per process; a file lock serializes concurrent
+/// processes (parallel test binaries).
+pub fn workspace_fmu(name: &str) -> Result<PathBuf, Error> {
+    static BUILT: OnceLock<Mutex<HashMap<String, PathBuf>>> = OnceLock::new();
+    let mut built = BUILT
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(path) = built.get(name) {
+        return Ok(path.clone());
+    }
+    let root = workspace_root()?;
+    let target = root.join("target");
+    fs::create_dir_all(&target).map_err(io_error("cannot create", &target))?;
+    let lock_path = target.join("fmu-build.lock");
+    let lock = File::create(&lock_path).map_err(io_error("cannot create", &lock_path))?;
+    lock.lock().map_err(io_error("cannot lock", &lock_path))?;
+    let path = build_and_package(&root, name);
+    drop(lock);
+    let path = path?;
+    built.insert(name.to_string(), path.clone());
+    Ok(path)
+}
+
+fn build_and_package(root: &Path, name: &str) -> Result<PathBuf, Error> {
+    let build_dir = root.join("target").join("fmu-build");
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut command = Command::new(&cargo);
+    command
+        .current_dir(root)
+        .args(["build", "--release", "-p", name, "--target-dir"])
+        .arg(&build_dir);
+    // The outer cargo (e.g. `cargo test`) may have set these for itself.
+    for var in [
+        "CARGO_TARGET_DIR",
+        "CARGO_BUILD_TARGET_DIR",
+        "CARGO_BUILD_TARGET",
+        "CARGO_MAKEFLAGS",
+        "MAKEFLAGS",
+        "MFLAGS",
+    ] {
+        command.env_remove(var);
+    }
+    let shown = format!(
+        "{} build --release -p {name} --target-dir {}",
+        cargo.to_string_lossy(),
+        build_dir.display()
+    );
+    let output = command.output().map_err(|source| Error::Spawn {
+        command: shown.clone(),
+        source,
+    })?;
+    if !output.status.success() {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+        let stderr_tail = lines[lines.len().saturating_sub(12)..].join(" | ");
+        return Err(Error::Build {
+            name: name.to_string(),
+            command: shown,
+            status: output.status,
+            stderr_tail,
+        });
+    }
+    let (_, suffix) = PLATFORM;
+    let prefix = if cfg!(windows) { "" } else { "lib" };
+    let library = build_dir
+        .join("release")
+        .join(format!("{prefix}{}.{suffix}", name.replace('-', "_")));
+    if !library.is_file() {
+        return Err(Error::MissingLibrary {
+            name: name.to_string(),
+            path: library,
+        });
+    }
+    package(&library, &root.join("target").join("fmus"))
+}
+
+/// The package names of every crate under `<root>/fmus/`, sorted.
+pub fn workspace_fmu_names() -> Result<Vec<String>, Error> {
+    let fmus = workspace_root()?.join("fmus");
+    let entries = fs::read_dir(&fmus).map_err(io_error("cannot read", &fmus))?;
+    let mut names = Vec::new();
+    for entry in entries {
+        let dir = entry.map_err(io_error("cannot read", &fmus))?.path();
+        let manifest = dir.join("Cargo.toml");
+        let Ok(text) = fs::read_to_string(&manifest) else {
+            continue;
+        };
+        let name = text
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix("name"))
+            .filter_map(|rest| rest.trim().strip_prefix('='))
+            .map(|v| v.trim().trim_matches('"').to_string())
+            .next();
+        if let Some(name) =
+            name.or_else(|| dir.file_name().map(|n| n.to_string_lossy().into_owned()))
+        {
+            names.push(name);
+        }
+    }
+    names.sort();
+    Ok(names)
+}
+
+/// Builds and packages every crate under `fmus/`; returns the `.fmu` paths.
+pub fn workspace_fmus() -> Result<Vec<PathBuf>, Error> {
+    workspace_fmu_names()?
+        .iter()
+        .map(|name| workspace_fmu(name))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_identifier_is_read_from_the_cosimulation_element() {
+        let xml =
+            r#"<fmiModelDescription modelName="x"><CoSimulation modelIdentifier="osc_1" a="b"/>"#;
+        assert_eq!(model_identifier(xml), Some("osc_1"));
+        assert_eq!(
+            model_identifier(r#"<CoSimulation modelIdentifier="../evil"/>"#),
+            None
+        );
+        assert_eq!(model_identifier("<CoSimulation/>"), None);
+    }
+
+    #[test]
+    fn workspace_root_has_the_fmus_folder() {
+        let root = workspace_root().unwrap();
+        assert!(root.join("fmus").is_dir(), "{}", root.display());
+        assert!(workspace_fmu_names()
+            .unwrap()
+            .contains(&"oscillator".to_string()));
+    }
+}

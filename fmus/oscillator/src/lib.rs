@@ -1,1 +1,161 @@
-//! Single-mass oscillator.
+//! Single-mass oscillator: m ẍ = F − c x − d v.
+//!
+//! Outputs position `x`, velocity `v` and acceleration `a` (direct feedthrough of the
+//! force `F`), with output derivatives up to order 2. With `exact = true` a step is
+//! the matrix exponential of the system augmented with the input polynomial, exact
+//! for inputs of degree ≤ 2.
+
+use nalgebra::{Matrix5, Vector5};
+use tether_fmu_kit::{
+    export_fmu, Boolean, Declaration, DefaultExperiment, InputJet, Model, Output, Parameters, Real,
+    State,
+};
+
+pub struct Oscillator {
+    m: f64,
+    c: f64,
+    d: f64,
+    x0: f64,
+    v0: f64,
+    exact: bool,
+}
+
+impl Oscillator {
+    fn acceleration(&self, x: f64, v: f64, f: f64) -> f64 {
+        (f - self.c * x - self.d * v) / self.m
+    }
+
+    /// d/dt of z = [x, v, F, Ḟ, F̈] with F̈ constant: ż = A z.
+    fn augmented_matrix(&self) -> Matrix5<f64> {
+        let (m, c, d) = (self.m, self.c, self.d);
+        #[rustfmt::skip]
+        let a = Matrix5::new(
+            0.0,    1.0,    0.0,     0.0, 0.0,
+            -c / m, -d / m, 1.0 / m, 0.0, 0.0,
+            0.0,    0.0,    0.0,     1.0, 0.0,
+            0.0,    0.0,    0.0,     0.0, 1.0,
+            0.0,    0.0,    0.0,     0.0, 0.0,
+        );
+        a
+    }
+}
+
+impl Model for Oscillator {
+    const DECLARATION: Declaration = Declaration {
+        model_name: "oscillator",
+        model_identifier: "oscillator",
+        description: "Single mass on a spring and damper, driven by a force: m x'' = F - c x - d v",
+        real_parameters: &[
+            Real::new("m", 1.0)
+                .unit("kg")
+                .description("Mass (must be > 0)"),
+            Real::new("c", 1000.0)
+                .min(0.0)
+                .unit("N/m")
+                .description("Spring stiffness"),
+            Real::new("d", 10.0)
+                .min(0.0)
+                .unit("N.s/m")
+                .description("Damping coefficient"),
+            Real::new("x0", 0.0)
+                .unit("m")
+                .description("Initial position"),
+            Real::new("v0", 100.0)
+                .unit("m/s")
+                .description("Initial velocity"),
+        ],
+        boolean_parameters: &[Boolean::new("exact", false)
+            .description("Integrate exactly (matrix exponential) instead of with Dop853")],
+        inputs: &[Real::new("F", 0.0)
+            .unit("N")
+            .description("Force on the mass")],
+        outputs: &[
+            Output::new("x")
+                .unit("m")
+                .description("Position")
+                .depends_on(&["pos"]),
+            Output::new("v")
+                .unit("m/s")
+                .description("Velocity")
+                .depends_on(&["vel"]),
+            Output::new("a")
+                .unit("m/s2")
+                .description("Acceleration")
+                .depends_on(&["pos", "vel", "F"]),
+        ],
+        states: &[
+            State::new("pos")
+                .unit("m", "m/s")
+                .description("Position state"),
+            State::new("vel")
+                .unit("m/s", "m/s2")
+                .description("Velocity state"),
+        ],
+        max_output_derivative_order: 2,
+        default_experiment: DefaultExperiment {
+            start_time: 0.0,
+            stop_time: 1.0,
+            step_size: 1e-3,
+        },
+        ..Declaration::EMPTY
+    };
+
+    fn new(p: &Parameters) -> Result<Self, String> {
+        let m = p.real("m")?;
+        if m.is_nan() || m <= 0.0 {
+            return Err(format!("m must be > 0, got {m}"));
+        }
+        Ok(Oscillator {
+            m,
+            c: p.real("c")?,
+            d: p.real("d")?,
+            x0: p.real("x0")?,
+            v0: p.real("v0")?,
+            exact: p.boolean("exact")?,
+        })
+    }
+
+    fn initial_states(&self, x: &mut [f64]) {
+        x.copy_from_slice(&[self.x0, self.v0]);
+    }
+
+    fn derivatives(&self, _t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        dx[0] = x[1];
+        dx[1] = self.acceleration(x[0], x[1], u[0]);
+    }
+
+    fn outputs(&self, _t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
+        y.copy_from_slice(&[x[0], x[1], self.acceleration(x[0], x[1], u[0])]);
+    }
+
+    fn output_derivatives(
+        &self,
+        _t: f64,
+        x: &[f64],
+        u: &[InputJet],
+        order: u32,
+        dy: &mut [f64],
+    ) -> bool {
+        let f = u[0];
+        let a = self.acceleration(x[0], x[1], f.value);
+        let jerk = self.acceleration(x[1], a, f.d1);
+        match order {
+            1 => dy.copy_from_slice(&[x[1], a, jerk]),
+            2 => dy.copy_from_slice(&[a, jerk, self.acceleration(a, jerk, f.d2)]),
+            _ => return false,
+        }
+        true
+    }
+
+    fn exact_step(&self, _t: f64, h: f64, x: &mut [f64], u: &[InputJet]) -> bool {
+        if !self.exact {
+            return false;
+        }
+        let f = u[0];
+        let z = (self.augmented_matrix() * h).exp() * Vector5::new(x[0], x[1], f.value, f.d1, f.d2);
+        x.copy_from_slice(&[z[0], z[1]]);
+        true
+    }
+}
+
+export_fmu!(Oscillator);

@@ -1,0 +1,265 @@
+//! Value access of an [`Instance`]: get/set by value reference, input derivatives and
+//! output derivatives. Every request is checked completely before anything is changed,
+//! so a refused call has no effect.
+
+use crate::declaration::Slot;
+use crate::input::InputJet;
+use crate::instance::{Failure, Instance, Outcome};
+use crate::machine::MachineState;
+use crate::model::Model;
+
+impl<M: Model> Instance<M> {
+    fn slot(&self, vr: u32, type_name: &str) -> Outcome<Slot> {
+        let slot = usize::try_from(vr)
+            .ok()
+            .and_then(|i| self.slots.get(i).copied());
+        let slot = slot.ok_or_else(|| Failure::usage(format!("unknown value reference {vr}")))?;
+        if slot.type_name() != type_name {
+            let name = M::DECLARATION.name(slot);
+            return Err(Failure::usage(format!(
+                "value reference {vr} ({name}) is a {} variable, not {type_name}",
+                slot.type_name()
+            )));
+        }
+        Ok(slot)
+    }
+
+    pub fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Outcome {
+        let slots = vrs
+            .iter()
+            .map(|&vr| self.slot(vr, "Real"))
+            .collect::<Outcome<Vec<_>>>()?;
+        let needs_model = slots
+            .iter()
+            .any(|s| matches!(s, Slot::Output(_) | Slot::State(_) | Slot::Derivative(_)));
+        let (y, dx) = if needs_model {
+            self.with_model(|model, d, u| {
+                let mut y = vec![0.0; M::DECLARATION.outputs.len()];
+                let mut dx = vec![0.0; d.states.len()];
+                model.outputs(d.time, &d.states, u, &mut y);
+                model.derivatives(d.time, &d.states, u, &mut dx);
+                (y, dx)
+            })?
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        for (value, slot) in values.iter_mut().zip(slots) {
+            *value = match slot {
+                Slot::RealParameter(i) => self.data.reals[i],
+                Slot::Input(i) => self.data.inputs[i].value,
+                Slot::Output(i) => y[i],
+                Slot::State(i) => self.data.states[i],
+                Slot::Derivative(i) => dx[i],
+                Slot::IntegerParameter(_) | Slot::BooleanParameter(_) => 0.0,
+            };
+        }
+        Ok(())
+    }
+
+    /// Parameters are `fixed`: settable until fmi2ExitInitializationMode.
+    fn check_parameter_settable(&self, slot: Slot) -> Outcome {
+        if matches!(
+            self.data.machine,
+            MachineState::Instantiated | MachineState::InitializationMode
+        ) {
+            Ok(())
+        } else {
+            let name = M::DECLARATION.name(slot);
+            Err(Failure::usage(format!(
+                "parameter {name} is fixed: it can only be set before fmi2ExitInitializationMode"
+            )))
+        }
+    }
+
+    fn check_real(&self, vr: u32, value: f64) -> Outcome<Slot> {
+        let slot = self.slot(vr, "Real")?;
+        let name = M::DECLARATION.name(slot);
+        let declared = match slot {
+            Slot::RealParameter(i) => {
+                self.check_parameter_settable(slot)?;
+                M::DECLARATION.all_real_parameters()[i]
+            }
+            Slot::Input(i) => M::DECLARATION.inputs[i],
+            _ => {
+                return Err(Failure::usage(format!(
+                    "{name} (value reference {vr}) cannot be set"
+                )))
+            }
+        };
+        let below = declared.min.is_some_and(|m| value < m);
+        let above = declared.max.is_some_and(|m| value > m);
+        if !value.is_finite() || below || above {
+            return Err(Failure::usage(format!(
+                "{name} = {value} is outside [{}, {}]",
+                declared.min.unwrap_or(f64::NEG_INFINITY),
+                declared.max.unwrap_or(f64::INFINITY)
+            )));
+        }
+        Ok(slot)
+    }
+
+    /// Setting an input resets its derivatives to 0 (the new value is held constant
+    /// until fmi2SetRealInputDerivatives says otherwise).
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Outcome {
+        let slots = vrs
+            .iter()
+            .zip(values)
+            .map(|(&vr, &v)| self.check_real(vr, v))
+            .collect::<Outcome<Vec<_>>>()?;
+        for (slot, &value) in slots.into_iter().zip(values) {
+            match slot {
+                Slot::RealParameter(i) => {
+                    self.data.reals[i] = value;
+                    self.model = None;
+                }
+                Slot::Input(i) => self.data.inputs[i] = InputJet::constant(value),
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    pub fn get_integer(&mut self, vrs: &[u32], values: &mut [i32]) -> Outcome {
+        for (value, &vr) in values.iter_mut().zip(vrs) {
+            if let Slot::IntegerParameter(i) = self.slot(vr, "Integer")? {
+                *value = self.data.integers[i];
+            }
+        }
+        Ok(())
+    }
+
+    pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Outcome {
+        for (&vr, &value) in vrs.iter().zip(values) {
+            let slot = self.slot(vr, "Integer")?;
+            self.check_parameter_settable(slot)?;
+            if let Slot::IntegerParameter(i) = slot {
+                let p = M::DECLARATION.integer_parameters[i];
+                if p.min.is_some_and(|m| value < m) || p.max.is_some_and(|m| value > m) {
+                    return Err(Failure::usage(format!(
+                        "{} = {value} is outside [min, max]",
+                        p.name
+                    )));
+                }
+            }
+        }
+        for (&vr, &value) in vrs.iter().zip(values) {
+            if let Ok(Slot::IntegerParameter(i)) = self.slot(vr, "Integer") {
+                self.data.integers[i] = value;
+            }
+        }
+        self.model = None;
+        Ok(())
+    }
+
+    pub fn get_boolean(&mut self, vrs: &[u32], values: &mut [bool]) -> Outcome {
+        for (value, &vr) in values.iter_mut().zip(vrs) {
+            if let Slot::BooleanParameter(i) = self.slot(vr, "Boolean")? {
+                *value = self.data.booleans[i];
+            }
+        }
+        Ok(())
+    }
+
+    pub fn set_boolean(&mut self, vrs: &[u32], values: &[bool]) -> Outcome {
+        for &vr in vrs {
+            let slot = self.slot(vr, "Boolean")?;
+            self.check_parameter_settable(slot)?;
+        }
+        for (&vr, &value) in vrs.iter().zip(values) {
+            if let Ok(Slot::BooleanParameter(i)) = self.slot(vr, "Boolean") {
+                self.data.booleans[i] = value;
+            }
+        }
+        self.model = None;
+        Ok(())
+    }
+
+    /// The model has no String variables: only empty requests succeed.
+    pub fn strings(&mut self, vrs: &[u32]) -> Outcome {
+        match vrs.first() {
+            None => Ok(()),
+            Some(vr) => Err(Failure::usage(format!(
+                "value reference {vr} is not a String variable (the model has none)"
+            ))),
+        }
+    }
+
+    /// Orders 1 and 2 are held; the input is then the Taylor polynomial around the
+    /// current communication point during the next fmi2DoStep.
+    pub fn set_real_input_derivatives(
+        &mut self,
+        vrs: &[u32],
+        orders: &[i32],
+        values: &[f64],
+    ) -> Outcome {
+        let mut targets = Vec::with_capacity(vrs.len());
+        for ((&vr, &order), &value) in vrs.iter().zip(orders).zip(values) {
+            let slot = self.slot(vr, "Real")?;
+            let Slot::Input(i) = slot else {
+                return Err(Failure::usage(format!(
+                    "{} is not an input",
+                    M::DECLARATION.name(slot)
+                )));
+            };
+            if !(1..=2).contains(&order) || !value.is_finite() {
+                return Err(Failure::usage(format!("input derivative of order {order} = {value} is not supported (orders 1 and 2, finite values)")));
+            }
+            targets.push((i, order, value));
+        }
+        for (i, order, value) in targets {
+            let jet = &mut self.data.inputs[i];
+            if order == 1 {
+                jet.d1 = value
+            } else {
+                jet.d2 = value
+            }
+        }
+        Ok(())
+    }
+
+    pub fn get_real_output_derivatives(
+        &mut self,
+        vrs: &[u32],
+        orders: &[i32],
+        values: &mut [f64],
+    ) -> Outcome {
+        let max = M::DECLARATION.max_output_derivative_order;
+        let mut requests = Vec::with_capacity(vrs.len());
+        for (&vr, &order) in vrs.iter().zip(orders) {
+            let slot = self.slot(vr, "Real")?;
+            let Slot::Output(i) = slot else {
+                return Err(Failure::usage(format!(
+                    "{} is not an output",
+                    M::DECLARATION.name(slot)
+                )));
+            };
+            let order = u32::try_from(order).ok().filter(|o| (1..=max).contains(o));
+            let order = order.ok_or_else(|| {
+                Failure::usage(format!(
+                    "derivative order must be in 1..={max} (maxOutputDerivativeOrder)"
+                ))
+            })?;
+            requests.push((i, order));
+        }
+        let n = M::DECLARATION.outputs.len();
+        let derivatives = self.with_model(|model, d, _| {
+            (1..=max)
+                .map(|order| {
+                    let mut dy = vec![0.0; n];
+                    model
+                        .output_derivatives(d.time, &d.states, &d.inputs, order, &mut dy)
+                        .then_some(dy)
+                })
+                .collect::<Vec<_>>()
+        })?;
+        for (value, (i, order)) in values.iter_mut().zip(requests) {
+            let dy = derivatives[order as usize - 1].as_ref();
+            *value = dy.ok_or_else(|| {
+                Failure::usage(format!(
+                    "the model provides no output derivatives of order {order}"
+                ))
+            })?[i];
+        }
+        Ok(())
+    }
+}

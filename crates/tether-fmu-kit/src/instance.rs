@@ -1,0 +1,366 @@
+//! One FMU instance: the safe core behind the C functions. Every FMI call goes through
+//! [`Instance::call`], which checks the state-machine table, runs the call and turns a
+//! [`Failure`] into a logged status.
+
+use crate::declaration::{Parameters, Slot};
+use crate::input::{eval_all, InputJet};
+use crate::integrate;
+use crate::machine::{Call, MachineState};
+use crate::model::Model;
+use crate::snapshot::{Shape, Snapshot};
+use crate::xml::LOG_CATEGORIES;
+
+/// fmi2Status.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(i32)]
+pub enum Status {
+    Ok = 0,
+    Warning = 1,
+    Discard = 2,
+    Error = 3,
+    Fatal = 4,
+}
+
+/// Why a call did not succeed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Failure {
+    pub status: Status,
+    pub message: String,
+    /// The model or its integration failed: the instance enters the Error state.
+    /// Usage errors (wrong state, bad arguments) leave the state unchanged, since the
+    /// call had no effect.
+    pub enters_error_state: bool,
+}
+
+impl Failure {
+    pub fn usage(message: impl Into<String>) -> Self {
+        Failure {
+            status: Status::Error,
+            message: message.into(),
+            enters_error_state: false,
+        }
+    }
+    pub fn model(message: impl Into<String>) -> Self {
+        Failure {
+            status: Status::Error,
+            message: message.into(),
+            enters_error_state: true,
+        }
+    }
+    pub fn discard(message: impl Into<String>) -> Self {
+        Failure {
+            status: Status::Discard,
+            message: message.into(),
+            enters_error_state: false,
+        }
+    }
+}
+
+pub type Outcome<T = ()> = Result<T, Failure>;
+
+/// Receives (status, category, message) for the fmi2CallbackLogger.
+pub type LogFn = Box<dyn Fn(Status, &str, &str)>;
+
+/// Relative tolerance of the communication-point check: |t_c − t| ≤ 1e-9·max(|t|, h).
+pub const TIME_TOLERANCE: f64 = 1e-9;
+
+pub struct Instance<M: Model> {
+    pub name: String,
+    logger: Option<LogFn>,
+    logging_on: bool,
+    categories: [bool; LOG_CATEGORIES.len()],
+    pub(crate) slots: Vec<Slot>,
+    fingerprint: u64,
+    pub data: Snapshot,
+    pub(crate) model: Option<M>,
+}
+
+impl<M: Model> Instance<M> {
+    pub fn new(name: &str, logger: Option<LogFn>, logging_on: bool) -> Self {
+        let d = &M::DECLARATION;
+        Instance {
+            name: name.to_string(),
+            logger,
+            logging_on,
+            categories: [true; LOG_CATEGORIES.len()],
+            slots: d.slots(),
+            fingerprint: fingerprint::<M>(),
+            data: initial_snapshot::<M>(),
+            model: None,
+        }
+    }
+
+    pub fn shape() -> Shape {
+        let d = &M::DECLARATION;
+        Shape {
+            reals: d.real_parameters.len() + 1,
+            integers: d.integer_parameters.len(),
+            booleans: d.boolean_parameters.len(),
+            inputs: d.inputs.len(),
+            states: d.states.len(),
+        }
+    }
+
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
+    /// Runs one FMI call: state-table check, the call, failure logging and the
+    /// resulting state transition.
+    pub fn call(&mut self, call: Call, f: impl FnOnce(&mut Self) -> Outcome) -> Status {
+        let state = self.data.machine;
+        let result = if call.allowed_in(state) {
+            f(self)
+        } else {
+            Err(Failure::usage(format!("not allowed in state {state:?}")))
+        };
+        match result {
+            Ok(()) => Status::Ok,
+            Err(failure) => self.fail(call, failure),
+        }
+    }
+
+    /// Logs a failure of `call` and applies its state transition; returns its status.
+    pub fn fail(&mut self, call: Call, failure: Failure) -> Status {
+        if failure.status == Status::Fatal {
+            self.data.machine = MachineState::Fatal;
+        } else if failure.enters_error_state {
+            self.data.machine = MachineState::Error;
+        }
+        self.log(
+            failure.status,
+            &format!("{}: {}", call.name(), failure.message),
+        );
+        failure.status
+    }
+
+    /// Sends a message to the environment's logger. Errors and fatal errors are always
+    /// sent; other messages only with logging on and their category enabled.
+    pub fn log(&self, status: Status, message: &str) {
+        let category = match status {
+            Status::Ok => 0,
+            Status::Warning => 1,
+            Status::Discard => 2,
+            Status::Error => 3,
+            Status::Fatal => 4,
+        };
+        let all = LOG_CATEGORIES.len() - 1;
+        let wanted = status as i32 >= Status::Error as i32
+            || (self.logging_on && (self.categories[category] || self.categories[all]));
+        if let (true, Some(logger)) = (wanted, &self.logger) {
+            logger(status, LOG_CATEGORIES[category].0, message);
+        }
+    }
+
+    fn log_event(&self, message: &str) {
+        self.log(Status::Ok, message);
+    }
+
+    pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Outcome {
+        let mut enabled = [categories.is_empty(); LOG_CATEGORIES.len()];
+        for name in categories {
+            let i = LOG_CATEGORIES.iter().position(|(c, _)| c == name);
+            let i = i.ok_or_else(|| Failure::usage(format!("unknown log category {name:?}")))?;
+            enabled[i] = true;
+        }
+        self.logging_on = on;
+        self.categories = enabled;
+        Ok(())
+    }
+
+    pub fn setup_experiment(
+        &mut self,
+        tolerance: Option<f64>,
+        start: f64,
+        stop: Option<f64>,
+    ) -> Outcome {
+        if !start.is_finite() || stop.is_some_and(|s| s.is_nan() || s < start) {
+            return Err(Failure::usage(format!(
+                "invalid experiment: start {start}, stop {stop:?}"
+            )));
+        }
+        if let Some(tol) = tolerance {
+            if !(tol > 0.0 && tol.is_finite()) {
+                return Err(Failure::usage(format!("tolerance must be > 0, got {tol}")));
+            }
+            *self.tolerance_mut() = tol;
+            self.model = None;
+        }
+        self.data.start_time = start;
+        self.data.time = start;
+        self.data.stop_time = stop;
+        Ok(())
+    }
+
+    fn tolerance_mut(&mut self) -> &mut f64 {
+        let i = self.data.reals.len() - 1;
+        &mut self.data.reals[i]
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> Outcome {
+        self.data.machine = MachineState::InitializationMode;
+        self.model = None;
+        Ok(())
+    }
+
+    pub fn exit_initialization_mode(&mut self) -> Outcome {
+        self.ensure_model().map_err(|f| Failure::model(f.message))?;
+        self.data.machine = MachineState::StepComplete;
+        self.data.step_base = self.data.time;
+        self.data.step_size = 0.0;
+        self.data.step_count = 0;
+        self.log_event(&format!(
+            "initialized at t = {}, states {:?}",
+            self.data.time, self.data.states
+        ));
+        Ok(())
+    }
+
+    pub fn terminate(&mut self) -> Outcome {
+        self.data.machine = MachineState::Terminated;
+        Ok(())
+    }
+
+    pub fn reset(&mut self) -> Outcome {
+        self.data = initial_snapshot::<M>();
+        self.model = None;
+        Ok(())
+    }
+
+    /// Builds the model from the parameters if needed; before the end of
+    /// initialization this also (re)computes the initial states.
+    pub(crate) fn ensure_model(&mut self) -> Outcome {
+        if self.model.is_some() {
+            return Ok(());
+        }
+        let tolerance = self.data.reals[self.data.reals.len() - 1];
+        if !(tolerance > 0.0 && tolerance.is_finite()) {
+            return Err(Failure::usage(format!(
+                "parameter tolerance must be > 0, got {tolerance}"
+            )));
+        }
+        let d = &self.data;
+        let parameters = Parameters::new(&M::DECLARATION, &d.reals, &d.integers, &d.booleans);
+        let model =
+            M::new(&parameters).map_err(|e| Failure::usage(format!("invalid parameters: {e}")))?;
+        if matches!(
+            self.data.machine,
+            MachineState::Instantiated | MachineState::InitializationMode
+        ) {
+            model.initial_states(&mut self.data.states);
+        }
+        self.model = Some(model);
+        Ok(())
+    }
+
+    /// Runs `f` with the model, the data and the current input values.
+    pub(crate) fn with_model<T>(
+        &mut self,
+        f: impl FnOnce(&M, &Snapshot, &[f64]) -> T,
+    ) -> Outcome<T> {
+        self.ensure_model()?;
+        let mut u = vec![0.0; self.data.inputs.len()];
+        eval_all(&self.data.inputs, 0.0, &mut u);
+        match &self.model {
+            Some(model) => Ok(f(model, &self.data, &u)),
+            None => Err(Failure::usage("model not built")),
+        }
+    }
+
+    /// One communication step. The communication point must equal the FMU's time
+    /// within [`TIME_TOLERANCE`]; the new time is `step_base + n·h` while h is
+    /// unchanged (no accumulation of `t += h`), else `t_c + h` starts a new count.
+    pub fn do_step(&mut self, t_c: f64, h: f64) -> Outcome {
+        let t = self.data.time;
+        if !(h > 0.0 && h.is_finite() && t_c.is_finite()) {
+            return Err(Failure::usage(format!(
+                "invalid step: currentCommunicationPoint {t_c}, communicationStepSize {h}"
+            )));
+        }
+        let tol = TIME_TOLERANCE * t.abs().max(h);
+        if (t_c - t).abs() > tol {
+            return Err(Failure::usage(format!(
+                "currentCommunicationPoint {t_c} differs from the FMU's time {t}"
+            )));
+        }
+        if let Some(stop) = self.data.stop_time {
+            if t_c + h > stop + tol {
+                return Err(Failure::usage(format!(
+                    "step to {} goes beyond the stop time {stop}",
+                    t_c + h
+                )));
+            }
+        }
+        self.ensure_model()?;
+        let Some(model) = &self.model else {
+            return Err(Failure::usage("model not built"));
+        };
+        let tolerance = self.data.reals[self.data.reals.len() - 1];
+        let how = integrate::step(
+            model,
+            t,
+            h,
+            &mut self.data.states,
+            &self.data.inputs,
+            tolerance,
+        )
+        .map_err(Failure::model)?;
+        let d = &mut self.data;
+        if h == d.step_size {
+            d.step_count += 1;
+        } else {
+            d.step_base = t_c;
+            d.step_size = h;
+            d.step_count = 1;
+        }
+        let new_time = d.step_base + d.step_count as f64 * h;
+        for jet in &mut d.inputs {
+            *jet = jet.shifted(new_time - t);
+        }
+        d.time = new_time;
+        self.log_event(&format!("step {t} -> {new_time} ({how})"));
+        Ok(())
+    }
+
+    pub fn restore(&mut self, snapshot: &Snapshot) -> Outcome {
+        if snapshot.shape() != Self::shape() {
+            return Err(Failure::usage("FMU state does not fit this model"));
+        }
+        self.data.clone_from(snapshot);
+        self.model = None;
+        Ok(())
+    }
+}
+
+/// The start values of every variable, in the Instantiated state.
+fn initial_snapshot<M: Model>() -> Snapshot {
+    let d = &M::DECLARATION;
+    let start = d.default_experiment.start_time;
+    Snapshot {
+        machine: MachineState::Instantiated,
+        time: start,
+        start_time: start,
+        stop_time: None,
+        step_base: start,
+        step_size: 0.0,
+        step_count: 0,
+        reals: d.all_real_parameters().iter().map(|p| p.start).collect(),
+        integers: d.integer_parameters.iter().map(|p| p.start).collect(),
+        booleans: d.boolean_parameters.iter().map(|p| p.start).collect(),
+        inputs: d
+            .inputs
+            .iter()
+            .map(|u| InputJet::constant(u.start))
+            .collect(),
+        states: vec![0.0; d.states.len()],
+    }
+}
+
+/// Identifies the model in serialized states: FNV-1a of the GUID.
+pub fn fingerprint<M: Model>() -> u64 {
+    crate::xml::guid(&M::DECLARATION)
+        .bytes()
+        .fold(0xcbf2_9ce4_8422_2325, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+        })
+}

@@ -1,0 +1,49 @@
+//! The one trait a model author implements.
+
+use crate::declaration::{Declaration, Parameters};
+use crate::input::InputJet;
+
+/// A continuous-time model ẋ = f(t, x, u), y = g(t, x, u) with parameters.
+///
+/// The kit owns time, states, inputs (with their derivatives) and parameter values;
+/// the model only evaluates equations. The model value itself is rebuilt from the
+/// parameters by [`Model::new`] whenever they change, so it can hold validated,
+/// precomputed data.
+pub trait Model: Sized + 'static {
+    /// Names, parameters, inputs, outputs and states, in value-reference order.
+    const DECLARATION: Declaration;
+
+    /// Builds the model from parameter values, or says which one is invalid (the kit
+    /// logs the message and returns fmi2Error).
+    fn new(parameters: &Parameters) -> Result<Self, String>;
+
+    /// Initial values of the continuous states (in `DECLARATION.states` order).
+    fn initial_states(&self, x: &mut [f64]);
+
+    /// Right-hand side ẋ = f(t, x, u).
+    fn derivatives(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]);
+
+    /// Outputs y = g(t, x, u); direct feedthrough is an output that reads `u`.
+    fn outputs(&self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]);
+
+    /// The `order`-th time derivatives of all outputs (order 1..=
+    /// `max_output_derivative_order`), given the inputs with their derivatives.
+    /// Return `false` if not provided (the default).
+    fn output_derivatives(
+        &self,
+        _t: f64,
+        _x: &[f64],
+        _u: &[InputJet],
+        _order: u32,
+        _dy: &mut [f64],
+    ) -> bool {
+        false
+    }
+
+    /// Advances `x` from `t` to `t + h` exactly, with the inputs given as Taylor
+    /// polynomials around `t`. Return `false` to let the kit integrate numerically
+    /// (the default).
+    fn exact_step(&self, _t: f64, _h: f64, _x: &mut [f64], _u: &[InputJet]) -> bool {
+        false
+    }
+}

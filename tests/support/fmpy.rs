@@ -1,0 +1,91 @@
+//! Running fmpy (the reference FMI importer) from tests.
+//!
+//! Python comes from `TETHER_PYTHON` if set, else from a virtualenv at
+//! `<root>/target/fmpy-venv` with `fmpy==0.3.32`, created once under a file lock so
+//! parallel test binaries share it.
+
+use std::fs::{self, File};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// The fmpy version the tests are written against.
+pub const FMPY_VERSION: &str = "0.3.32";
+
+/// The workspace root (the root test package's manifest directory).
+pub fn workspace_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `tests/fmpy/<name>`.
+pub fn script(name: &str) -> PathBuf {
+    workspace_root().join("tests").join("fmpy").join(name)
+}
+
+/// A Python interpreter that can `import fmpy`.
+pub fn python() -> Result<PathBuf, String> {
+    static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    PYTHON
+        .get_or_init(|| match std::env::var_os("TETHER_PYTHON") {
+            Some(python) => Ok(PathBuf::from(python)),
+            None => venv_python(&workspace_root().join("target")),
+        })
+        .clone()
+}
+
+fn run(command: &mut Command) -> Result<(), String> {
+    let shown = format!("{command:?}");
+    let output = command
+        .output()
+        .map_err(|e| format!("cannot run {shown}: {e}"))?;
+    if output.status.success() {
+        Ok(())
+    } else {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let tail: Vec<&str> = stderr.lines().rev().take(10).collect();
+        let tail: Vec<&str> = tail.into_iter().rev().collect();
+        Err(format!(
+            "{shown} failed ({}): {}",
+            output.status,
+            tail.join(" | ")
+        ))
+    }
+}
+
+fn venv_python(target: &Path) -> Result<PathBuf, String> {
+    let venv = target.join("fmpy-venv");
+    let python = venv.join("bin").join("python");
+    let ready = venv.join(format!(".fmpy-{FMPY_VERSION}-installed"));
+    fs::create_dir_all(target).map_err(|e| format!("cannot create {}: {e}", target.display()))?;
+    let lock_path = target.join("fmpy-venv.lock");
+    let lock = File::create(&lock_path)
+        .map_err(|e| format!("cannot create {}: {e}", lock_path.display()))?;
+    lock.lock()
+        .map_err(|e| format!("cannot lock {}: {e}", lock_path.display()))?;
+    if !ready.exists() {
+        if !python.exists() {
+            run(Command::new("python3").arg("-m").arg("venv").arg(&venv))?;
+        }
+        run(Command::new(&python).args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            &format!("fmpy=={FMPY_VERSION}"),
+        ]))?;
+        fs::write(&ready, "").map_err(|e| format!("cannot write {}: {e}", ready.display()))?;
+    }
+    Ok(python)
+}
+
+/// Runs `tests/fmpy/<script>` with `args` and returns its output (whatever the exit
+/// status: callers assert on it).
+pub fn run_script(script_name: &str, args: &[&std::ffi::OsStr]) -> Result<Output, String> {
+    let python = python()?;
+    let script = script(script_name);
+    Command::new(&python)
+        .arg(&script)
+        .args(args)
+        .output()
+        .map_err(|e| format!("cannot run {} {}: {e}", python.display(), script.display()))
+}
