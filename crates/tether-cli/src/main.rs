@@ -1,1 +1,59 @@
-fn main() {}
+//! `tether`: couple FMI 2.0 co-simulation FMUs through algebraic constraints.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod info;
+mod run;
+mod simulate;
+
+/// Tether couples FMI 2.0 co-simulation FMUs through algebraic constraints
+/// (rigid joints) with the predictor/corrector methods of Schweizer & Lu (2015).
+#[derive(Parser)]
+#[command(name = "tether", version, about, long_about = None)]
+struct Cli {
+    /// Log FMU messages and Tether's own (repeat for more: -v info, -vv debug).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    verbose: u8,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print an FMU's identity, capabilities and variables.
+    Info(info::Args),
+    /// Run one FMU at a fixed communication step and write its outputs to CSV.
+    Simulate(simulate::Args),
+    /// Run a coupled system described by a system file and write CSV.
+    Run(run::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let level = match cli.verbose {
+        0 => log::LevelFilter::Warn,
+        1 => log::LevelFilter::Info,
+        2 => log::LevelFilter::Debug,
+        _ => log::LevelFilter::Trace,
+    };
+    env_logger::Builder::new()
+        .filter_level(level)
+        .parse_env("TETHER_LOG")
+        .format_timestamp(None)
+        .init();
+    let result = match cli.command {
+        Command::Info(args) => info::main(args),
+        Command::Simulate(args) => simulate::main(args),
+        Command::Run(args) => run::main(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let message = format!("{e:#}").replace('\n', " ");
+            eprintln!("error: {message}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,1 +1,46 @@
-//! The co-simulation master.
+//! # tether-master
+//!
+//! The constraint-coupling co-simulation master of Tether: the semi-implicit
+//! predictor/corrector methods of Schweizer & Lu (ZAMM 2015) — Method 1
+//! (Baumgarte stabilisation) and Method 2 (weighted multipliers) on index 1, 2
+//! or 3 level — plus an explicit baseline, coupling FMI 2.0 co-simulation FMUs
+//! through algebraic constraints between their outputs.
+//!
+//! ```no_run
+//! use tether_master::{MemoryRecorder, Simulation, SystemSpec};
+//! # fn main() -> Result<(), tether_master::MasterError> {
+//! let spec = SystemSpec::from_file("examples/oscillator.toml".as_ref())?;
+//! let mut sim = Simulation::new(&spec)?;
+//! let mut results = MemoryRecorder::default();
+//! let stats = sim.run(&mut [&mut results], &mut |_, _| {})?;
+//! println!("{stats}");
+//! # Ok(()) }
+//! ```
+//!
+//! The algorithm as implemented is described in `docs/algorithm.md`.
+
+mod coupling;
+mod error;
+mod explicit;
+pub mod expr;
+mod method;
+mod observer;
+pub mod polynomial;
+mod predictor_corrector;
+mod simulation;
+mod slave;
+mod solve;
+pub mod spec;
+mod start;
+mod stats;
+
+pub use error::MasterError;
+pub use method::Method;
+pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
+pub use simulation::Simulation;
+pub use spec::{
+    ConstraintSpec, CouplingSettings, Experiment, InitialMultiplier, InstanceSpec, StartValue,
+    SystemSpec,
+};
+pub use start::apply_start_value;
+pub use stats::{InstanceCounters, PhaseTimes, RunStats};

@@ -1,0 +1,147 @@
+//! `tether simulate FILE.fmu`: one FMU at a fixed communication step, every
+//! output to CSV — the same job as `fmpy simulate`, so an FMU can be checked
+//! against fmpy before it is coupled.
+
+use std::fs::File;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use tether_fmi::{BaseType, Causality, Fmu};
+use tether_master::{apply_start_value, CsvRecorder, Observer, Sample, StartValue};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The `.fmu` file or unpacked FMU directory.
+    fmu: PathBuf,
+    /// Start time (default: DefaultExperiment startTime, else 0).
+    #[arg(long)]
+    start: Option<f64>,
+    /// Stop time (default: DefaultExperiment stopTime, else 1).
+    #[arg(long)]
+    stop: Option<f64>,
+    /// Communication step (default: DefaultExperiment stepSize, else (stop − start)/500).
+    #[arg(long)]
+    step: Option<f64>,
+    /// Tolerance for fmi2SetupExperiment (default: DefaultExperiment tolerance, if any).
+    #[arg(long)]
+    tolerance: Option<f64>,
+    /// Start value of a parameter or input, repeatable: --set m=2 --set exact=true.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
+    /// Output CSV file (default: <modelIdentifier>.csv).
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+}
+
+pub fn main(args: Args) -> Result<()> {
+    let fmu = Fmu::open(&args.fmu)?;
+    let md = fmu.model_description().clone();
+    let de = md.default_experiment.unwrap_or_default();
+    let start = args.start.or(de.start_time).unwrap_or(0.0);
+    let stop = args.stop.or(de.stop_time).unwrap_or(start + 1.0);
+    let step = args.step.or(de.step_size).unwrap_or((stop - start) / 500.0);
+    let tolerance = args.tolerance.or(de.tolerance);
+    if !(start.is_finite() && stop.is_finite() && stop > start) {
+        bail!("invalid time span: start {start}, stop {stop} (stop must be after start)");
+    }
+    if !(step.is_finite() && step > 0.0) {
+        bail!("invalid --step {step}: expected a finite step > 0");
+    }
+    let steps = ((stop - start) / step).round().max(1.0) as u64;
+
+    let outputs: Vec<_> = md
+        .model_variables
+        .iter()
+        .filter(|v| v.causality == Causality::Output && v.base_type() != BaseType::String)
+        .collect();
+    let columns: Vec<String> = outputs.iter().map(|v| v.name.clone()).collect();
+    let real: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Real);
+    let int: Vec<(usize, u32)> = outputs
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| matches!(v.base_type(), BaseType::Integer | BaseType::Enumeration))
+        .map(|(i, v)| (i, v.value_reference))
+        .collect();
+    let boolean: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Boolean);
+
+    let name = md.co_simulation.model_identifier.clone();
+    let mut instance = fmu.instantiate(&name, Default::default())?;
+    for assignment in &args.set {
+        let (var, value) = assignment
+            .split_once('=')
+            .with_context(|| format!("--set {assignment}: expected NAME=VALUE"))?;
+        apply_start_value(
+            &mut instance,
+            &md,
+            var.trim(),
+            &StartValue::parse_cli(value.trim()),
+        )?;
+    }
+    instance.setup_experiment(tolerance, start, Some(stop))?;
+    instance.enter_initialization_mode()?;
+    instance.exit_initialization_mode()?;
+
+    let out = args
+        .out
+        .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
+    let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let mut recorder = CsvRecorder::new(file);
+    recorder.start(&columns)?;
+    let mut row = vec![0.0; columns.len()];
+    let real_vrs: Vec<u32> = real.iter().map(|x| x.1).collect();
+    let int_vrs: Vec<u32> = int.iter().map(|x| x.1).collect();
+    let bool_vrs: Vec<u32> = boolean.iter().map(|x| x.1).collect();
+    let mut real_buf = vec![0.0; real.len()];
+    let mut int_buf = vec![0; int.len()];
+    let mut bool_buf = vec![false; boolean.len()];
+    let mut outcome = Ok(());
+    for n in 0..=steps {
+        let t = start + n as f64 * step;
+        if n > 0 {
+            if let Err(e) = instance.do_step(start + (n - 1) as f64 * step, step, true) {
+                outcome = Err(e);
+                break;
+            }
+        }
+        instance.get_real(&real_vrs, &mut real_buf)?;
+        instance.get_integer(&int_vrs, &mut int_buf)?;
+        instance.get_boolean(&bool_vrs, &mut bool_buf)?;
+        for (k, &(slot, _)) in real.iter().enumerate() {
+            row[slot] = real_buf[k];
+        }
+        for (k, &(slot, _)) in int.iter().enumerate() {
+            row[slot] = f64::from(int_buf[k]);
+        }
+        for (k, &(slot, _)) in boolean.iter().enumerate() {
+            row[slot] = if bool_buf[k] { 1.0 } else { 0.0 };
+        }
+        recorder.sample(Sample {
+            step: n,
+            time: t,
+            values: &row,
+        })?;
+    }
+    let failure = outcome.as_ref().err().map(|e| e.to_string());
+    recorder.finish(failure.as_deref())?;
+    outcome.with_context(|| {
+        format!(
+            "simulation stopped; results so far kept in {}",
+            out.display()
+        )
+    })?;
+    instance.terminate()?;
+    eprintln!(
+        "{name}: {steps} steps of {step} from {start} to {stop}; results: {}",
+        out.display()
+    );
+    Ok(())
+}
+
+fn kind_slots(outputs: &[&tether_fmi::ScalarVariable], kind: BaseType) -> Vec<(usize, u32)> {
+    outputs
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.base_type() == kind)
+        .map(|(i, v)| (i, v.value_reference))
+        .collect()
+}

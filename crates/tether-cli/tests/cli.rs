@@ -1,0 +1,247 @@
+//! The `tether` binary as a user runs it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tether(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tether"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run tether")
+}
+
+fn oscillator() -> PathBuf {
+    tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU")
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .unwrap()
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// The last line of stderr must be the one-line error.
+fn error_line(out: &Output) -> String {
+    assert!(
+        !out.status.success(),
+        "expected failure, got success: {}",
+        stderr(out)
+    );
+    let text = stderr(out);
+    let line = text.lines().last().unwrap_or_default().to_string();
+    assert!(line.starts_with("error: "), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    line
+}
+
+#[test]
+fn info_prints_identity_capabilities_and_variables() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tether(&["info", oscillator().to_str().unwrap()], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    for needle in [
+        "oscillator",
+        "canGetAndSetFMUstate",
+        "canInterpolateInputs",
+        "input",
+        "output",
+        " F ",
+        " x ",
+        " a ",
+    ] {
+        assert!(text.contains(needle), "missing {needle:?} in\n{text}");
+    }
+}
+
+#[test]
+fn simulate_writes_every_output_on_the_communication_grid() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("free.csv");
+    let out = tether(
+        &[
+            "simulate",
+            oscillator().to_str().unwrap(),
+            "--stop",
+            "0.5",
+            "--step",
+            "1e-3",
+            "--set",
+            "v0=1",
+            "--set",
+            "exact=true",
+            "--out",
+            csv.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header[0], "time");
+    for col in ["x", "v", "a"] {
+        assert!(header.contains(&col), "{header:?}");
+    }
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 501);
+    for (n, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], n as f64 * 1e-3, "time is start + n·h");
+    }
+    let vi = header.iter().position(|c| *c == "v").unwrap();
+    assert_eq!(rows[0][vi], 1.0, "--set v0=1 applied");
+}
+
+#[test]
+fn simulate_refuses_a_bad_setting_with_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let osc = oscillator();
+    let line = error_line(&tether(
+        &["simulate", osc.to_str().unwrap(), "--set", "mm=2"],
+        dir.path(),
+    ));
+    assert!(line.contains("mm") && line.contains("'m'"), "{line}");
+    let line = error_line(&tether(
+        &["simulate", osc.to_str().unwrap(), "--set", "x=2"],
+        dir.path(),
+    ));
+    assert!(line.contains("output"), "{line}");
+    let line = error_line(&tether(
+        &["simulate", osc.to_str().unwrap(), "--step", "0"],
+        dir.path(),
+    ));
+    assert!(line.contains("step"), "{line}");
+}
+
+#[test]
+fn run_the_oscillator_example_writes_the_documented_columns() {
+    oscillator();
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("osc.csv");
+    let example = root().join("examples/oscillator.toml");
+    let out = tether(
+        &[
+            "run",
+            example.to_str().unwrap(),
+            "--stop",
+            "0.1",
+            "--out",
+            csv.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let summary = stderr(&out);
+    assert!(
+        summary.contains("macro steps: 100") && summary.contains("doStep"),
+        "{summary}"
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header = text.lines().next().unwrap();
+    assert_eq!(
+        header,
+        "time,mass1.x,mass1.v,mass1.a,mass2.x,mass2.v,mass2.a,link.lambda,link.g"
+    );
+    assert_eq!(text.lines().count(), 102);
+    let first: Vec<f64> = text
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (first[7] - 1000.0 / 3.0).abs() < 1e-6,
+        "consistent λ0, got {}",
+        first[7]
+    );
+}
+
+fn write_system(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("examples/oscillator.toml")).unwrap();
+    let fmu = oscillator();
+    let text = text.replace("../target/fmus/oscillator.fmu", fmu.to_str().unwrap());
+    let path = dir.join("system.toml");
+    std::fs::write(&path, edit(text)).unwrap();
+    path
+}
+
+#[test]
+fn a_system_file_naming_a_missing_variable_is_a_one_line_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = write_system(dir.path(), |t| {
+        t.replace("mass2.x - mass1.x", "mass2.x - mass1.xx")
+    });
+    let line = error_line(&tether(&["run", sys.to_str().unwrap()], dir.path()));
+    assert!(line.contains("xx") && line.contains("'x'"), "{line}");
+    let sys = write_system(dir.path(), |t| {
+        t.replace("mass1.F - mass2.F", "mass1.F - mass3.F")
+    });
+    let line = error_line(&tether(&["run", sys.to_str().unwrap()], dir.path()));
+    assert!(line.contains("mass3"), "{line}");
+    let sys = write_system(dir.path(), |t| {
+        t.replace("mass1.F - mass2.F", "mass1.x - mass2.F")
+    });
+    let line = error_line(&tether(&["run", sys.to_str().unwrap()], dir.path()));
+    assert!(line.contains("mass1.x") && line.contains("input"), "{line}");
+}
+
+#[test]
+fn bad_method_parameters_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = write_system(dir.path(), |t| t);
+    let s = sys.to_str().unwrap();
+    for (args, needle) in [
+        (vec!["--beta", "-1"], "beta"),
+        (vec!["--order", "3"], "order"),
+        (vec!["--step", "0"], "step"),
+        (vec!["--stop", "-1"], "stop"),
+        (vec!["--a", "1"], "--a"),
+        (vec!["--method", "explicit"], "mu"),
+    ] {
+        let mut full = vec!["run", s];
+        full.extend(args.iter());
+        let line = error_line(&tether(&full, dir.path()));
+        assert!(line.contains(needle), "{args:?}: {line}");
+    }
+}
+
+#[test]
+fn divergence_keeps_the_results_and_marks_them_incomplete() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = write_system(dir.path(), |t| t);
+    let csv = dir.path().join("unstable.csv");
+    // Index 3 with linear polynomials is unstable (the paper's conclusion).
+    let out = tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--beta",
+            "0",
+            "--gamma",
+            "0",
+            "--order",
+            "1",
+            "--out",
+            csv.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    let line = error_line(&out);
+    assert!(line.contains("diverged") && line.contains("t = "), "{line}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let last = text.lines().last().unwrap();
+    assert!(
+        last.starts_with("# incomplete: coupling diverged"),
+        "{last}"
+    );
+    assert!(text.lines().count() > 3, "accepted steps are kept");
+}

@@ -1,0 +1,128 @@
+//! The master's error type: every message is one line naming the culprit.
+
+use std::path::PathBuf;
+
+use crate::expr::ExprError;
+
+/// Everything that can stop a coupled run or keep it from starting.
+#[derive(Debug, thiserror::Error)]
+pub enum MasterError {
+    /// The system file cannot be read or has the wrong shape.
+    #[error("system file {}: {reason}", path.display())]
+    SystemFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, on one line.
+        reason: String,
+    },
+    /// A number outside its allowed range (method parameter, step, stop time …).
+    #[error("invalid {name} = {value}: expected {expected}")]
+    InvalidParameter {
+        /// Parameter name.
+        name: String,
+        /// The value given.
+        value: f64,
+        /// What would have been accepted.
+        expected: String,
+    },
+    /// A constraint expression cannot be parsed.
+    #[error("constraint '{constraint}', {level}: {source}")]
+    Expression {
+        /// Constraint name.
+        constraint: String,
+        /// `position`, `velocity`, `acceleration` or `drives`.
+        level: &'static str,
+        /// The parse error.
+        source: ExprError,
+    },
+    /// An expression names an instance the system file does not declare.
+    #[error("constraint '{constraint}' refers to unknown instance '{instance}'{hint}")]
+    UnknownInstance {
+        /// Constraint name.
+        constraint: String,
+        /// The name that was not found.
+        instance: String,
+        /// `; did you mean …?` or empty.
+        hint: String,
+    },
+    /// A variable is used in a role its causality or type does not allow.
+    #[error("{instance}.{variable} is {found}, but {role} needs {expected}")]
+    WrongVariable {
+        /// Instance name.
+        instance: String,
+        /// Variable name.
+        variable: String,
+        /// What the variable is (`a parameter`, `an Integer output` …).
+        found: String,
+        /// The role it was used in.
+        role: String,
+        /// What the role requires.
+        expected: String,
+    },
+    /// A constraint lacks a level the chosen method evaluates.
+    #[error("constraint '{constraint}' has no {level} expression, which {needed_by} needs")]
+    MissingLevel {
+        /// Constraint name.
+        constraint: String,
+        /// `velocity` or `acceleration`.
+        level: &'static str,
+        /// What needs it.
+        needed_by: String,
+    },
+    /// An FMU lacks a capability the chosen method needs.
+    #[error(
+        "instance '{instance}' ({model}) does not declare {capability}, which {needed_by} needs"
+    )]
+    MissingCapability {
+        /// Instance name.
+        instance: String,
+        /// Model name.
+        model: String,
+        /// The capability flag.
+        capability: &'static str,
+        /// What needs it.
+        needed_by: String,
+    },
+    /// A start value cannot be applied to its variable.
+    #[error("instance '{instance}': cannot set {variable} = {value}: {reason}")]
+    StartValue {
+        /// Instance name.
+        instance: String,
+        /// Variable name.
+        variable: String,
+        /// Value as written.
+        value: String,
+        /// Why not.
+        reason: String,
+    },
+    /// The interface Jacobian cannot be solved reliably.
+    #[error("singular interface Jacobian ({level} level) at t = {time}: condition estimate {condition:.3e} exceeds {limit:.1e}")]
+    SingularJacobian {
+        /// Time of the macro point T_{N+1} being solved for.
+        time: f64,
+        /// Which matrix: `baumgarte`, `position`, `velocity`, `acceleration`.
+        level: &'static str,
+        /// Estimated 1-norm condition number after row scaling (inf if exactly singular).
+        condition: f64,
+        /// The accepted maximum.
+        limit: f64,
+    },
+    /// A state, output or multiplier became non-finite or exploded.
+    #[error("coupling diverged at t = {time}: {quantity} = {value:e} (limit {limit:.1e})")]
+    Diverged {
+        /// Time of the accepted step.
+        time: f64,
+        /// The column name of the quantity.
+        quantity: String,
+        /// Its value.
+        value: f64,
+        /// The bound it crossed.
+        limit: f64,
+    },
+    /// An FMI call or FMU load failed.
+    #[error(transparent)]
+    Fmi(#[from] tether_fmi::Error),
+    /// Writing results failed.
+    #[error("recording results: {0}")]
+    Recording(#[from] std::io::Error),
+}

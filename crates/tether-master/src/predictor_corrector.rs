@@ -1,0 +1,162 @@
+//! The semi-implicit predictor/corrector macro step (paper Sect. 3.3,
+//! eqs. 55–70 for Method 1 and 71–76 for Method 2).
+
+use std::time::Instant;
+
+use nalgebra::DVector;
+
+use crate::coupling::LevelKind;
+use crate::polynomial::{extrapolation, interpolation};
+use crate::simulation::Simulation;
+use crate::solve::solve;
+use crate::{MasterError, Method};
+
+impl Simulation {
+    /// One macro step T_N → T_{N+1}: save, predict, perturb, solve, correct.
+    pub(crate) fn predictor_corrector_step(&mut self) -> Result<(), MasterError> {
+        let h = self.experiment.step;
+        let t = self.time();
+        let k = self.settings.order;
+        // Start-up: only N+1 points of history exist at T_N (docs/algorithm.md).
+        let degree_pred = k.min(self.n as usize);
+        let degree_corr = k.min(self.n as usize + 1);
+        let nu = self.constraints.len();
+
+        // Step 1, predictor (eq. 56–58): extrapolated polynomials.
+        let clock = Instant::now();
+        for m in 0..nu {
+            self.work.polys[m] = extrapolation(&self.history[m], degree_pred, h);
+            self.work.u_pred[m] = self.work.polys[m].at(h);
+        }
+        for (s, slave) in self.slaves.iter_mut().enumerate() {
+            if slave.is_coupled() {
+                slave.save_state()?;
+            }
+            slave.apply_inputs(&self.work.polys, k)?;
+            slave.do_step(t, h)?;
+            slave.read_coupled()?;
+            self.work.base[s].copy_from_slice(&slave.coupled_values);
+        }
+        for (l, &level) in self.levels.iter().enumerate() {
+            for (r, c) in self.constraints.iter().enumerate() {
+                self.work.g[l][r] = c.level(level).eval_live(&self.slaves);
+            }
+        }
+        self.stats.times.predictor += clock.elapsed();
+
+        // Step 2a, perturbed predictors (eq. 59–64): finite-difference columns.
+        let clock = Instant::now();
+        for gi in 0..self.groups.len() {
+            self.work.perturbed.copy_from_slice(&self.work.polys);
+            self.work.live.fill(false);
+            for &m in &self.groups[gi] {
+                let delta = self.settings.epsilon * self.history[m][0].abs().max(1.0);
+                self.work.delta[m] = delta;
+                self.work.perturbed[m] = interpolation(
+                    self.work.u_pred[m] + delta,
+                    &self.history[m],
+                    degree_corr,
+                    h,
+                );
+                for &s in &self.owners[m] {
+                    self.work.live[s] = true;
+                }
+            }
+            for (s, slave) in self.slaves.iter_mut().enumerate() {
+                if self.work.live[s] {
+                    slave.restore_state()?;
+                    slave.apply_inputs(&self.work.perturbed, k)?;
+                    slave.do_step(t, h)?;
+                    slave.read_coupled()?;
+                }
+            }
+            for &m in &self.groups[gi] {
+                // Only the instances m drives count as perturbed for column m.
+                self.work.live.fill(false);
+                for &s in &self.owners[m] {
+                    self.work.live[s] = true;
+                }
+                for (l, &level) in self.levels.iter().enumerate() {
+                    for (r, c) in self.constraints.iter().enumerate() {
+                        let g = c
+                            .level(level)
+                            .eval(&self.slaves, &self.work.base, &self.work.live);
+                        self.work.jac[l][(r, m)] = (g - self.work.g[l][r]) / self.work.delta[m];
+                    }
+                }
+            }
+        }
+        self.stats.times.jacobian += clock.elapsed();
+
+        // Step 2b, corrected unknowns (eq. 68 or eq. 73–76).
+        let clock = Instant::now();
+        let corrected = self.corrected_unknowns(self.time_at(self.n + 1))?;
+        self.stats.times.solve += clock.elapsed();
+
+        // Step 3, corrector: repeat the step with interpolation polynomials.
+        let clock = Instant::now();
+        for m in 0..nu {
+            self.work.polys[m] = interpolation(corrected[m], &self.history[m], degree_corr, h);
+        }
+        for slave in self.slaves.iter_mut() {
+            if slave.is_coupled() {
+                slave.restore_state()?;
+                slave.apply_inputs(&self.work.polys, k)?;
+                slave.do_step(t, h)?;
+            }
+        }
+        for (m, hist) in self.history.iter_mut().enumerate() {
+            *hist = [corrected[m], hist[0], hist[1]];
+        }
+        self.n += 1;
+        self.read_accepted()?;
+        self.stats.times.corrector += clock.elapsed();
+        Ok(())
+    }
+
+    fn corrected_unknowns(&mut self, time: f64) -> Result<DVector<f64>, MasterError> {
+        let limit = self.settings.max_condition;
+        let u_pred = DVector::from_column_slice(&self.work.u_pred);
+        let level_index = |kind| self.levels.iter().position(|&l| l == kind);
+        match self.method {
+            Method::Baumgarte { beta, gamma } => {
+                // Eq. 68: u = u^p − (G^B)⁻¹ g^B with g^B = g + β ġ + γ g̈.
+                let mut a = self.work.jac[0].clone();
+                let mut b = self.work.g[0].clone();
+                if let Some(v) = level_index(LevelKind::Velocity) {
+                    a += beta * &self.work.jac[v];
+                    b += beta * &self.work.g[v];
+                }
+                if let Some(acc) = level_index(LevelKind::Acceleration) {
+                    a += gamma * &self.work.jac[acc];
+                    b += gamma * &self.work.g[acc];
+                }
+                let level = if self.levels.len() == 1 {
+                    "position"
+                } else {
+                    "baumgarte"
+                };
+                self.stats.jacobian_solves += 1;
+                Ok(u_pred - solve(&a, &b, time, level, limit)?)
+            }
+            Method::Weighted { a, b } => {
+                // Eq. 73–76: solve each level, then average with weights 1, a, b.
+                let mut sum = DVector::zeros(u_pred.len());
+                let mut total = 0.0;
+                for (l, &kind) in self.levels.iter().enumerate() {
+                    let (weight, name) = match kind {
+                        LevelKind::Position => (1.0, "position"),
+                        LevelKind::Velocity => (a, "velocity"),
+                        LevelKind::Acceleration => (b, "acceleration"),
+                    };
+                    self.stats.jacobian_solves += 1;
+                    let step = solve(&self.work.jac[l], &self.work.g[l], time, name, limit)?;
+                    sum += weight * (&u_pred - step);
+                    total += weight;
+                }
+                Ok(sum / total)
+            }
+            Method::Explicit { .. } => unreachable!("the explicit method has its own step"),
+        }
+    }
+}

@@ -1,0 +1,290 @@
+//! A coupled run: instantiate the FMUs, resolve the coupling, pick consistent
+//! initial multipliers, then march over the macro grid `T_n = T_0 + n·H`.
+
+use std::time::Instant;
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::coupling::{self, Constraint, LevelKind};
+use crate::observer::{Observer, Sample};
+use crate::polynomial::Taylor;
+use crate::slave::Slave;
+use crate::spec::{CouplingSettings, Experiment, InitialMultiplier, SystemSpec};
+use crate::stats::RunStats;
+use crate::{MasterError, Method};
+
+/// A coupled system, ready to run.
+pub struct Simulation {
+    pub(crate) experiment: Experiment,
+    pub(crate) method: Method,
+    pub(crate) settings: CouplingSettings,
+    pub(crate) slaves: Vec<Slave>,
+    pub(crate) constraints: Vec<Constraint>,
+    /// For each unknown, the slaves whose inputs it drives.
+    pub(crate) owners: Vec<Vec<usize>>,
+    /// Unknowns whose perturbations share one run.
+    pub(crate) groups: Vec<Vec<usize>>,
+    /// Levels the method evaluates (position always first).
+    pub(crate) levels: Vec<LevelKind>,
+    /// Per unknown: `[u_N, u_{N-1}, u_{N-2}]`.
+    pub(crate) history: Vec<[f64; 3]>,
+    /// Current macro point index N.
+    pub(crate) n: u64,
+    pub(crate) work: Work,
+    columns: Vec<String>,
+    row: Vec<f64>,
+    limits: Vec<f64>,
+    steps: u64,
+    pub(crate) stats: RunStats,
+}
+
+/// Buffers reused by every macro step.
+pub(crate) struct Work {
+    /// Coupled output values of each slave after the predictor (or base point).
+    pub base: Vec<Vec<f64>>,
+    /// Which slaves' latest values count as perturbed.
+    pub live: Vec<bool>,
+    pub polys: Vec<Taylor>,
+    pub perturbed: Vec<Taylor>,
+    pub u_pred: Vec<f64>,
+    pub delta: Vec<f64>,
+    /// Condition values `g`, `ġ`, `g̈` at the predictor, indexed like `levels`.
+    pub g: Vec<DVector<f64>>,
+    /// Interface Jacobians ∂g/∂u, ∂ġ/∂u, ∂g̈/∂u, indexed like `levels`.
+    pub jac: Vec<DMatrix<f64>>,
+}
+
+impl Simulation {
+    /// Build a run from a system description (paths already resolved).
+    pub fn new(spec: &SystemSpec) -> Result<Simulation, MasterError> {
+        let clock = Instant::now();
+        spec.validate()?;
+        let method = spec.method;
+        let settings = spec.coupling;
+        if matches!(method, Method::Explicit { .. }) && settings.order != 0 {
+            return Err(MasterError::InvalidParameter {
+                name: "order".into(),
+                value: settings.order as f64,
+                expected: "0: the explicit method holds the multipliers constant over a step"
+                    .into(),
+            });
+        }
+        let mut slaves = spec
+            .instances
+            .iter()
+            .map(Slave::instantiate)
+            .collect::<Result<Vec<_>, _>>()?;
+        let constraints =
+            coupling::resolve(&spec.constraints, &mut slaves, &method, settings.order)?;
+        let nu = constraints.len();
+        let mut owners = vec![Vec::new(); nu];
+        for (s, slave) in slaves.iter().enumerate() {
+            for input in &slave.inputs {
+                for &(m, _) in &input.terms {
+                    if !owners[m].contains(&s) {
+                        owners[m].push(s);
+                    }
+                }
+            }
+        }
+        let groups = coupling::perturbation_groups(&owners);
+        let mut levels = vec![LevelKind::Position];
+        if method.needs_velocity() {
+            levels.push(LevelKind::Velocity);
+        }
+        if method.needs_acceleration() {
+            levels.push(LevelKind::Acceleration);
+        }
+        let exp = spec.experiment;
+        let stop = exp.start + spec.macro_steps() as f64 * exp.step;
+        for slave in &mut slaves {
+            slave.initialize(exp.start, stop, exp.tolerance)?;
+        }
+        let mut columns = Vec::new();
+        for slave in &slaves {
+            columns.extend(slave.recorded_names().iter().cloned());
+        }
+        columns.extend(constraints.iter().map(|c| format!("{}.lambda", c.name)));
+        columns.extend(constraints.iter().map(|c| format!("{}.g", c.name)));
+        let work = Work {
+            base: slaves
+                .iter()
+                .map(|s| vec![0.0; s.coupled_values.len()])
+                .collect(),
+            live: vec![false; slaves.len()],
+            polys: vec![Taylor::default(); nu],
+            perturbed: vec![Taylor::default(); nu],
+            u_pred: vec![0.0; nu],
+            delta: vec![0.0; nu],
+            g: levels.iter().map(|_| DVector::zeros(nu)).collect(),
+            jac: levels.iter().map(|_| DMatrix::zeros(nu, nu)).collect(),
+        };
+        let mut sim = Simulation {
+            experiment: exp,
+            method,
+            settings,
+            history: constraints
+                .iter()
+                .map(|c| match c.initial {
+                    InitialMultiplier::Value(v) => [v; 3],
+                    InitialMultiplier::Consistent => [0.0; 3],
+                })
+                .collect(),
+            slaves,
+            constraints,
+            owners,
+            groups,
+            levels,
+            n: 0,
+            work,
+            row: vec![0.0; columns.len()],
+            limits: vec![f64::INFINITY; columns.len()],
+            columns,
+            steps: spec.macro_steps(),
+            stats: RunStats::default(),
+        };
+        sim.initial_multipliers()?;
+        sim.read_accepted()?;
+        sim.fill_row();
+        let factor = sim.settings.divergence_factor;
+        sim.limits = sim.row.iter().map(|v| factor * v.abs().max(1.0)).collect();
+        sim.check_divergence(sim.experiment.start)?;
+        sim.stats.times.setup = clock.elapsed();
+        Ok(sim)
+    }
+
+    /// Column names after `time`: every Real output as `<instance>.<variable>`,
+    /// then `<constraint>.lambda`, then `<constraint>.g`.
+    pub fn columns(&self) -> &[String] {
+        &self.columns
+    }
+
+    /// The current macro time T_N = T_0 + N·H.
+    pub fn time(&self) -> f64 {
+        self.time_at(self.n)
+    }
+
+    pub(crate) fn time_at(&self, n: u64) -> f64 {
+        self.experiment.start + n as f64 * self.experiment.step
+    }
+
+    /// Number of macro steps the experiment asks for.
+    pub fn total_steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The current coupling unknowns u_N (one multiplier per constraint).
+    pub fn unknowns(&self) -> Vec<f64> {
+        self.history.iter().map(|h| h[0]).collect()
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> RunStats {
+        let mut stats = self.stats.clone();
+        stats.instances = self.slaves.iter().map(|s| s.counters().clone()).collect();
+        stats
+    }
+
+    /// Advance one macro step with the configured method.
+    pub fn step(&mut self) -> Result<(), MasterError> {
+        match self.method {
+            Method::Explicit { mu } => self.explicit_step(mu)?,
+            _ => self.predictor_corrector_step()?,
+        }
+        self.stats.macro_steps += 1;
+        self.fill_row();
+        self.check_divergence(self.time())
+    }
+
+    /// Run to the stop time, feeding every accepted point to the observers.
+    /// On failure the observers are finished with the error message (results
+    /// up to the last accepted step are kept) and the error is returned.
+    pub fn run(
+        &mut self,
+        observers: &mut [&mut dyn Observer],
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<RunStats, MasterError> {
+        let clock = Instant::now();
+        for o in observers.iter_mut() {
+            o.start(&self.columns)?;
+        }
+        self.notify(observers)?;
+        let outcome = (|| {
+            while self.n < self.steps {
+                self.step()?;
+                self.notify(observers)?;
+                progress(self.n, self.steps);
+            }
+            Ok(())
+        })();
+        let message = outcome.as_ref().err().map(|e: &MasterError| e.to_string());
+        for o in observers.iter_mut() {
+            o.finish(message.as_deref())?;
+        }
+        self.stats.wall = clock.elapsed() + self.stats.times.setup;
+        outcome.map(|()| self.stats())
+    }
+
+    fn notify(&mut self, observers: &mut [&mut dyn Observer]) -> Result<(), MasterError> {
+        let clock = Instant::now();
+        let sample = Sample {
+            step: self.n,
+            time: self.time(),
+            values: &self.row,
+        };
+        for o in observers.iter_mut() {
+            o.sample(sample)?;
+        }
+        self.stats.times.recording += clock.elapsed();
+        Ok(())
+    }
+
+    /// Read coupled and recorded outputs of every slave at an accepted point.
+    pub(crate) fn read_accepted(&mut self) -> Result<(), MasterError> {
+        for slave in &mut self.slaves {
+            slave.read_coupled()?;
+            slave.read_recorded()?;
+        }
+        Ok(())
+    }
+
+    fn fill_row(&mut self) {
+        let mut i = 0;
+        for slave in &self.slaves {
+            for &v in slave.recorded_values() {
+                self.row[i] = v;
+                i += 1;
+            }
+        }
+        for h in &self.history {
+            self.row[i] = h[0];
+            i += 1;
+        }
+        for c in &self.constraints {
+            self.row[i] = c.position.eval_live(&self.slaves);
+            i += 1;
+        }
+    }
+
+    fn check_divergence(&self, time: f64) -> Result<(), MasterError> {
+        for ((v, limit), name) in self.row.iter().zip(&self.limits).zip(&self.columns) {
+            if !v.is_finite() || v.abs() > *limit {
+                return Err(MasterError::Diverged {
+                    time,
+                    quantity: name.clone(),
+                    value: *v,
+                    limit: *limit,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Set every coupled slave's inputs from `polys` (degree `k` derivatives).
+    pub(crate) fn apply_all(&mut self, k: usize) -> Result<(), MasterError> {
+        for slave in &mut self.slaves {
+            slave.apply_inputs(&self.work.polys, k)?;
+        }
+        Ok(())
+    }
+}

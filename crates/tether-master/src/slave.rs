@@ -1,0 +1,288 @@
+//! One FMU instance as the coupling algorithm sees it: coupled inputs driven by
+//! polynomials, coupled outputs read after each run, a saved state to roll back
+//! to, and the outputs recorded at accepted steps.
+
+use tether_fmi::{BaseType, Causality, Fmu, FmuState, Instance};
+
+use crate::polynomial::Taylor;
+use crate::spec::InstanceSpec;
+use crate::stats::InstanceCounters;
+use crate::MasterError;
+
+/// A coupled input: `value = Σ coefficient · u[unknown]`.
+#[derive(Debug, Clone)]
+pub(crate) struct CoupledInput {
+    pub vr: u32,
+    pub terms: Vec<(usize, f64)>,
+}
+
+/// An output value read after each run: the variable itself or one of its
+/// derivatives (order 1 or 2) through `fmi2GetRealOutputDerivatives`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct CoupledOutput {
+    pub vr: u32,
+    pub order: u32,
+}
+
+/// An FMU instance inside a coupled system.
+pub struct Slave {
+    pub(crate) name: String,
+    pub(crate) model_name: String,
+    pub(crate) instance: Instance,
+    pub(crate) fmu: Fmu,
+    state: Option<FmuState>,
+    pub(crate) inputs: Vec<CoupledInput>,
+    input_vrs: Vec<u32>,
+    input_values: Vec<f64>,
+    input_d_vrs: Vec<u32>,
+    input_d_orders: Vec<i32>,
+    input_d_values: Vec<f64>,
+    pub(crate) coupled_outputs: Vec<CoupledOutput>,
+    value_vrs: Vec<u32>,
+    value_slots: Vec<usize>,
+    value_buf: Vec<f64>,
+    derivative_reads: Vec<(u32, i32, usize)>,
+    /// Values of `coupled_outputs` after the latest run.
+    pub(crate) coupled_values: Vec<f64>,
+    pub(crate) recorded_names: Vec<String>,
+    recorded_vrs: Vec<u32>,
+    /// Recorded outputs after the latest read.
+    pub(crate) recorded_values: Vec<f64>,
+    pub(crate) counters: InstanceCounters,
+    pub(crate) can_interpolate_inputs: bool,
+    pub(crate) max_output_derivative_order: u32,
+    pub(crate) can_get_and_set_state: bool,
+}
+
+impl Slave {
+    /// Open the FMU, instantiate it and apply the start values.
+    pub(crate) fn instantiate(spec: &InstanceSpec) -> Result<Slave, MasterError> {
+        let fmu = Fmu::open(&spec.fmu)?;
+        let md = fmu.model_description();
+        let cs = &md.co_simulation;
+        let can_interpolate_inputs = cs.can_interpolate_inputs;
+        let max_output_derivative_order = cs.max_output_derivative_order;
+        let can_get_and_set_state = cs.can_get_and_set_fmu_state;
+        let model_name = md.model_name.clone();
+        let mut recorded_names = Vec::new();
+        let mut recorded_vrs = Vec::new();
+        for v in &md.model_variables {
+            if v.causality == Causality::Output && v.base_type() == BaseType::Real {
+                recorded_names.push(format!("{}.{}", spec.name, v.name));
+                recorded_vrs.push(v.value_reference);
+            }
+        }
+        let instance = fmu.instantiate(&spec.name, Default::default())?;
+        let mut slave = Slave {
+            name: spec.name.clone(),
+            model_name,
+            instance,
+            fmu,
+            state: None,
+            inputs: Vec::new(),
+            input_vrs: Vec::new(),
+            input_values: Vec::new(),
+            input_d_vrs: Vec::new(),
+            input_d_orders: Vec::new(),
+            input_d_values: Vec::new(),
+            coupled_outputs: Vec::new(),
+            value_vrs: Vec::new(),
+            value_slots: Vec::new(),
+            value_buf: Vec::new(),
+            derivative_reads: Vec::new(),
+            coupled_values: Vec::new(),
+            recorded_values: vec![0.0; recorded_vrs.len()],
+            recorded_names,
+            recorded_vrs,
+            counters: InstanceCounters {
+                name: spec.name.clone(),
+                ..Default::default()
+            },
+            can_interpolate_inputs,
+            max_output_derivative_order,
+            can_get_and_set_state,
+        };
+        for (name, value) in &spec.parameters {
+            crate::start::apply_start_value(
+                &mut slave.instance,
+                slave.fmu.model_description(),
+                name,
+                value,
+            )?;
+        }
+        Ok(slave)
+    }
+
+    /// Register a coupled Real input driven by unknowns; returns its index.
+    pub(crate) fn add_input(&mut self, vr: u32, unknown: usize, coefficient: f64) {
+        if let Some(i) = self.inputs.iter_mut().find(|i| i.vr == vr) {
+            i.terms.push((unknown, coefficient));
+        } else {
+            self.inputs.push(CoupledInput {
+                vr,
+                terms: vec![(unknown, coefficient)],
+            });
+        }
+    }
+
+    /// Register a coupled output; returns its slot in `coupled_values`.
+    pub(crate) fn add_output(&mut self, output: CoupledOutput) -> usize {
+        if let Some(i) = self.coupled_outputs.iter().position(|o| *o == output) {
+            return i;
+        }
+        self.coupled_outputs.push(output);
+        self.coupled_outputs.len() - 1
+    }
+
+    /// Size the buffers once the coupling is known (no allocation afterwards).
+    pub(crate) fn finalize(&mut self) {
+        self.input_vrs = self.inputs.iter().map(|i| i.vr).collect();
+        self.input_values = vec![0.0; self.inputs.len()];
+        self.input_d_vrs.clear();
+        self.input_d_orders.clear();
+        for order in 1..=2 {
+            for i in &self.inputs {
+                self.input_d_vrs.push(i.vr);
+                self.input_d_orders.push(order);
+            }
+        }
+        self.input_d_values = vec![0.0; self.input_d_vrs.len()];
+        self.value_vrs.clear();
+        self.value_slots.clear();
+        self.derivative_reads.clear();
+        for (slot, o) in self.coupled_outputs.iter().enumerate() {
+            if o.order == 0 {
+                self.value_vrs.push(o.vr);
+                self.value_slots.push(slot);
+            } else {
+                self.derivative_reads.push((o.vr, o.order as i32, slot));
+            }
+        }
+        self.value_buf = vec![0.0; self.value_vrs.len()];
+        self.coupled_values = vec![0.0; self.coupled_outputs.len()];
+    }
+
+    /// Whether any unknown drives this instance.
+    pub(crate) fn is_coupled(&self) -> bool {
+        !self.inputs.is_empty()
+    }
+
+    /// Initialise: setup experiment, initialization mode.
+    pub(crate) fn initialize(
+        &mut self,
+        start: f64,
+        stop: f64,
+        tolerance: Option<f64>,
+    ) -> Result<(), MasterError> {
+        self.instance
+            .setup_experiment(tolerance, start, Some(stop))?;
+        self.instance.enter_initialization_mode()?;
+        self.instance.exit_initialization_mode()?;
+        Ok(())
+    }
+
+    /// Save the current state (`fmi2GetFMUstate`, reusing the previous handle).
+    pub(crate) fn save_state(&mut self) -> Result<(), MasterError> {
+        match &mut self.state {
+            Some(s) => self.instance.update_fmu_state(s)?,
+            None => self.state = Some(self.instance.get_fmu_state()?),
+        }
+        self.counters.state_gets += 1;
+        Ok(())
+    }
+
+    /// Roll back to the saved state (`fmi2SetFMUstate`).
+    pub(crate) fn restore_state(&mut self) -> Result<(), MasterError> {
+        let state = self
+            .state
+            .as_ref()
+            .expect("restore_state is only called after save_state");
+        self.instance.set_fmu_state(state)?;
+        self.counters.state_sets += 1;
+        Ok(())
+    }
+
+    /// Set the coupled inputs from the unknowns' polynomials; `degree` > 0 also
+    /// passes derivatives through `fmi2SetRealInputDerivatives`.
+    pub(crate) fn apply_inputs(
+        &mut self,
+        polys: &[Taylor],
+        degree: usize,
+    ) -> Result<(), MasterError> {
+        if self.inputs.is_empty() {
+            return Ok(());
+        }
+        let n = self.inputs.len();
+        for (k, input) in self.inputs.iter().enumerate() {
+            let mut p = Taylor::default();
+            for &(m, c) in &input.terms {
+                p.value += c * polys[m].value;
+                p.d1 += c * polys[m].d1;
+                p.d2 += c * polys[m].d2;
+            }
+            self.input_values[k] = p.value;
+            self.input_d_values[k] = p.d1;
+            self.input_d_values[n + k] = p.d2;
+        }
+        self.instance
+            .set_real(&self.input_vrs, &self.input_values)?;
+        if degree > 0 {
+            let count = n * degree.min(2);
+            self.instance.set_real_input_derivatives(
+                &self.input_d_vrs[..count],
+                &self.input_d_orders[..count],
+                &self.input_d_values[..count],
+            )?;
+        }
+        Ok(())
+    }
+
+    /// One `fmi2DoStep` from `t` over `h`.
+    pub(crate) fn do_step(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
+        self.counters.do_steps += 1;
+        self.instance.do_step(t, h, true)?;
+        Ok(())
+    }
+
+    /// Read the coupled outputs into `coupled_values`.
+    pub(crate) fn read_coupled(&mut self) -> Result<(), MasterError> {
+        if !self.value_vrs.is_empty() {
+            self.instance
+                .get_real(&self.value_vrs, &mut self.value_buf)?;
+            for (k, &slot) in self.value_slots.iter().enumerate() {
+                self.coupled_values[slot] = self.value_buf[k];
+            }
+        }
+        for &(vr, order, slot) in &self.derivative_reads {
+            let mut out = [0.0];
+            self.instance
+                .get_real_output_derivatives(&[vr], &[order], &mut out)?;
+            self.coupled_values[slot] = out[0];
+        }
+        Ok(())
+    }
+
+    /// Read every Real output into `recorded_values`.
+    pub(crate) fn read_recorded(&mut self) -> Result<(), MasterError> {
+        if !self.recorded_vrs.is_empty() {
+            self.instance
+                .get_real(&self.recorded_vrs, &mut self.recorded_values)?;
+        }
+        Ok(())
+    }
+
+    /// Column names of the recorded outputs.
+    pub fn recorded_names(&self) -> &[String] {
+        &self.recorded_names
+    }
+
+    /// Recorded outputs after the latest read.
+    pub fn recorded_values(&self) -> &[f64] {
+        &self.recorded_values
+    }
+
+    /// Call counters.
+    pub fn counters(&self) -> &InstanceCounters {
+        &self.counters
+    }
+}

@@ -1,0 +1,48 @@
+//! Applying start values (parameters, input starts) to an instance by name.
+
+use tether_fmi::{BaseType, Causality, Instance, ModelDescription, Variability};
+
+use crate::coupling::describe;
+use crate::spec::StartValue;
+use crate::MasterError;
+
+/// Set `name = value` on `instance` before initialization. Refuses outputs,
+/// locals, constants and type mismatches with a message naming the variable.
+pub fn apply_start_value(
+    instance: &mut Instance,
+    md: &ModelDescription,
+    name: &str,
+    value: &StartValue,
+) -> Result<(), MasterError> {
+    let fail = |reason: String| MasterError::StartValue {
+        instance: instance.name().to_string(),
+        variable: name.to_string(),
+        value: value.to_string(),
+        reason,
+    };
+    let var = md.variable(name)?;
+    if matches!(
+        var.causality,
+        Causality::Output
+            | Causality::Local
+            | Causality::Independent
+            | Causality::CalculatedParameter
+    ) || var.variability == Variability::Constant
+    {
+        return Err(fail(format!("it is {} and cannot be set", describe(var))));
+    }
+    let vr = [var.value_reference];
+    match (var.base_type(), value) {
+        (BaseType::Real, StartValue::Real(x)) => instance.set_real(&vr, &[*x])?,
+        (BaseType::Real, StartValue::Integer(i)) => instance.set_real(&vr, &[*i as f64])?,
+        (BaseType::Integer | BaseType::Enumeration, StartValue::Integer(i)) => {
+            let i =
+                i32::try_from(*i).map_err(|_| fail("out of the 32-bit integer range".into()))?;
+            instance.set_integer(&vr, &[i])?
+        }
+        (BaseType::Boolean, StartValue::Boolean(b)) => instance.set_boolean(&vr, &[*b])?,
+        (BaseType::String, StartValue::String(s)) => instance.set_string(&vr, &[s.as_str()])?,
+        _ => return Err(fail(format!("the variable is {}", describe(var)))),
+    }
+    Ok(())
+}

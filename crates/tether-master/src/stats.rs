@@ -1,0 +1,79 @@
+//! Counters of a run: what the algorithm asked of the FMUs and where the time went.
+
+use std::fmt;
+use std::time::Duration;
+
+/// FMI calls made on one instance.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct InstanceCounters {
+    /// Instance name.
+    pub name: String,
+    /// `fmi2DoStep` calls.
+    pub do_steps: u64,
+    /// `fmi2GetFMUstate` calls.
+    pub state_gets: u64,
+    /// `fmi2SetFMUstate` calls.
+    pub state_sets: u64,
+}
+
+/// Wall time spent in each phase of the macro steps.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Initialisation: instantiation, start values, consistent multipliers.
+    pub setup: Duration,
+    /// Predictor runs (eq. 56–58).
+    pub predictor: Duration,
+    /// Perturbed runs for the interface Jacobian (eq. 59–64).
+    pub jacobian: Duration,
+    /// Building and solving the linear systems (eq. 68 / 73–76).
+    pub solve: Duration,
+    /// Corrector runs.
+    pub corrector: Duration,
+    /// Observers (recording results).
+    pub recording: Duration,
+}
+
+/// Everything counted during a run.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunStats {
+    /// Accepted macro steps.
+    pub macro_steps: u64,
+    /// Linear solves of the interface Jacobian (one per matrix factorised).
+    pub jacobian_solves: u64,
+    /// Per-instance FMI call counts.
+    pub instances: Vec<InstanceCounters>,
+    /// Where the time went.
+    pub times: PhaseTimes,
+    /// Total wall time of [`crate::Simulation::run`] and setup.
+    pub wall: Duration,
+}
+
+impl fmt::Display for RunStats {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "macro steps: {}   Jacobian solves: {}   wall time: {:.3} s",
+            self.macro_steps,
+            self.jacobian_solves,
+            self.wall.as_secs_f64()
+        )?;
+        for c in &self.instances {
+            writeln!(
+                f,
+                "  {:<16} doStep: {:>9}   getFMUstate: {:>8}   setFMUstate: {:>8}",
+                c.name, c.do_steps, c.state_gets, c.state_sets
+            )?;
+        }
+        let t = &self.times;
+        write!(
+            f,
+            "  time [s]: setup {:.3}  predictor {:.3}  jacobian {:.3}  solve {:.3}  corrector {:.3}  recording {:.3}",
+            t.setup.as_secs_f64(),
+            t.predictor.as_secs_f64(),
+            t.jacobian.as_secs_f64(),
+            t.solve.as_secs_f64(),
+            t.corrector.as_secs_f64(),
+            t.recording.as_secs_f64()
+        )
+    }
+}
