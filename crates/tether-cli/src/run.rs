@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 use tether_master::{CsvRecorder, Method, Simulation, SystemSpec};
 
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// The system file (TOML), see docs/system-file.md.
     system: PathBuf,

@@ -10,6 +10,7 @@ use tether_fmi::{BaseType, Causality, Fmu};
 use tether_master::{apply_start_value, CsvRecorder, Observer, Sample, StartValue};
 
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// The `.fmu` file or unpacked FMU directory.
     fmu: PathBuf,
