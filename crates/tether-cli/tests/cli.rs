@@ -245,3 +245,35 @@ fn divergence_keeps_the_results_and_marks_them_incomplete() {
     );
     assert!(text.lines().count() > 3, "accepted steps are kept");
 }
+
+#[test]
+fn a_multiplier_that_cannot_move_its_constraint_is_a_singular_jacobian() {
+    let dir = tempfile::tempdir().unwrap();
+    // g = x2 − x2 does not depend on λ: the interface Jacobian is zero.
+    let sys = write_system(dir.path(), |t| {
+        t.replace("mass2.x - mass1.x", "mass2.x - mass2.x").replace(
+            "[method]\nkind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6",
+            "[method]\nkind = \"baumgarte\"",
+        )
+    });
+    let csv = dir.path().join("singular.csv");
+    let out = tether(
+        &["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()],
+        dir.path(),
+    );
+    let line = error_line(&out);
+    assert!(
+        line.contains("singular interface Jacobian")
+            && line.contains("t = 0.001")
+            && line.contains("condition"),
+        "{line}"
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(
+        text.lines()
+            .last()
+            .unwrap()
+            .starts_with("# incomplete: singular"),
+        "{text}"
+    );
+}
