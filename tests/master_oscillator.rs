@@ -303,3 +303,23 @@ fn several_constraints_share_perturbed_runs_and_match_single_pairs() {
 fn toml_of(spec: &SystemSpec) -> String {
     toml::to_string(spec).unwrap()
 }
+
+/// What the paper leaves open or states as "partly": measured at H = 1e-3.
+#[test]
+fn higher_degree_polynomials_at_h_1e_3() {
+    for method in [VARIANTS[1].1, VARIANTS[4].1] {
+        let err = run(&system(method, 1, 1e-3, 1.0)).unwrap_err();
+        assert!(
+            matches!(err, MasterError::Diverged { .. }),
+            "index 2, k = 1: {err}"
+        );
+    }
+    let e = errors(&run(&system(VARIANTS[0].1, 2, 1e-3, 1.0)).unwrap());
+    eprintln!("baumgarte index 1, k = 2: {e:?}");
+    assert!(e.state() < 1e-3, "{e:?}");
+    let err = run(&system(VARIANTS[3].1, 2, 1e-3, 1.0)).unwrap_err();
+    assert!(
+        matches!(err, MasterError::Diverged { .. }),
+        "weighted index 1, k = 2: {err}"
+    );
+}

@@ -57,12 +57,8 @@ pub fn main(args: Args) -> Result<()> {
         .collect();
     let columns: Vec<String> = outputs.iter().map(|v| v.name.clone()).collect();
     let real: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Real);
-    let int: Vec<(usize, u32)> = outputs
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| matches!(v.base_type(), BaseType::Integer | BaseType::Enumeration))
-        .map(|(i, v)| (i, v.value_reference))
-        .collect();
+    let mut int: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Integer);
+    int.extend(kind_slots(&outputs, BaseType::Enumeration));
     let boolean: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Boolean);
 
     let name = md.co_simulation.model_identifier.clone();
