@@ -1,14 +1,48 @@
-//! Constraints resolved against the FMUs: which outputs form g, ġ, g̈ and
-//! which inputs each multiplier drives.
+//! The coupling conditions resolved against the FMUs: the unknowns (one per
+//! row), and the rows — linear constraints between outputs, joint conditions
+//! between marker ports, additional coupling variables and force-port rows.
 
+use nalgebra::Vector3;
 use tether_fmi::{BaseType, Causality, ScalarVariable};
 
-use crate::expr::{LinearExpr, Term};
+use crate::expr::LinearExpr;
+use crate::joints::{self, Condition, Frames, Joint, Side, MARKER_OUTPUTS};
 use crate::slave::{CoupledOutput, Slave};
-use crate::spec::{ConstraintSpec, InitialMultiplier};
+use crate::spec::{ConstraintSpec, InitialMultiplier, JointInitial, JointSpec, SystemSpec};
 use crate::{MasterError, Method};
 
-/// One level (position, velocity or acceleration) of a constraint:
+/// Where row values come from: the slaves' latest coupled outputs, or for
+/// slaves not `live`, the saved `base` values; the unknowns `u` with at most
+/// one component bumped (a finite-difference column).
+pub(crate) struct View<'a> {
+    pub slaves: &'a [Slave],
+    pub base: &'a [Vec<f64>],
+    pub live: Option<&'a [bool]>,
+    pub u: &'a [f64],
+    pub bump: Option<(usize, f64)>,
+}
+
+impl View<'_> {
+    /// Output `slot` of slave `s`.
+    #[inline]
+    pub fn value(&self, s: usize, slot: usize) -> f64 {
+        match self.live {
+            Some(live) if !live[s] => self.base[s][slot],
+            _ => self.slaves[s].coupled_values[slot],
+        }
+    }
+
+    /// Unknown `m`, bumped if it is the perturbed one.
+    #[inline]
+    pub fn unknown(&self, m: usize) -> f64 {
+        match self.bump {
+            Some((b, delta)) if b == m => self.u[m] + delta,
+            _ => self.u[m],
+        }
+    }
+}
+
+/// One level (position, velocity or acceleration) of a linear constraint:
 /// `Σ coefficient · slave.coupled_values[slot]`.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Level {
@@ -16,68 +50,233 @@ pub(crate) struct Level {
 }
 
 impl Level {
-    /// Evaluate with the latest values of the slaves in `live` and the saved
-    /// `base` values of all the others.
-    pub fn eval(&self, slaves: &[Slave], base: &[Vec<f64>], live: &[bool]) -> f64 {
+    pub fn eval(&self, view: &View) -> f64 {
         self.terms
             .iter()
-            .map(|&(s, slot, c)| {
-                let v = if live[s] {
-                    slaves[s].coupled_values[slot]
-                } else {
-                    base[s][slot]
-                };
-                c * v
-            })
-            .sum()
-    }
-
-    /// Evaluate with the latest values of every slave.
-    pub fn eval_live(&self, slaves: &[Slave]) -> f64 {
-        self.terms
-            .iter()
-            .map(|&(s, slot, c)| c * slaves[s].coupled_values[slot])
+            .map(|&(s, slot, c)| c * view.value(s, slot))
             .sum()
     }
 }
 
-/// A constraint with its multiplier (unknown number = constraint number).
+/// A linear constraint with its multiplier.
 #[derive(Debug, Clone)]
 pub(crate) struct Constraint {
-    pub name: String,
     pub position: Level,
     pub velocity: Option<Level>,
     pub acceleration: Option<Level>,
-    pub initial: InitialMultiplier,
 }
 
-/// The three condition levels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum LevelKind {
+/// Which condition a row evaluates: one level, or the explicit method's
+/// stabilised acceleration condition `g̈ + 2ġ/μ + g/μ²`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum RowLevel {
     Position,
     Velocity,
     Acceleration,
+    Stabilised(f64),
 }
 
-impl Constraint {
-    pub fn level(&self, kind: LevelKind) -> &Level {
-        match kind {
-            LevelKind::Position => &self.position,
-            LevelKind::Velocity => self.velocity.as_ref().expect("checked at build time"),
-            LevelKind::Acceleration => self.acceleration.as_ref().expect("checked at build time"),
+impl RowLevel {
+    /// Pick or combine the three levels of a condition.
+    #[inline]
+    pub fn combine(self, g: f64, g_dot: f64, g_ddot: f64) -> f64 {
+        match self {
+            RowLevel::Position => g,
+            RowLevel::Velocity => g_dot,
+            RowLevel::Acceleration => g_ddot,
+            RowLevel::Stabilised(mu) => g_ddot + (2.0 * g_dot / mu + g / (mu * mu)),
         }
     }
 }
 
-/// Resolve every constraint of the system file against the instantiated slaves.
-pub(crate) fn resolve(
-    specs: &[ConstraintSpec],
-    slaves: &mut [Slave],
-    method: &Method,
-    order: usize,
-) -> Result<Vec<Constraint>, MasterError> {
-    let mut constraints = Vec::with_capacity(specs.len());
-    for (m, spec) in specs.iter().enumerate() {
+impl Constraint {
+    fn eval(&self, level: RowLevel, view: &View) -> f64 {
+        let opt = |l: &Option<Level>| l.as_ref().expect("checked at build time").eval(view);
+        match level {
+            RowLevel::Position => self.position.eval(view),
+            RowLevel::Velocity => opt(&self.velocity),
+            RowLevel::Acceleration => opt(&self.acceleration),
+            RowLevel::Stabilised(mu) => {
+                let mut r = opt(&self.acceleration);
+                r += 2.0 * opt(&self.velocity) / mu + self.position.eval(view) / (mu * mu);
+                r
+            }
+        }
+    }
+}
+
+/// An additional coupling variable: row `u − value(outputs)`.
+#[derive(Debug, Clone)]
+pub(crate) struct Variable {
+    pub unknown: usize,
+    pub value: Level,
+}
+
+/// A force or torque input of a marker, driven by its own unknown; row
+/// `u − Σ λ · law component`.
+#[derive(Debug, Clone)]
+pub(crate) struct Port {
+    pub unknown: usize,
+    /// (joint, condition, law component 0..12)
+    pub contributions: Vec<(usize, usize, usize)>,
+}
+
+/// What row `r` (and unknown `r`) is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Row {
+    Constraint(usize),
+    Joint { joint: usize, condition: usize },
+    Variable(usize),
+    Port(usize),
+}
+
+/// A coupling unknown.
+#[derive(Debug, Clone)]
+pub(crate) struct Unknown {
+    /// Column name of its value.
+    pub name: String,
+    /// Column name of its row's position-level residual, for condition rows.
+    pub residual: Option<String>,
+    pub initial: InitialMultiplier,
+    pub row: Row,
+}
+
+impl Unknown {
+    /// Rows that are the same on every level (variables and ports).
+    pub fn is_algebraic(&self) -> bool {
+        matches!(self.row, Row::Variable(_) | Row::Port(_))
+    }
+}
+
+/// Everything the master solves for and the rows it solves.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Coupling {
+    pub constraints: Vec<Constraint>,
+    pub joints: Vec<Joint>,
+    pub variables: Vec<Variable>,
+    pub ports: Vec<Port>,
+    pub unknowns: Vec<Unknown>,
+}
+
+impl Coupling {
+    /// Number of unknowns (= rows).
+    pub fn len(&self) -> usize {
+        self.unknowns.len()
+    }
+
+    /// Evaluate every row at `level` into `out`.
+    pub fn eval(&self, level: RowLevel, view: &View, out: &mut [f64]) {
+        for (r, unknown) in self.unknowns.iter().enumerate() {
+            out[r] = match unknown.row {
+                Row::Constraint(c) => self.constraints[c].eval(level, view),
+                // Joint rows are filled below, one kinematics read per joint.
+                Row::Joint { .. } => continue,
+                Row::Variable(v) => {
+                    let var = &self.variables[v];
+                    view.unknown(var.unknown) - var.value.eval(view)
+                }
+                Row::Port(p) => {
+                    let port = &self.ports[p];
+                    let mut force = 0.0;
+                    for &(j, c, component) in &port.contributions {
+                        let joint = &self.joints[j];
+                        let (ki, kj) = joint.kinematics(view);
+                        let law = joint.conditions[c].law(&ki, &kj);
+                        force += view.unknown(joint.first_unknown + c) * law[component];
+                    }
+                    view.unknown(port.unknown) - force
+                }
+            };
+        }
+        for joint in &self.joints {
+            let (ki, kj) = joint.kinematics(view);
+            for (c, condition) in joint.conditions.iter().enumerate() {
+                out[joint.first_unknown + c] = condition.value(level, &ki, &kj);
+            }
+        }
+    }
+
+    /// Position-level residual of every condition row, in `residual` order.
+    pub fn residuals<'a>(&'a self, view: &'a View) -> impl Iterator<Item = f64> + 'a {
+        self.unknowns
+            .iter()
+            .filter(|u| u.residual.is_some())
+            .map(move |u| match u.row {
+                Row::Constraint(c) => self.constraints[c].position.eval(view),
+                Row::Joint { joint, condition } => {
+                    let j = &self.joints[joint];
+                    let (ki, kj) = j.kinematics(view);
+                    j.conditions[condition].value(RowLevel::Position, &ki, &kj)
+                }
+                _ => unreachable!("only condition rows have residuals"),
+            })
+    }
+
+    /// Resolve every constraint, joint and coupling variable of the system
+    /// file against the instantiated slaves.
+    pub fn build(
+        spec: &SystemSpec,
+        slaves: &mut [Slave],
+        method: &Method,
+        order: usize,
+    ) -> Result<Coupling, MasterError> {
+        let mut coupling = Coupling::default();
+        for con in &spec.constraints {
+            coupling.add_constraint(con, slaves, method)?;
+        }
+        let mut port_specs: Vec<(usize, u32, String, Vec<(usize, usize, usize)>)> = Vec::new();
+        for joint in &spec.joints {
+            coupling.add_joint(joint, slaves, &mut port_specs)?;
+        }
+        for var in &spec.coupling_variables {
+            let m = coupling.unknowns.len();
+            let owner = format!("coupling variable '{}'", var.name);
+            let parse = |level: &'static str, text: &str| {
+                LinearExpr::parse(text).map_err(|source| MasterError::Expression {
+                    constraint: var.name.clone(),
+                    level,
+                    source,
+                })
+            };
+            let value = output_level(&owner, "value", &parse("value", &var.value)?, slaves)?;
+            drive_inputs(&owner, &parse("drives", &var.drives)?, m, slaves)?;
+            coupling.variables.push(Variable { unknown: m, value });
+            coupling.unknowns.push(Unknown {
+                name: format!("{}.value", var.name),
+                residual: None,
+                initial: var.initial,
+                row: Row::Variable(coupling.variables.len() - 1),
+            });
+        }
+        for (slave, vr, name, contributions) in port_specs {
+            let m = coupling.unknowns.len();
+            slaves[slave].add_input(vr, m, 1.0);
+            coupling.ports.push(Port {
+                unknown: m,
+                contributions,
+            });
+            coupling.unknowns.push(Unknown {
+                name,
+                residual: None,
+                initial: InitialMultiplier::Consistent,
+                row: Row::Port(coupling.ports.len() - 1),
+            });
+        }
+        check_capabilities(slaves, method, order)?;
+        for slave in slaves.iter_mut() {
+            slave.finalize();
+        }
+        Ok(coupling)
+    }
+
+    fn add_constraint(
+        &mut self,
+        spec: &ConstraintSpec,
+        slaves: &mut [Slave],
+        method: &Method,
+    ) -> Result<(), MasterError> {
+        let m = self.unknowns.len();
+        let owner = format!("constraint '{}'", spec.name);
         let parse = |level: &'static str, text: &str| {
             LinearExpr::parse(text).map_err(|source| MasterError::Expression {
                 constraint: spec.name.clone(),
@@ -86,7 +285,7 @@ pub(crate) fn resolve(
             })
         };
         let position = output_level(
-            spec,
+            &owner,
             "position",
             &parse("position", &spec.position)?,
             slaves,
@@ -94,7 +293,12 @@ pub(crate) fn resolve(
         let mut optional =
             |level: &'static str, text: &Option<String>| -> Result<Option<Level>, MasterError> {
                 match text {
-                    Some(t) => Ok(Some(output_level(spec, level, &parse(level, t)?, slaves)?)),
+                    Some(t) => Ok(Some(output_level(
+                        &owner,
+                        level,
+                        &parse(level, t)?,
+                        slaves,
+                    )?)),
                     None => Ok(None),
                 }
             };
@@ -128,33 +332,302 @@ pub(crate) fn resolve(
                 "a consistent initial multiplier (or give `initial = <value>`)".into(),
             )?;
         }
-        for term in &parse("drives", &spec.drives)?.terms {
-            let s = find_slave(spec, term, slaves)?;
-            let var = slaves[s]
-                .fmu
-                .model_description()
-                .variable(&term.variable)?
-                .clone();
-            let is_real = var.base_type() == BaseType::Real;
-            if var.causality != Causality::Input || !is_real || term.derivative_order != 0 {
-                return Err(MasterError::WrongVariable {
-                    instance: term.instance.clone(),
-                    variable: term.variable.clone(),
-                    found: describe(&var),
-                    role: format!("'drives' of constraint '{}'", spec.name),
-                    expected: "a Real input".into(),
-                });
-            }
-            slaves[s].add_input(var.value_reference, m, term.coefficient);
-        }
-        constraints.push(Constraint {
-            name: spec.name.clone(),
+        drive_inputs(&owner, &parse("drives", &spec.drives)?, m, slaves)?;
+        self.constraints.push(Constraint {
             position,
             velocity,
             acceleration,
-            initial: spec.initial,
         });
+        self.unknowns.push(Unknown {
+            name: format!("{}.lambda", spec.name),
+            residual: Some(format!("{}.g", spec.name)),
+            initial: spec.initial,
+            row: Row::Constraint(self.constraints.len() - 1),
+        });
+        Ok(())
     }
+
+    fn add_joint(
+        &mut self,
+        spec: &JointSpec,
+        slaves: &mut [Slave],
+        ports: &mut Vec<(usize, u32, String, Vec<(usize, usize, usize)>)>,
+    ) -> Result<(), MasterError> {
+        let invalid = |reason: String| MasterError::Joint {
+            joint: spec.name.clone(),
+            reason,
+        };
+        let v =
+            |x: Option<[f64; 3]>, default: Vector3<f64>| x.map(Vector3::from).unwrap_or(default);
+        let frames = Frames::new(
+            v(spec.axis_i, Vector3::z()),
+            v(spec.ref_i, Vector3::x()),
+            v(spec.axis_j, Vector3::z()),
+            v(spec.ref_j, Vector3::x()),
+        )
+        .map_err(|e| invalid(e.into()))?;
+        let mut conditions = joints::conditions(&spec.kind, &frames).ok_or_else(|| {
+            invalid(format!(
+                "unknown kind '{}'; kinds are: {}",
+                spec.kind,
+                joints::KINDS.join(", ")
+            ))
+        })?;
+        let planar = match spec.plane.as_deref() {
+            None => false,
+            Some("xy") => true,
+            Some(other) => {
+                return Err(invalid(format!(
+                    "plane = \"{other}\" is not supported; use \"xy\" or leave it out"
+                )))
+            }
+        };
+        if planar {
+            conditions.retain(Condition::acts_in_plane);
+            if conditions.is_empty() {
+                return Err(invalid(format!(
+                    "a {} joint has no condition acting in the xy-plane",
+                    spec.kind
+                )));
+            }
+        }
+        let offsets = [
+            v(spec.offset_i, Vector3::zeros()),
+            v(spec.offset_j, Vector3::zeros()),
+        ];
+        let owner = format!("joint '{}'", spec.name);
+        let mut sides = Vec::with_capacity(2);
+        for (text, offset) in [(&spec.i, offsets[0]), (&spec.j, offsets[1])] {
+            let (instance, marker) = text.split_once('.').ok_or_else(|| {
+                invalid(format!(
+                    "marker '{text}' must be written <instance>.<marker>"
+                ))
+            })?;
+            sides.push(resolve_marker(&owner, instance, marker, offset, slaves)?);
+        }
+        let joint_index = self.joints.len();
+        let first = self.unknowns.len();
+        if let JointInitial::Values(values) = &spec.initial {
+            if values.len() != conditions.len() {
+                return Err(invalid(format!(
+                    "initial has {} values but the joint has {} conditions",
+                    values.len(),
+                    conditions.len()
+                )));
+            }
+        }
+        for k in 0..conditions.len() {
+            let initial = match &spec.initial {
+                JointInitial::Values(values) => InitialMultiplier::Value(values[k]),
+                JointInitial::Consistent => InitialMultiplier::Consistent,
+            };
+            self.unknowns.push(Unknown {
+                name: format!("{}.lambda[{}]", spec.name, k + 1),
+                residual: Some(format!("{}.g[{}]", spec.name, k + 1)),
+                initial,
+                row: Row::Joint {
+                    joint: joint_index,
+                    condition: k,
+                },
+            });
+        }
+        match &spec.multipliers {
+            Some(drives) => {
+                // The paper's style: each multiplier drives FMU inputs.
+                if drives.len() != conditions.len() {
+                    return Err(invalid(format!(
+                        "multipliers has {} expressions but the joint has {} conditions",
+                        drives.len(),
+                        conditions.len()
+                    )));
+                }
+                for (k, text) in drives.iter().enumerate() {
+                    let expr =
+                        LinearExpr::parse(text).map_err(|source| MasterError::Expression {
+                            constraint: spec.name.clone(),
+                            level: "multipliers",
+                            source,
+                        })?;
+                    drive_inputs(&owner, &expr, first + k, slaves)?;
+                }
+            }
+            None => {
+                // Force ports: every port component some condition can load.
+                for (side_index, side) in sides.iter().enumerate() {
+                    for (part, quantity) in [(0, "F"), (1, "T")] {
+                        for axis in 0..3 {
+                            if planar && (axis == 2) == (part == 0) {
+                                continue; // in the plane: F x/y and T z only
+                            }
+                            let component = side_index * 6 + part * 3 + axis;
+                            let loading: Vec<usize> = conditions
+                                .iter()
+                                .enumerate()
+                                .filter(|(_, c)| {
+                                    c.active_components(&offsets[0], &offsets[1])
+                                        [side_index * 2 + part]
+                                })
+                                .map(|(k, _)| k)
+                                .collect();
+                            if loading.is_empty() {
+                                continue;
+                            }
+                            let name = format!("{}.{quantity}[{}]", side.marker, axis + 1);
+                            let vr = port_input(&owner, side, &name, slaves)?;
+                            let key = (side.slave, vr);
+                            let index = match ports.iter().position(|p| (p.0, p.1) == key) {
+                                Some(i) => i,
+                                None => {
+                                    let column = format!("{}.{name}", slaves[side.slave].name);
+                                    ports.push((side.slave, vr, column, Vec::new()));
+                                    ports.len() - 1
+                                }
+                            };
+                            for k in loading {
+                                ports[index].3.push((joint_index, k, component));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let [side_i, side_j]: [Side; 2] = sides.try_into().expect("two sides");
+        self.joints.push(Joint {
+            sides: [side_i, side_j],
+            conditions,
+            first_unknown: first,
+        });
+        Ok(())
+    }
+}
+
+/// Look up `<instance>.<marker>` and register its 27 outputs.
+fn resolve_marker(
+    owner: &str,
+    instance: &str,
+    marker: &str,
+    offset: Vector3<f64>,
+    slaves: &mut [Slave],
+) -> Result<Side, MasterError> {
+    let s = find_slave(owner, instance, slaves)?;
+    let slave = &mut slaves[s];
+    let md = slave.fmu.model_description();
+    let names = joints::marker_output_names(marker);
+    let mut vrs = [0u32; MARKER_OUTPUTS];
+    for (k, name) in names.iter().enumerate() {
+        match md.model_variables.iter().find(|v| &v.name == name) {
+            Some(var)
+                if var.causality == Causality::Output && var.base_type() == BaseType::Real =>
+            {
+                vrs[k] = var.value_reference;
+            }
+            Some(var) => {
+                return Err(MasterError::WrongVariable {
+                    instance: instance.to_string(),
+                    variable: name.clone(),
+                    found: describe(var),
+                    role: format!("marker '{marker}' of {owner}"),
+                    expected: "a Real output".into(),
+                })
+            }
+            None if k == 0 => {
+                let mut known: Vec<&str> = md
+                    .model_variables
+                    .iter()
+                    .filter_map(|v| v.name.strip_suffix(".r[1]"))
+                    .collect();
+                known.dedup();
+                let hint = if known.is_empty() {
+                    "it has no marker ports (docs/marker-ports.md)".to_string()
+                } else {
+                    format!("its markers are: {}", known.join(", "))
+                };
+                return Err(MasterError::UnknownMarker {
+                    owner: owner.to_string(),
+                    instance: instance.to_string(),
+                    marker: marker.to_string(),
+                    hint,
+                });
+            }
+            None => {
+                return Err(MasterError::IncompleteMarker {
+                    instance: instance.to_string(),
+                    marker: marker.to_string(),
+                    missing: name.clone(),
+                })
+            }
+        }
+    }
+    let mut slots = [0usize; MARKER_OUTPUTS];
+    for (k, &vr) in vrs.iter().enumerate() {
+        slots[k] = slave.add_output(CoupledOutput { vr, order: 0 });
+    }
+    Ok(Side {
+        slave: s,
+        marker: marker.to_string(),
+        slots,
+        offset,
+    })
+}
+
+/// The value reference of a marker's force or torque input.
+fn port_input(owner: &str, side: &Side, name: &str, slaves: &[Slave]) -> Result<u32, MasterError> {
+    let slave = &slaves[side.slave];
+    match slave
+        .fmu
+        .model_description()
+        .model_variables
+        .iter()
+        .find(|v| v.name == name)
+    {
+        Some(var) if var.causality == Causality::Input && var.base_type() == BaseType::Real => {
+            Ok(var.value_reference)
+        }
+        Some(var) => Err(MasterError::WrongVariable {
+            instance: slave.name.clone(),
+            variable: name.to_string(),
+            found: describe(var),
+            role: format!("the force port of {owner}"),
+            expected: "a Real input".into(),
+        }),
+        None => Err(MasterError::MissingPort {
+            owner: owner.to_string(),
+            instance: slave.name.clone(),
+            input: name.to_string(),
+        }),
+    }
+}
+
+/// Register `expr`'s inputs as driven by unknown `m`.
+fn drive_inputs(
+    owner: &str,
+    expr: &LinearExpr,
+    m: usize,
+    slaves: &mut [Slave],
+) -> Result<(), MasterError> {
+    for term in &expr.terms {
+        let s = find_slave(owner, &term.instance, slaves)?;
+        let var = slaves[s]
+            .fmu
+            .model_description()
+            .variable(&term.variable)?
+            .clone();
+        let is_real = var.base_type() == BaseType::Real;
+        if var.causality != Causality::Input || !is_real || term.derivative_order != 0 {
+            return Err(MasterError::WrongVariable {
+                instance: term.instance.clone(),
+                variable: term.variable.clone(),
+                found: describe(&var),
+                role: format!("'drives' of {owner}"),
+                expected: "a Real input".into(),
+            });
+        }
+        slaves[s].add_input(var.value_reference, m, term.coefficient);
+    }
+    Ok(())
+}
+
+fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result<(), MasterError> {
     for slave in slaves.iter() {
         if !slave.is_coupled() {
             continue;
@@ -182,21 +655,18 @@ pub(crate) fn resolve(
             ));
         }
     }
-    for slave in slaves.iter_mut() {
-        slave.finalize();
-    }
-    Ok(constraints)
+    Ok(())
 }
 
 fn output_level(
-    spec: &ConstraintSpec,
+    owner: &str,
     level: &'static str,
     expr: &LinearExpr,
     slaves: &mut [Slave],
 ) -> Result<Level, MasterError> {
     let mut out = Level::default();
     for term in &expr.terms {
-        let s = find_slave(spec, term, slaves)?;
+        let s = find_slave(owner, &term.instance, slaves)?;
         let slave = &mut slaves[s];
         let var = slave
             .fmu
@@ -209,7 +679,7 @@ fn output_level(
                 instance: term.instance.clone(),
                 variable: term.variable.clone(),
                 found: describe(&var),
-                role: format!("the {level} level of constraint '{}'", spec.name),
+                role: format!("the {level} level of {owner}"),
                 expected: "a Real output".into(),
             });
         }
@@ -218,7 +688,7 @@ fn output_level(
                 instance: slave.name.clone(),
                 model: slave.model_name.clone(),
                 capability: "a large enough maxOutputDerivativeOrder",
-                needed_by: format!("{term} in constraint '{}'", spec.name),
+                needed_by: format!("{term} in {owner}"),
             });
         }
         let slot = slave.add_output(CoupledOutput {
@@ -230,15 +700,15 @@ fn output_level(
     Ok(out)
 }
 
-fn find_slave(spec: &ConstraintSpec, term: &Term, slaves: &[Slave]) -> Result<usize, MasterError> {
+fn find_slave(owner: &str, instance: &str, slaves: &[Slave]) -> Result<usize, MasterError> {
     slaves
         .iter()
-        .position(|s| s.name == term.instance)
+        .position(|s| s.name == instance)
         .ok_or_else(|| {
             let close: Vec<&str> = slaves
                 .iter()
                 .map(|s| s.name.as_str())
-                .filter(|n| similar(n, &term.instance))
+                .filter(|n| similar(n, instance))
                 .collect();
             let hint = if close.is_empty() {
                 let all: Vec<&str> = slaves.iter().map(|s| s.name.as_str()).collect();
@@ -247,8 +717,8 @@ fn find_slave(spec: &ConstraintSpec, term: &Term, slaves: &[Slave]) -> Result<us
                 format!("; did you mean '{}'?", close.join("', '"))
             };
             MasterError::UnknownInstance {
-                constraint: spec.name.clone(),
-                instance: term.instance.clone(),
+                owner: owner.to_string(),
+                instance: instance.to_string(),
                 hint,
             }
         })

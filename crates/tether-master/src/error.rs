@@ -36,14 +36,54 @@ pub enum MasterError {
         source: ExprError,
     },
     /// An expression names an instance the system file does not declare.
-    #[error("constraint '{constraint}' refers to unknown instance '{instance}'{hint}")]
+    #[error("{owner} refers to unknown instance '{instance}'{hint}")]
     UnknownInstance {
-        /// Constraint name.
-        constraint: String,
+        /// What refers to it: `constraint 'link'`, `joint 'hinge'` …
+        owner: String,
         /// The name that was not found.
         instance: String,
         /// `; did you mean …?` or empty.
         hint: String,
+    },
+    /// A joint names a marker its instance does not have.
+    #[error("{owner}: instance '{instance}' has no marker '{marker}' (no output '{marker}.r[1]'); {hint}")]
+    UnknownMarker {
+        /// `joint 'hinge'`.
+        owner: String,
+        /// Instance name.
+        instance: String,
+        /// Marker name.
+        marker: String,
+        /// The markers it has, or a pointer to the convention.
+        hint: String,
+    },
+    /// A marker lacks one of the outputs of the marker-port convention.
+    #[error("instance '{instance}': marker '{marker}' has no output '{missing}' (docs/marker-ports.md lists the 27 outputs a marker needs)")]
+    IncompleteMarker {
+        /// Instance name.
+        instance: String,
+        /// Marker name.
+        marker: String,
+        /// The missing output.
+        missing: String,
+    },
+    /// A joint needs a force or torque input a marker does not have.
+    #[error("{owner} needs input '{input}' of instance '{instance}' (a force/torque port); declare it in the FMU, or use plane = \"xy\" for a planar joint")]
+    MissingPort {
+        /// `joint 'hinge'`.
+        owner: String,
+        /// Instance name.
+        instance: String,
+        /// The input name.
+        input: String,
+    },
+    /// A joint's description is inconsistent.
+    #[error("joint '{joint}': {reason}")]
+    Joint {
+        /// Joint name.
+        joint: String,
+        /// What is wrong.
+        reason: String,
     },
     /// A variable is used in a role its causality or type does not allow.
     #[error("{instance}.{variable} is {found}, but {role} needs {expected}")]

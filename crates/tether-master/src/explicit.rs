@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::coupling::LevelKind;
+use crate::coupling::{RowLevel, View};
 use crate::polynomial::Taylor;
 use crate::simulation::Simulation;
 use crate::solve::solve;
@@ -18,8 +18,8 @@ impl Simulation {
     /// λ(T_0): user values stay; "consistent" ones solve g̈ = 0 at T_0 (for the
     /// explicit method: its own condition μ² g̈ + 2μ ġ + g = 0).
     pub(crate) fn initial_multipliers(&mut self) -> Result<(), MasterError> {
-        let unknowns: Vec<usize> = (0..self.constraints.len())
-            .filter(|&m| self.constraints[m].initial == InitialMultiplier::Consistent)
+        let unknowns: Vec<usize> = (0..self.coupling.len())
+            .filter(|&m| self.coupling.unknowns[m].initial == InitialMultiplier::Consistent)
             .collect();
         let mu = match self.method {
             crate::Method::Explicit { mu } => Some(mu),
@@ -46,7 +46,7 @@ impl Simulation {
         self.n += 1;
         self.stats.times.predictor += clock.elapsed();
         let clock = Instant::now();
-        let all: Vec<usize> = (0..self.constraints.len()).collect();
+        let all: Vec<usize> = (0..self.coupling.len()).collect();
         for hist in self.history.iter_mut() {
             *hist = [hist[0], hist[0], hist[1]];
         }
@@ -82,19 +82,25 @@ impl Simulation {
             self.work.base[s].copy_from_slice(&slave.coupled_values);
         }
         let n = unknowns.len();
-        let residual = |sim: &Simulation, m: usize, live: Option<&[bool]>| -> f64 {
-            let c = &sim.constraints[m];
-            let eval = |kind| match live {
-                Some(live) => c.level(kind).eval(&sim.slaves, &sim.work.base, live),
-                None => c.level(kind).eval_live(&sim.slaves),
-            };
-            let mut r = eval(LevelKind::Acceleration);
-            if let Some(mu) = mu {
-                r += 2.0 * eval(LevelKind::Velocity) / mu + eval(LevelKind::Position) / (mu * mu);
-            }
-            r
+        let level = match mu {
+            Some(mu) => RowLevel::Stabilised(mu),
+            None => RowLevel::Acceleration,
         };
-        let r0 = DVector::from_iterator(n, unknowns.iter().map(|&m| residual(self, m, None)));
+        for (m, hist) in self.history.iter().enumerate() {
+            self.work.u[m] = hist[0];
+        }
+        {
+            let work = &mut self.work;
+            let view = View {
+                slaves: &self.slaves,
+                base: &work.base,
+                live: None,
+                u: &work.u,
+                bump: None,
+            };
+            self.coupling.eval(level, &view, &mut work.rows);
+        }
+        let r0 = DVector::from_iterator(n, unknowns.iter().map(|&m| self.work.rows[m]));
         let mut w = DMatrix::zeros(n, n);
         for gi in 0..self.groups.len() {
             let members: Vec<usize> = self.groups[gi]
@@ -132,8 +138,17 @@ impl Simulation {
                     .iter()
                     .position(|&x| x == m)
                     .expect("member of unknowns");
+                let work = &mut self.work;
+                let view = View {
+                    slaves: &self.slaves,
+                    base: &work.base,
+                    live: Some(&live),
+                    u: &work.u,
+                    bump: Some((m, work.delta[m])),
+                };
+                self.coupling.eval(level, &view, &mut work.rows);
                 for (row, &r) in unknowns.iter().enumerate() {
-                    w[(row, col)] = (residual(self, r, Some(&live)) - r0[row]) / self.work.delta[m];
+                    w[(row, col)] = (work.rows[r] - r0[row]) / work.delta[m];
                 }
             }
             for (s, slave) in self.slaves.iter_mut().enumerate() {

@@ -23,6 +23,7 @@ mod coupling;
 mod error;
 mod explicit;
 pub mod expr;
+mod joints;
 mod method;
 mod observer;
 pub mod polynomial;
@@ -39,8 +40,8 @@ pub use method::Method;
 pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
 pub use simulation::Simulation;
 pub use spec::{
-    ConstraintSpec, CouplingSettings, Experiment, InitialMultiplier, InstanceSpec, StartValue,
-    SystemSpec,
+    ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment, InitialMultiplier,
+    InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
 pub use stats::{InstanceCounters, PhaseTimes, RunStats};

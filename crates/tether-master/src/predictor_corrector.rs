@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use nalgebra::DVector;
 
-use crate::coupling::LevelKind;
+use crate::coupling::{RowLevel, View};
 use crate::polynomial::{extrapolation, interpolation};
 use crate::simulation::Simulation;
 use crate::solve::solve;
@@ -20,7 +20,7 @@ impl Simulation {
         // Start-up: only N+1 points of history exist at T_N (docs/algorithm.md).
         let degree_pred = k.min(self.n as usize);
         let degree_corr = k.min(self.n as usize + 1);
-        let nu = self.constraints.len();
+        let nu = self.coupling.len();
 
         // Step 1, predictor (eq. 56–58): extrapolated polynomials.
         let clock = Instant::now();
@@ -37,9 +37,17 @@ impl Simulation {
             slave.read_coupled()?;
             self.work.base[s].copy_from_slice(&slave.coupled_values);
         }
-        for (l, &level) in self.levels.iter().enumerate() {
-            for (r, c) in self.constraints.iter().enumerate() {
-                self.work.g[l][r] = c.level(level).eval_live(&self.slaves);
+        {
+            let work = &mut self.work;
+            let view = View {
+                slaves: &self.slaves,
+                base: &work.base,
+                live: None,
+                u: &work.u_pred,
+                bump: None,
+            };
+            for (l, &level) in self.levels.iter().enumerate() {
+                self.coupling.eval(level, &view, work.g[l].as_mut_slice());
             }
         }
         self.stats.times.predictor += clock.elapsed();
@@ -72,16 +80,23 @@ impl Simulation {
             }
             for &m in &self.groups[gi] {
                 // Only the instances m drives count as perturbed for column m.
-                self.work.live.fill(false);
+                let work = &mut self.work;
+                work.live.fill(false);
                 for &s in &self.owners[m] {
-                    self.work.live[s] = true;
+                    work.live[s] = true;
                 }
+                let delta = work.delta[m];
                 for (l, &level) in self.levels.iter().enumerate() {
-                    for (r, c) in self.constraints.iter().enumerate() {
-                        let g = c
-                            .level(level)
-                            .eval(&self.slaves, &self.work.base, &self.work.live);
-                        self.work.jac[l][(r, m)] = (g - self.work.g[l][r]) / self.work.delta[m];
+                    let view = View {
+                        slaves: &self.slaves,
+                        base: &work.base,
+                        live: Some(&work.live),
+                        u: &work.u_pred,
+                        bump: Some((m, delta)),
+                    };
+                    self.coupling.eval(level, &view, &mut work.rows);
+                    for r in 0..nu {
+                        work.jac[l][(r, m)] = (work.rows[r] - work.g[l][r]) / delta;
                     }
                 }
             }
@@ -118,18 +133,24 @@ impl Simulation {
         let limit = self.settings.max_condition;
         let u_pred = DVector::from_column_slice(&self.work.u_pred);
         let level_index = |kind| self.levels.iter().position(|&l| l == kind);
+        let algebraic = |r: usize| self.coupling.unknowns[r].is_algebraic();
         match self.method {
             Method::Baumgarte { beta, gamma } => {
                 // Eq. 68: u = u^p − (G^B)⁻¹ g^B with g^B = g + β ġ + γ g̈.
                 let mut a = self.work.jac[0].clone();
                 let mut b = self.work.g[0].clone();
-                if let Some(v) = level_index(LevelKind::Velocity) {
+                if let Some(v) = level_index(RowLevel::Velocity) {
                     a += beta * &self.work.jac[v];
                     b += beta * &self.work.g[v];
                 }
-                if let Some(acc) = level_index(LevelKind::Acceleration) {
+                if let Some(acc) = level_index(RowLevel::Acceleration) {
                     a += gamma * &self.work.jac[acc];
                     b += gamma * &self.work.g[acc];
+                }
+                // Port and coupling-variable rows are not stabilised.
+                for r in (0..a.nrows()).filter(|&r| algebraic(r)) {
+                    a.row_mut(r).copy_from(&self.work.jac[0].row(r));
+                    b[r] = self.work.g[0][r];
                 }
                 let level = if self.levels.len() == 1 {
                     "position"
@@ -145,9 +166,9 @@ impl Simulation {
                 let mut total = 0.0;
                 for (l, &kind) in self.levels.iter().enumerate() {
                     let (weight, name) = match kind {
-                        LevelKind::Position => (1.0, "position"),
-                        LevelKind::Velocity => (a, "velocity"),
-                        LevelKind::Acceleration => (b, "acceleration"),
+                        RowLevel::Velocity => (a, "velocity"),
+                        RowLevel::Acceleration => (b, "acceleration"),
+                        _ => (1.0, "position"),
                     };
                     self.stats.jacobian_solves += 1;
                     let step = solve(&self.work.jac[l], &self.work.g[l], time, name, limit)?;

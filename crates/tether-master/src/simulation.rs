@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::coupling::{self, Constraint, LevelKind};
+use crate::coupling::{self, Coupling, RowLevel, View};
 use crate::observer::{Observer, Sample};
 use crate::polynomial::Taylor;
 use crate::slave::Slave;
@@ -19,13 +19,13 @@ pub struct Simulation {
     pub(crate) method: Method,
     pub(crate) settings: CouplingSettings,
     pub(crate) slaves: Vec<Slave>,
-    pub(crate) constraints: Vec<Constraint>,
+    pub(crate) coupling: Coupling,
     /// For each unknown, the slaves whose inputs it drives.
     pub(crate) owners: Vec<Vec<usize>>,
     /// Unknowns whose perturbations share one run.
     pub(crate) groups: Vec<Vec<usize>>,
     /// Levels the method evaluates (position always first).
-    pub(crate) levels: Vec<LevelKind>,
+    pub(crate) levels: Vec<RowLevel>,
     /// Per unknown: `[u_N, u_{N-1}, u_{N-2}]`.
     pub(crate) history: Vec<[f64; 3]>,
     /// Current macro point index N.
@@ -52,6 +52,10 @@ pub(crate) struct Work {
     pub g: Vec<DVector<f64>>,
     /// Interface Jacobians ∂g/∂u, ∂ġ/∂u, ∂g̈/∂u, indexed like `levels`.
     pub jac: Vec<DMatrix<f64>>,
+    /// Row values of one perturbed evaluation.
+    pub rows: Vec<f64>,
+    /// Current unknowns u_N.
+    pub u: Vec<f64>,
 }
 
 impl Simulation {
@@ -74,9 +78,8 @@ impl Simulation {
             .iter()
             .map(Slave::instantiate)
             .collect::<Result<Vec<_>, _>>()?;
-        let constraints =
-            coupling::resolve(&spec.constraints, &mut slaves, &method, settings.order)?;
-        let nu = constraints.len();
+        let coupling = Coupling::build(spec, &mut slaves, &method, settings.order)?;
+        let nu = coupling.len();
         let mut owners = vec![Vec::new(); nu];
         for (s, slave) in slaves.iter().enumerate() {
             for input in &slave.inputs {
@@ -88,12 +91,12 @@ impl Simulation {
             }
         }
         let groups = coupling::perturbation_groups(&owners);
-        let mut levels = vec![LevelKind::Position];
+        let mut levels = vec![RowLevel::Position];
         if method.needs_velocity() {
-            levels.push(LevelKind::Velocity);
+            levels.push(RowLevel::Velocity);
         }
         if method.needs_acceleration() {
-            levels.push(LevelKind::Acceleration);
+            levels.push(RowLevel::Acceleration);
         }
         let exp = spec.experiment;
         let stop = exp.start + spec.macro_steps() as f64 * exp.step;
@@ -104,8 +107,8 @@ impl Simulation {
         for slave in &slaves {
             columns.extend(slave.recorded_names().iter().cloned());
         }
-        columns.extend(constraints.iter().map(|c| format!("{}.lambda", c.name)));
-        columns.extend(constraints.iter().map(|c| format!("{}.g", c.name)));
+        columns.extend(coupling.unknowns.iter().map(|u| u.name.clone()));
+        columns.extend(coupling.unknowns.iter().filter_map(|u| u.residual.clone()));
         let work = Work {
             base: slaves
                 .iter()
@@ -118,12 +121,15 @@ impl Simulation {
             delta: vec![0.0; nu],
             g: levels.iter().map(|_| DVector::zeros(nu)).collect(),
             jac: levels.iter().map(|_| DMatrix::zeros(nu, nu)).collect(),
+            rows: vec![0.0; nu],
+            u: vec![0.0; nu],
         };
         let mut sim = Simulation {
             experiment: exp,
             method,
             settings,
-            history: constraints
+            history: coupling
+                .unknowns
                 .iter()
                 .map(|c| match c.initial {
                     InitialMultiplier::Value(v) => [v; 3],
@@ -131,7 +137,7 @@ impl Simulation {
                 })
                 .collect(),
             slaves,
-            constraints,
+            coupling,
             owners,
             groups,
             levels,
@@ -173,7 +179,8 @@ impl Simulation {
         self.steps
     }
 
-    /// The current coupling unknowns u_N (one multiplier per constraint).
+    /// The current coupling unknowns u_N, in column order (multipliers of
+    /// constraints and joints, coupling variables, force ports).
     pub fn unknowns(&self) -> Vec<f64> {
         self.history.iter().map(|h| h[0]).collect()
     }
@@ -260,8 +267,18 @@ impl Simulation {
             self.row[i] = h[0];
             i += 1;
         }
-        for c in &self.constraints {
-            self.row[i] = c.position.eval_live(&self.slaves);
+        for (m, h) in self.history.iter().enumerate() {
+            self.work.u[m] = h[0];
+        }
+        let view = View {
+            slaves: &self.slaves,
+            base: &self.work.base,
+            live: None,
+            u: &self.work.u,
+            bump: None,
+        };
+        for residual in self.coupling.residuals(&view) {
+            self.row[i] = residual;
             i += 1;
         }
     }

@@ -32,6 +32,13 @@ pub struct SystemSpec {
     /// Algebraic constraints between the instances.
     #[serde(rename = "constraint", default)]
     pub constraints: Vec<ConstraintSpec>,
+    /// Mechanical joints between marker ports (`docs/marker-ports.md`).
+    #[serde(rename = "joint", default)]
+    pub joints: Vec<JointSpec>,
+    /// Additional coupling variables `input = expression of outputs`
+    /// (the paper's γ̃, r̃: an FMU that applies a joint's force law itself).
+    #[serde(rename = "coupling_variable", default)]
+    pub coupling_variables: Vec<CouplingVariableSpec>,
 }
 
 /// Time grid: `T_n = start + n·step`, up to `stop`.
@@ -149,6 +156,105 @@ pub struct ConstraintSpec {
     pub drives: String,
     /// λ at the start time: a number, or `"consistent"` (the default) to solve
     /// the acceleration-level condition at T_0.
+    #[serde(default)]
+    pub initial: InitialMultiplier,
+}
+
+/// A joint between two markers: its kind, the markers and its geometry.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointSpec {
+    /// Name, used as the column prefix (`<name>.lambda[k]`, `<name>.g[k]`).
+    pub name: String,
+    /// atpoint, inplane, perpendicular, universal, revolute, cylindrical,
+    /// translational, planar, inline or orientation.
+    pub kind: String,
+    /// Marker on side i: `<instance>.<marker>`.
+    pub i: String,
+    /// Marker on side j: `<instance>.<marker>`.
+    pub j: String,
+    /// `"xy"`: both sides move in the world xy-plane; only in-plane conditions
+    /// and port components are used.
+    #[serde(default)]
+    pub plane: Option<String>,
+    /// Joint-frame z axis on side i, in marker-i coordinates (default z).
+    #[serde(default)]
+    pub axis_i: Option<[f64; 3]>,
+    /// Joint-frame x axis on side i (default x; orthonormalised against the axis).
+    #[serde(default)]
+    pub ref_i: Option<[f64; 3]>,
+    /// Joint-frame z axis on side j, in marker-j coordinates (default z).
+    #[serde(default)]
+    pub axis_j: Option<[f64; 3]>,
+    /// Joint-frame x axis on side j (default x).
+    #[serde(default)]
+    pub ref_j: Option<[f64; 3]>,
+    /// Attachment point on side i, in marker-i coordinates (default origin).
+    #[serde(default)]
+    pub offset_i: Option<[f64; 3]>,
+    /// Attachment point on side j, in marker-j coordinates (default origin).
+    #[serde(default)]
+    pub offset_j: Option<[f64; 3]>,
+    /// The paper's style: one `drives` expression per condition; the FMUs take
+    /// the multipliers as inputs and apply the force law themselves. Without
+    /// it, the master drives the markers' force and torque ports.
+    #[serde(default)]
+    pub multipliers: Option<Vec<String>>,
+    /// Multipliers at the start time: `"consistent"` (default) or one number
+    /// per condition.
+    #[serde(default)]
+    pub initial: JointInitial,
+}
+
+/// λ(T_0) of a joint: `"consistent"` or one value per condition.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum JointInitial {
+    /// Solved with the acceleration-level conditions at T_0.
+    #[default]
+    Consistent,
+    /// Given by the user, one per condition.
+    Values(Vec<f64>),
+}
+
+impl Serialize for JointInitial {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            JointInitial::Values(v) => v.serialize(s),
+            JointInitial::Consistent => s.serialize_str("consistent"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for JointInitial {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            List(Vec<f64>),
+            Word(String),
+        }
+        match Raw::deserialize(d)? {
+            Raw::List(v) => Ok(JointInitial::Values(v)),
+            Raw::Word(w) if w == "consistent" => Ok(JointInitial::Consistent),
+            Raw::Word(w) => Err(serde::de::Error::custom(format!(
+                "initial must be a list of numbers or \"consistent\", found \"{w}\""
+            ))),
+        }
+    }
+}
+
+/// An additional coupling variable: an input that must equal an expression
+/// of outputs at every macro point (row `u − value = 0`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CouplingVariableSpec {
+    /// Name, used as the column `<name>.value`.
+    pub name: String,
+    /// The inputs it drives, as a linear expression (`inst.input`).
+    pub drives: String,
+    /// The value it must take, a linear expression of outputs.
+    pub value: String,
+    /// Value at the start time: a number, or `"consistent"` (the default).
     #[serde(default)]
     pub initial: InitialMultiplier,
 }
@@ -287,6 +393,8 @@ impl SystemSpec {
             .iter()
             .map(|i| &i.name)
             .chain(self.constraints.iter().map(|c| &c.name))
+            .chain(self.joints.iter().map(|j| &j.name))
+            .chain(self.coupling_variables.iter().map(|v| &v.name))
         {
             let valid = name
                 .chars()
@@ -308,14 +416,44 @@ impl SystemSpec {
                 });
             }
         }
-        for con in &self.constraints {
-            if let InitialMultiplier::Value(v) = con.initial {
-                if !v.is_finite() {
+        for joint in &self.joints {
+            for (side, v) in [
+                ("axis_i", joint.axis_i),
+                ("ref_i", joint.ref_i),
+                ("axis_j", joint.axis_j),
+                ("ref_j", joint.ref_j),
+                ("offset_i", joint.offset_i),
+                ("offset_j", joint.offset_j),
+            ] {
+                if let Some(v) = v {
+                    if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+                        return Err(param(
+                            &format!("{}.{side}", joint.name),
+                            *bad,
+                            "finite vector components",
+                        ));
+                    }
+                }
+            }
+            if let JointInitial::Values(values) = &joint.initial {
+                if let Some(bad) = values.iter().find(|x| !x.is_finite()) {
                     return Err(param(
-                        &format!("{}.initial", con.name),
-                        v,
-                        "a finite number",
+                        &format!("{}.initial", joint.name),
+                        *bad,
+                        "finite multipliers",
                     ));
+                }
+            }
+        }
+        let initials = self
+            .constraints
+            .iter()
+            .map(|c| (&c.name, c.initial))
+            .chain(self.coupling_variables.iter().map(|c| (&c.name, c.initial)));
+        for (name, initial) in initials {
+            if let InitialMultiplier::Value(v) = initial {
+                if !v.is_finite() {
+                    return Err(param(&format!("{name}.initial"), v, "a finite number"));
                 }
             }
         }
