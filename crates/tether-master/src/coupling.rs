@@ -121,6 +121,10 @@ pub(crate) struct Port {
     pub contributions: Vec<(usize, usize, usize)>,
 }
 
+/// A port found while resolving joints: slave, input value reference, column
+/// name and contributions, before it gets its unknown.
+type PortDraft = (usize, u32, String, Vec<(usize, usize, usize)>);
+
 /// What row `r` (and unknown `r`) is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Row {
@@ -224,7 +228,7 @@ impl Coupling {
         for con in &spec.constraints {
             coupling.add_constraint(con, slaves, method)?;
         }
-        let mut port_specs: Vec<(usize, u32, String, Vec<(usize, usize, usize)>)> = Vec::new();
+        let mut port_specs: Vec<PortDraft> = Vec::new();
         for joint in &spec.joints {
             coupling.add_joint(joint, slaves, &mut port_specs)?;
         }
@@ -351,7 +355,7 @@ impl Coupling {
         &mut self,
         spec: &JointSpec,
         slaves: &mut [Slave],
-        ports: &mut Vec<(usize, u32, String, Vec<(usize, usize, usize)>)>,
+        ports: &mut Vec<PortDraft>,
     ) -> Result<(), MasterError> {
         let invalid = |reason: String| MasterError::Joint {
             joint: spec.name.clone(),
