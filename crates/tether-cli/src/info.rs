@@ -110,6 +110,14 @@ pub fn describe(md: &ModelDescription) -> String {
         }
     ));
     line("  explicit                                   yes".into());
+    let markers = markers(md);
+    if !markers.is_empty() {
+        line(String::new());
+        line("Marker ports (docs/marker-ports.md)".into());
+        for (name, ports) in markers {
+            line(format!("  {name:<24} inputs: {}", ports.join(" ")));
+        }
+    }
     if let Some(de) = &md.default_experiment {
         line(String::new());
         let show = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_else(|| "-".into());
@@ -131,6 +139,28 @@ pub fn describe(md: &ModelDescription) -> String {
         line(variable_line(v));
     }
     out
+}
+
+/// Markers (outputs named `M.r[1]`) with the force/torque inputs each declares.
+fn markers(md: &ModelDescription) -> Vec<(String, Vec<String>)> {
+    let mut found = Vec::new();
+    for v in &md.model_variables {
+        if v.causality != Causality::Output {
+            continue;
+        }
+        if let Some(marker) = v.name.strip_suffix(".r[1]") {
+            let ports: Vec<String> = md
+                .model_variables
+                .iter()
+                .filter(|p| p.causality == Causality::Input)
+                .filter_map(|p| p.name.strip_prefix(&format!("{marker}.")))
+                .filter(|rest| rest.starts_with("F[") || rest.starts_with("T["))
+                .map(str::to_string)
+                .collect();
+            found.push((marker.to_string(), ports));
+        }
+    }
+    found
 }
 
 fn variable_line(v: &ScalarVariable) -> String {
