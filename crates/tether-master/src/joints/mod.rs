@@ -140,7 +140,7 @@ impl Condition {
 }
 
 /// Number of slots a marker occupies: r, R (row-major), v, w, a, alpha.
-pub(crate) const MARKER_OUTPUTS: usize = 27;
+pub(crate) const MARKER_OUTPUTS: usize = 24;
 
 /// The marker output names in slot order.
 pub(crate) fn marker_output_names(marker: &str) -> Vec<String> {
