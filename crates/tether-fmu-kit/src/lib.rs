@@ -14,6 +14,7 @@ pub mod input;
 pub mod instance;
 mod integrate;
 pub mod machine;
+pub mod marker;
 pub mod model;
 pub mod snapshot;
 pub mod xml;
@@ -22,6 +23,7 @@ pub use declaration::{
     Boolean, Declaration, DefaultExperiment, Integer, Output, Parameters, Real, State,
 };
 pub use input::InputJet;
+pub use marker::MarkerKinematics;
 pub use model::Model;
 
 /// Exports `$model` (a type implementing [`Model`]) as an FMI 2.0 co-simulation FMU:
