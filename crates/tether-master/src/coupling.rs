@@ -505,7 +505,7 @@ impl Coupling {
     }
 }
 
-/// Look up `<instance>.<marker>` and register its 27 outputs.
+/// Look up `<instance>.<marker>` and register its 24 outputs.
 fn resolve_marker(
     owner: &str,
     instance: &str,

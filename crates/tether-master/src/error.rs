@@ -58,7 +58,7 @@ pub enum MasterError {
         hint: String,
     },
     /// A marker lacks one of the outputs of the marker-port convention.
-    #[error("instance '{instance}': marker '{marker}' has no output '{missing}' (docs/marker-ports.md lists the 27 outputs a marker needs)")]
+    #[error("instance '{instance}': marker '{marker}' has no output '{missing}' (docs/marker-ports.md lists the 24 outputs a marker needs)")]
     IncompleteMarker {
         /// Instance name.
         instance: String,
