@@ -2,3 +2,4 @@
 
 pub mod fmi;
 pub mod fmpy;
+pub mod multibody;

@@ -440,7 +440,7 @@ impl Model for Body3d {
             },
             2 => {
                 let axis = Self::read(p, "axis")?;
-                if !(axis.norm() > 1e-12) {
+                if !axis.norm().is_finite() || axis.norm() <= 1e-12 {
                     return Err(format!(
                         "axis must be a nonzero vector for the revolute ground joint, got [{}, {}, {}]",
                         axis[0], axis[1], axis[2]
