@@ -154,6 +154,7 @@ fn free_fall_is_a_parabola_and_the_attitude_is_constant() {
             inst.do_step(t, h, true).expect("step");
         }
     }
+    eprintln!("free fall: largest deviation {worst:.1e}");
     assert!(
         worst < 1e-10,
         "largest deviation from the parabola {worst:e}"
@@ -194,6 +195,7 @@ fn torque_free_symmetric_top_precesses_as_the_closed_form_says() {
             inst.do_step(t, h, true).expect("step");
         }
     }
+    eprintln!("symmetric top: largest deviation {worst:.1e}, R orthonormal to {ortho:.1e}");
     assert!(
         worst < 1e-9,
         "largest deviation from the precession {worst:e}"
@@ -244,6 +246,9 @@ fn pendulum(joint: i32) -> (f64, f64, f64, f64) {
         }
     }
     assert!(moved > 0.5, "the pendulum hardly moved ({moved})");
+    eprintln!(
+        "joint {joint}: energy drift {de:.1e}, pivot {dp:.1e}, R {ortho:.1e}, axis {daxis:.1e}"
+    );
     (de, dp, ortho, daxis)
 }
 
@@ -304,6 +309,7 @@ fn marker_velocity_is_the_derivative_of_the_marker_position() {
                 .max((drot - w_cross * s.rot).abs().max());
         }
         // Central differences: error ~ h²/6 · third derivative ≈ 1e-8 · O(100).
+        eprintln!("joint {joint}: finite differences differ by {worst:.1e}");
         assert!(worst < 1e-6, "joint {joint}: derivative mismatch {worst:e}");
     }
 }
