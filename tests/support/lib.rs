@@ -2,4 +2,5 @@
 
 pub mod fmi;
 pub mod fmpy;
+pub mod multibody;
 pub mod reference;
