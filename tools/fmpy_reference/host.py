@@ -65,6 +65,7 @@ class Host:
         self.outputs = []  # [(value reference, derivative order)]
         self.values = {}  # (value reference, order) -> latest value read
         self.state = None
+        self.initialized = False
         self.counters = Counters()
         for name, value in spec.parameters.items():
             self._start_value(name, value)
@@ -118,6 +119,7 @@ class Host:
         self.fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
         self.fmu.enterInitializationMode()
         self.fmu.exitInitializationMode()
+        self.initialized = True
 
     # -- during the run ---------------------------------------------------------
 
@@ -177,7 +179,8 @@ class Host:
         try:
             if self.state is not None:
                 self.fmu.freeFMUstate(self.state)
-            self.fmu.terminate()
+            if self.initialized:
+                self.fmu.terminate()
         except Exception:
             pass  # the run's own error, if any, is the one to report
         finally:

@@ -193,7 +193,8 @@ fn check_times(a: &Table, b: &Table) -> Result<()> {
         1e-9 * a.times[0].abs().max(1.0)
     };
     for (i, (ta, tb)) in a.times.iter().zip(&b.times).enumerate() {
-        if !((ta - tb).abs() <= tolerance) {
+        let same = (ta - tb).abs() <= tolerance;
+        if !same {
             bail!(
                 "the times differ at row {}: {} has t = {ta}, {} has t = {tb}",
                 i + 1,
