@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod compare;
 mod info;
 mod run;
 mod simulate;
@@ -28,6 +29,8 @@ enum Command {
     Simulate(simulate::Args),
     /// Run a coupled system described by a system file and write CSV.
     Run(run::Args),
+    /// Report the largest deviation per column between two result files.
+    Compare(compare::Args),
 }
 
 fn main() -> ExitCode {
@@ -47,6 +50,7 @@ fn main() -> ExitCode {
         Command::Info(args) => info::main(args),
         Command::Simulate(args) => simulate::main(args),
         Command::Run(args) => run::main(args),
+        Command::Compare(args) => compare::main(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

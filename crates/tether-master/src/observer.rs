@@ -45,7 +45,13 @@ impl<W: Write> Observer for CsvRecorder<W> {
         self.out.write_all(b"time")?;
         for c in columns {
             self.out.write_all(b",")?;
-            self.out.write_all(c.as_bytes())?;
+            // Structured names such as `link.tip.R[1,2]` contain commas: quote
+            // them as RFC 4180 says, doubling any quote inside.
+            if c.contains([',', '"', '\n', '\r']) {
+                write!(self.out, "\"{}\"", c.replace('"', "\"\""))?;
+            } else {
+                self.out.write_all(c.as_bytes())?;
+            }
         }
         self.out.write_all(b"\n")
     }
@@ -120,18 +126,19 @@ mod tests {
         let mut buf = Vec::new();
         {
             let mut rec = CsvRecorder::new(&mut buf);
-            rec.start(&["a.x".into(), "c.lambda".into()]).unwrap();
+            rec.start(&["a.x".into(), "c.lambda".into(), "b.R[1,2]".into()])
+                .unwrap();
             rec.sample(Sample {
                 step: 0,
                 time: 0.0,
-                values: &[0.1, 1.0 / 3.0],
+                values: &[0.1, 1.0 / 3.0, 0.5],
             })
             .unwrap();
             rec.finish(Some("coupling diverged at t = 1")).unwrap();
         }
         let text = String::from_utf8(buf).unwrap();
         let lines: Vec<&str> = text.lines().collect();
-        assert_eq!(lines[0], "time,a.x,c.lambda");
+        assert_eq!(lines[0], "time,a.x,c.lambda,\"b.R[1,2]\"");
         let third: f64 = lines[1].split(',').nth(2).unwrap().parse().unwrap();
         assert_eq!(third.to_bits(), (1.0f64 / 3.0).to_bits());
         assert_eq!(lines[2], "# incomplete: coupling diverged at t = 1");

@@ -1,0 +1,343 @@
+//! `tether compare A.csv B.csv`: the largest deviation per column between two
+//! result files, e.g. a `tether run` and the fmpy reference of the same system
+//! (docs/validation.md).
+//!
+//! Columns are matched by name; both files must have the same times. For each
+//! column c the measure is
+//!
+//! ```text
+//! dev_c   = max over rows |a − b|
+//! scale_c = max over rows max(|a|, |b|)           (the column's magnitude)
+//! rel_c   = dev_c / max(scale_c, f64::MIN_POSITIVE)
+//! ```
+//!
+//! and the column passes when `dev_c ≤ atol + rtol · scale_c`. Scaling by the
+//! column's magnitude over the whole run, not by each value, keeps zero
+//! crossings (a multiplier changing sign) from inflating the measure. Residual
+//! columns (`<constraint>.g`) are differences of nearly equal outputs and have
+//! a tiny scale of their own; `--atol` bounds them in absolute terms.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+pub struct Args {
+    /// First result file (CSV with a `time` column, as `tether run` writes it).
+    a: PathBuf,
+    /// Second result file.
+    b: PathBuf,
+    /// Relative tolerance: a column passes when max |a − b| ≤ atol + rtol · scale.
+    #[arg(long, default_value_t = 1e-9)]
+    rtol: f64,
+    /// Absolute tolerance (see --rtol).
+    #[arg(long, default_value_t = 0.0)]
+    atol: f64,
+    /// Compare only these columns (default: all; then both files must have the
+    /// same columns). Repeatable and space-separated: --columns link.lambda link.g
+    #[arg(long, num_args = 1.., value_name = "NAME")]
+    columns: Vec<String>,
+}
+
+/// One result file.
+struct Table {
+    path: PathBuf,
+    names: Vec<String>,
+    times: Vec<f64>,
+    /// `rows[i][j]`: column `names[j]` (after `time`) at `times[i]`.
+    rows: Vec<Vec<f64>>,
+    /// The reason of a `# incomplete: …` line, if the run stopped early.
+    incomplete: Option<String>,
+}
+
+fn read_table(path: &Path) -> Result<Table> {
+    let shown = path.display();
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {shown}"))?;
+    let incomplete = text
+        .lines()
+        .find_map(|l| l.strip_prefix("# incomplete:"))
+        .map(|r| r.trim().to_string());
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_reader(text.as_bytes());
+    let header = reader
+        .headers()
+        .with_context(|| format!("{shown}: cannot read the header"))?
+        .clone();
+    if header.get(0) != Some("time") {
+        bail!("{shown}: the first column must be `time`");
+    }
+    let names: Vec<String> = header.iter().skip(1).map(str::to_string).collect();
+    let mut seen = HashMap::new();
+    for name in &names {
+        if seen.insert(name.as_str(), ()).is_some() {
+            bail!("{shown}: column '{name}' appears twice");
+        }
+    }
+    let (mut times, mut rows) = (Vec::new(), Vec::new());
+    for record in reader.records() {
+        let record = record.map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
+        let line = record.position().map_or(0, |p| p.line());
+        let mut values = Vec::with_capacity(names.len());
+        for (j, field) in record.iter().enumerate() {
+            let value: f64 = field.trim().parse().map_err(|_| {
+                let column = if j == 0 { "time" } else { &names[j - 1] };
+                anyhow::anyhow!(
+                    "{shown}, line {line}, column '{column}': '{field}' is not a number"
+                )
+            })?;
+            values.push(value);
+        }
+        times.push(values[0]);
+        values.remove(0);
+        rows.push(values);
+    }
+    if rows.is_empty() {
+        bail!("{shown}: no rows");
+    }
+    Ok(Table {
+        path: path.to_path_buf(),
+        names,
+        times,
+        rows,
+        incomplete,
+    })
+}
+
+/// The deviation of one column.
+struct Deviation {
+    name: String,
+    max_abs: f64,
+    at_time: f64,
+    scale: f64,
+    relative: f64,
+    /// max_abs / (atol + rtol·scale): above 1 fails.
+    excess: f64,
+}
+
+/// |a − b|, with equal non-finite values (both NaN, the same infinity) as 0.
+fn difference(a: f64, b: f64) -> f64 {
+    if a == b || (a.is_nan() && b.is_nan()) {
+        0.0
+    } else {
+        (a - b).abs()
+    }
+}
+
+fn columns_to_compare(a: &Table, b: &Table, wanted: &[String]) -> Result<Vec<String>> {
+    if !wanted.is_empty() {
+        for name in wanted {
+            for t in [a, b] {
+                if !t.names.contains(name) {
+                    bail!("column '{name}' is not in {}", t.path.display());
+                }
+            }
+        }
+        return Ok(wanted.to_vec());
+    }
+    let only = |x: &Table, y: &Table| -> Vec<String> {
+        x.names
+            .iter()
+            .filter(|n| !y.names.contains(n))
+            .cloned()
+            .collect()
+    };
+    let (only_a, only_b) = (only(a, b), only(b, a));
+    if !only_a.is_empty() || !only_b.is_empty() {
+        let list = |v: &[String]| {
+            if v.is_empty() {
+                "none".to_string()
+            } else {
+                v.join(", ")
+            }
+        };
+        bail!(
+            "the files have different columns: only in {}: {}; only in {}: {} (use --columns to compare the common ones)",
+            a.path.display(),
+            list(&only_a),
+            b.path.display(),
+            list(&only_b)
+        );
+    }
+    Ok(a.names.clone())
+}
+
+fn check_times(a: &Table, b: &Table) -> Result<()> {
+    let note = |t: &Table| match &t.incomplete {
+        Some(r) => format!(" (incomplete: {r})"),
+        None => String::new(),
+    };
+    if a.times.len() != b.times.len() {
+        bail!(
+            "the files have different numbers of rows: {} has {}{}, {} has {}{}",
+            a.path.display(),
+            a.times.len(),
+            note(a),
+            b.path.display(),
+            b.times.len(),
+            note(b)
+        );
+    }
+    // Same grid point: within 1e-9 of the smallest time increment.
+    let spacing = a
+        .times
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let tolerance = if spacing.is_finite() {
+        1e-9 * spacing
+    } else {
+        1e-9 * a.times[0].abs().max(1.0)
+    };
+    for (i, (ta, tb)) in a.times.iter().zip(&b.times).enumerate() {
+        let same = (ta - tb).abs() <= tolerance;
+        if !same {
+            bail!(
+                "the times differ at row {}: {} has t = {ta}, {} has t = {tb}",
+                i + 1,
+                a.path.display(),
+                b.path.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+fn deviations(a: &Table, b: &Table, names: &[String], rtol: f64, atol: f64) -> Vec<Deviation> {
+    names
+        .iter()
+        .map(|name| {
+            let ja = a.names.iter().position(|n| n == name).expect("checked");
+            let jb = b.names.iter().position(|n| n == name).expect("checked");
+            let (mut max_abs, mut at_time, mut scale) = (0.0f64, a.times[0], 0.0f64);
+            for (i, (ra, rb)) in a.rows.iter().zip(&b.rows).enumerate() {
+                let (x, y) = (ra[ja], rb[jb]);
+                let d = difference(x, y);
+                if d > max_abs || (d.is_nan() && !max_abs.is_nan()) {
+                    max_abs = d;
+                    at_time = a.times[i];
+                }
+                for v in [x, y] {
+                    if v.is_finite() {
+                        scale = scale.max(v.abs());
+                    }
+                }
+            }
+            let relative = if max_abs == 0.0 {
+                0.0
+            } else {
+                max_abs / scale.max(f64::MIN_POSITIVE)
+            };
+            let bound = atol + rtol * scale;
+            let excess = if max_abs == 0.0 {
+                0.0
+            } else if bound > 0.0 {
+                max_abs / bound
+            } else {
+                f64::INFINITY
+            };
+            Deviation {
+                name: name.clone(),
+                max_abs,
+                at_time,
+                scale,
+                relative,
+                excess: if excess.is_nan() {
+                    f64::INFINITY
+                } else {
+                    excess
+                },
+            }
+        })
+        .collect()
+}
+
+pub fn main(args: Args) -> Result<()> {
+    for (name, v) in [("--rtol", args.rtol), ("--atol", args.atol)] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{name} = {v}: expected a finite number >= 0");
+        }
+    }
+    let a = read_table(&args.a)?;
+    let b = read_table(&args.b)?;
+    let names = columns_to_compare(&a, &b, &args.columns)?;
+    check_times(&a, &b)?;
+    let devs = deviations(&a, &b, &names, args.rtol, args.atol);
+
+    let width = devs.iter().map(|d| d.name.len()).max().unwrap_or(6).max(6);
+    println!(
+        "{:<width$}  {:>10}  {:>12}  {:>10}  {:>10}  ok",
+        "column", "max |a-b|", "at t", "scale", "relative"
+    );
+    for d in &devs {
+        let at = if d.max_abs == 0.0 {
+            "-".to_string()
+        } else {
+            d.at_time.to_string()
+        };
+        println!(
+            "{:<width$}  {:>10}  {:>12}  {:>10}  {:>10}  {}",
+            d.name,
+            sci(d.max_abs),
+            at,
+            sci(d.scale),
+            sci(d.relative),
+            if d.excess <= 1.0 { "yes" } else { "NO" }
+        );
+    }
+    for t in [&a, &b] {
+        if let Some(reason) = &t.incomplete {
+            println!("note: {} is incomplete: {reason}", t.path.display());
+        }
+    }
+    let worst_relative = devs.iter().map(|d| d.relative).fold(0.0, f64::max);
+    println!(
+        "{} rows, {} columns; largest relative deviation {} (rtol = {}, atol = {})",
+        a.times.len(),
+        devs.len(),
+        sci(worst_relative),
+        tol(args.rtol),
+        tol(args.atol)
+    );
+    let worst = devs
+        .iter()
+        .filter(|d| d.excess > 1.0)
+        .max_by(|x, y| x.excess.total_cmp(&y.excess));
+    if let Some(d) = worst {
+        bail!(
+            "column '{}' deviates by {} relative to its scale {} (max |a-b| = {} at t = {}), above rtol = {}, atol = {}",
+            d.name,
+            sci(d.relative),
+            sci(d.scale),
+            sci(d.max_abs),
+            d.at_time,
+            tol(args.rtol),
+            tol(args.atol)
+        );
+    }
+    Ok(())
+}
+
+/// `1.234e-05`, `0`, `inf`: four significant digits, a signed two-digit exponent.
+fn sci(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return x.to_string();
+    }
+    let text = format!("{x:.3e}");
+    let (mantissa, exponent) = text.split_once('e').expect("{:e} has an exponent");
+    let exponent: i32 = exponent.parse().expect("integer exponent");
+    let sign = if exponent < 0 { '-' } else { '+' };
+    format!("{mantissa}e{sign}{:02}", exponent.abs())
+}
+
+/// A tolerance as given: `1e-9`, `0`.
+fn tol(x: f64) -> String {
+    if x == 0.0 {
+        "0".into()
+    } else {
+        format!("{x:e}")
+    }
+}

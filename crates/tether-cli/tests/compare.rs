@@ -1,0 +1,193 @@
+//! `tether compare`: per-column deviations between two result files, the exit
+//! status and the one-line errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const HEADER: &str = "time,mass1.x,\"m.R[1,2]\",link.lambda,link.g";
+
+/// A small result file: x = sin t, a name with a comma, λ crossing zero, g tiny.
+fn rows() -> Vec<[f64; 5]> {
+    (0..=10)
+        .map(|n| {
+            let t = n as f64 * 0.1;
+            [t, t.sin(), 0.5, 300.0 * (3.0 * t).cos(), 1e-9 * t]
+        })
+        .collect()
+}
+
+fn write(dir: &Path, name: &str, header: &str, rows: &[[f64; 5]], tail: &str) -> PathBuf {
+    let mut text = format!("{header}\n");
+    for r in rows {
+        let fields: Vec<String> = r.iter().map(|v| v.to_string()).collect();
+        text.push_str(&fields.join(","));
+        text.push('\n');
+    }
+    text.push_str(tail);
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn compare(a: &Path, b: &Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tether"))
+        .arg("compare")
+        .arg(a)
+        .arg(b)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn stdout(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The single error line, which must be the whole of stderr.
+fn one_error_line(out: &Output) -> String {
+    assert!(!out.status.success(), "expected failure: {}", stdout(out));
+    let err = stderr(out);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.starts_with("error: "), "{err}");
+    err
+}
+
+#[test]
+fn identical_files_pass_with_zero_deviation() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(dir.path(), "a.csv", HEADER, &rows(), "");
+    let b = write(dir.path(), "b.csv", HEADER, &rows(), "");
+    let out = compare(&a, &b, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = stdout(&out);
+    assert!(
+        table.contains("m.R[1,2]"),
+        "quoted names stay whole: {table}"
+    );
+    assert!(
+        table.contains("largest relative deviation 0 (rtol = 1e-9, atol = 0)"),
+        "{table}"
+    );
+    assert_eq!(table.matches(" yes").count(), 4, "{table}");
+}
+
+#[test]
+fn a_perturbed_value_fails_naming_the_column_and_its_relative_deviation() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(dir.path(), "a.csv", HEADER, &rows(), "");
+    let mut perturbed = rows();
+    // λ's scale is 300 (its value at t = 0); add 3e-6, i.e. 1e-8 of the scale,
+    // at t = 0.5, where λ itself is only 300·cos(1.5) ≈ 21.
+    perturbed[5][3] += 3e-6;
+    let b = write(dir.path(), "b.csv", HEADER, &perturbed, "");
+    let out = compare(&a, &b, &[]);
+    let err = one_error_line(&out);
+    assert!(err.contains("column 'link.lambda'"), "{err}");
+    assert!(err.contains("at t = 0.5"), "{err}");
+    let relative: f64 = err
+        .split("deviates by ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("no relative deviation in: {err}"));
+    assert!((relative / 1e-8 - 1.0).abs() < 1e-3, "{relative} in {err}");
+    assert!(stdout(&out).contains("NO"), "{}", stdout(&out));
+    // The same files pass once the tolerance admits the deviation.
+    let out = compare(&a, &b, &["--rtol", "2e-8"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    // The worst column is the one furthest above its bound.
+    let mut both = perturbed.clone();
+    both[2][1] += 1e-6; // x: scale ≈ 0.84, so ~1.2e-6 relative: the worst
+    let c = write(dir.path(), "c.csv", HEADER, &both, "");
+    let err = one_error_line(&compare(&a, &c, &[]));
+    assert!(err.contains("column 'mass1.x'"), "{err}");
+}
+
+#[test]
+fn tiny_residual_columns_are_bounded_by_atol() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(dir.path(), "a.csv", HEADER, &rows(), "");
+    let mut shifted = rows();
+    shifted[3][4] += 1e-12; // g's scale is 1e-9: 1e-3 relative
+    let b = write(dir.path(), "b.csv", HEADER, &shifted, "");
+    let err = one_error_line(&compare(&a, &b, &[]));
+    assert!(err.contains("column 'link.g'"), "{err}");
+    let out = compare(&a, &b, &["--atol", "1e-11"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn mismatched_columns_are_one_clear_error_unless_selected() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(dir.path(), "a.csv", HEADER, &rows(), "");
+    let other = HEADER.replace("link.g", "link.h");
+    let b = write(dir.path(), "b.csv", &other, &rows(), "");
+    let err = one_error_line(&compare(&a, &b, &[]));
+    assert!(
+        err.contains("only in") && err.contains("link.g") && err.contains("link.h"),
+        "{err}"
+    );
+    let out = compare(&a, &b, &["--columns", "mass1.x", "link.lambda"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stdout(&out).contains("link.g"), "{}", stdout(&out));
+    let err = one_error_line(&compare(&a, &b, &["--columns", "link.g"]));
+    assert!(
+        err.contains("'link.g' is not in") && err.contains("b.csv"),
+        "{err}"
+    );
+}
+
+#[test]
+fn mismatched_times_and_row_counts_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(dir.path(), "a.csv", HEADER, &rows(), "");
+    let mut late = rows();
+    late[4][0] += 1e-6;
+    let b = write(dir.path(), "b.csv", HEADER, &late, "");
+    let err = one_error_line(&compare(&a, &b, &[]));
+    assert!(err.contains("times differ at row 5"), "{err}");
+    // Stopped early: the row counts differ and the reason is shown.
+    let short = write(
+        dir.path(),
+        "short.csv",
+        HEADER,
+        &rows()[..6],
+        "# incomplete: coupling diverged at t = 0.5\n",
+    );
+    let err = one_error_line(&compare(&a, &short, &[]));
+    assert!(
+        err.contains("different numbers of rows") && err.contains("coupling diverged"),
+        "{err}"
+    );
+    // Times a grid spacing's billionth apart are the same point.
+    let mut close = rows();
+    close[7][0] += 1e-12;
+    let c = write(dir.path(), "c.csv", HEADER, &close, "");
+    assert!(compare(&a, &c, &[]).status.success());
+}
+
+#[test]
+fn unreadable_input_names_the_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(dir.path(), "a.csv", HEADER, &rows(), "");
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, format!("{HEADER}\n0,1,2,abc,4\n")).unwrap();
+    let err = one_error_line(&compare(&a, &bad, &[]));
+    assert!(
+        err.contains("bad.csv, line 2, column 'link.lambda': 'abc' is not a number"),
+        "{err}"
+    );
+    let ragged = dir.path().join("ragged.csv");
+    std::fs::write(&ragged, format!("{HEADER}\n0,1,2\n")).unwrap();
+    let err = one_error_line(&compare(&a, &ragged, &[]));
+    assert!(err.contains("ragged.csv"), "{err}");
+    let missing = dir.path().join("missing.csv");
+    let err = one_error_line(&compare(&a, &missing, &[]));
+    assert!(err.contains("missing.csv"), "{err}");
+    let err = one_error_line(&compare(&a, &a, &["--rtol", "-1"]));
+    assert!(err.contains("--rtol"), "{err}");
+}

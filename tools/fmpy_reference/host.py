@@ -1,0 +1,191 @@
+"""FMU instances driven through fmpy's FMU2Slave: start values, coupled inputs
+(value and input derivatives), outputs and output derivatives, FMU states."""
+
+import os
+from ctypes import byref
+
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+
+from errors import RunError
+
+_NOT_SETTABLE = {"output", "local", "independent", "calculatedParameter"}
+
+
+def _article(type_name):
+    return "an" if type_name in ("Integer", "Enumeration") else "a"
+
+
+def describe(var):
+    causality = {"calculatedParameter": "calculated parameter", "local": "local variable",
+                 "independent": "independent variable"}.get(var.causality, var.causality)
+    return f"{_article(var.type)} {var.type} {causality}"
+
+
+class Counters:
+    def __init__(self):
+        self.do_steps = 0
+        self.state_gets = 0
+        self.state_sets = 0
+
+
+class Host:
+    """One FMU instance of the system."""
+
+    _unpacked = {}
+
+    def __init__(self, spec):
+        self.name = spec.name
+        path = spec.fmu
+        if not os.path.exists(path):
+            raise RunError(f"instance '{self.name}': FMU {path} does not exist")
+        try:
+            md = read_model_description(path)
+        except Exception as e:  # fmpy raises several types for unreadable FMUs
+            raise RunError(f"instance '{self.name}': cannot read {path}: {_one_line(e)}") from None
+        if md.coSimulation is None:
+            raise RunError(f"instance '{self.name}': {path} is not a co-simulation FMU")
+        self.md = md
+        self.cs = md.coSimulation
+        self.variables = {v.name: v for v in md.modelVariables}
+        if os.path.isdir(path):
+            unzipped = path
+        else:
+            key = os.path.realpath(path)
+            if key not in Host._unpacked:
+                Host._unpacked[key] = extract(path)
+            unzipped = Host._unpacked[key]
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                             modelIdentifier=self.cs.modelIdentifier, instanceName=self.name)
+        self.fmu.instantiate()
+        self.recorded = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        self.recorded_vrs = [v.valueReference for v in self.recorded]
+        self.recorded_values = [0.0] * len(self.recorded)
+        self.inputs = []  # [value reference, [(unknown, coefficient), ...]]
+        self.outputs = []  # [(value reference, derivative order)]
+        self.values = {}  # (value reference, order) -> latest value read
+        self.state = None
+        self.initialized = False
+        self.counters = Counters()
+        for name, value in spec.parameters.items():
+            self._start_value(name, value)
+
+    def variable(self, name):
+        var = self.variables.get(name)
+        if var is None:
+            raise RunError(f"{self.md.modelName} has no variable '{name}' (instance '{self.name}')")
+        return var
+
+    def _start_value(self, name, value):
+        var = self.variable(name)
+
+        def fail(reason):
+            return RunError(f"instance '{self.name}': cannot set {name} = {value}: {reason}")
+
+        if var.causality in _NOT_SETTABLE or var.variability == "constant":
+            raise fail(f"it is {describe(var)} and cannot be set")
+        vr = [var.valueReference]
+        is_bool = isinstance(value, bool)
+        if var.type == "Real" and isinstance(value, (int, float)) and not is_bool:
+            self.fmu.setReal(vr, [float(value)])
+        elif var.type in ("Integer", "Enumeration") and isinstance(value, int) and not is_bool:
+            if not -(2**31) <= value < 2**31:
+                raise fail("out of the 32-bit integer range")
+            self.fmu.setInteger(vr, [value])
+        elif var.type == "Boolean" and is_bool:
+            self.fmu.setBoolean(vr, [value])
+        elif var.type == "String" and isinstance(value, str):
+            self.fmu.setString(vr, [value])
+        else:
+            raise fail(f"the variable is {describe(var)}")
+
+    # -- wiring, before the run ------------------------------------------------
+
+    def add_input(self, vr, unknown, coefficient):
+        for entry in self.inputs:
+            if entry[0] == vr:
+                entry[1].append((unknown, coefficient))
+                return
+        self.inputs.append([vr, [(unknown, coefficient)]])
+
+    def add_output(self, vr, order):
+        if (vr, order) not in self.outputs:
+            self.outputs.append((vr, order))
+
+    def is_coupled(self):
+        return bool(self.inputs)
+
+    def initialize(self, start, stop, tolerance):
+        self.fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
+        self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+        self.initialized = True
+
+    # -- during the run ---------------------------------------------------------
+
+    def save_state(self):
+        """fmi2GetFMUstate, updating one state handle for the whole run."""
+        if self.state is None:
+            self.state = self.fmu.getFMUstate()
+        else:
+            self.fmu.fmi2GetFMUstate(self.fmu.component, byref(self.state))
+        self.counters.state_gets += 1
+
+    def restore_state(self):
+        self.fmu.setFMUstate(self.state)
+        self.counters.state_sets += 1
+
+    def apply(self, jets, order):
+        """Inputs from the unknowns' polynomials: input = sum of c * u_m(t).
+        With order k > 0, derivatives 1..k go through fmi2SetRealInputDerivatives."""
+        if not self.inputs:
+            return
+        vrs, values, d1, d2 = [], [], [], []
+        for vr, terms in self.inputs:
+            value = first = second = 0.0
+            for m, c in terms:
+                value += c * jets[m].value
+                first += c * jets[m].d1
+                second += c * jets[m].d2
+            vrs.append(vr)
+            values.append(value)
+            d1.append(first)
+            d2.append(second)
+        self.fmu.setReal(vrs, values)
+        if order >= 1:
+            self.fmu.setRealInputDerivatives(vrs, [1] * len(vrs), d1)
+        if order >= 2:
+            self.fmu.setRealInputDerivatives(vrs, [2] * len(vrs), d2)
+
+    def do_step(self, t, h):
+        self.counters.do_steps += 1
+        self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+
+    def read(self):
+        """Read every output some constraint row uses into `values`."""
+        plain = [o for o in self.outputs if o[1] == 0]
+        if plain:
+            for (vr, _), x in zip(plain, self.fmu.getReal([vr for vr, _ in plain])):
+                self.values[(vr, 0)] = x
+        for vr, order in self.outputs:
+            if order > 0:
+                self.values[(vr, order)] = self.fmu.getRealOutputDerivatives([vr], [order])[0]
+
+    def read_recorded(self):
+        if self.recorded_vrs:
+            self.recorded_values = self.fmu.getReal(self.recorded_vrs)
+
+    def close(self):
+        try:
+            if self.state is not None:
+                self.fmu.freeFMUstate(self.state)
+            if self.initialized:
+                self.fmu.terminate()
+        except Exception:
+            pass  # the run's own error, if any, is the one to report
+        finally:
+            self.fmu.freeInstance()
+
+
+def _one_line(e):
+    return " ".join(str(e).split())

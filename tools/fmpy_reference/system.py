@@ -1,0 +1,264 @@
+"""The system file (docs/system-file.md), read with tomllib and checked the way
+`tether run` checks it: unknown keys are errors, values must have the right type
+and range, relative `fmu` paths are resolved against the file's folder."""
+
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass, field
+
+from errors import RunError
+
+
+@dataclass
+class Method:
+    kind: str  # "baumgarte" | "weighted" | "explicit"
+    beta: float = 0.0
+    gamma: float = 0.0
+    a: float = 0.0
+    b: float = 0.0
+    mu: float = 0.0
+
+    def needs_velocity(self):
+        return {"baumgarte": self.beta > 0, "weighted": self.a > 0, "explicit": True}[self.kind]
+
+    def needs_acceleration(self):
+        return {"baumgarte": self.gamma > 0, "weighted": self.b > 0, "explicit": True}[self.kind]
+
+    def index(self):
+        if self.kind == "explicit":
+            return 1
+        return 1 if self.needs_acceleration() else (2 if self.needs_velocity() else 3)
+
+    def describe(self):
+        if self.kind == "baumgarte":
+            return f"baumgarte (index {self.index()}, beta = {self.beta:e}, gamma = {self.gamma:e})"
+        if self.kind == "weighted":
+            return f"weighted (index {self.index()}, a = {self.a}, b = {self.b})"
+        return f"explicit (mu = {self.mu:e})"
+
+
+@dataclass
+class Instance:
+    name: str
+    fmu: str
+    parameters: dict = field(default_factory=dict)
+
+
+@dataclass
+class Constraint:
+    name: str
+    position: str
+    velocity: str | None
+    acceleration: str | None
+    drives: str
+    initial: float | None  # None: "consistent"
+
+
+@dataclass
+class System:
+    name: str | None
+    start: float
+    stop: float
+    step: float
+    tolerance: float | None
+    method: Method
+    order: int = 0
+    epsilon: float = 1e-5
+    max_condition: float = 1e12
+    divergence_factor: float = 1e6
+    instances: list = field(default_factory=list)
+    constraints: list = field(default_factory=list)
+
+    def macro_steps(self):
+        """(stop - start)/step rounded half away from zero, at least 1."""
+        x = (self.stop - self.start) / self.step
+        n = math.floor(x)
+        if x - n >= 0.5:
+            n += 1
+        return max(int(n), 1)
+
+
+def _is_number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+class _Table:
+    """A TOML table whose keys are consumed; leftovers are unknown keys."""
+
+    def __init__(self, where, table):
+        if not isinstance(table, dict):
+            raise RunError(f"{where}: expected a table")
+        self.where = where
+        self.table = dict(table)
+
+    def take(self, key, kind, default=..., required=False):
+        if key not in self.table:
+            if required or default is ...:
+                raise RunError(f"{self.where}: missing key `{key}`")
+            return default
+        value = self.table.pop(key)
+        if kind == "number":
+            if not _is_number(value):
+                raise RunError(f"{self.where}: `{key}` must be a number, found {value!r}")
+            return float(value)
+        if kind == "integer":
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise RunError(f"{self.where}: `{key}` must be a non-negative integer, found {value!r}")
+            return value
+        if kind == "string":
+            if not isinstance(value, str):
+                raise RunError(f"{self.where}: `{key}` must be a string, found {value!r}")
+            return value
+        return value
+
+    def done(self):
+        if self.table:
+            key = sorted(self.table)[0]
+            raise RunError(f"{self.where}: unknown key `{key}`")
+
+
+def _method(raw):
+    if raw is None:
+        return Method("baumgarte")
+    t = _Table("[method]", raw)
+    kind = t.take("kind", "string", required=True)
+    if kind == "baumgarte":
+        m = Method(kind, beta=t.take("beta", "number", 0.0), gamma=t.take("gamma", "number", 0.0))
+    elif kind == "weighted":
+        m = Method(kind, a=t.take("a", "number", 0.0), b=t.take("b", "number", 0.0))
+    elif kind == "explicit":
+        m = Method(kind, mu=t.take("mu", "number", required=True))
+    else:
+        raise RunError(f"[method]: unknown kind `{kind}`, expected baumgarte, weighted or explicit")
+    t.done()
+    return m
+
+
+def read(path):
+    """Read and check a system file; FMU paths come back resolved."""
+    try:
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+    except OSError as e:
+        raise RunError(f"system file {path}: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise RunError(f"system file {path}: {e}") from None
+    try:
+        system = _from_document(doc)
+    except RunError as e:
+        raise RunError(f"system file {path}: {e}") from None
+    base = os.path.dirname(path)
+    for inst in system.instances:
+        if not os.path.isabs(inst.fmu):
+            inst.fmu = os.path.join(base, inst.fmu)
+    return system
+
+
+def _from_document(doc):
+    top = _Table("top level", doc)
+    name = top.take("name", "string", None)
+    exp = _Table("[experiment]", top.take("experiment", "table", required=True))
+    system = System(
+        name=name,
+        start=exp.take("start", "number", 0.0),
+        stop=exp.take("stop", "number", required=True),
+        step=exp.take("step", "number", required=True),
+        tolerance=exp.take("tolerance", "number", None),
+        method=_method(top.take("method", "table", None)),
+    )
+    exp.done()
+    coupling = _Table("[coupling]", top.take("coupling", "table", {}))
+    system.order = coupling.take("order", "integer", 0)
+    system.epsilon = coupling.take("epsilon", "number", 1e-5)
+    system.max_condition = coupling.take("max_condition", "number", 1e12)
+    system.divergence_factor = coupling.take("divergence_factor", "number", 1e6)
+    coupling.done()
+    for i, raw in enumerate(top.take("instance", "array", required=True)):
+        t = _Table(f"[[instance]] {i + 1}", raw)
+        inst = Instance(t.take("name", "string", required=True), t.take("fmu", "string", required=True))
+        params = t.take("parameters", "table", {})
+        if not isinstance(params, dict):
+            raise RunError(f"instance '{inst.name}': `parameters` must be a table")
+        for key, value in params.items():
+            if not isinstance(value, (bool, int, float, str)):
+                raise RunError(f"instance '{inst.name}': parameter `{key}` must be a number, boolean or string")
+        inst.parameters = params
+        t.done()
+        system.instances.append(inst)
+    for i, raw in enumerate(top.take("constraint", "array", [])):
+        t = _Table(f"[[constraint]] {i + 1}", raw)
+        initial = t.take("initial", "raw", "consistent")
+        if _is_number(initial):
+            initial = float(initial)
+        elif initial == "consistent":
+            initial = None
+        else:
+            raise RunError(f"initial must be a number or \"consistent\", found {initial!r}")
+        system.constraints.append(
+            Constraint(
+                name=t.take("name", "string", required=True),
+                position=t.take("position", "string", required=True),
+                velocity=t.take("velocity", "string", None),
+                acceleration=t.take("acceleration", "string", None),
+                drives=t.take("drives", "string", required=True),
+                initial=initial,
+            )
+        )
+        t.done()
+    top.done()
+    return system
+
+
+_NAME = re.compile(r"[^\W\d]\w*|_\w*")
+
+
+def check(system):
+    """What can be checked without the FMUs (after command-line overrides)."""
+
+    def invalid(name, value, expected):
+        return RunError(f"invalid {name} = {value}: expected {expected}")
+
+    finite = math.isfinite
+    if not finite(system.start):
+        raise invalid("start", system.start, "a finite start time")
+    if not finite(system.step) or system.step <= 0:
+        raise invalid("step", system.step, "a finite macro-step size > 0")
+    if not finite(system.stop) or system.stop <= system.start:
+        raise invalid("stop", system.stop, "a finite stop time after the start time")
+    if system.tolerance is not None and (not finite(system.tolerance) or system.tolerance <= 0):
+        raise invalid("tolerance", system.tolerance, "a finite tolerance > 0")
+    m = system.method
+    params = {"baumgarte": [("beta", m.beta), ("gamma", m.gamma)], "weighted": [("a", m.a), ("b", m.b)]}
+    for pname, value in params.get(m.kind, []):
+        if not finite(value) or value < 0:
+            raise invalid(pname, value, f"a finite number >= 0 for method {m.kind}")
+    if m.kind == "explicit" and (not finite(m.mu) or m.mu <= 0):
+        raise invalid("mu", m.mu, "a finite number > 0 for method explicit")
+    if m.kind == "baumgarte" and m.gamma > 0 and m.beta == 0:
+        raise invalid("beta", m.beta, "beta > 0 when gamma > 0 (index 1 needs both)")
+    if m.kind == "weighted" and m.b > 0 and m.a == 0:
+        raise invalid("a", m.a, "a > 0 when b > 0 (index 1 needs both)")
+    if system.order > 2:
+        raise invalid("order", system.order, "a polynomial degree k of 0, 1 or 2")
+    if not finite(system.epsilon) or not 0 < system.epsilon < 1:
+        raise invalid("epsilon", system.epsilon, "a finite increment in (0, 1)")
+    if not finite(system.max_condition) or system.max_condition <= 1:
+        raise invalid("max_condition", system.max_condition, "a finite number > 1")
+    if not finite(system.divergence_factor) or system.divergence_factor <= 1:
+        raise invalid("divergence_factor", system.divergence_factor, "a finite number > 1")
+    if m.kind == "explicit" and system.order != 0:
+        raise invalid("order", system.order, "0: the explicit method holds the multipliers constant over a step")
+    if not system.instances:
+        raise RunError("no [[instance]] given")
+    seen = set()
+    for name in [i.name for i in system.instances] + [c.name for c in system.constraints]:
+        if not _NAME.fullmatch(name):
+            raise RunError(f"name '{name}' must start with a letter and contain only letters, digits and '_'")
+        if name in seen:
+            raise RunError(f"name '{name}' is used twice")
+        seen.add(name)
+    for c in system.constraints:
+        if c.initial is not None and not finite(c.initial):
+            raise invalid(f"{c.name}.initial", c.initial, "a finite number")

@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# Run every validation variant with `tether run` and with the fmpy reference,
+# and compare the two result files with `tether compare` (docs/validation.md).
+#
+#   tools/fmpy_reference/validate.sh [TETHER_BINARY] [PYTHON]
+#
+# Defaults: target/release/tether and $TETHER_PYTHON (else python3). The FMUs
+# must be packaged (cargo xtask fmus). Results go to target/validation/.
+# Exits non-zero if any variant deviates beyond its tolerance, or if a variant
+# expected to diverge does not stop (in both hosts).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+tether=${1:-target/release/tether}
+python=${2:-${TETHER_PYTHON:-python3}}
+out=target/validation
+mkdir -p "$out"
+summary=()
+failed=0
+
+# variant SYSTEM TAG EXPECT RTOL ATOL -- FLAGS...
+# EXPECT is "completes" or "diverges" (both hosts must stop at the same step).
+variant() {
+  local system=$1 tag=$2 expect=$3 rtol=$4 atol=$5
+  shift 6
+  local a="$out/$tag-tether.csv" b="$out/$tag-fmpy.csv" sa=0 sb=0
+  "$tether" run "tests/validation/$system.toml" "$@" --quiet --out "$a" 2>"$out/$tag-tether.err" || sa=$?
+  "$python" tools/fmpy_reference "tests/validation/$system.toml" "$@" --quiet --out "$b" 2>"$out/$tag-fmpy.err" || sb=$?
+  if [ "$expect" = completes ] && { [ $sa -ne 0 ] || [ $sb -ne 0 ]; }; then
+    echo "$tag: a run failed:" >&2; cat "$out/$tag-tether.err" "$out/$tag-fmpy.err" >&2
+    failed=1; return
+  fi
+  if [ "$expect" = diverges ] && { [ $sa -eq 0 ] || [ $sb -eq 0 ]; }; then
+    echo "$tag: expected both runs to stop as diverged" >&2
+    failed=1; return
+  fi
+  local report
+  if report=$("$tether" compare "$a" "$b" --rtol "$rtol" --atol "$atol" 2>&1); then
+    :
+  else
+    echo "$report" >&2; failed=1
+  fi
+  local rows dev
+  rows=$(grep -c -v '^#' "$b")
+  dev=$(echo "$report" | sed -n 's/.*largest relative deviation \([^ ]*\).*/\1/p')
+  summary+=("$(printf '%-18s %-9s %5s rows  max relative deviation %-10s (rtol %s, atol %s)  %s' \
+    "$tag" "$system" "$((rows - 1))" "${dev:-?}" "$rtol" "$atol" "$*")")
+}
+
+i1m1=(--method baumgarte --beta 2e-3 --gamma 1e-6)
+i2m1=(--method baumgarte --beta 2e-3)
+i3m1=(--method baumgarte --beta 0 --gamma 0)
+i1m2=(--method weighted --a 1 --b 1)
+i2m2=(--method weighted --a 1)
+i3m2=(--method weighted --a 0 --b 0)
+
+# The paper's oscillator: single multiplier, tolerance 1e-9 relative.
+variant oscillator m1-index1-k0 completes 1e-9 0 -- "${i1m1[@]}" --order 0
+variant oscillator m1-index2-k0 completes 1e-9 0 -- "${i2m1[@]}" --order 0
+variant oscillator m1-index3-k0 completes 1e-9 0 -- "${i3m1[@]}" --order 0
+variant oscillator m2-index1-k0 completes 1e-9 0 -- "${i1m2[@]}" --order 0
+variant oscillator m2-index2-k0 completes 1e-9 0 -- "${i2m2[@]}" --order 0
+variant oscillator m2-index3-k0 completes 1e-9 0 -- "${i3m2[@]}" --order 0
+variant oscillator m1-index1-k1 completes 1e-9 0 -- "${i1m1[@]}" --order 1
+variant oscillator m2-index1-k1 completes 1e-9 0 -- "${i1m2[@]}" --order 1
+variant oscillator m1-index1-k2 completes 1e-9 0 -- "${i1m1[@]}" --order 2
+variant oscillator explicit completes 1e-9 0 -- --method explicit --mu 1e-2
+# Unstable at H = 1e-3 (docs/algorithm.md): both hosts stop at the same step.
+variant oscillator m1-index2-k1 diverges 1e-9 0 -- "${i2m1[@]}" --order 1
+variant oscillator m1-index3-k1 diverges 1e-9 0 -- "${i3m1[@]}" --order 1
+variant oscillator m2-index2-k1 diverges 1e-9 0 -- "${i2m2[@]}" --order 1
+variant oscillator m2-index3-k1 diverges 1e-9 0 -- "${i3m2[@]}" --order 1
+variant oscillator m2-index1-k2 diverges 1e-9 0 -- "${i1m2[@]}" --order 2
+# Two coupled multipliers (2x2 Jacobian): rounding differences of the two LU
+# solvers are amplified by the finite-difference Jacobian; the bound is
+# explained in docs/validation.md.
+variant chain chain-m1-index2-k0 completes 1e-5 1e-9 -- "${i2m1[@]}" --order 0
+variant chain chain-m1-index1-k0 completes 1e-5 1e-9 -- "${i1m1[@]}" --order 0
+variant chain chain-m2-index1-k1 completes 1e-5 1e-9 -- "${i1m2[@]}" --order 1
+variant chain chain-explicit completes 1e-5 1e-9 -- --method explicit --mu 1e-2
+
+printf '%s\n' "${summary[@]}"
+exit $failed
