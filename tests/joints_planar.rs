@@ -1,0 +1,224 @@
+//! The paper's mechanisms (EXAMPLES.md §2–3) through link FMUs and planar
+//! joints, against the monolithic references in `tests/support/reference`.
+//!
+//! Run with `cargo test --test joints_planar -- --nocapture` to see the tables.
+
+use tether_master::{MasterError, MemoryRecorder, Method, Simulation, SystemSpec};
+use tether_tests::reference::{double_pendulum, slider_crank};
+
+/// The example file with the link FMU packaged where it points.
+fn example(name: &str) -> SystemSpec {
+    tether_fmu_build::workspace_fmu("link").expect("package the link FMU");
+    let root = tether_fmu_build::workspace_root().expect("workspace root");
+    SystemSpec::from_file(&root.join("examples").join(name)).expect("read the example")
+}
+
+fn run(spec: &SystemSpec) -> Result<MemoryRecorder, MasterError> {
+    let mut sim = Simulation::new(spec)?;
+    let mut rec = MemoryRecorder::default();
+    sim.run(&mut [&mut rec], &mut |_, _| {})?;
+    Ok(rec)
+}
+
+fn with(mut spec: SystemSpec, method: Method, order: usize, h: f64, stop: f64) -> SystemSpec {
+    spec.method = method;
+    spec.coupling.order = order;
+    spec.experiment.step = h;
+    spec.experiment.stop = stop;
+    spec
+}
+
+/// Fitted order from the errors at successive halvings of H (least squares in log-log).
+fn fitted_order(hs: &[f64], errors: &[f64]) -> f64 {
+    let n = hs.len() as f64;
+    let (lx, ly): (Vec<f64>, Vec<f64>) = hs.iter().zip(errors).map(|(h, e)| (h.ln(), e.ln())).unzip();
+    let mx = lx.iter().sum::<f64>() / n;
+    let my = ly.iter().sum::<f64>() / n;
+    let sxy: f64 = lx.iter().zip(&ly).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = lx.iter().map(|x| (x - mx) * (x - mx)).sum();
+    sxy / sxx
+}
+
+/// Max over time of the difference of `columns` from the reference.
+fn max_error(rec: &MemoryRecorder, columns: &[&str], reference: impl Fn(usize, &str) -> f64) -> f64 {
+    let mut worst: f64 = 0.0;
+    for name in columns {
+        let series = rec.series(name).unwrap_or_else(|| panic!("no column {name}"));
+        for (k, v) in series.iter().enumerate() {
+            worst = worst.max((v - reference(k, name)).abs());
+        }
+    }
+    worst
+}
+
+const BAUMGARTE_INDEX1: Method = Method::Baumgarte {
+    beta: 2e-3,
+    gamma: 1e-6,
+};
+const WEIGHTED_INDEX1: Method = Method::Weighted { a: 1.0, b: 1.0 };
+const HS: [f64; 3] = [4e-3, 2e-3, 1e-3];
+
+fn double_pendulum_errors(method: Method, stop: f64) -> Vec<f64> {
+    HS.iter()
+        .map(|&h| {
+            let spec = with(example("double_pendulum.toml"), method, 0, h, stop);
+            let rec = run(&spec).expect("double pendulum runs");
+            let times = rec.times.clone();
+            let reference = double_pendulum::reference(&times);
+            max_error(&rec, &["link1.B.r[1]", "link1.B.r[2]", "link2.B.r[1]", "link2.B.r[2]"], |k, name| {
+                reference[k].column(name).expect("reference column")
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn double_pendulum_converges_to_the_monolithic_reference() {
+    for (label, method) in [("M1 index 1", BAUMGARTE_INDEX1), ("M2 index 1", WEIGHTED_INDEX1)] {
+        let errors = double_pendulum_errors(method, 1.0);
+        let order = fitted_order(&HS, &errors);
+        println!("double pendulum {label}: marker position errors {:?} over H = {HS:?}: order {order:.2}", errors.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>());
+        for pair in errors.windows(2) {
+            assert!(pair[1] < pair[0], "{label}: error must shrink with H: {errors:?}");
+        }
+        assert!(order > 0.9, "{label}: order {order}");
+    }
+}
+
+const BAUMGARTE_INDEX2: Method = Method::Baumgarte {
+    beta: 2e-3,
+    gamma: 0.0,
+};
+const WEIGHTED_INDEX2: Method = Method::Weighted { a: 1.0, b: 0.0 };
+
+/// Largest |E(t) − E(0)| of the total mechanical energy of both links.
+fn energy_drift(rec: &MemoryRecorder) -> f64 {
+    let e1 = rec.series("crank.E").unwrap();
+    let e2 = rec.series("rocker.E").unwrap();
+    let e0 = e1[0] + e2[0];
+    e1.iter()
+        .zip(&e2)
+        .map(|(a, b)| (a + b - e0).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn slider_crank_converges_and_its_energy_drift_shrinks_with_h() {
+    for (label, method) in [("M1 index 2", BAUMGARTE_INDEX2), ("M2 index 2", WEIGHTED_INDEX2)] {
+        let mut errors = Vec::new();
+        let mut drifts = Vec::new();
+        for &h in &HS {
+            let spec = with(example("slider_crank.toml"), method, 0, h, 1.0);
+            let rec = run(&spec).expect("slider-crank runs");
+            let reference = slider_crank::reference(&rec.times);
+            errors.push(max_error(&rec, &["crank.phi", "rocker.phi"], |k, name| {
+                reference[k].column(name).expect("reference column")
+            }));
+            drifts.push(energy_drift(&rec));
+        }
+        let order = fitted_order(&HS, &errors);
+        let drift_order = fitted_order(&HS, &drifts);
+        println!(
+            "slider-crank {label}, k = 0: angle errors {:?}, energy drift {:?} over H = {HS:?}: orders {order:.2}, {drift_order:.2}",
+            errors.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>(),
+            drifts.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>()
+        );
+        for pair in errors.windows(2).chain(drifts.windows(2)) {
+            assert!(pair[1] < pair[0], "{label}: must shrink with H: {errors:?} {drifts:?}");
+        }
+    }
+}
+
+/// The paper: "the numerical dissipation is significantly reduced if higher order
+/// approximation is used (k > 0)". Index 2 with k > 0 is not stable here (as for
+/// the oscillator, where the paper calls index 2 only partly stable with k = 1), so
+/// the comparison over k is made on index 1 (β = 2e-3, γ = 1e-6), where it holds.
+#[test]
+fn slider_crank_energy_drift_shrinks_with_k() {
+    // Method 2 index 1 (a = b = 1) diverges with k = 2, as on the oscillator.
+    for (label, method, top) in [
+        ("M1 index 1", BAUMGARTE_INDEX1, 2),
+        ("M2 index 1", WEIGHTED_INDEX1, 1),
+    ] {
+        let drifts: Vec<f64> = (0..=top)
+            .map(|k| {
+                let spec = with(example("slider_crank.toml"), method, k, 1e-3, 1.0);
+                energy_drift(&run(&spec).expect("index 1 is stable for k = 0, 1, 2"))
+            })
+            .collect();
+        println!(
+            "slider-crank {label}, H = 1e-3: energy drift for k = 0..={top}: {:?}",
+            drifts.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>()
+        );
+        assert!(drifts[1] < drifts[0] / 10.0, "{label}: {drifts:?}");
+        if top == 2 {
+            assert!(drifts[2] < drifts[1] / 10.0, "{label}: {drifts:?}");
+        }
+    }
+    for (label, method) in [("M1 index 2", BAUMGARTE_INDEX2), ("M2 index 2", WEIGHTED_INDEX2)] {
+        let spec = with(example("slider_crank.toml"), method, 1, 1e-3, 1.0);
+        match run(&spec) {
+            Err(MasterError::Diverged { time, quantity, .. }) => {
+                println!("slider-crank {label}, k = 1: diverged at t = {time} ({quantity})")
+            }
+            other => panic!("{label} with k = 1 was expected to diverge: {:?}", other.map(|_| ())),
+        }
+    }
+}
+
+/// The paper's own style (the FMUs take the multipliers as inputs) against the
+/// force ports: for an atpoint joint the port unknowns are exactly ±λ, so both
+/// give the same motion up to the finite-difference Jacobians' differences.
+#[test]
+fn multiplier_inputs_and_force_ports_agree_on_the_double_pendulum() {
+    let ports = with(example("double_pendulum.toml"), BAUMGARTE_INDEX1, 0, 1e-3, 1.0);
+    let mut paper = ports.clone();
+    paper.joints[0].multipliers = Some(vec![
+        "link1.B.F[1] - link2.A.F[1]".into(),
+        "link1.B.F[2] - link2.A.F[2]".into(),
+    ]);
+    let (a, b) = (run(&ports).unwrap(), run(&paper).unwrap());
+    let columns = ["link1.B.r[1]", "link1.B.r[2]", "link2.B.r[1]", "link2.B.r[2]"];
+    let relative = |name: &str| {
+        let (x, y) = (a.series(name).unwrap(), b.series(name).unwrap());
+        let scale = x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let diff = x.iter().zip(&y).fold(0.0_f64, |m, (p, q)| m.max((p - q).abs()));
+        println!("{name}: max difference {diff:.3e} (scale {scale:.3})");
+        diff / scale
+    };
+    // Paper style has 2 unknowns, force ports 6 (2 λ + 4 ports); both solve the
+    // same conditions and differ only in their finite-difference Jacobians
+    // (perturbing λ moves both FMUs at once, a port only one). The corrected
+    // multipliers carry that difference (measured 1.3e-7 relative); the motion
+    // barely sees it (measured 1.1e-12).
+    for name in columns {
+        assert!(relative(name) < 1e-10, "{name}");
+    }
+    for name in ["hinge.lambda[1]", "hinge.lambda[2]"] {
+        assert!(relative(name) < 1e-5, "{name}");
+    }
+}
+
+#[test]
+fn a_joint_naming_a_marker_that_does_not_exist_is_a_clear_error() {
+    let mut spec = example("double_pendulum.toml");
+    spec.joints[0].i = "link1.C".into();
+    let err = Simulation::new(&spec).err().expect("must fail").to_string();
+    assert_eq!(
+        err,
+        "joint 'hinge': instance 'link1' has no marker 'C' (no output 'C.r[1]'); its markers are: A, B"
+    );
+    let mut spec = example("double_pendulum.toml");
+    spec.joints[0].j = "link3.A".into();
+    let err = Simulation::new(&spec).err().expect("must fail").to_string();
+    assert!(err.contains("unknown instance 'link3'") && err.contains("link2"), "{err}");
+}
+
+#[test]
+fn a_spatial_joint_on_planar_fmus_names_the_missing_port() {
+    let mut spec = example("double_pendulum.toml");
+    spec.joints[0].plane = None;
+    let err = Simulation::new(&spec).err().expect("must fail").to_string();
+    assert!(!err.contains('\n'));
+    assert!(err.contains("'B.F[3]'") && err.contains("link1"), "{err}");
+}
