@@ -6,9 +6,11 @@ use std::time::Instant;
 use nalgebra::{DMatrix, DVector};
 
 use crate::coupling::{self, Constraint, LevelKind};
+use crate::explicit::Feedthrough;
 use crate::observer::{Observer, Sample};
 use crate::polynomial::Taylor;
 use crate::slave::Slave;
+use crate::solve::Solver;
 use crate::spec::{CouplingSettings, Experiment, InitialMultiplier, SystemSpec};
 use crate::stats::RunStats;
 use crate::{MasterError, Method};
@@ -52,6 +54,12 @@ pub(crate) struct Work {
     pub g: Vec<DVector<f64>>,
     /// Interface Jacobians ∂g/∂u, ∂ġ/∂u, ∂g̈/∂u, indexed like `levels`.
     pub jac: Vec<DMatrix<f64>>,
+    /// Corrected unknowns of the current step.
+    pub corrected: Vec<f64>,
+    /// LU workspace for the linear solves.
+    pub solver: Solver,
+    /// Buffers of the feedthrough Newton step (initial and explicit multipliers).
+    pub feedthrough: Feedthrough,
 }
 
 impl Simulation {
@@ -118,6 +126,9 @@ impl Simulation {
             delta: vec![0.0; nu],
             g: levels.iter().map(|_| DVector::zeros(nu)).collect(),
             jac: levels.iter().map(|_| DMatrix::zeros(nu, nu)).collect(),
+            corrected: vec![0.0; nu],
+            solver: Solver::default(),
+            feedthrough: Feedthrough::default(),
         };
         let mut sim = Simulation {
             experiment: exp,
