@@ -9,7 +9,7 @@
 //!   explicit method.
 //!
 //! `cargo bench -p tether-bench [-- floor|fmpy|recording|precision ...]`;
-//! `TETHER_BENCH_REPS` repetitions (default 7, medians reported),
+//! `TETHER_BENCH_REPS` repetitions (default 9, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
 
@@ -17,7 +17,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use tether_bench::{fmpy_loop, floor, workspace_root, Case, StateError};
+use tether_bench::{floor, fmpy_loop, workspace_root, Case, StateError};
 use tether_fmi::Fmu;
 use tether_master::{CsvRecorder, InstanceCounters, Method, Observer, Sample, Simulation};
 
@@ -39,7 +39,7 @@ fn reps() -> usize {
     std::env::var("TETHER_BENCH_REPS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(7)
+        .unwrap_or(9)
 }
 
 /// A fresh simulation at T_0 (setup not timed) and the per-instance counters.
@@ -154,27 +154,41 @@ fn bench_fmpy() {
         .map(PathBuf::from)
         .unwrap_or_else(|| workspace_root().join("tools/bench/fmpy_loop.py"));
     println!("script: {}", script.display());
-    println!("FMU     k   fmpy/step      Tether/step    Tether faster by   (median of {} runs)", reps().min(3));
+    println!(
+        "FMU     k   C floor/step   fmpy/step      Tether/step    fmpy/Tether   overheads (fmpy−C)/(Tether−C)   (median of {} runs)",
+        reps().min(3)
+    );
     for exact in [true, false] {
         for order in [0, 1] {
             let case = Case::example(exact, order);
-            let (mut pys, mut tethers, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+            let fmu = Fmu::open(&case.spec().instances[0].fmu).expect("open the FMU");
+            let (mut floors, mut pys, mut tethers, mut ratios) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new());
             let mut same = true;
             for _ in 0..reps().min(3) {
                 let (mut sim, _) = fresh(&case);
                 let lambda0 = sim.unknowns()[0];
                 let t = time_steps(&mut sim, case.steps);
+                let c = floor(&case, &fmu, lambda0).expect("C floor");
                 let py = fmpy_loop(&python, &script, &case, lambda0).expect("fmpy loop");
                 same &= py.lambda.to_bits() == sim.unknowns()[0].to_bits();
+                floors.push(c.seconds / case.steps as f64);
                 pys.push(py.per_step);
                 tethers.push(t);
                 ratios.push(py.per_step / t);
             }
+            let (c, py, t) = (median(floors), median(pys), median(tethers));
+            let overheads = if t > c {
+                format!("{:6.0}×", (py - c) / (t - c))
+            } else {
+                "  (Tether within noise of C)".into()
+            };
             println!(
-                "{}  {order}  {}    {}    {:7.0}×   λ_N {}",
+                "{}  {order}  {}    {}    {}    {:6.1}×      {overheads}   λ_N {}",
                 mode(exact),
-                us(median(pys)),
-                us(median(tethers)),
+                us(c),
+                us(py),
+                us(t),
                 median(ratios),
                 if same { "identical" } else { "DIFFERS" }
             );
@@ -260,8 +274,17 @@ fn bench_precision() {
     println!("method                       H            steps      error        wall");
     let target = 1e-6;
     let methods = [
-        ("baumgarte index 2 (β=2e-3)", Method::Baumgarte { beta: 2e-3, gamma: 0.0 }),
-        ("weighted index 2 (a=1)", Method::Weighted { a: 1.0, b: 0.0 }),
+        (
+            "baumgarte index 2 (β=2e-3)",
+            Method::Baumgarte {
+                beta: 2e-3,
+                gamma: 0.0,
+            },
+        ),
+        (
+            "weighted index 2 (a=1)",
+            Method::Weighted { a: 1.0, b: 0.0 },
+        ),
         ("explicit (μ=1e-2)", Method::Explicit { mu: 1e-2 }),
     ];
     let mut walls = Vec::new();
@@ -283,12 +306,15 @@ fn bench_precision() {
             let wall = (stats.wall - stats.times.setup - stats.times.recording).as_secs_f64();
             history.push((h, err.max, wall));
             if err.max <= target {
-                println!("{name:<28} {h:<12.4e} {steps:<10} {:<12.3e} {:.4} s", err.max, wall);
+                println!(
+                    "{name:<28} {h:<12.4e} {steps:<10} {:<12.3e} {:.4} s",
+                    err.max, wall
+                );
                 walls.push(Some(wall));
                 break;
             }
             // Too expensive to reach: extrapolate with the observed order.
-            if steps >= 1 << 21 {
+            if steps >= 1 << 17 {
                 let (h0, e0, _) = history[history.len() - 2];
                 let p = (e0 / err.max).ln() / (h0 / h).ln();
                 let factor = (err.max / target).powf(1.0 / p);
