@@ -31,7 +31,9 @@ pub trait Observer {
 /// `# incomplete: <error>` after the last accepted step.
 pub struct CsvRecorder<W: Write> {
     out: std::io::BufWriter<W>,
-    number: ryu::Buffer,
+    number: zmij::Buffer,
+    /// One row, assembled before a single write (reused, grows to the widest row).
+    line: Vec<u8>,
 }
 
 impl<W: Write> CsvRecorder<W> {
@@ -39,7 +41,8 @@ impl<W: Write> CsvRecorder<W> {
     pub fn new(out: W) -> Self {
         CsvRecorder {
             out: std::io::BufWriter::with_capacity(1 << 16, out),
-            number: ryu::Buffer::new(),
+            number: zmij::Buffer::new(),
+            line: Vec::new(),
         }
     }
 }
@@ -55,13 +58,15 @@ impl<W: Write> Observer for CsvRecorder<W> {
     }
 
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
-        self.out
-            .write_all(self.number.format(sample.time).as_bytes())?;
+        let line = &mut self.line;
+        line.clear();
+        line.extend_from_slice(self.number.format(sample.time).as_bytes());
         for &v in sample.values {
-            self.out.write_all(b",")?;
-            self.out.write_all(self.number.format(v).as_bytes())?;
+            line.push(b',');
+            line.extend_from_slice(self.number.format(v).as_bytes());
         }
-        self.out.write_all(b"\n")
+        line.push(b'\n');
+        self.out.write_all(line)
     }
 
     fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()> {
