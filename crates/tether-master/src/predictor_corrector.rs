@@ -3,12 +3,9 @@
 
 use std::time::Instant;
 
-use nalgebra::DVector;
-
 use crate::coupling::{RowLevel, View};
 use crate::polynomial::{extrapolation, interpolation};
 use crate::simulation::Simulation;
-use crate::solve::solve;
 use crate::{MasterError, Method};
 
 impl Simulation {
@@ -47,7 +44,8 @@ impl Simulation {
                 bump: None,
             };
             for (l, &level) in self.levels.iter().enumerate() {
-                self.coupling.eval(level, &view, work.g[l].as_mut_slice());
+                self.coupling
+                    .eval(level, &view, work.g[l].as_mut_slice());
             }
         }
         self.stats.times.predictor += clock.elapsed();
@@ -105,13 +103,14 @@ impl Simulation {
 
         // Step 2b, corrected unknowns (eq. 68 or eq. 73–76).
         let clock = Instant::now();
-        let corrected = self.corrected_unknowns(self.time_at(self.n + 1))?;
+        self.corrected_unknowns(self.time_at(self.n + 1))?;
         self.stats.times.solve += clock.elapsed();
 
         // Step 3, corrector: repeat the step with interpolation polynomials.
         let clock = Instant::now();
         for m in 0..nu {
-            self.work.polys[m] = interpolation(corrected[m], &self.history[m], degree_corr, h);
+            let corrected = self.work.corrected[m];
+            self.work.polys[m] = interpolation(corrected, &self.history[m], degree_corr, h);
         }
         for slave in self.slaves.iter_mut() {
             if slave.is_coupled() {
@@ -121,7 +120,7 @@ impl Simulation {
             }
         }
         for (m, hist) in self.history.iter_mut().enumerate() {
-            *hist = [corrected[m], hist[0], hist[1]];
+            *hist = [self.work.corrected[m], hist[0], hist[1]];
         }
         self.n += 1;
         self.read_accepted()?;
@@ -129,28 +128,40 @@ impl Simulation {
         Ok(())
     }
 
-    fn corrected_unknowns(&mut self, time: f64) -> Result<DVector<f64>, MasterError> {
+    /// The corrected unknowns into `work.corrected` (buffers reused, no allocation).
+    fn corrected_unknowns(&mut self, time: f64) -> Result<(), MasterError> {
         let limit = self.settings.max_condition;
-        let u_pred = DVector::from_column_slice(&self.work.u_pred);
+        let nu = self.work.u_pred.len();
         let level_index = |kind| self.levels.iter().position(|&l| l == kind);
-        let algebraic = |r: usize| self.coupling.unknowns[r].is_algebraic();
+        let work = &mut self.work;
         match self.method {
             Method::Baumgarte { beta, gamma } => {
                 // Eq. 68: u = u^p − (G^B)⁻¹ g^B with g^B = g + β ġ + γ g̈.
-                let mut a = self.work.jac[0].clone();
-                let mut b = self.work.g[0].clone();
+                let (a, b) = work.solver.system(nu);
+                a.copy_from_slice(work.jac[0].as_slice());
+                b.copy_from_slice(work.g[0].as_slice());
+                let mut add = |weight: f64, l: usize| {
+                    for (x, j) in a.iter_mut().zip(work.jac[l].iter()) {
+                        *x += weight * j;
+                    }
+                    for (x, g) in b.iter_mut().zip(work.g[l].iter()) {
+                        *x += weight * g;
+                    }
+                };
                 if let Some(v) = level_index(RowLevel::Velocity) {
-                    a += beta * &self.work.jac[v];
-                    b += beta * &self.work.g[v];
+                    add(beta, v);
                 }
                 if let Some(acc) = level_index(RowLevel::Acceleration) {
-                    a += gamma * &self.work.jac[acc];
-                    b += gamma * &self.work.g[acc];
+                    add(gamma, acc);
                 }
                 // Port and coupling-variable rows are not stabilised.
-                for r in (0..a.nrows()).filter(|&r| algebraic(r)) {
-                    a.row_mut(r).copy_from(&self.work.jac[0].row(r));
-                    b[r] = self.work.g[0][r];
+                for (r, unknown) in self.coupling.unknowns.iter().enumerate() {
+                    if unknown.is_algebraic() {
+                        for c in 0..nu {
+                            a[r + c * nu] = work.jac[0][(r, c)];
+                        }
+                        b[r] = work.g[0][r];
+                    }
                 }
                 let level = if self.levels.len() == 1 {
                     "position"
@@ -158,11 +169,14 @@ impl Simulation {
                     "baumgarte"
                 };
                 self.stats.jacobian_solves += 1;
-                Ok(u_pred - solve(&a, &b, time, level, limit)?)
+                let step = work.solver.solve(time, level, limit)?;
+                for ((c, p), s) in work.corrected.iter_mut().zip(&work.u_pred).zip(step) {
+                    *c = p - s;
+                }
             }
             Method::Weighted { a, b } => {
                 // Eq. 73–76: solve each level, then average with weights 1, a, b.
-                let mut sum = DVector::zeros(u_pred.len());
+                work.corrected.fill(0.0);
                 let mut total = 0.0;
                 for (l, &kind) in self.levels.iter().enumerate() {
                     let (weight, name) = match kind {
@@ -171,13 +185,19 @@ impl Simulation {
                         _ => (1.0, "position"),
                     };
                     self.stats.jacobian_solves += 1;
-                    let step = solve(&self.work.jac[l], &self.work.g[l], time, name, limit)?;
-                    sum += weight * (&u_pred - step);
+                    work.solver.load(&work.jac[l], &work.g[l]);
+                    let step = work.solver.solve(time, name, limit)?;
+                    for ((c, p), s) in work.corrected.iter_mut().zip(&work.u_pred).zip(step) {
+                        *c += weight * (p - s);
+                    }
                     total += weight;
                 }
-                Ok(sum / total)
+                for c in work.corrected.iter_mut() {
+                    *c /= total;
+                }
             }
             Method::Explicit { .. } => unreachable!("the explicit method has its own step"),
         }
+        Ok(())
     }
 }

@@ -6,9 +6,11 @@ use std::time::Instant;
 use nalgebra::{DMatrix, DVector};
 
 use crate::coupling::{self, Coupling, RowLevel, View};
+use crate::explicit::Feedthrough;
 use crate::observer::{Observer, Sample};
 use crate::polynomial::Taylor;
 use crate::slave::Slave;
+use crate::solve::Solver;
 use crate::spec::{CouplingSettings, Experiment, InitialMultiplier, SystemSpec};
 use crate::stats::RunStats;
 use crate::{MasterError, Method};
@@ -56,6 +58,12 @@ pub(crate) struct Work {
     pub rows: Vec<f64>,
     /// Current unknowns u_N.
     pub u: Vec<f64>,
+    /// Corrected unknowns of the current step.
+    pub corrected: Vec<f64>,
+    /// LU workspace for the linear solves.
+    pub solver: Solver,
+    /// Buffers of the feedthrough Newton step (initial and explicit multipliers).
+    pub feedthrough: Feedthrough,
 }
 
 impl Simulation {
@@ -123,6 +131,9 @@ impl Simulation {
             jac: levels.iter().map(|_| DMatrix::zeros(nu, nu)).collect(),
             rows: vec![0.0; nu],
             u: vec![0.0; nu],
+            corrected: vec![0.0; nu],
+            solver: Solver::default(),
+            feedthrough: Feedthrough::default(),
         };
         let mut sim = Simulation {
             experiment: exp,

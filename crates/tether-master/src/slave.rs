@@ -226,6 +226,7 @@ impl Slave {
         }
         self.instance
             .set_real(&self.input_vrs, &self.input_values)?;
+        self.counters.set_reals += 1;
         if degree > 0 {
             let count = n * degree.min(2);
             self.instance.set_real_input_derivatives(
@@ -233,6 +234,7 @@ impl Slave {
                 &self.input_d_orders[..count],
                 &self.input_d_values[..count],
             )?;
+            self.counters.set_input_derivatives += 1;
         }
         Ok(())
     }
@@ -249,6 +251,7 @@ impl Slave {
         if !self.value_vrs.is_empty() {
             self.instance
                 .get_real(&self.value_vrs, &mut self.value_buf)?;
+            self.counters.get_reals += 1;
             for (k, &slot) in self.value_slots.iter().enumerate() {
                 self.coupled_values[slot] = self.value_buf[k];
             }
@@ -257,6 +260,7 @@ impl Slave {
             let mut out = [0.0];
             self.instance
                 .get_real_output_derivatives(&[vr], &[order], &mut out)?;
+            self.counters.get_output_derivatives += 1;
             self.coupled_values[slot] = out[0];
         }
         Ok(())
@@ -267,6 +271,7 @@ impl Slave {
         if !self.recorded_vrs.is_empty() {
             self.instance
                 .get_real(&self.recorded_vrs, &mut self.recorded_values)?;
+            self.counters.get_reals += 1;
         }
         Ok(())
     }

@@ -1,15 +1,198 @@
 //! Solving the linearised coupling conditions (eq. 68, 73–75) with an LU
-//! factorisation and a condition check.
+//! factorisation and a condition check, on buffers reused across macro steps.
+//!
+//! The systems are small (one row per coupling unknown) and solved every macro
+//! step, so the factorisation is a plain dense LU with partial pivoting on
+//! preallocated column-major buffers: after the first solve of a given size no
+//! step allocates. The operations are those of nalgebra's `LU::new`,
+//! `try_inverse` and matrix–vector product in the same order, so the results are
+//! bit for bit what `DMatrix::lu` gave before (checked by a test below).
 
 use nalgebra::{DMatrix, DVector};
 
 use crate::MasterError;
 
-/// Solve `A x = b`. Rows are scaled to unit max-norm first (position, velocity
-/// and acceleration rows have very different magnitudes), then the 1-norm
-/// condition number of the scaled matrix is estimated from its inverse — the
-/// systems are small (one row per coupling unknown). A condition above `limit`
-/// or an exactly singular matrix is an error naming the time and the level.
+/// A reusable solver for `A x = b` with `n × n` systems.
+#[derive(Debug, Default, Clone)]
+pub(crate) struct Solver {
+    n: usize,
+    /// The system matrix, column-major; scaled and factorised in place.
+    a: Vec<f64>,
+    /// The right-hand side, scaled in place.
+    b: Vec<f64>,
+    /// Row-scaled copy of `a` (its 1-norm enters the condition estimate).
+    scaled: Vec<f64>,
+    /// Row swapped with row `i` at elimination step `i`.
+    pivots: Vec<usize>,
+    /// A⁻¹ of the scaled system, column-major.
+    inverse: Vec<f64>,
+    /// The solution.
+    x: Vec<f64>,
+}
+
+impl Solver {
+    /// Size the system to `n × n` (allocating only when `n` grows) and hand out
+    /// the matrix (column-major, like nalgebra's storage) and right-hand side to
+    /// fill. Their previous contents are unspecified.
+    pub fn system(&mut self, n: usize) -> (&mut [f64], &mut [f64]) {
+        self.n = n;
+        self.a.resize(n * n, 0.0);
+        self.b.resize(n, 0.0);
+        self.scaled.resize(n * n, 0.0);
+        self.pivots.resize(n, 0);
+        self.inverse.resize(n * n, 0.0);
+        self.x.resize(n, 0.0);
+        (&mut self.a, &mut self.b)
+    }
+
+    /// Load `A` and `b` (copies, no allocation once sized).
+    pub fn load(&mut self, a: &DMatrix<f64>, b: &DVector<f64>) {
+        let n = b.len();
+        debug_assert_eq!(a.shape(), (n, n));
+        let (sa, sb) = self.system(n);
+        sa.copy_from_slice(a.as_slice());
+        sb.copy_from_slice(b.as_slice());
+    }
+
+    /// Solve the loaded system. Rows are scaled to unit max-norm first
+    /// (position, velocity and acceleration rows have very different
+    /// magnitudes), then the 1-norm condition number of the scaled matrix is
+    /// estimated from its inverse. A condition above `limit` or an exactly
+    /// singular matrix is an error naming the time and the level.
+    pub fn solve(
+        &mut self,
+        time: f64,
+        level: &'static str,
+        limit: f64,
+    ) -> Result<&[f64], MasterError> {
+        let singular = |condition: f64| MasterError::SingularJacobian {
+            time,
+            level,
+            condition,
+            limit,
+        };
+        let n = self.n;
+        let a = &mut self.a;
+        for i in 0..n {
+            let s = (0..n).map(|j| a[i + j * n].abs()).fold(0.0, f64::max);
+            if !(s.is_finite() && s > 0.0) {
+                return Err(singular(f64::INFINITY));
+            }
+            let inv = 1.0 / s;
+            for j in 0..n {
+                a[i + j * n] *= inv;
+            }
+            self.b[i] /= s;
+        }
+        self.scaled.copy_from_slice(a);
+        if !lu_in_place(a, &mut self.pivots, n) {
+            return Err(singular(f64::INFINITY));
+        }
+        if !inverse(a, &self.pivots, &mut self.inverse, n) {
+            return Err(singular(f64::INFINITY));
+        }
+        let condition = norm1(&self.scaled, n) * norm1(&self.inverse, n);
+        if !(condition.is_finite() && condition <= limit) {
+            return Err(singular(condition));
+        }
+        // x = A⁻¹ b, accumulated column by column.
+        for i in 0..n {
+            self.x[i] = self.inverse[i] * self.b[0];
+        }
+        for j in 1..n {
+            let bj = self.b[j];
+            for i in 0..n {
+                self.x[i] += self.inverse[i + j * n] * bj;
+            }
+        }
+        Ok(&self.x)
+    }
+}
+
+/// LU with partial pivoting (first largest magnitude) in place: unit lower
+/// factor below the diagonal, upper factor on and above. `false` if a pivot
+/// column is all zero.
+fn lu_in_place(a: &mut [f64], pivots: &mut [usize], n: usize) -> bool {
+    for i in 0..n {
+        let mut piv = i;
+        let mut max = a[i + i * n].abs();
+        for r in i + 1..n {
+            let v = a[r + i * n].abs();
+            if v > max {
+                max = v;
+                piv = r;
+            }
+        }
+        pivots[i] = piv;
+        let diag = a[piv + i * n];
+        if diag == 0.0 {
+            return false;
+        }
+        if piv != i {
+            for j in 0..n {
+                a.swap(i + j * n, piv + j * n);
+            }
+        }
+        let inv_diag = 1.0 / diag;
+        for r in i + 1..n {
+            a[r + i * n] *= inv_diag;
+        }
+        for k in i + 1..n {
+            let p = a[i + k * n];
+            for r in i + 1..n {
+                a[r + k * n] += -p * a[r + i * n];
+            }
+        }
+    }
+    true
+}
+
+/// The inverse from the factors: permuted identity, forward then backward
+/// substitution, column by column. `false` on a zero diagonal.
+fn inverse(lu: &[f64], pivots: &[usize], out: &mut [f64], n: usize) -> bool {
+    out.fill(0.0);
+    for i in 0..n {
+        out[i + i * n] = 1.0;
+    }
+    for (i, &piv) in pivots.iter().enumerate().take(n) {
+        if piv != i {
+            for j in 0..n {
+                out.swap(i + j * n, piv + j * n);
+            }
+        }
+    }
+    for c in 0..n {
+        let col = &mut out[c * n..(c + 1) * n];
+        for i in 0..n.saturating_sub(1) {
+            let coeff = col[i];
+            for r in i + 1..n {
+                col[r] += -coeff * lu[r + i * n];
+            }
+        }
+        for i in (0..n).rev() {
+            let diag = lu[i + i * n];
+            if diag == 0.0 {
+                return false;
+            }
+            let coeff = col[i] / diag;
+            col[i] = coeff;
+            for r in 0..i {
+                col[r] += -coeff * lu[r + i * n];
+            }
+        }
+    }
+    true
+}
+
+/// Largest column sum of magnitudes.
+fn norm1(m: &[f64], n: usize) -> f64 {
+    (0..n)
+        .map(|j| m[j * n..(j + 1) * n].iter().map(|x| x.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+/// Solve `A x = b` once (allocates a solver; for setup code and tests).
+#[cfg(test)]
 pub(crate) fn solve(
     a: &DMatrix<f64>,
     b: &DVector<f64>,
@@ -17,36 +200,11 @@ pub(crate) fn solve(
     level: &'static str,
     limit: f64,
 ) -> Result<DVector<f64>, MasterError> {
-    let singular = |condition: f64| MasterError::SingularJacobian {
-        time,
-        level,
-        condition,
-        limit,
-    };
-    let n = a.nrows();
-    let mut scaled = a.clone();
-    let mut rhs = b.clone();
-    for i in 0..n {
-        let s = scaled.row(i).amax();
-        if !(s.is_finite() && s > 0.0) {
-            return Err(singular(f64::INFINITY));
-        }
-        scaled.row_mut(i).scale_mut(1.0 / s);
-        rhs[i] /= s;
-    }
-    let lu = scaled.clone().lu();
-    let inverse = lu.try_inverse().ok_or_else(|| singular(f64::INFINITY))?;
-    let condition = norm1(&scaled) * norm1(&inverse);
-    if !(condition.is_finite() && condition <= limit) {
-        return Err(singular(condition));
-    }
-    Ok(&inverse * rhs)
-}
-
-fn norm1(m: &DMatrix<f64>) -> f64 {
-    m.column_iter()
-        .map(|c| c.iter().map(|x| x.abs()).sum::<f64>())
-        .fold(0.0, f64::max)
+    let mut solver = Solver::default();
+    solver.load(a, b);
+    Ok(DVector::from_column_slice(
+        solver.solve(time, level, limit)?,
+    ))
 }
 
 #[cfg(test)]
@@ -77,5 +235,59 @@ mod tests {
         let zero = DMatrix::zeros(1, 1);
         let err = solve(&zero, &DVector::from_vec(vec![1.0]), 1.0, "position", 1e12).unwrap_err();
         assert!(err.to_string().contains("inf"), "{err}");
+        let rank_one = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 4.0]);
+        let err = solve(&rank_one, &b, 2.0, "velocity", 1e12).unwrap_err();
+        assert!(err.to_string().contains("t = 2"), "{err}");
+    }
+
+    /// The previous implementation, on nalgebra's LU: the reference for the
+    /// bit-for-bit comparison.
+    fn nalgebra_solve(a: &DMatrix<f64>, b: &DVector<f64>) -> Option<(DVector<f64>, f64)> {
+        let n = a.nrows();
+        let mut scaled = a.clone();
+        let mut rhs = b.clone();
+        for i in 0..n {
+            let s = scaled.row(i).amax();
+            scaled.row_mut(i).scale_mut(1.0 / s);
+            rhs[i] /= s;
+        }
+        let inverse = scaled.clone().lu().try_inverse()?;
+        let n1 = |m: &DMatrix<f64>| {
+            m.column_iter()
+                .map(|c| c.iter().map(|x| x.abs()).sum::<f64>())
+                .fold(0.0, f64::max)
+        };
+        Some((&inverse * rhs, n1(&scaled) * n1(&inverse)))
+    }
+
+    #[test]
+    fn matches_nalgebra_lu_bit_for_bit_and_reuses_its_buffers() {
+        // A small deterministic generator (xorshift) for matrices of sizes 1..5
+        // (nalgebra multiplies with its own loop up to 5 × 5).
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let mut solver = Solver::default();
+        for trial in 0..500 {
+            let n = 1 + trial % 5;
+            let scale: Vec<f64> = (0..n).map(|i| 10f64.powi(3 * i as i32 - 6)).collect();
+            let a = DMatrix::from_fn(n, n, |i, _| next() * scale[i]);
+            let b = DVector::from_fn(n, |i, _| next() * scale[i]);
+            let (expected, condition) =
+                nalgebra_solve(&a, &b).expect("random matrices are regular");
+            solver.load(&a, &b);
+            match solver.solve(0.0, "position", f64::INFINITY) {
+                Ok(x) => {
+                    for i in 0..n {
+                        assert_eq!(x[i].to_bits(), expected[i].to_bits(), "trial {trial}");
+                    }
+                }
+                Err(e) => panic!("trial {trial}: {e}, nalgebra condition {condition}"),
+            }
+        }
     }
 }

@@ -14,6 +14,14 @@ pub struct InstanceCounters {
     pub state_gets: u64,
     /// `fmi2SetFMUstate` calls.
     pub state_sets: u64,
+    /// `fmi2SetReal` calls (coupled inputs).
+    pub set_reals: u64,
+    /// `fmi2GetReal` calls (coupled and recorded outputs).
+    pub get_reals: u64,
+    /// `fmi2SetRealInputDerivatives` calls.
+    pub set_input_derivatives: u64,
+    /// `fmi2GetRealOutputDerivatives` calls.
+    pub get_output_derivatives: u64,
 }
 
 /// Wall time spent in each phase of the macro steps.
@@ -60,8 +68,17 @@ impl fmt::Display for RunStats {
         for c in &self.instances {
             writeln!(
                 f,
-                "  {:<16} doStep: {:>9}   getFMUstate: {:>8}   setFMUstate: {:>8}",
-                c.name, c.do_steps, c.state_gets, c.state_sets
+                "  {:<16} doStep: {:>9}   getFMUstate: {:>8}   setFMUstate: {:>8}   \
+                 setReal: {:>9}   getReal: {:>9}   setRealInputDerivatives: {:>8}   \
+                 getRealOutputDerivatives: {:>8}",
+                c.name,
+                c.do_steps,
+                c.state_gets,
+                c.state_sets,
+                c.set_reals,
+                c.get_reals,
+                c.set_input_derivatives,
+                c.get_output_derivatives
             )?;
         }
         let t = &self.times;

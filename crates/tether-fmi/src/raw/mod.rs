@@ -166,11 +166,13 @@ pub(crate) fn check(site: CallSite<'_>, code: fmi2Status) -> crate::Result<()> {
         status
     );
     let function = site.function;
-    let instance = site.instance.to_owned();
     let time = site.time;
+    // The instance name is copied only for an error (OK calls allocate nothing).
+    let instance = || site.instance.to_owned();
     match status {
         Status::Ok => Ok(()),
         Status::Warning => {
+            let instance = site.instance;
             log::warn!(
                 target: "tether_fmi::call",
                 "{function} returned fmi2Warning on instance '{instance}' at t={time}"
@@ -179,27 +181,27 @@ pub(crate) fn check(site: CallSite<'_>, code: fmi2Status) -> crate::Result<()> {
         }
         Status::Discard => Err(crate::Error::Discard {
             function,
-            instance,
+            instance: instance(),
             time,
         }),
         Status::Error => Err(crate::Error::Failed {
             function,
-            instance,
+            instance: instance(),
             time,
         }),
         Status::Fatal => Err(crate::Error::Fatal {
             function,
-            instance,
+            instance: instance(),
             time,
         }),
         Status::Pending => Err(crate::Error::Pending {
             function,
-            instance,
+            instance: instance(),
             time,
         }),
         Status::Unknown(code) => Err(crate::Error::UnknownStatus {
             function,
-            instance,
+            instance: instance(),
             time,
             code,
         }),

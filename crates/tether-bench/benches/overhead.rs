@@ -1,0 +1,393 @@
+//! What Tether adds to the FMUs' own work, each number a ratio measured in the
+//! same run (docs/performance.md):
+//!
+//! * `floor`: the predictor/corrector macro step on the oscillator pair against
+//!   a C loop making exactly the same FMI calls (c/floor.c);
+//! * `fmpy`: the same algorithm driven from Python through fmpy;
+//! * `recording`: what writing CSV every step adds;
+//! * `precision`: wall time to a max state error of 1e-6, index 2 against the
+//!   explicit method.
+//!
+//! `cargo bench -p tether-bench [-- floor|fmpy|recording|precision ...]`;
+//! `TETHER_BENCH_REPS` repetitions (default 9, medians reported),
+//! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
+//! script (default tools/bench/fmpy_loop.py).
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use tether_bench::{floor, fmpy_loop, workspace_root, Case, StateError};
+use tether_fmi::Fmu;
+use tether_master::{CsvRecorder, InstanceCounters, Method, Observer, Sample, Simulation};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn minimum(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+/// "median (min)" in µs: on a shared machine the minimum is the least disturbed run.
+fn us2(v: &[f64]) -> String {
+    format!(
+        "{:.3} µs (min {:.3})",
+        median(v.to_vec()) * 1e6,
+        minimum(v) * 1e6
+    )
+}
+
+fn us(seconds: f64) -> String {
+    format!("{:8.3} µs", seconds * 1e6)
+}
+
+fn reps() -> usize {
+    std::env::var("TETHER_BENCH_REPS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(9)
+}
+
+/// A fresh simulation at T_0 (setup not timed) and the per-instance counters.
+fn fresh(case: &Case) -> (Simulation, Vec<InstanceCounters>) {
+    let sim = Simulation::new(&case.spec()).expect("simulation");
+    let counters = sim.stats().instances;
+    (sim, counters)
+}
+
+/// Time `case.steps` macro steps; per-step seconds.
+fn time_steps(sim: &mut Simulation, steps: u64) -> f64 {
+    let clock = Instant::now();
+    for _ in 0..steps {
+        sim.step().expect("macro step");
+    }
+    clock.elapsed().as_secs_f64() / steps as f64
+}
+
+fn mode(exact: bool) -> &'static str {
+    if exact {
+        "exact "
+    } else {
+        "Dop853"
+    }
+}
+
+fn bench_floor() {
+    println!("\n== Macro step against the C floor (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps) ==");
+    println!("FMU     k   C floor/step   Tether/step    ratio   (median of {} runs; λ_N identical bit for bit)", reps());
+    for exact in [true, false] {
+        for order in [0, 1] {
+            let case = Case::example(exact, order);
+            let fmu = Fmu::open(&case.spec().instances[0].fmu).expect("open the FMU");
+            let (mut floors, mut tethers, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+            for rep in 0..reps() {
+                let (mut sim, before) = fresh(&case);
+                let lambda0 = sim.unknowns()[0];
+                // Alternate which goes first, so drifting load hits both alike.
+                let (c, t) = if rep % 2 == 0 {
+                    let c = floor(&case, &fmu, lambda0).expect("C floor");
+                    (c, time_steps(&mut sim, case.steps))
+                } else {
+                    let t = time_steps(&mut sim, case.steps);
+                    (floor(&case, &fmu, lambda0).expect("C floor"), t)
+                };
+                let c_step = c.seconds / case.steps as f64;
+                assert_eq!(
+                    sim.unknowns()[0].to_bits(),
+                    c.lambda.to_bits(),
+                    "the C floor computes the same λ_N: {} vs {}",
+                    sim.unknowns()[0],
+                    c.lambda
+                );
+                if rep == 0 {
+                    let after = sim.stats().instances;
+                    for (s, (a, b)) in after.iter().zip(&before).enumerate() {
+                        let tether = [
+                            a.do_steps - b.do_steps,
+                            a.state_gets - b.state_gets,
+                            a.state_sets - b.state_sets,
+                            a.set_reals - b.set_reals,
+                            a.get_reals - b.get_reals,
+                            a.set_input_derivatives - b.set_input_derivatives,
+                        ];
+                        let floor_calls = c.calls[s].map(|x| x as u64);
+                        assert_eq!(
+                            tether, floor_calls,
+                            "instance {s}: [doStep, getFMUstate, setFMUstate, setReal, getReal, setRealInputDerivatives]"
+                        );
+                        assert_eq!(a.get_output_derivatives, b.get_output_derivatives);
+                        if s == 0 && exact && order == 1 {
+                            let per: Vec<String> = tether
+                                .iter()
+                                .map(|x| format!("{}", *x as f64 / case.steps as f64))
+                                .collect();
+                            println!(
+                                "        FMI calls per step and instance (k = 1), Tether = C: doStep {}, getFMUstate {}, setFMUstate {}, setReal {}, getReal {}, setRealInputDerivatives {}",
+                                per[0], per[1], per[2], per[3], per[4], per[5]
+                            );
+                        }
+                    }
+                }
+                floors.push(c_step);
+                tethers.push(t);
+                ratios.push(t / c_step);
+            }
+            println!(
+                "{}  {order}  {}    {}    {:5.2}×",
+                mode(exact),
+                us(median(floors)),
+                us(median(tethers)),
+                median(ratios)
+            );
+        }
+    }
+}
+
+fn bench_fmpy() {
+    println!("\n== Against an fmpy-driven Python loop of the same algorithm (1000 steps) ==");
+    let python = match std::env::var_os("TETHER_PYTHON") {
+        Some(p) => PathBuf::from(p),
+        None => {
+            let venv = workspace_root().join("target/fmpy-venv/bin/python");
+            if !venv.exists() {
+                println!("skipped: set TETHER_PYTHON to a Python with fmpy");
+                return;
+            }
+            venv
+        }
+    };
+    let script = std::env::var_os("TETHER_FMPY_LOOP")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("tools/bench/fmpy_loop.py"));
+    println!("script: {}", script.display());
+    println!(
+        "FMU     k   C floor/step   fmpy/step      Tether/step    fmpy/Tether   overheads (fmpy−C)/(Tether−C)   (median of {} runs)",
+        reps().min(3)
+    );
+    for exact in [true, false] {
+        for order in [0, 1] {
+            let case = Case::example(exact, order);
+            let fmu = Fmu::open(&case.spec().instances[0].fmu).expect("open the FMU");
+            let (mut floors, mut pys, mut tethers, mut ratios) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+            let mut same = true;
+            for _ in 0..reps().min(3) {
+                let (mut sim, _) = fresh(&case);
+                let lambda0 = sim.unknowns()[0];
+                let t = time_steps(&mut sim, case.steps);
+                let c = floor(&case, &fmu, lambda0).expect("C floor");
+                let py = fmpy_loop(&python, &script, &case, lambda0).expect("fmpy loop");
+                same &= py.lambda.to_bits() == sim.unknowns()[0].to_bits();
+                floors.push(c.seconds / case.steps as f64);
+                pys.push(py.per_step);
+                tethers.push(t);
+                ratios.push(py.per_step / t);
+            }
+            let (c, py, t) = (median(floors), median(pys), median(tethers));
+            let overheads = if t > c {
+                format!("{:6.0}×", (py - c) / (t - c))
+            } else {
+                "  (Tether within noise of C)".into()
+            };
+            println!(
+                "{}  {order}  {}    {}    {}    {:6.1}×      {overheads}   λ_N {}",
+                mode(exact),
+                us(c),
+                us(py),
+                us(t),
+                median(ratios),
+                if same { "identical" } else { "DIFFERS" }
+            );
+        }
+    }
+}
+
+fn bench_recording() {
+    println!("\n== Recording: CSV written every step (exact FMUs, k = 0, 1000 steps) ==");
+    let case = Case::example(true, 0);
+    let dir = workspace_root().join("target/bench");
+    std::fs::create_dir_all(&dir).expect("target/bench");
+    let path = dir.join("oscillator.csv");
+    let (mut plain, mut recorded, mut phase) = (Vec::new(), Vec::new(), Vec::new());
+    for rep in 0..reps() {
+        let run = |csv: bool| {
+            let mut sim = Simulation::new(&case.spec()).expect("simulation");
+            let stats = if csv {
+                let file = std::fs::File::create(&path).expect("create the CSV file");
+                let mut rec = CsvRecorder::new(file);
+                sim.run(&mut [&mut rec], &mut |_, _| {}).expect("run")
+            } else {
+                sim.run(&mut [], &mut |_, _| {}).expect("run")
+            };
+            let steps = case.steps as f64;
+            let wall = (stats.wall - stats.times.setup).as_secs_f64() / steps;
+            (wall, stats.times.recording.as_secs_f64() / steps)
+        };
+        let (a, b) = if rep % 2 == 0 {
+            let a = run(false);
+            (a, run(true))
+        } else {
+            let b = run(true);
+            (run(false), b)
+        };
+        plain.push(a.0);
+        recorded.push(b.0);
+        phase.push(b.1);
+    }
+    // The recorder alone, on one row of the run's width, many times over.
+    let columns: Vec<String> = Simulation::new(&case.spec())
+        .expect("simulation")
+        .columns()
+        .to_vec();
+    let row: Vec<f64> = (0..columns.len())
+        .map(|i| (i as f64 + 1.0) / 7.0 * 1e3)
+        .collect();
+    let (mut micro, mut formatting) = (Vec::new(), Vec::new());
+    for _ in 0..reps() {
+        let mut rec = CsvRecorder::new(std::io::sink());
+        let n = 100_000;
+        let clock = Instant::now();
+        for i in 0..n {
+            rec.sample(Sample {
+                step: i,
+                time: i as f64 * 1e-3,
+                values: &row,
+            })
+            .unwrap();
+        }
+        formatting.push(clock.elapsed().as_secs_f64() / n as f64);
+        let file = std::fs::File::create(&path).expect("create the CSV file");
+        let mut rec = CsvRecorder::new(file);
+        rec.start(&columns).unwrap();
+        let n = 100_000;
+        let clock = Instant::now();
+        for i in 0..n {
+            rec.sample(Sample {
+                step: i,
+                time: i as f64 * 1e-3,
+                values: &row,
+            })
+            .unwrap();
+        }
+        rec.finish(None).unwrap();
+        micro.push(clock.elapsed().as_secs_f64() / n as f64);
+    }
+    std::io::stdout().flush().ok();
+    println!(
+        "values per row: {} + time; run without observers {}/step, with CSV {}/step",
+        columns.len(),
+        us(median(plain.clone())),
+        us(median(recorded.clone()))
+    );
+    println!(
+        "CSV per step, median (min) of {} runs:\n  observer phase timer in the runs  {}\n  recorder alone, 100000 rows to a file  {}\n  formatting alone, to io::sink  {}\n  difference of the runs' medians  {}",
+        reps(),
+        us2(&phase),
+        us2(&micro),
+        us2(&formatting),
+        us(median(recorded) - median(plain))
+    );
+}
+
+fn bench_precision() {
+    println!("\n== Work–precision: wall time to max state error ≤ 1e-6 over [0, 1] (exact FMUs, k = 0) ==");
+    println!("method                       H            steps      error        wall");
+    let target = 1e-6;
+    let methods = [
+        (
+            "baumgarte index 2 (β=2e-3)",
+            Method::Baumgarte {
+                beta: 2e-3,
+                gamma: 0.0,
+            },
+        ),
+        (
+            "weighted index 2 (a=1)",
+            Method::Weighted { a: 1.0, b: 0.0 },
+        ),
+        ("explicit (μ=1e-2)", Method::Explicit { mu: 1e-2 }),
+    ];
+    let mut walls = Vec::new();
+    for (name, method) in methods {
+        let mut h: f64 = 1e-3;
+        let mut history: Vec<(f64, f64, f64)> = Vec::new();
+        loop {
+            let steps = (1.0 / h).round() as u64;
+            let case = Case {
+                exact: true,
+                order: 0,
+                method,
+                step: h,
+                steps,
+            };
+            let mut sim = Simulation::new(&case.spec()).expect("simulation");
+            let mut err = StateError::default();
+            let stats = sim.run(&mut [&mut err], &mut |_, _| {}).expect("run");
+            let wall = (stats.wall - stats.times.setup - stats.times.recording).as_secs_f64();
+            history.push((h, err.max, wall));
+            if err.max <= target {
+                println!(
+                    "{name:<28} {h:<12.4e} {steps:<10} {:<12.3e} {:.4} s",
+                    err.max, wall
+                );
+                walls.push(Some(wall));
+                break;
+            }
+            // Too expensive to reach: extrapolate with the observed order.
+            if steps >= 1 << 17 {
+                let (h0, e0, _) = history[history.len() - 2];
+                let p = (e0 / err.max).ln() / (h0 / h).ln();
+                let factor = (err.max / target).powf(1.0 / p);
+                let estimate = wall * factor;
+                println!(
+                    "{name:<28} {:<12.4e} {:<10} (order {p:.2} from the last two halvings: error {:.3e} at H = {h:.3e} in {wall:.2} s) ≈ {estimate:.1} s",
+                    h / factor,
+                    (steps as f64 * factor).round(),
+                    err.max
+                );
+                walls.push(Some(estimate));
+                break;
+            }
+            h /= 2.0;
+        }
+    }
+    if let [Some(b), Some(w), Some(e)] = walls[..] {
+        println!(
+            "explicit / baumgarte index 2: {:.0}×   explicit / weighted index 2: {:.0}×",
+            e / b,
+            e / w
+        );
+    }
+}
+
+fn main() {
+    let wanted: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let run = |name: &str| wanted.is_empty() || wanted.iter().any(|w| w == name);
+    println!(
+        "tether-bench: {} logical CPUs, {}",
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        std::env::consts::ARCH
+    );
+    if run("floor") {
+        bench_floor();
+    }
+    if run("fmpy") {
+        bench_fmpy();
+    }
+    if run("recording") {
+        bench_recording();
+    }
+    if run("precision") {
+        bench_precision();
+    }
+}

@@ -1,0 +1,12 @@
+//! Builds the C floor: the FMI calls of one macro step and nothing else.
+
+fn main() {
+    println!("cargo:rerun-if-changed=c/floor.c");
+    cc::Build::new()
+        .file("c/floor.c")
+        .opt_level(2)
+        .warnings(true)
+        .compile("tether_floor");
+    // dlopen/dlsym live in libdl on older glibc and in libc on newer ones.
+    println!("cargo:rustc-link-lib=dl");
+}

@@ -1,0 +1,294 @@
+//! Shared pieces of the benchmarks in `benches/overhead.rs`: the oscillator
+//! system of `examples/oscillator.toml` in the variants measured, the C floor
+//! (`c/floor.c`, built by `build.rs`) and the fmpy loop.
+//!
+//! Run with `cargo bench -p tether-bench`; see docs/performance.md.
+
+use std::ffi::{c_char, c_int, c_long, CString};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use tether_fmi::Fmu;
+use tether_master::{Method, StartValue, SystemSpec};
+
+/// The workspace root.
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .expect("workspace root")
+}
+
+/// One measured configuration of the paper's oscillator pair.
+#[derive(Debug, Clone, Copy)]
+pub struct Case {
+    /// Integrate exactly (matrix exponential) instead of with Dop853.
+    pub exact: bool,
+    /// Degree k of the coupling polynomials.
+    pub order: usize,
+    /// The coupling method.
+    pub method: Method,
+    /// Macro step H.
+    pub step: f64,
+    /// Number of macro steps.
+    pub steps: u64,
+}
+
+impl Case {
+    /// Method 1, index 1 (β = 2e-3, γ = 1e-6) as in examples/oscillator.toml.
+    pub fn example(exact: bool, order: usize) -> Case {
+        Case {
+            exact,
+            order,
+            method: Method::Baumgarte {
+                beta: 2e-3,
+                gamma: 1e-6,
+            },
+            step: 1e-3,
+            steps: 1000,
+        }
+    }
+
+    /// The system: examples/oscillator.toml with this case's settings.
+    pub fn spec(&self) -> SystemSpec {
+        tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU");
+        let path = workspace_root().join("examples/oscillator.toml");
+        let mut spec = SystemSpec::from_file(&path).expect("examples/oscillator.toml");
+        for instance in &mut spec.instances {
+            instance
+                .parameters
+                .insert("exact".into(), StartValue::Boolean(self.exact));
+        }
+        spec.method = self.method;
+        spec.coupling.order = self.order;
+        spec.experiment.step = self.step;
+        spec.experiment.stop = spec.experiment.start + self.steps as f64 * self.step;
+        spec
+    }
+}
+
+/// Mirrors `FloorConfig` in c/floor.c.
+#[repr(C)]
+struct FloorConfig {
+    library: *const c_char,
+    guid: *const c_char,
+    resources: *const c_char,
+    m: [f64; 2],
+    c: f64,
+    d: f64,
+    x0: f64,
+    v0: f64,
+    exact: c_int,
+    order: c_int,
+    beta: f64,
+    gamma: f64,
+    epsilon: f64,
+    h: f64,
+    start: f64,
+    lambda0: f64,
+    steps: c_long,
+    vrs: [u32; 10],
+}
+
+/// Mirrors `FloorResult` in c/floor.c.
+#[repr(C)]
+#[derive(Debug, Default, Clone, Copy)]
+pub struct FloorResult {
+    /// Wall time of the macro-step loop.
+    pub seconds: f64,
+    /// λ at the last macro point.
+    pub lambda: f64,
+    /// x of mass 1 at the last macro point.
+    pub x1: f64,
+    /// Per instance: doStep, getFMUstate, setFMUstate, setReal, getReal,
+    /// setRealInputDerivatives.
+    pub calls: [[c_long; 6]; 2],
+}
+
+extern "C" {
+    fn tether_floor_run(
+        cfg: *const FloorConfig,
+        res: *mut FloorResult,
+        err: *mut c_char,
+        errlen: usize,
+    ) -> c_int;
+}
+
+/// The C floor for `case`: the same FMU binary (its own unpacked copy), the same
+/// FMI calls and scalar arithmetic per macro step, starting from `lambda0`.
+pub fn floor(case: &Case, fmu: &Fmu, lambda0: f64) -> Result<FloorResult, String> {
+    let spec = case.spec();
+    let Method::Baumgarte { beta, gamma } = case.method else {
+        return Err("the C floor implements Method 1 (baumgarte) only".into());
+    };
+    let md = fmu.model_description();
+    let vr = |name: &str| md.value_reference(name).map_err(|e| e.to_string());
+    let real = |i: usize, name: &str| match spec.instances[i].parameters.get(name) {
+        Some(StartValue::Real(v)) => Ok(*v),
+        other => Err(format!("parameter {name} of instance {i}: {other:?}")),
+    };
+    let cstr = |s: &str| CString::new(s).map_err(|e| e.to_string());
+    let library = cstr(&fmu.library_path().to_string_lossy())?;
+    let guid = cstr(&md.guid)?;
+    let resources = cstr(&fmu.resource_location())?;
+    let cfg = FloorConfig {
+        library: library.as_ptr(),
+        guid: guid.as_ptr(),
+        resources: resources.as_ptr(),
+        m: [real(0, "m")?, real(1, "m")?],
+        c: real(0, "c")?,
+        d: real(0, "d")?,
+        x0: real(0, "x0")?,
+        v0: real(0, "v0")?,
+        exact: c_int::from(case.exact),
+        order: case.order as c_int,
+        beta,
+        gamma,
+        epsilon: spec.coupling.epsilon,
+        h: spec.experiment.step,
+        start: spec.experiment.start,
+        lambda0,
+        steps: case.steps as c_long,
+        vrs: [
+            vr("m")?,
+            vr("c")?,
+            vr("d")?,
+            vr("x0")?,
+            vr("v0")?,
+            vr("exact")?,
+            vr("F")?,
+            vr("x")?,
+            vr("v")?,
+            vr("a")?,
+        ],
+    };
+    let mut result = FloorResult::default();
+    let mut err = [0 as c_char; 256];
+    // SAFETY: `cfg` and its strings outlive the call, `result` and `err` are
+    // valid for writes of their sizes; the C side reads and writes nothing else.
+    let status = unsafe { tether_floor_run(&cfg, &mut result, err.as_mut_ptr(), err.len()) };
+    if status != 0 {
+        let bytes: Vec<u8> = err
+            .iter()
+            .take_while(|&&c| c != 0)
+            .map(|&c| c as u8)
+            .collect();
+        return Err(format!("C floor: {}", String::from_utf8_lossy(&bytes)));
+    }
+    Ok(result)
+}
+
+/// What the fmpy loop printed: its per-step time and final values.
+#[derive(Debug, Clone, Copy)]
+pub struct FmpyResult {
+    /// Wall time of the loop per macro step, seconds.
+    pub per_step: f64,
+    /// λ at the last macro point.
+    pub lambda: f64,
+    /// x of mass 1 at the last macro point.
+    pub x1: f64,
+}
+
+/// Run the fmpy loop `script` (a Python file) on `case` starting from `lambda0`.
+///
+/// The script is called as
+/// `python SCRIPT --fmu F --steps N --step H --order K --exact 0|1 --beta B
+/// --gamma G --epsilon E --lambda0 L` and prints one line
+/// `per_step_s=<seconds> lambda=<value> x1=<value>` (other lines are ignored).
+pub fn fmpy_loop(
+    python: &Path,
+    script: &Path,
+    case: &Case,
+    lambda0: f64,
+) -> Result<FmpyResult, String> {
+    let spec = case.spec();
+    let Method::Baumgarte { beta, gamma } = case.method else {
+        return Err("the fmpy loop implements Method 1 (baumgarte) only".into());
+    };
+    let output = Command::new(python)
+        .arg(script)
+        .arg("--fmu")
+        .arg(&spec.instances[0].fmu)
+        .args(["--steps", &case.steps.to_string()])
+        .args(["--step", &format!("{:e}", spec.experiment.step)])
+        .args(["--order", &case.order.to_string()])
+        .args(["--exact", if case.exact { "1" } else { "0" }])
+        .args(["--beta", &format!("{beta:e}")])
+        .args(["--gamma", &format!("{gamma:e}")])
+        .args(["--epsilon", &format!("{:e}", spec.coupling.epsilon)])
+        .args(["--lambda0", &format!("{lambda0:e}")])
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    if !output.status.success() {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        return Err(format!(
+            "{} {} failed ({}): {}",
+            python.display(),
+            script.display(),
+            output.status,
+            stderr.lines().last().unwrap_or("")
+        ));
+    }
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("per_step_s="))
+        .ok_or_else(|| format!("{} printed no per_step_s= line", script.display()))?;
+    let field = |key: &str| -> Result<f64, String> {
+        line.split_whitespace()
+            .find_map(|kv| kv.strip_prefix(key))
+            .and_then(|v| v.parse().ok())
+            .ok_or_else(|| format!("no {key} in {line:?}"))
+    };
+    Ok(FmpyResult {
+        per_step: field("per_step_s=")?,
+        lambda: field("lambda=")?,
+        x1: field("x1=")?,
+    })
+}
+
+/// Closed form of the coupled oscillator of examples/oscillator.toml (one
+/// damped oscillator with m = m1 + m2, c = c1 + c2, d = d1 + d2, as in
+/// tests/master_oscillator.rs): (x, v) at time t.
+pub fn reference(t: f64) -> (f64, f64) {
+    const M1: f64 = 1.0;
+    const M2: f64 = 2.0;
+    const C: f64 = 1000.0;
+    const D: f64 = 10.0;
+    const V0: f64 = 100.0;
+    let (m, c, d) = (M1 + M2, 2.0 * C, 2.0 * D);
+    let delta = d / (2.0 * m);
+    let wd = (c / m - delta * delta).sqrt();
+    let (s, co, e) = ((wd * t).sin(), (wd * t).cos(), (-delta * t).exp());
+    (e * V0 / wd * s, e * V0 * (co - delta / wd * s))
+}
+
+/// Observer tracking the max state error max(|x1 − x|, |v1 − v|) against [`reference`].
+#[derive(Debug, Default)]
+pub struct StateError {
+    columns: Option<(usize, usize)>,
+    /// The largest error so far.
+    pub max: f64,
+}
+
+impl tether_master::Observer for StateError {
+    fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
+        let find = |name: &str| columns.iter().position(|c| c == name);
+        self.columns = find("mass1.x").zip(find("mass1.v"));
+        Ok(())
+    }
+
+    fn sample(&mut self, sample: tether_master::Sample<'_>) -> std::io::Result<()> {
+        let (ix, iv) = self.columns.expect("columns mass1.x and mass1.v");
+        let (x, v) = reference(sample.time);
+        let e = (sample.values[ix] - x)
+            .abs()
+            .max((sample.values[iv] - v).abs());
+        self.max = self.max.max(e);
+        Ok(())
+    }
+
+    fn finish(&mut self, _failure: Option<&str>) -> std::io::Result<()> {
+        Ok(())
+    }
+}

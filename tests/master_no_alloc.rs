@@ -1,0 +1,161 @@
+//! The steady-state macro-step loop does not allocate: every method on the
+//! paper's oscillator pair, with CSV recording, counted by a global allocator.
+//!
+//! Only the master's allocations are counted: the FMUs are separate shared
+//! libraries with their own allocator (and the C API hands them no Rust heap).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use tether_master::{CsvRecorder, Simulation, SystemSpec};
+
+/// Counts allocations (and reallocations) made by the current thread, so the
+/// test harness's other threads do not disturb the count.
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn count() {
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+fn allocations() -> u64 {
+    ALLOCATIONS.with(Cell::get)
+}
+
+// SAFETY: every call is forwarded unchanged to the system allocator; counting
+// touches only a thread-local `Cell` (const-initialised, no allocation).
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// The oscillator pair of examples/oscillator.toml with `method` and order `k`.
+fn system(method: &str, order: usize, pairs: usize) -> SystemSpec {
+    let fmu = tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU");
+    let mut text = format!(
+        r#"
+        [experiment]
+        stop = 0.1
+        step = 1e-3
+
+        [method]
+        {method}
+
+        [coupling]
+        order = {order}
+        "#
+    );
+    for p in 0..pairs {
+        text += &format!(
+            r#"
+            [[instance]]
+            name = "mass1_{p}"
+            fmu = "{fmu}"
+            parameters = {{ m = 1.0, c = 1000.0, d = 10.0, x0 = 0.0, v0 = 100.0, exact = true }}
+
+            [[instance]]
+            name = "mass2_{p}"
+            fmu = "{fmu}"
+            parameters = {{ m = 2.0, c = 1000.0, d = 10.0, x0 = 0.0, v0 = 100.0, exact = true }}
+
+            [[constraint]]
+            name = "link_{p}"
+            position = "mass2_{p}.x - mass1_{p}.x"
+            velocity = "mass2_{p}.v - mass1_{p}.v"
+            acceleration = "mass2_{p}.a - mass1_{p}.a"
+            drives = "mass1_{p}.F - mass2_{p}.F"
+            "#,
+            fmu = fmu.display()
+        );
+    }
+    SystemSpec::from_toml(&text).expect("valid system")
+}
+
+/// Allocations during macro steps 10..=100, with a CSV recorder attached.
+fn steady_state_allocations(spec: &SystemSpec) -> u64 {
+    const WARM_UP: u64 = 10;
+    let mut sim = Simulation::new(spec).expect("simulation");
+    let mut csv = CsvRecorder::new(std::io::sink());
+    let mut at_warm_up = None;
+    let mut at_end = 0;
+    sim.run(&mut [&mut csv], &mut |n, total| {
+        if n == WARM_UP {
+            at_warm_up = Some(allocations());
+        }
+        if n == total {
+            at_end = allocations();
+        }
+    })
+    .expect("run");
+    at_end - at_warm_up.expect("ran past the warm-up")
+}
+
+#[test]
+fn macro_steps_do_not_allocate_for_any_method() {
+    let cases = [
+        (
+            "baumgarte index 1",
+            "kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6",
+            &[0, 1, 2][..],
+        ),
+        (
+            "baumgarte index 2",
+            "kind = \"baumgarte\"\nbeta = 2e-3",
+            &[0][..],
+        ),
+        ("baumgarte index 3", "kind = \"baumgarte\"", &[0][..]),
+        (
+            "weighted index 1",
+            "kind = \"weighted\"\na = 1.0\nb = 1.0",
+            &[0, 1][..],
+        ),
+        ("weighted index 2", "kind = \"weighted\"\na = 1.0", &[0][..]),
+        ("weighted index 3", "kind = \"weighted\"", &[0][..]),
+        ("explicit", "kind = \"explicit\"\nmu = 1e-2", &[0][..]),
+    ];
+    let mut failures = Vec::new();
+    for (name, method, orders) in cases {
+        for &k in orders {
+            // One pair, and two pairs (a vector of multipliers, a 2 × 2 solve).
+            for pairs in [1, 2] {
+                let n = steady_state_allocations(&system(method, k, pairs));
+                eprintln!("{name}, k = {k}, {pairs} pair(s): {n} allocations in 90 steps");
+                if n != 0 {
+                    failures.push(format!("{name}, k = {k}, {pairs} pair(s): {n}"));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "allocations per run: {failures:?}");
+}
+
+/// The counter sees allocations at all (so zero above means something).
+#[test]
+fn the_counter_counts() {
+    let before = allocations();
+    let v: Vec<u64> = std::hint::black_box((0..100).collect());
+    assert!(allocations() > before, "{}", v.len());
+}
