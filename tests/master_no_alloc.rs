@@ -159,3 +159,35 @@ fn the_counter_counts() {
     let v: Vec<u64> = std::hint::black_box((0..100).collect());
     assert!(allocations() > before, "{}", v.len());
 }
+
+/// Joints (force ports, nonlinear conditions): the double pendulum and the
+/// slider-crank examples and one 3D joint, for the predictor/corrector methods
+/// and the explicit method.
+#[test]
+fn joint_macro_steps_do_not_allocate() {
+    tether_fmu_build::workspace_fmu("link").expect("package the link FMU");
+    tether_fmu_build::workspace_fmu("body3d").expect("package the body3d FMU");
+    let root = tether_fmu_build::workspace_root().expect("workspace root");
+    let mut failures = Vec::new();
+    for file in ["double_pendulum.toml", "slider_crank.toml", "3d_revolute.toml"] {
+        let base = SystemSpec::from_file(&root.join("examples").join(file)).expect("example");
+        for method in [
+            tether_master::Method::Baumgarte {
+                beta: 2e-3,
+                gamma: 1e-6,
+            },
+            tether_master::Method::Weighted { a: 1.0, b: 0.0 },
+            tether_master::Method::Explicit { mu: 1e-2 },
+        ] {
+            let mut spec = base.clone();
+            spec.method = method;
+            spec.experiment.stop = 0.1;
+            let n = steady_state_allocations(&spec);
+            eprintln!("{file}, {method}: {n} allocations in 90 steps");
+            if n != 0 {
+                failures.push(format!("{file}, {method}: {n}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "allocations per run: {failures:?}");
+}
