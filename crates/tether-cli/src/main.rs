@@ -5,8 +5,12 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod info;
+mod plot;
 mod run;
+mod settings;
 mod simulate;
+mod study;
+mod sweep;
 
 /// Tether couples FMI 2.0 co-simulation FMUs through algebraic constraints
 /// (rigid joints) with the predictor/corrector methods of Schweizer & Lu (2015).
@@ -28,6 +32,12 @@ enum Command {
     Simulate(simulate::Args),
     /// Run a coupled system described by a system file and write CSV.
     Run(run::Args),
+    /// Plot results files over time as SVG or PNG.
+    Plot(plot::Args),
+    /// A convergence or stability sweep of a system file, set up by flags.
+    Sweep(sweep::Args),
+    /// Run study files: convergence, stability maps, time series; with plots.
+    Study(study::Args),
 }
 
 fn main() -> ExitCode {
@@ -47,6 +57,9 @@ fn main() -> ExitCode {
         Command::Info(args) => info::main(args),
         Command::Simulate(args) => simulate::main(args),
         Command::Run(args) => run::main(args),
+        Command::Plot(args) => plot::main(args),
+        Command::Sweep(args) => sweep::main(args),
+        Command::Study(args) => study::main(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
