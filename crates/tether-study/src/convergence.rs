@@ -133,7 +133,11 @@ pub fn convergence(
             } else {
                 vec![f64::NAN; keys.len()]
             };
-            let error = errors.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let error = if errors.iter().any(|e| e.is_nan()) {
+                f64::NAN
+            } else {
+                errors.iter().copied().fold(0.0, f64::max)
+            };
             points.push(ConvergencePoint {
                 step: h,
                 outcome: run.outcome.clone(),

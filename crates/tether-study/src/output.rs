@@ -182,7 +182,7 @@ pub fn stability_text(study: &Stability, maps: &[StabilityMap]) -> Result<String
         let count = |k: Class| m.cells.iter().filter(|c| c.class == k).count();
         let _ = writeln!(
             s,
-            "  {}: {} stable, {} unstable, {} failed  (rows: {} from top; columns: {} {} … {})",
+            "  {}: {} stable, {} unstable, {} failed  (rows: {} from top; columns: {} {:e} … {:e})",
             m.label,
             count(Class::Stable),
             count(Class::Unstable),

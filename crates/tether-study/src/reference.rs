@@ -223,7 +223,10 @@ mod tests {
         for d in [0.0, 20.0, critical, 3.0 * critical] {
             let f = |t| damped_oscillator(m, c, d, 0.5, 100.0, t);
             let (x0, v0) = f(0.0);
-            assert!((x0 - 0.5).abs() < 1e-12 && (v0 - 100.0).abs() < 1e-10, "d = {d}");
+            assert!(
+                (x0 - 0.5).abs() < 1e-12 && (v0 - 100.0).abs() < 1e-10,
+                "d = {d}"
+            );
             for t in [0.013, 0.2, 0.7] {
                 let h = 1e-5;
                 let (xp, vp) = f(t + h);
