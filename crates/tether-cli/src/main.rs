@@ -6,8 +6,12 @@ use clap::{Parser, Subcommand};
 
 mod compare;
 mod info;
+mod plot;
 mod run;
+mod settings;
 mod simulate;
+mod study;
+mod sweep;
 
 /// Tether couples FMI 2.0 co-simulation FMUs through algebraic constraints
 /// (rigid joints) with the predictor/corrector methods of Schweizer & Lu (2015).
@@ -31,6 +35,12 @@ enum Command {
     Run(run::Args),
     /// Report the largest deviation per column between two result files.
     Compare(compare::Args),
+    /// Plot results files over time as SVG or PNG.
+    Plot(plot::Args),
+    /// A convergence or stability sweep of a system file, set up by flags.
+    Sweep(sweep::Args),
+    /// Run study files: convergence, stability maps, time series; with plots.
+    Study(study::Args),
 }
 
 fn main() -> ExitCode {
@@ -51,6 +61,9 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate::main(args),
         Command::Run(args) => run::main(args),
         Command::Compare(args) => compare::main(args),
+        Command::Plot(args) => plot::main(args),
+        Command::Sweep(args) => sweep::main(args),
+        Command::Study(args) => study::main(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

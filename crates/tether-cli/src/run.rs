@@ -4,47 +4,28 @@ use std::fs::File;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
-use tether_master::{CsvRecorder, Method, Simulation, SystemSpec};
+use anyhow::{Context, Result};
+use tether_master::{CsvRecorder, MemoryRecorder, Observer, Simulation, SystemSpec};
+
+use crate::settings::Settings;
 
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
     /// The system file (TOML), see docs/system-file.md.
     system: PathBuf,
-    /// Stop time (overrides [experiment] stop).
-    #[arg(long)]
-    stop: Option<f64>,
-    /// Macro-step size H (overrides [experiment] step).
-    #[arg(long)]
-    step: Option<f64>,
-    /// Coupling method (overrides [method] kind).
-    #[arg(long, value_parser = ["baumgarte", "weighted", "explicit"])]
-    method: Option<String>,
-    /// Baumgarte velocity weight β (method baumgarte).
-    #[arg(long)]
-    beta: Option<f64>,
-    /// Baumgarte acceleration weight γ (method baumgarte).
-    #[arg(long)]
-    gamma: Option<f64>,
-    /// Velocity-level weight a (method weighted).
-    #[arg(long)]
-    a: Option<f64>,
-    /// Acceleration-level weight b (method weighted).
-    #[arg(long)]
-    b: Option<f64>,
-    /// Stabilisation constant μ_B (method explicit).
-    #[arg(long)]
-    mu: Option<f64>,
-    /// Degree k of the coupling polynomials: 0, 1 or 2.
-    #[arg(long)]
-    order: Option<usize>,
-    /// Finite-difference increment ε for the interface Jacobian.
-    #[arg(long)]
-    epsilon: Option<f64>,
+    #[command(flatten)]
+    settings: Settings,
     /// Output CSV file (default: the system file's name with .csv, in the current directory).
     #[arg(long, short)]
     out: Option<PathBuf>,
+    /// Also plot the results over time into this file (.svg or .png).
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Columns to plot, comma separated (default: all, or the multipliers and
+    /// residuals when there are more than eight).
+    #[arg(long, value_delimiter = ',', requires = "plot")]
+    columns: Vec<String>,
     /// Do not print the run summary.
     #[arg(long, short)]
     quiet: bool,
@@ -52,7 +33,7 @@ pub struct Args {
 
 pub fn main(args: Args) -> Result<()> {
     let mut spec = SystemSpec::from_file(&args.system)?;
-    apply_overrides(&mut spec, &args)?;
+    args.settings.apply(&mut spec)?;
     let out = match &args.out {
         Some(p) => p.clone(),
         None => PathBuf::from(
@@ -81,7 +62,12 @@ pub fn main(args: Args) -> Result<()> {
             }
         }
     };
-    let outcome = sim.run(&mut [&mut recorder], &mut progress);
+    let mut memory = MemoryRecorder::default();
+    let mut observers: Vec<&mut dyn Observer> = vec![&mut recorder];
+    if args.plot.is_some() {
+        observers.push(&mut memory);
+    }
+    let outcome = sim.run(&mut observers, &mut progress);
     if let Some(bar) = &bar {
         bar.finish_and_clear();
     }
@@ -97,6 +83,18 @@ pub fn main(args: Args) -> Result<()> {
         );
         eprintln!("{}", sim.stats());
     }
+    if let Some(path) = &args.plot {
+        let name = spec.name.clone().unwrap_or_else(|| "system".into());
+        let table = tether_study::Table::from_recorder(&name, &memory);
+        let title = format!(
+            "{name}: {}, k = {}, H = {}",
+            spec.method, spec.coupling.order, spec.experiment.step
+        );
+        crate::plot::draw(&[table], &args.columns, &title, path)?;
+        if !args.quiet {
+            eprintln!("plot: {}", path.display());
+        }
+    }
     match outcome {
         Ok(_) => {
             if !args.quiet {
@@ -110,69 +108,4 @@ pub fn main(args: Args) -> Result<()> {
             out.display()
         ))),
     }
-}
-
-fn apply_overrides(spec: &mut SystemSpec, args: &Args) -> Result<()> {
-    if let Some(stop) = args.stop {
-        spec.experiment.stop = stop;
-    }
-    if let Some(step) = args.step {
-        spec.experiment.step = step;
-    }
-    if let Some(order) = args.order {
-        spec.coupling.order = order;
-    }
-    if let Some(eps) = args.epsilon {
-        spec.coupling.epsilon = eps;
-    }
-    let kind = args.method.as_deref().unwrap_or(spec.method.name());
-    let current = spec.method;
-    spec.method = match kind {
-        "baumgarte" => {
-            let (beta, gamma) = match current {
-                Method::Baumgarte { beta, gamma } => (beta, gamma),
-                _ => (0.0, 0.0),
-            };
-            Method::Baumgarte {
-                beta: args.beta.unwrap_or(beta),
-                gamma: args.gamma.unwrap_or(gamma),
-            }
-        }
-        "weighted" => {
-            let (a, b) = match current {
-                Method::Weighted { a, b } => (a, b),
-                _ => (0.0, 0.0),
-            };
-            Method::Weighted {
-                a: args.a.unwrap_or(a),
-                b: args.b.unwrap_or(b),
-            }
-        }
-        _ => {
-            let mu = match current {
-                Method::Explicit { mu } => Some(mu),
-                _ => None,
-            };
-            match args.mu.or(mu) {
-                Some(mu) => Method::Explicit { mu },
-                None => bail!("method explicit needs --mu (or mu in [method])"),
-            }
-        }
-    };
-    let misplaced = [
-        ("--beta", args.beta.is_some(), "baumgarte"),
-        ("--gamma", args.gamma.is_some(), "baumgarte"),
-        ("--a", args.a.is_some(), "weighted"),
-        ("--b", args.b.is_some(), "weighted"),
-        ("--mu", args.mu.is_some(), "explicit"),
-    ];
-    for (flag, given, method) in misplaced {
-        if given && spec.method.name() != method {
-            bail!(
-                "{flag} applies to method {method}, but the method is {}",
-                spec.method.name()
-            );
-        }
-    }
-    Ok(())
 }

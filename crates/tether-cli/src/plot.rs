@@ -1,0 +1,88 @@
+//! `tether plot RESULTS.csv…`: time series of results files as SVG or PNG.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+use tether_study::plot::{save, SeriesPlot};
+use tether_study::Table;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Results files (CSV with a `time` column, as `tether run` writes them);
+    /// several files are drawn over each other.
+    #[arg(required = true)]
+    results: Vec<PathBuf>,
+    /// Columns to plot, one panel each, comma separated (default: all, or the
+    /// multipliers and residuals when there are more than eight).
+    #[arg(long, value_delimiter = ',')]
+    columns: Vec<String>,
+    /// Output file: .svg or .png.
+    #[arg(long, short)]
+    out: PathBuf,
+    /// Figure title (default: the file names).
+    #[arg(long)]
+    title: Option<String>,
+}
+
+pub fn main(args: Args) -> Result<()> {
+    let tables = args
+        .results
+        .iter()
+        .map(|p| {
+            let mut t = Table::read_csv(p)?;
+            t.source = p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| t.source.clone());
+            Ok(t)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let title = args.title.clone().unwrap_or_else(|| {
+        tables
+            .iter()
+            .map(|t| t.source.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    });
+    draw(&tables, &args.columns, &title, &args.out)?;
+    eprintln!("plot: {}", args.out.display());
+    Ok(())
+}
+
+/// Plot `columns` (or the default choice) of every table into `out`.
+pub fn draw(tables: &[Table], columns: &[String], title: &str, out: &Path) -> Result<()> {
+    let Some(first) = tables.first() else {
+        bail!("nothing to plot");
+    };
+    let columns = if columns.is_empty() {
+        default_columns(first)
+    } else {
+        columns.to_vec()
+    };
+    for t in tables {
+        for c in &columns {
+            t.column(c)?;
+        }
+        if t.times.is_empty() {
+            bail!("{}: no results to plot", t.source);
+        }
+    }
+    let figure = SeriesPlot {
+        title: title.to_string(),
+        columns,
+        runs: tables.iter().map(|t| (t.source.clone(), t)).collect(),
+    };
+    save(out, &figure)?;
+    Ok(())
+}
+
+fn default_columns(t: &Table) -> Vec<String> {
+    if t.columns.len() <= 8 {
+        return t.columns.clone();
+    }
+    t.columns
+        .iter()
+        .filter(|c| c.ends_with(".lambda") || c.ends_with(".g"))
+        .cloned()
+        .collect()
+}

@@ -1,0 +1,155 @@
+//! `tether sweep convergence|stability SYSTEM.toml …`: a study from flags.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use tether_master::SystemSpec;
+use tether_study::{
+    Axis, Convergence, Kind, Overrides, ReferenceSpec, Stability, Study, VariantSpec,
+};
+
+use crate::settings::Settings;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    kind: SweepKind,
+}
+
+#[derive(clap::Subcommand)]
+enum SweepKind {
+    /// Global error of chosen columns over a list of macro-step sizes H.
+    Convergence(ConvergenceArgs),
+    /// Stable / unstable over a grid of two quantities.
+    Stability(StabilityArgs),
+}
+
+/// What every sweep shares: the system, its settings and where results go.
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct Common {
+    /// The system file (TOML), see docs/system-file.md.
+    system: PathBuf,
+    #[command(flatten)]
+    settings: Settings,
+    /// Set an FMU start value for every run: INSTANCE.PARAMETER=VALUE (repeatable).
+    #[arg(long = "set", value_name = "INSTANCE.PARAMETER=VALUE")]
+    set: Vec<String>,
+    /// Folder for the results (CSV, text summary, plots).
+    #[arg(long, default_value = ".")]
+    out_dir: PathBuf,
+    /// File stem of the results (default: convergence / stability).
+    #[arg(long)]
+    name: Option<String>,
+    /// Plot formats, comma separated: svg, png.
+    #[arg(long, value_delimiter = ',', default_value = "svg")]
+    format: Vec<String>,
+    /// Do not show a progress bar or print the summary.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct ConvergenceArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Macro-step sizes H, comma separated (at least two).
+    #[arg(long, value_delimiter = ',', required = true)]
+    steps: Vec<f64>,
+    /// Reference: finest (the run with the smallest H), two-mass-oscillator
+    /// (closed form), or a results CSV file.
+    #[arg(long, default_value = "finest")]
+    reference: String,
+    /// Columns whose error is measured, comma separated.
+    #[arg(long, value_delimiter = ',', required = true)]
+    columns: Vec<String>,
+}
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct StabilityArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Horizontal axis: TARGETS=FROM..TO:POINTS[:log] or TARGETS=V1,V2,…;
+    /// TARGETS are INSTANCE.PARAMETER (comma separated, all get the value) or step.
+    #[arg(long)]
+    x: String,
+    /// Vertical axis, as --x.
+    #[arg(long)]
+    y: String,
+    /// Also call a completed run unstable when a monitored column's peak over
+    /// the last tenth exceeds GROWTH times its peak over the first tenth.
+    #[arg(long)]
+    growth: Option<f64>,
+    /// Columns the growth criterion watches (default: all but residuals).
+    #[arg(long, value_delimiter = ',')]
+    monitor: Vec<String>,
+}
+
+pub fn main(args: Args) -> Result<()> {
+    let (common, kind, default_name) = match args.kind {
+        SweepKind::Convergence(c) => {
+            let reference = match c.reference.as_str() {
+                "finest" | "two-mass-oscillator" => ReferenceSpec::Named(c.reference),
+                file => ReferenceSpec::Csv {
+                    csv: std::path::absolute(file)?,
+                },
+            };
+            let kind = Kind::Convergence(Convergence {
+                steps: c.steps,
+                reference,
+                columns: c.columns,
+            });
+            (c.common, kind, "convergence")
+        }
+        SweepKind::Stability(s) => {
+            let kind = Kind::Stability(Box::new(Stability {
+                x: Axis::parse_cli(&s.x)?,
+                y: Axis::parse_cli(&s.y)?,
+                growth: s.growth,
+                monitor: s.monitor,
+            }));
+            (s.common, kind, "stability")
+        }
+    };
+    // The flags act on the system file like `tether run`'s; the result is
+    // handed to the study as settings for every run.
+    let mut spec = SystemSpec::from_file(&common.system)?;
+    common.settings.apply(&mut spec)?;
+    let mut set = Overrides {
+        method: Some(spec.method),
+        order: Some(spec.coupling.order),
+        step: Some(spec.experiment.step),
+        stop: Some(spec.experiment.stop),
+        epsilon: Some(spec.coupling.epsilon),
+        ..Overrides::default()
+    };
+    for item in &common.set {
+        let (target, value) = item
+            .split_once('=')
+            .ok_or_else(|| anyhow::anyhow!("--set {item}: expected INSTANCE.PARAMETER=VALUE"))?;
+        set.parameters.insert(
+            target.to_string(),
+            tether_master::StartValue::parse_cli(value),
+        );
+    }
+    let name = common.name.unwrap_or_else(|| default_name.to_string());
+    let study = Study {
+        title: format!(
+            "{}: {}, k = {}",
+            spec.name.as_deref().unwrap_or(&name),
+            spec.method,
+            spec.coupling.order
+        ),
+        system: common.system.clone(),
+        base: PathBuf::from("."),
+        output: name,
+        skip_if_missing: false,
+        formats: common.format,
+        set,
+        variants: Vec::<VariantSpec>::new(),
+        kind,
+    };
+    crate::study::run_one(&study, &common.out_dir, common.quiet)
+}

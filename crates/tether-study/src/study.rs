@@ -1,0 +1,302 @@
+//! A study file: a system file, variants of it, and one study over them.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use tether_master::{Method, StartValue, SystemSpec};
+
+use crate::convergence::{convergence, Convergence};
+use crate::output;
+use crate::series::{series, Series};
+use crate::stability::{stability, Stability};
+use crate::{Overrides, StudyError};
+
+/// One variant of the system: a label and the settings that differ.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VariantSpec {
+    /// Name in legends and CSV files (default: the method and k).
+    #[serde(default)]
+    pub label: Option<String>,
+    /// The coupling method, e.g. `{ kind = "weighted", a = 1.0, b = 1.0 }`.
+    #[serde(default)]
+    pub method: Option<Method>,
+    /// Degree k of the coupling polynomials.
+    #[serde(default)]
+    pub order: Option<usize>,
+    /// Macro-step size H.
+    #[serde(default)]
+    pub step: Option<f64>,
+    /// Stop time.
+    #[serde(default)]
+    pub stop: Option<f64>,
+    /// Finite-difference increment ε.
+    #[serde(default)]
+    pub epsilon: Option<f64>,
+    /// The master's divergence bound.
+    #[serde(default)]
+    pub divergence_factor: Option<f64>,
+    /// FMU start values by `instance.parameter`.
+    #[serde(default)]
+    pub parameters: BTreeMap<String, StartValue>,
+}
+
+impl VariantSpec {
+    /// The settings this variant changes.
+    pub fn overrides(&self) -> Overrides {
+        Overrides {
+            method: self.method,
+            order: self.order,
+            step: self.step,
+            stop: self.stop,
+            epsilon: self.epsilon,
+            divergence_factor: self.divergence_factor,
+            parameters: self.parameters.clone(),
+        }
+    }
+}
+
+/// A system ready to run, with its label.
+#[derive(Debug, Clone)]
+pub struct Variant {
+    /// Name in legends and CSV files.
+    pub label: String,
+    /// The system with the variant's settings applied.
+    pub spec: SystemSpec,
+}
+
+/// What a study does.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Kind {
+    /// Time series of every variant.
+    Series(Series),
+    /// Error over H.
+    Convergence(Convergence),
+    /// Stable/unstable over a grid of two quantities.
+    Stability(Box<Stability>),
+}
+
+/// A whole study, as read from a study file or built from command-line flags.
+#[derive(Debug, Clone)]
+pub struct Study {
+    /// Title of the figure.
+    pub title: String,
+    /// The system file (resolved).
+    pub system: PathBuf,
+    /// Folder that relative paths in the study are relative to.
+    pub base: PathBuf,
+    /// File stem of the outputs.
+    pub output: String,
+    /// Skip (rather than fail) when the system file does not exist.
+    pub skip_if_missing: bool,
+    /// Plot formats to write: `svg`, `png`.
+    pub formats: Vec<String>,
+    /// Settings for every variant.
+    pub set: Overrides,
+    /// The variants (none: the system as it is, with `set`).
+    pub variants: Vec<VariantSpec>,
+    /// The study.
+    pub kind: Kind,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StudyFile {
+    #[serde(default)]
+    title: Option<String>,
+    system: PathBuf,
+    #[serde(default)]
+    output: Option<String>,
+    #[serde(default)]
+    skip_if_missing: bool,
+    #[serde(default)]
+    formats: Option<Vec<String>>,
+    #[serde(default)]
+    set: Overrides,
+    #[serde(rename = "variant", default)]
+    variants: Vec<VariantSpec>,
+    #[serde(default)]
+    series: Option<Series>,
+    #[serde(default)]
+    convergence: Option<Convergence>,
+    #[serde(default)]
+    stability: Option<Stability>,
+}
+
+/// What a finished study wrote, and a text summary of its results.
+#[derive(Debug, Clone)]
+pub struct StudyReport {
+    /// Files written.
+    pub files: Vec<PathBuf>,
+    /// Human-readable results (tables, orders, maps).
+    pub summary: String,
+}
+
+impl Study {
+    /// Read a study file; the system path is relative to it.
+    pub fn from_file(path: &Path) -> Result<Study, StudyError> {
+        let bad = |reason: String| StudyError::StudyFile {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+        let file: StudyFile =
+            toml::from_str(&text).map_err(|e| bad(e.to_string().replace('\n', " ")))?;
+        let kind = match (file.series, file.convergence, file.stability) {
+            (Some(s), None, None) => Kind::Series(s),
+            (None, Some(c), None) => Kind::Convergence(c),
+            (None, None, Some(s)) => Kind::Stability(Box::new(s)),
+            _ => {
+                return Err(bad(
+                    "give exactly one of [series], [convergence], [stability]".into(),
+                ))
+            }
+        };
+        let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "study".into());
+        let study = Study {
+            title: file.title.unwrap_or_else(|| stem.clone()),
+            system: base.join(&file.system),
+            output: file.output.unwrap_or(stem),
+            skip_if_missing: file.skip_if_missing,
+            formats: file.formats.unwrap_or_else(|| vec!["svg".into()]),
+            set: file.set,
+            variants: file.variants,
+            base,
+            kind,
+        };
+        study.validate().map_err(|e| bad(e.to_string()))?;
+        Ok(study)
+    }
+
+    fn validate(&self) -> Result<(), StudyError> {
+        for f in &self.formats {
+            if f != "svg" && f != "png" {
+                return Err(StudyError::Invalid(format!(
+                    "format '{f}': expected \"svg\" or \"png\""
+                )));
+            }
+        }
+        match &self.kind {
+            Kind::Series(_) => Ok(()),
+            Kind::Convergence(c) => c.validate(),
+            Kind::Stability(s) => s.validate().map(drop),
+        }
+    }
+
+    /// Read the system file and apply the settings of every variant.
+    pub fn variants(&self) -> Result<Vec<Variant>, StudyError> {
+        let system = SystemSpec::from_file(&self.system)?;
+        let specs = if self.variants.is_empty() {
+            vec![VariantSpec {
+                label: None,
+                method: None,
+                order: None,
+                step: None,
+                stop: None,
+                epsilon: None,
+                divergence_factor: None,
+                parameters: BTreeMap::new(),
+            }]
+        } else {
+            self.variants.clone()
+        };
+        specs
+            .iter()
+            .map(|v| {
+                let mut spec = system.clone();
+                self.set.merged(&v.overrides()).apply(&mut spec)?;
+                let label = v
+                    .label
+                    .clone()
+                    .unwrap_or_else(|| format!("{}, k = {}", spec.method, spec.coupling.order));
+                Ok(Variant { label, spec })
+            })
+            .collect()
+    }
+
+    /// Number of runs the study makes (for a progress bar).
+    pub fn runs(&self) -> Result<u64, StudyError> {
+        let n = self.variants.len().max(1);
+        let per = match &self.kind {
+            Kind::Series(_) => 1,
+            Kind::Convergence(c) => c.steps.len(),
+            Kind::Stability(s) => {
+                let (x, y) = s.validate()?;
+                x.len() * y.len()
+            }
+        };
+        Ok((n * per) as u64)
+    }
+
+    /// Run the study in parallel and write `<output>.csv`, `<output>.txt` and
+    /// the plots into `out_dir`. `progress` is called once per finished run.
+    pub fn run(
+        &self,
+        out_dir: &Path,
+        progress: &(dyn Fn() + Sync),
+    ) -> Result<StudyReport, StudyError> {
+        let variants = self.variants()?;
+        std::fs::create_dir_all(out_dir).map_err(|e| StudyError::Io {
+            path: out_dir.to_path_buf(),
+            source: e,
+        })?;
+        let stem = out_dir.join(&self.output);
+        let plots: Vec<PathBuf> = self
+            .formats
+            .iter()
+            .map(|f| stem.with_extension(f))
+            .collect();
+        let csv = stem.with_extension("csv");
+        let mut summary = format!("{}\n", self.title);
+        match &self.kind {
+            Kind::Series(s) => {
+                let runs = series(&variants, s, progress)?;
+                output::write_series(&csv, &runs)?;
+                for run in &runs {
+                    let _ = writeln!(
+                        summary,
+                        "  {}: {}",
+                        run.table.source,
+                        match run.outcome.message() {
+                            None => "completed".to_string(),
+                            Some(m) => format!("stopped: {m}"),
+                        }
+                    );
+                }
+                for p in &plots {
+                    output::plot_series(p, &self.title, s, &runs)?;
+                }
+            }
+            Kind::Convergence(c) => {
+                let curves = convergence(&variants, c, &self.base, progress)?;
+                output::write_convergence(&csv, c, &curves)?;
+                summary += &output::convergence_table(c, &curves);
+                for p in &plots {
+                    output::plot_convergence(p, &self.title, c, &curves)?;
+                }
+            }
+            Kind::Stability(s) => {
+                let maps = stability(&variants, s, progress)?;
+                output::write_stability(&csv, s, &maps)?;
+                summary += &output::stability_text(s, &maps)?;
+                for p in &plots {
+                    output::plot_stability(p, &self.title, s, &maps)?;
+                }
+            }
+        }
+        let txt = stem.with_extension("txt");
+        std::fs::write(&txt, &summary).map_err(|e| StudyError::Io {
+            path: txt.clone(),
+            source: e,
+        })?;
+        let mut files = vec![csv, txt];
+        files.extend(plots);
+        Ok(StudyReport { files, summary })
+    }
+}
