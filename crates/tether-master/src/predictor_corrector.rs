@@ -44,8 +44,7 @@ impl Simulation {
                 bump: None,
             };
             for (l, &level) in self.levels.iter().enumerate() {
-                self.coupling
-                    .eval(level, &view, work.g[l].as_mut_slice());
+                self.coupling.eval(level, &view, work.g[l].as_mut_slice());
             }
         }
         self.stats.times.predictor += clock.elapsed();
