@@ -89,7 +89,11 @@ fn both(
         .arg(root.join("tools").join("fmpy_reference"))
         .arg(&file)
         .args(flags)
-        .args(stop.map(|t| ["--stop".to_string(), t.to_string()]).iter().flatten())
+        .args(
+            stop.map(|t| ["--stop".to_string(), t.to_string()])
+                .iter()
+                .flatten(),
+        )
         .args(["--order", &order.to_string(), "--quiet", "--out"])
         .arg(&theirs)
         .output()
@@ -168,7 +172,13 @@ fn oscillator_agrees_with_the_fmpy_reference() {
         ),
     ];
     for (label, method, order, flags) in variants {
-        let (a, b) = both("tests/validation/oscillator.toml", method, order, None, flags);
+        let (a, b) = both(
+            "tests/validation/oscillator.toml",
+            method,
+            order,
+            None,
+            flags,
+        );
         let (rel, column) = worst(&a, &b, "\u{0}");
         eprintln!(
             "{label}: {} rows, max relative deviation {rel:e} ({column})",
@@ -238,7 +248,10 @@ fn joints_agree_with_the_fmpy_reference() {
             a.names.len()
         );
         assert!(a.times.len() > 10 && !a.incomplete, "{system}");
-        assert!(a.names.iter().any(|n| n.ends_with(".F[1]")), "{system}: force ports");
+        assert!(
+            a.names.iter().any(|n| n.ends_with(".F[1]")),
+            "{system}: force ports"
+        );
         assert!(rel <= 1e-9, "{system}: {column} deviates by {rel:e}");
     }
 }
