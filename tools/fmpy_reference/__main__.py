@@ -6,7 +6,9 @@ equations, with fmpy's FMU2Slave as the FMI host.
         [--stop T] [--step H] [--out FILE.csv] [--quiet]
 
 Writes the CSV layout of `tether run` (time, every Real output as
-<instance>.<variable>, <constraint>.lambda, <constraint>.g). Compare the two with
+<instance>.<variable>, the unknowns: <constraint>.lambda, <joint>.lambda[k],
+<variable>.value, force ports <instance>.<marker>.F[k] / .T[k], then the
+residuals <constraint>.g, <joint>.g[k]). Compare the two with
 `tether compare` (docs/validation.md). Errors are one line on stderr, exit status 1;
 a run that stops early keeps its rows and ends the file with `# incomplete: ...`.
 """

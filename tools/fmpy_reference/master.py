@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 import polynomials as poly
+import joints as jointkinds
 import rows as rowkinds
 from errors import RunError
 from host import Host, describe
@@ -44,34 +45,72 @@ class Master:
         self.past = [[u.initial] * 3 if u.initial is not None else [0.0] * 3 for u in self.unknowns]
         self.n = 0
         self.columns = [f"{h.name}.{v.name}" for h in self.hosts for v in h.recorded]
-        self.columns += [f"{u.name}.lambda" for u in self.unknowns]
-        self.columns += [f"{r.name}.g" for r in self.rows]
+        self.columns += [u.column for u in self.unknowns]
+        self.columns += [r.residual for r in self.rows if r.residual is not None]
 
     # -- set-up -----------------------------------------------------------------
 
     def _wire(self):
         """Resolve every row and unknown against the FMUs, with the checks of
-        `tether run` (docs/system-file.md, "Checks before the run")."""
+        `tether run` (docs/system-file.md, "Checks before the run"). Unknowns
+        and rows come in Tether's order: constraint multipliers, joint
+        multipliers (one per condition), coupling variables, force ports."""
         self.rows, self.unknowns = [], []
+        self.index = {h.name: s for s, h in enumerate(self.hosts)}
+        self.refs = {}  # (instance, variable) -> (host index, value reference)
         for spec in self.system.constraints:
             row, unknown = rowkinds.from_constraint(spec)
             self.rows.append(row)
             self.unknowns.append(unknown)
-        self.index = {h.name: s for s, h in enumerate(self.hosts)}
-        self.refs = {}  # (instance, variable) -> (host index, value reference)
+        ports = {}  # (instance, input) -> PortRow draft, in order of appearance
+        for spec in self.system.joints:
+            joint = jointkinds.Joint(spec)
+            for side in joint.sides:
+                self._check_marker(joint.name, side)
+            first = len(self.unknowns)
+            owner = f"joint '{joint.name}'"
+            for k in range(len(joint.conditions)):
+                drives = []
+                if spec.multipliers is not None:
+                    drives = rowkinds.drives(joint.name, spec.multipliers[k], "multipliers")
+                initial = None if spec.initial is None else spec.initial[k]
+                self.unknowns.append(rowkinds.Unknown(f"{joint.name}.lambda[{k + 1}]", drives, initial, owner))
+                self.rows.append(jointkinds.ConditionRow(joint, k))
+            if spec.multipliers is None:
+                for side, quantity, axis, component, loading in joint.port_components():
+                    s = joint.sides[side]
+                    name = f"{s.marker}.{quantity}[{axis + 1}]"
+                    var = self.hosts[self.index[s.instance]].variables.get(name)
+                    if var is None:
+                        raise RunError(f"{owner} needs the force port {s.instance}.{name}, which instance "
+                                       f"'{s.instance}' does not declare (docs/marker-ports.md)")
+                    draft = ports.setdefault((s.instance, name), jointkinds.PortRow(None))
+                    draft.contributions += [(joint, first, k, component) for k in loading]
+        for spec in self.system.variables:
+            m = len(self.unknowns)
+            self.unknowns.append(rowkinds.Unknown(f"{spec.name}.value", rowkinds.drives(spec.name, spec.drives),
+                                                  spec.initial, f"coupling variable '{spec.name}'"))
+            self.rows.append(rowkinds.VariableRow(spec.name, m, spec.value))
+        for (inst, name), row in ports.items():
+            row.unknown = len(self.unknowns)
+            self.unknowns.append(rowkinds.Unknown(f"{inst}.{name}", [(inst, name, 1.0, 0)], None,
+                                                  f"the force port {inst}.{name}"))
+            self.rows.append(row)
         for row, unknown in zip(self.rows, self.unknowns):
             for level in row.levels:
                 for inst, var, order in row.reads(level):
-                    s, v = self._lookup(row.name, inst, var)
+                    s, v = self._lookup(unknown.owner, inst, var)
                     if v.causality != "output" or v.type != "Real":
                         raise RunError(f"{inst}.{var} is {describe(v)}, but the {level} level of "
-                                       f"constraint '{row.name}' needs a Real output")
+                                       f"{unknown.owner} needs a Real output")
                     host = self.hosts[s]
                     if order > host.cs.maxOutputDerivativeOrder:
                         raise RunError(f"instance '{inst}' ({host.md.modelName}) lacks a large enough "
-                                       f"maxOutputDerivativeOrder, which der({inst}.{var}) in constraint "
-                                       f"'{row.name}' needs")
+                                       f"maxOutputDerivativeOrder, which der({inst}.{var}) in "
+                                       f"{unknown.owner} needs")
                     host.add_output(v.valueReference, order)
+            if not isinstance(row, rowkinds.LinearRow):
+                continue
             needs = [("velocity", self.method.needs_velocity(), f"method {self.method.describe()}"),
                      ("acceleration", self.method.needs_acceleration(), f"method {self.method.describe()}")]
             if unknown.initial is None:
@@ -82,10 +121,10 @@ class Master:
                     raise RunError(f"constraint '{row.name}' has no {level} expression, which {by} needs")
         for m, unknown in enumerate(self.unknowns):
             for inst, var, c, order in unknown.drives:
-                s, v = self._lookup(unknown.name, inst, var)
+                s, v = self._lookup(unknown.owner, inst, var)
                 if v.causality != "input" or v.type != "Real" or order != 0:
-                    raise RunError(f"{inst}.{var} is {describe(v)}, but 'drives' of constraint "
-                                   f"'{unknown.name}' needs a Real input")
+                    raise RunError(f"{inst}.{var} is {describe(v)}, but 'drives' of {unknown.owner} "
+                                   f"needs a Real input")
                 self.hosts[s].add_input(v.valueReference, m, c)
         self.owners = [[s for s, h in enumerate(self.hosts) if any(m == mm for _, terms in h.inputs
                                                                     for mm, _ in terms)]
@@ -100,10 +139,25 @@ class Master:
                 raise RunError(f"instance '{host.name}' ({host.md.modelName}) lacks canGetAndSetFMUstate, "
                                f"which the predictor/corrector method {self.method.kind} needs")
 
-    def _lookup(self, constraint, inst, var):
+    def _check_marker(self, joint, side):
+        """A marker needs all 24 Real outputs (docs/marker-ports.md)."""
+        s = self.index.get(side.instance)
+        if s is None:
+            raise RunError(f"joint '{joint}' refers to unknown instance '{side.instance}'; "
+                           f"instances are: {', '.join(self.index)}")
+        variables = self.hosts[s].variables
+        if side.names[0] not in variables:
+            known = [n[: -len(".r[1]")] for n in variables if n.endswith(".r[1]")]
+            hint = f"its markers are: {', '.join(known)}" if known else "it has no marker ports"
+            raise RunError(f"joint '{joint}': instance '{side.instance}' has no marker '{side.marker}'; {hint}")
+        for name in side.names:
+            if name not in variables:
+                raise RunError(f"instance '{side.instance}': marker '{side.marker}' lacks the output {name}")
+
+    def _lookup(self, owner, inst, var):
         s = self.index.get(inst)
         if s is None:
-            raise RunError(f"constraint '{constraint}' refers to unknown instance '{inst}'; "
+            raise RunError(f"{owner} refers to unknown instance '{inst}'; "
                            f"instances are: {', '.join(self.index)}")
         v = self.hosts[s].variable(var)
         self.refs[(inst, var)] = (s, v.valueReference)
@@ -116,16 +170,21 @@ class Master:
 
     # -- evaluating rows -------------------------------------------------------------
 
-    def _value(self, row, level, u, live=None, base=None):
-        """A row's level with the latest outputs of the hosts in `live` (all if
-        None) and the `base` snapshot of the others."""
+    def _output(self, live=None, base=None):
+        """output(instance, variable, order): the latest outputs of the hosts in
+        `live` (all if None) and the `base` snapshot of the others. Joints keep
+        their marker kinematics in `output.cache` (they depend on nothing else)."""
 
         def output(inst, var, order):
             s, vr = self.refs[(inst, var)]
             source = self.hosts[s].values if live is None or s in live else base[s]
             return source[(vr, order)]
 
-        return row.value(level, output, u)
+        output.cache = {}
+        return output
+
+    def _value(self, row, level, u, live=None, base=None, output=None):
+        return row.value(level, output or self._output(live, base), u)
 
     def _read_all(self):
         for host in self.hosts:
@@ -155,14 +214,10 @@ class Master:
         self._apply_constant()
         self._accept()
 
-    def _residual(self, m, mu, u, live=None, base=None):
+    def _residual(self, m, mu, u, live=None, base=None, output=None):
         """g'' (+ 2 g'/mu + g/mu^2 for the explicit method) of row m."""
-        row = self.rows[m]
-        r = self._value(row, "acceleration", u, live, base)
-        if mu is not None:
-            r += 2.0 * self._value(row, "velocity", u, live, base) / mu + \
-                self._value(row, "position", u, live, base) / (mu * mu)
-        return r
+        level = "acceleration" if mu is None else ("stabilised", mu)
+        return self._value(self.rows[m], level, u, live, base, output)
 
     def _feedthrough_newton(self, unknowns, mu):
         """One Newton step on the residuals of `unknowns`, with W = d residual / du
@@ -171,7 +226,8 @@ class Master:
         self._read_all()
         base = self._snapshot()
         u = self._current()
-        r0 = np.array([self._residual(m, mu, u) for m in unknowns])
+        out = self._output()
+        r0 = np.array([self._residual(m, mu, u, output=out) for m in unknowns])
         w = np.zeros((len(unknowns), len(unknowns)))
         eps = self.system.epsilon
         for col, m in enumerate(unknowns):
@@ -184,8 +240,9 @@ class Master:
             for s in live:
                 self.hosts[s].apply(perturbed, 0)
                 self.hosts[s].read()
+            out = self._output(live, base)
             for row_i, r in enumerate(unknowns):
-                w[row_i, col] = (self._residual(r, mu, up, live, base) - r0[row_i]) / delta
+                w[row_i, col] = (self._residual(r, mu, up, live, base, out) - r0[row_i]) / delta
             for s in live:
                 self.hosts[s].apply(jets, 0)
                 self.hosts[s].values = dict(base[s])
@@ -222,7 +279,8 @@ class Master:
             host.do_step(t, h)
             host.read()
         base = self._snapshot()
-        g = {lv: np.array([self._value(r, lv, u_pred) for r in self.rows]) for lv in self.levels}
+        out = self._output()
+        g = {lv: np.array([self._value(r, lv, u_pred, output=out) for r in self.rows]) for lv in self.levels}
 
         # Perturbed predictors: column m of each level's Jacobian (eq. 59-64).
         jac = {lv: np.zeros((nu, nu)) for lv in self.levels}
@@ -240,9 +298,10 @@ class Master:
                 host.apply(perturbed, k)
                 host.do_step(t, h)
                 host.read()
+            out = self._output(live, base)
             for lv in self.levels:
                 for r, row in enumerate(self.rows):
-                    jac[lv][r, m] = (self._value(row, lv, up, live, base) - g[lv][r]) / delta
+                    jac[lv][r, m] = (self._value(row, lv, up, output=out) - g[lv][r]) / delta
 
         corrected = self._corrected(u_pred, g, jac)
 
@@ -271,6 +330,11 @@ class Master:
             if "acceleration" in jac:
                 a = a + m.gamma * jac["acceleration"]
                 b = b + m.gamma * g["acceleration"]
+            # Port and coupling-variable rows are not stabilised.
+            for r, row in enumerate(self.rows):
+                if row.algebraic:
+                    a[r, :] = jac["position"][r, :]
+                    b[r] = g["position"][r]
             level = "position" if len(self.levels) == 1 else "baumgarte"
             return [float(x) for x in u_pred - solve(a, b, time, level, limit)]
         # Eq. 73-76: each level on its own, averaged with weights 1, a, b.
@@ -297,7 +361,8 @@ class Master:
         u = self._current()
         self.row = [x for host in self.hosts for x in host.recorded_values]
         self.row += u
-        self.row += [self._value(r, "position", u) for r in self.rows]
+        out = self._output()
+        self.row += [self._value(r, "position", u, output=out) for r in self.rows if r.residual is not None]
 
     def step(self):
         if self.method.kind == "explicit":

@@ -2,20 +2,22 @@
 
 The master solves one condition row per unknown. A row is anything with
 
-    name                       column prefix (`<name>.g` records its position level)
+    residual                   column of its position level (`<name>.g`), or None
+    algebraic                  True if the row is the same on every level (not stabilised)
     levels                     the levels it can evaluate: "position", "velocity", "acceleration"
     reads(level)               the outputs it needs: [(instance, variable, derivative order)]
     value(level, output, u)    its value, with output(instance, variable, order) -> float and
-                               u the unknowns at the end of the step being evaluated
+                               u the unknowns at the end of the step being evaluated; level
+                               may also be ("stabilised", mu), the explicit method's
+                               g'' + 2 g'/mu + g/mu^2
 
-and an unknown is anything with `name`, `drives` ([(instance, input variable,
-coefficient)]) and `initial` (a number, or None for "consistent").
+and an unknown is an Unknown: its column, the inputs it drives and its initial
+value (None for "consistent").
 
-Today the system file has one kind of each: a `[[constraint]]` is a LinearRow (a
-linear combination of outputs per level) plus a Multiplier driving the inputs of
-its `drives` expression. Joints between marker ports (docs/marker-ports.md) add
-rows that are nonlinear in the marker outputs and may depend on u directly, and
-unknowns that drive no input; they plug in here without touching the master.
+A `[[constraint]]` is a LinearRow plus an Unknown driving its `drives`
+expression; a `[[coupling_variable]]` a VariableRow plus an Unknown; joints
+between marker ports (joints.py) add ConditionRows (one per condition, its
+multiplier driving nothing or the `multipliers` expressions) and PortRows.
 """
 
 from dataclasses import dataclass
@@ -40,26 +42,64 @@ class LinearRow:
     def reads(self, level):
         return [(t.instance, t.variable, t.order) for t in self.terms[level]]
 
+    residual = property(lambda self: f"{self.name}.g")
+    algebraic = False
+
     def value(self, level, output, u):
-        total = 0.0
-        for t in self.terms[level]:
-            total += t.coefficient * output(t.instance, t.variable, t.order)
-        return total
+        if isinstance(level, tuple):  # ("stabilised", mu)
+            mu = level[1]
+            r = self.value("acceleration", output, u)
+            r += 2.0 * self.value("velocity", output, u) / mu + self.value("position", output, u) / (mu * mu)
+            return r
+        return _sum(self.terms[level], output)
+
+
+def _sum(terms, output):
+    total = 0.0
+    for t in terms:
+        total += t.coefficient * output(t.instance, t.variable, t.order)
+    return total
+
+
+class VariableRow:
+    """A `[[coupling_variable]]`: u - value(outputs) = 0 on every level."""
+
+    levels = LEVELS
+    algebraic = True
+    residual = None
+
+    def __init__(self, name, unknown, value_text):
+        self.name = name
+        self.unknown = unknown
+        self.terms = _parse(name, "value", value_text)
+
+    def reads(self, level):
+        return [(t.instance, t.variable, t.order) for t in self.terms]
+
+    def value(self, level, output, u):
+        return u[self.unknown] - _sum(self.terms, output)
 
 
 @dataclass
-class Multiplier:
-    """The multiplier of a `[[constraint]]`: drives `c * lambda` into each input."""
+class Unknown:
+    """A coupling unknown: its column, the inputs it drives as
+    [(instance, variable, coefficient, derivative order)] and its value at T_0
+    (None: "consistent"). `owner` names it in error messages."""
 
-    name: str
+    column: str
     drives: list
     initial: float | None
+    owner: str
+
+
+def drives(owner_name, text, what="drives"):
+    terms = _parse(owner_name, what, text)
+    return [(t.instance, t.variable, t.coefficient, t.order) for t in terms]
 
 
 def from_constraint(spec):
-    terms = _parse(spec.name, "drives", spec.drives)
-    drives = [(t.instance, t.variable, t.coefficient, t.order) for t in terms]
-    return LinearRow(spec), Multiplier(spec.name, drives, spec.initial)
+    return LinearRow(spec), Unknown(f"{spec.name}.lambda", drives(spec.name, spec.drives), spec.initial,
+                                    f"constraint '{spec.name}'")
 
 
 def _parse(constraint, level, text):

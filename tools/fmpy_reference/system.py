@@ -57,6 +57,31 @@ class Constraint:
 
 
 @dataclass
+class JointSpec:
+    name: str
+    kind: str
+    i: str
+    j: str
+    plane: str | None = None
+    axis_i: tuple | None = None
+    ref_i: tuple | None = None
+    axis_j: tuple | None = None
+    ref_j: tuple | None = None
+    offset_i: tuple | None = None
+    offset_j: tuple | None = None
+    multipliers: list | None = None
+    initial: list | None = None  # None: "consistent"
+
+
+@dataclass
+class VariableSpec:
+    name: str
+    drives: str
+    value: str
+    initial: float | None  # None: "consistent"
+
+
+@dataclass
 class System:
     name: str | None
     start: float
@@ -70,6 +95,8 @@ class System:
     divergence_factor: float = 1e6
     instances: list = field(default_factory=list)
     constraints: list = field(default_factory=list)
+    joints: list = field(default_factory=list)
+    variables: list = field(default_factory=list)
 
     def macro_steps(self):
         """(stop - start)/step rounded half away from zero, at least 1."""
@@ -207,6 +234,44 @@ def _from_document(doc):
             )
         )
         t.done()
+    for i, raw in enumerate(top.take("joint", "array", [])):
+        t = _Table(f"[[joint]] {i + 1}", raw)
+        joint = JointSpec(t.take("name", "string", required=True), t.take("kind", "string", required=True),
+                          t.take("i", "string", required=True), t.take("j", "string", required=True),
+                          plane=t.take("plane", "string", None))
+        for key in ("axis_i", "ref_i", "axis_j", "ref_j", "offset_i", "offset_j"):
+            value = t.take(key, "raw", None)
+            if value is not None:
+                if not isinstance(value, list) or len(value) != 3 or not all(_is_number(x) for x in value):
+                    raise RunError(f"joint '{joint.name}': `{key}` must be three numbers, found {value!r}")
+                if not all(math.isfinite(x) for x in value):
+                    raise RunError(f"joint '{joint.name}': `{key}` must be finite, found {value!r}")
+                setattr(joint, key, tuple(float(x) for x in value))
+        multipliers = t.take("multipliers", "raw", None)
+        if multipliers is not None:
+            if not isinstance(multipliers, list) or not all(isinstance(x, str) for x in multipliers):
+                raise RunError(f"joint '{joint.name}': `multipliers` must be a list of expressions")
+            joint.multipliers = multipliers
+        initial = t.take("initial", "raw", "consistent")
+        if isinstance(initial, list) and all(_is_number(x) for x in initial):
+            joint.initial = [float(x) for x in initial]
+        elif initial != "consistent":
+            raise RunError(f"initial must be a list of numbers or \"consistent\", found {initial!r}")
+        t.done()
+        system.joints.append(joint)
+    for i, raw in enumerate(top.take("coupling_variable", "array", [])):
+        t = _Table(f"[[coupling_variable]] {i + 1}", raw)
+        initial = t.take("initial", "raw", "consistent")
+        if _is_number(initial):
+            initial = float(initial)
+        elif initial == "consistent":
+            initial = None
+        else:
+            raise RunError(f"initial must be a number or \"consistent\", found {initial!r}")
+        system.variables.append(VariableSpec(t.take("name", "string", required=True),
+                                             t.take("drives", "string", required=True),
+                                             t.take("value", "string", required=True), initial))
+        t.done()
     top.done()
     return system
 
@@ -253,7 +318,9 @@ def check(system):
     if not system.instances:
         raise RunError("no [[instance]] given")
     seen = set()
-    for name in [i.name for i in system.instances] + [c.name for c in system.constraints]:
+    names = [i.name for i in system.instances] + [c.name for c in system.constraints]
+    names += [j.name for j in system.joints] + [v.name for v in system.variables]
+    for name in names:
         if not _NAME.fullmatch(name):
             raise RunError(f"name '{name}' must start with a letter and contain only letters, digits and '_'")
         if name in seen:
