@@ -42,6 +42,10 @@ pub struct Args {
     /// Finite-difference increment ε for the interface Jacobian.
     #[arg(long)]
     epsilon: Option<f64>,
+    /// Perturbed runs on other threads: auto (only when it pays), on or off
+    /// (overrides [coupling] parallel).
+    #[arg(long, value_parser = ["auto", "on", "off"])]
+    parallel: Option<String>,
     /// Output CSV file (default: the system file's name with .csv, in the current directory).
     #[arg(long, short)]
     out: Option<PathBuf>,
@@ -124,6 +128,9 @@ fn apply_overrides(spec: &mut SystemSpec, args: &Args) -> Result<()> {
     }
     if let Some(eps) = args.epsilon {
         spec.coupling.epsilon = eps;
+    }
+    if let Some(parallel) = &args.parallel {
+        spec.coupling.parallel = parallel.parse().map_err(anyhow::Error::msg)?;
     }
     let kind = args.method.as_deref().unwrap_or(spec.method.name());
     let current = spec.method;

@@ -62,13 +62,20 @@ pub struct ParallelInfo {
     pub sequential: Duration,
     /// Predicted time of the same work in parallel, hand-off included.
     pub parallel: Duration,
+    /// "auto": shortest measured macro step of the sequential steps.
+    pub trial_sequential: Duration,
+    /// "auto": shortest measured macro step of the parallel trial steps.
+    pub trial_parallel: Duration,
 }
 
-/// Macro steps run sequentially (and timed) before "auto" decides.
+/// Macro steps run sequentially (and timed) before "auto" tries the workers.
 pub(crate) const CALIBRATION_STEPS: u64 = 3;
 
-/// "auto" goes parallel only if the predicted step time is below this
-/// fraction of the sequential one (docs/performance.md, "Parallel").
+/// Macro steps "auto" then runs (and times) in parallel before it decides.
+pub(crate) const TRIAL_STEPS: u64 = 3;
+
+/// "auto" keeps the workers only if the parallel trial steps took at most this
+/// fraction of the sequential ones (docs/performance.md, "Parallel").
 pub(crate) const PAYS: f64 = 0.9;
 
 /// Hand-offs timed for the decision (their median counts).
@@ -186,6 +193,8 @@ pub(crate) struct Pool {
     /// Whether the steps use the workers (auto: after the calibration).
     pub active: bool,
     pub info: ParallelInfo,
+    /// Shortest whole macro step of the sequential and the parallel trial steps.
+    pub trial: [Duration; 2],
 }
 
 impl Pool {
@@ -287,6 +296,7 @@ impl Pool {
             step_cost: vec![Duration::MAX; slaves.len()],
             active: false,
             info: ParallelInfo::default(),
+            trial: [Duration::MAX; 2],
         };
         if mode == Parallel::On {
             // Without measurements every run counts the same.
@@ -303,9 +313,40 @@ impl Pool {
         self.mode == Parallel::Auto && !self.active && n < CALIBRATION_STEPS
     }
 
-    /// Whether "auto" decides now (the states at T_N must be saved).
+    /// Whether "auto" starts its parallel trial now.
     pub fn deciding(&self, n: u64) -> bool {
         self.mode == Parallel::Auto && !self.active && n == CALIBRATION_STEPS
+    }
+
+    /// Whether "auto" times macro step `n` (sequential or parallel trial).
+    pub fn timing(&self, n: u64) -> bool {
+        self.mode == Parallel::Auto && n < CALIBRATION_STEPS + TRIAL_STEPS
+    }
+
+    /// Record the wall time of macro step `n`.
+    pub fn record(&mut self, n: u64, elapsed: Duration) {
+        let slot = &mut self.trial[usize::from(n >= CALIBRATION_STEPS)];
+        *slot = (*slot).min(elapsed);
+    }
+
+    /// "auto", after the trial: whether the parallel steps were at most
+    /// [`PAYS`] of the sequential ones.
+    pub fn keep(&mut self, n: u64) -> Option<bool> {
+        if self.mode != Parallel::Auto || n != CALIBRATION_STEPS + TRIAL_STEPS || !self.active {
+            return None;
+        }
+        let [sequential, parallel] = self.trial;
+        let pays = parallel.as_secs_f64() <= PAYS * sequential.as_secs_f64();
+        log::info!(
+            "parallel perturbed runs: macro step {sequential:?} sequential, {parallel:?} parallel: {}",
+            if pays { "on" } else { "off" }
+        );
+        self.info.trial_sequential = sequential;
+        self.info.trial_parallel = parallel;
+        if !pays {
+            self.info.workers = 0;
+        }
+        Some(pays)
     }
 
     /// Split the perturbed runs between the main thread and the workers by
@@ -367,9 +408,9 @@ impl Pool {
         }
     }
 
-    /// "auto": time the hand-off with the states saved at T_N, then keep the
-    /// workers only if the predicted step is at most [`PAYS`] of the
-    /// sequential one. Returns whether the pool stays.
+    /// "auto": time the hand-off with the states saved at T_{N-1}, split the
+    /// runs by the measured step costs, and start the parallel trial unless the
+    /// prediction says it cannot pay. Returns whether the pool stays.
     pub fn decide(&mut self, slaves: &mut [Slave]) -> Result<bool, MasterError> {
         let n = slaves.len();
         // Every capable instance's state crosses over while timing.
@@ -392,14 +433,16 @@ impl Pool {
         }
         let cost = self.step_cost.clone();
         self.assign(&cost, handoff, n);
-        let pays = self.info.parallel.as_secs_f64() <= PAYS * self.info.sequential.as_secs_f64()
+        // Try the workers if the prediction from the measured FMU steps and
+        // hand-off is not hopeless; the trial steps decide.
+        let pays = self.info.parallel < self.info.sequential
             && self.lanes.iter().any(|l| !lock(&l.shared).runs.is_empty());
         log::info!(
-            "parallel perturbed runs: hand-off {:?}, predicted step runs {:?} sequential, {:?} parallel: {}",
+            "parallel perturbed runs: hand-off {:?}, predicted runs per step {:?} sequential, {:?} parallel: {}",
             handoff,
             self.info.sequential,
             self.info.parallel,
-            if pays { "on" } else { "off" }
+            if pays { "trying" } else { "off" }
         );
         self.active = pays;
         if pays {
@@ -463,6 +506,23 @@ impl Pool {
             }
         }
         failure.map_or(Ok(()), Err)
+    }
+
+    /// Add the copies' FMI calls to the originals' counters (before the pool
+    /// goes away), and zero them.
+    pub fn fold_counters(&self, slaves: &mut [Slave]) {
+        for (s, slave) in slaves.iter_mut().enumerate() {
+            self.add_counters(s, &mut slave.counters);
+        }
+        for lane in &self.lanes {
+            for extra in lock(&lane.shared).extras.iter_mut().flatten() {
+                let name = std::mem::take(&mut extra.counters.name);
+                extra.counters = crate::InstanceCounters {
+                    name,
+                    ..Default::default()
+                };
+            }
+        }
     }
 
     /// FMI calls made by the copies of instance `s`.

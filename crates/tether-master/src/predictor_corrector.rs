@@ -19,6 +19,7 @@ impl Simulation {
         let degree_pred = k.min(self.n as usize);
         let degree_corr = k.min(self.n as usize + 1);
         let nu = self.coupling.len();
+        let step_clock = Instant::now();
 
         // Step 1, predictor (eq. 56–58): extrapolated polynomials.
         let clock = Instant::now();
@@ -168,6 +169,17 @@ impl Simulation {
         self.n += 1;
         self.read_accepted()?;
         self.stats.times.corrector += clock.elapsed();
+        if let Some(pool) = self.pool.as_mut().filter(|p| p.timing(self.n - 1)) {
+            pool.record(self.n - 1, step_clock.elapsed());
+            if let Some(keep) = pool.keep(self.n) {
+                self.stats.parallel = pool.info;
+                if !keep {
+                    // Join the workers and free the copies.
+                    pool.fold_counters(&mut self.slaves);
+                    self.pool = None;
+                }
+            }
+        }
         Ok(())
     }
 
