@@ -46,9 +46,7 @@ fn errors(dir: &std::path::Path, text: &str, h: f64) -> (f64, f64) {
     for marker in ["body2.A", "body2.B", "body1.B"] {
         for k in 1..=3 {
             let name = format!("{marker}.r[{k}]");
-            let c = rec
-                .column(&name)
-                .unwrap_or_else(|| panic!("no column {name}"));
+            let c = rec.column(&name).unwrap_or_else(|| panic!("no column {name}"));
             for (&r, sample) in rows.iter().zip(&reference) {
                 let value = rec.rows[r][c];
                 deviation = deviation.max((value - sample.column(&name).unwrap()).abs());
@@ -118,8 +116,5 @@ fn every_joint_kind_matches_its_monolithic_reference() {
             failures.push(kind);
         }
     }
-    assert!(
-        failures.is_empty(),
-        "joint kinds off their reference: {failures:?}"
-    );
+    assert!(failures.is_empty(), "joint kinds off their reference: {failures:?}");
 }

@@ -31,8 +31,7 @@ fn with(mut spec: SystemSpec, method: Method, order: usize, h: f64, stop: f64) -
 /// Fitted order from the errors at successive halvings of H (least squares in log-log).
 fn fitted_order(hs: &[f64], errors: &[f64]) -> f64 {
     let n = hs.len() as f64;
-    let (lx, ly): (Vec<f64>, Vec<f64>) =
-        hs.iter().zip(errors).map(|(h, e)| (h.ln(), e.ln())).unzip();
+    let (lx, ly): (Vec<f64>, Vec<f64>) = hs.iter().zip(errors).map(|(h, e)| (h.ln(), e.ln())).unzip();
     let mx = lx.iter().sum::<f64>() / n;
     let my = ly.iter().sum::<f64>() / n;
     let sxy: f64 = lx.iter().zip(&ly).map(|(x, y)| (x - mx) * (y - my)).sum();
@@ -41,16 +40,10 @@ fn fitted_order(hs: &[f64], errors: &[f64]) -> f64 {
 }
 
 /// Max over time of the difference of `columns` from the reference.
-fn max_error(
-    rec: &MemoryRecorder,
-    columns: &[&str],
-    reference: impl Fn(usize, &str) -> f64,
-) -> f64 {
+fn max_error(rec: &MemoryRecorder, columns: &[&str], reference: impl Fn(usize, &str) -> f64) -> f64 {
     let mut worst: f64 = 0.0;
     for name in columns {
-        let series = rec
-            .series(name)
-            .unwrap_or_else(|| panic!("no column {name}"));
+        let series = rec.series(name).unwrap_or_else(|| panic!("no column {name}"));
         for (k, v) in series.iter().enumerate() {
             worst = worst.max((v - reference(k, name)).abs());
         }
@@ -72,34 +65,21 @@ fn double_pendulum_errors(method: Method, stop: f64) -> Vec<f64> {
             let rec = run(&spec).expect("double pendulum runs");
             let times = rec.times.clone();
             let reference = double_pendulum::reference(&times);
-            max_error(
-                &rec,
-                &[
-                    "link1.B.r[1]",
-                    "link1.B.r[2]",
-                    "link2.B.r[1]",
-                    "link2.B.r[2]",
-                ],
-                |k, name| reference[k].column(name).expect("reference column"),
-            )
+            max_error(&rec, &["link1.B.r[1]", "link1.B.r[2]", "link2.B.r[1]", "link2.B.r[2]"], |k, name| {
+                reference[k].column(name).expect("reference column")
+            })
         })
         .collect()
 }
 
 #[test]
 fn double_pendulum_converges_to_the_monolithic_reference() {
-    for (label, method) in [
-        ("M1 index 1", BAUMGARTE_INDEX1),
-        ("M2 index 1", WEIGHTED_INDEX1),
-    ] {
+    for (label, method) in [("M1 index 1", BAUMGARTE_INDEX1), ("M2 index 1", WEIGHTED_INDEX1)] {
         let errors = double_pendulum_errors(method, 1.0);
         let order = fitted_order(&HS, &errors);
         println!("double pendulum {label}: marker position errors {:?} over H = {HS:?}: order {order:.2}", errors.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>());
         for pair in errors.windows(2) {
-            assert!(
-                pair[1] < pair[0],
-                "{label}: error must shrink with H: {errors:?}"
-            );
+            assert!(pair[1] < pair[0], "{label}: error must shrink with H: {errors:?}");
         }
         assert!(order > 0.9, "{label}: order {order}");
     }
@@ -124,10 +104,7 @@ fn energy_drift(rec: &MemoryRecorder) -> f64 {
 
 #[test]
 fn slider_crank_converges_and_its_energy_drift_shrinks_with_h() {
-    for (label, method) in [
-        ("M1 index 2", BAUMGARTE_INDEX2),
-        ("M2 index 2", WEIGHTED_INDEX2),
-    ] {
+    for (label, method) in [("M1 index 2", BAUMGARTE_INDEX2), ("M2 index 2", WEIGHTED_INDEX2)] {
         let mut errors = Vec::new();
         let mut drifts = Vec::new();
         for &h in &HS {
@@ -147,10 +124,7 @@ fn slider_crank_converges_and_its_energy_drift_shrinks_with_h() {
             drifts.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>()
         );
         for pair in errors.windows(2).chain(drifts.windows(2)) {
-            assert!(
-                pair[1] < pair[0],
-                "{label}: must shrink with H: {errors:?} {drifts:?}"
-            );
+            assert!(pair[1] < pair[0], "{label}: must shrink with H: {errors:?} {drifts:?}");
         }
     }
 }
@@ -174,29 +148,20 @@ fn slider_crank_energy_drift_shrinks_with_k() {
             .collect();
         println!(
             "slider-crank {label}, H = 1e-3: energy drift for k = 0..={top}: {:?}",
-            drifts
-                .iter()
-                .map(|e| format!("{e:.3e}"))
-                .collect::<Vec<_>>()
+            drifts.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>()
         );
         assert!(drifts[1] < drifts[0] / 10.0, "{label}: {drifts:?}");
         if top == 2 {
             assert!(drifts[2] < drifts[1] / 10.0, "{label}: {drifts:?}");
         }
     }
-    for (label, method) in [
-        ("M1 index 2", BAUMGARTE_INDEX2),
-        ("M2 index 2", WEIGHTED_INDEX2),
-    ] {
+    for (label, method) in [("M1 index 2", BAUMGARTE_INDEX2), ("M2 index 2", WEIGHTED_INDEX2)] {
         let spec = with(example("slider_crank.toml"), method, 1, 1e-3, 1.0);
         match run(&spec) {
             Err(MasterError::Diverged { time, quantity, .. }) => {
                 println!("slider-crank {label}, k = 1: diverged at t = {time} ({quantity})")
             }
-            other => panic!(
-                "{label} with k = 1 was expected to diverge: {:?}",
-                other.map(|_| ())
-            ),
+            other => panic!("{label} with k = 1 was expected to diverge: {:?}", other.map(|_| ())),
         }
     }
 }
@@ -206,32 +171,18 @@ fn slider_crank_energy_drift_shrinks_with_k() {
 /// give the same motion up to the finite-difference Jacobians' differences.
 #[test]
 fn multiplier_inputs_and_force_ports_agree_on_the_double_pendulum() {
-    let ports = with(
-        example("double_pendulum.toml"),
-        BAUMGARTE_INDEX1,
-        0,
-        1e-3,
-        1.0,
-    );
+    let ports = with(example("double_pendulum.toml"), BAUMGARTE_INDEX1, 0, 1e-3, 1.0);
     let mut paper = ports.clone();
     paper.joints[0].multipliers = Some(vec![
         "link1.B.F[1] - link2.A.F[1]".into(),
         "link1.B.F[2] - link2.A.F[2]".into(),
     ]);
     let (a, b) = (run(&ports).unwrap(), run(&paper).unwrap());
-    let columns = [
-        "link1.B.r[1]",
-        "link1.B.r[2]",
-        "link2.B.r[1]",
-        "link2.B.r[2]",
-    ];
+    let columns = ["link1.B.r[1]", "link1.B.r[2]", "link2.B.r[1]", "link2.B.r[2]"];
     let relative = |name: &str| {
         let (x, y) = (a.series(name).unwrap(), b.series(name).unwrap());
         let scale = x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        let diff = x
-            .iter()
-            .zip(&y)
-            .fold(0.0_f64, |m, (p, q)| m.max((p - q).abs()));
+        let diff = x.iter().zip(&y).fold(0.0_f64, |m, (p, q)| m.max((p - q).abs()));
         println!("{name}: max difference {diff:.3e} (scale {scale:.3})");
         diff / scale
     };
@@ -260,10 +211,7 @@ fn a_joint_naming_a_marker_that_does_not_exist_is_a_clear_error() {
     let mut spec = example("double_pendulum.toml");
     spec.joints[0].j = "link3.A".into();
     let err = Simulation::new(&spec).err().expect("must fail").to_string();
-    assert!(
-        err.contains("unknown instance 'link3'") && err.contains("link2"),
-        "{err}"
-    );
+    assert!(err.contains("unknown instance 'link3'") && err.contains("link2"), "{err}");
 }
 
 #[test]

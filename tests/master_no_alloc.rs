@@ -169,11 +169,7 @@ fn joint_macro_steps_do_not_allocate() {
     tether_fmu_build::workspace_fmu("body3d").expect("package the body3d FMU");
     let root = tether_fmu_build::workspace_root().expect("workspace root");
     let mut failures = Vec::new();
-    for file in [
-        "double_pendulum.toml",
-        "slider_crank.toml",
-        "3d_revolute.toml",
-    ] {
+    for file in ["double_pendulum.toml", "slider_crank.toml", "3d_revolute.toml"] {
         let base = SystemSpec::from_file(&root.join("examples").join(file)).expect("example");
         for method in [
             tether_master::Method::Baumgarte {
