@@ -6,9 +6,12 @@
 //! * `fmpy`: the same algorithm driven from Python through fmpy;
 //! * `recording`: what writing CSV every step adds;
 //! * `precision`: wall time to a max state error of 1e-6, index 2 against the
-//!   explicit method.
+//!   explicit method;
+//! * `parallel`: perturbed runs on a worker thread (`[coupling] parallel`)
+//!   against the sequential path, on a 3D joint with an expensive FMU step and
+//!   on the cheap oscillator pair.
 //!
-//! `cargo bench -p tether-bench [-- floor|fmpy|recording|precision ...]`;
+//! `cargo bench -p tether-bench [-- floor|fmpy|recording|precision|parallel ...]`;
 //! `TETHER_BENCH_REPS` repetitions (default 9, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
@@ -19,7 +22,9 @@ use std::time::Instant;
 
 use tether_bench::{floor, fmpy_loop, workspace_root, Case, StateError};
 use tether_fmi::Fmu;
-use tether_master::{CsvRecorder, InstanceCounters, Method, Observer, Sample, Simulation};
+use tether_master::{
+    CsvRecorder, InstanceCounters, Method, Observer, Parallel, Sample, Simulation, SystemSpec,
+};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -389,5 +394,114 @@ fn main() {
     }
     if run("precision") {
         bench_precision();
+    }
+    if run("parallel") {
+        bench_parallel();
+    }
+}
+
+/// One system of the parallel bench.
+struct ParallelCase {
+    name: &'static str,
+    spec: SystemSpec,
+}
+
+fn parallel_cases() -> Vec<ParallelCase> {
+    tether_fmu_build::workspace_fmu("body3d").expect("package the body3d FMU");
+    let root = workspace_root();
+    let revolute =
+        SystemSpec::from_file(&root.join("examples/3d_revolute.toml")).expect("3d_revolute.toml");
+    let tighten = |mut spec: SystemSpec| {
+        for instance in &mut spec.instances {
+            instance
+                .parameters
+                .insert("tolerance".into(), tether_master::StartValue::Real(1e-13));
+        }
+        spec
+    };
+    let mut tight = tighten(revolute.clone());
+    tight.experiment.stop = 200.0 * tight.experiment.step;
+    let mut default = revolute;
+    default.experiment.stop = 300.0 * default.experiment.step;
+    let mut long = default.clone();
+    long.experiment.step = 1e-2;
+    long.experiment.stop = 100.0 * long.experiment.step;
+    let mut oscillator = Case::example(true, 0).spec();
+    oscillator.experiment.stop = 1.0;
+    vec![
+        ParallelCase {
+            name: "3d_revolute, body3d tolerance 1e-13, H = 1e-3",
+            spec: tight,
+        },
+        ParallelCase {
+            name: "3d_revolute, body3d tolerance 1e-13, H = 1e-2",
+            spec: tighten(long.clone()),
+        },
+        ParallelCase {
+            name: "3d_revolute, default tolerance, H = 1e-2",
+            spec: long,
+        },
+        ParallelCase {
+            name: "3d_revolute, default tolerance, H = 1e-3",
+            spec: default,
+        },
+        ParallelCase {
+            name: "oscillator pair, exact FMUs, H = 1e-3",
+            spec: oscillator,
+        },
+    ]
+}
+
+/// Runs (setup excluded: it is the same FMU loading for every mode, plus the
+/// copies' instantiation for on and auto) per macro step with parallel = off,
+/// on, auto, interleaved repetitions; ratios of medians from the same run.
+fn bench_parallel() {
+    println!("\n== parallel: perturbed runs on a worker thread (time per macro step) ==");
+    let reps = reps();
+    for case in parallel_cases() {
+        let steps = case.spec.macro_steps() as f64;
+        let modes = [Parallel::Off, Parallel::On, Parallel::Auto];
+        let mut times: [Vec<f64>; 3] = Default::default();
+        let mut info = None;
+        let mut shape = (0, 0);
+        for _ in 0..reps {
+            for (i, &mode) in modes.iter().enumerate() {
+                let mut spec = case.spec.clone();
+                spec.coupling.parallel = mode;
+                let mut sim = Simulation::new(&spec).expect("simulation");
+                let clock = Instant::now();
+                let stats = sim.run(&mut [], &mut |_, _| {}).expect("run");
+                times[i].push(clock.elapsed().as_secs_f64() / steps);
+                if mode == Parallel::Auto {
+                    info = Some(stats.parallel);
+                }
+                let runs: u64 = stats.instances.iter().map(|c| c.do_steps).sum();
+                shape = (stats.instances.len(), runs / stats.macro_steps);
+            }
+        }
+        let [off, on, auto] = times.clone().map(median);
+        let info = info.expect("auto ran");
+        println!(
+            "{} ({} instances, {} doStep per macro step)",
+            case.name, shape.0, shape.1
+        );
+        println!(
+            "  per macro step: off {}   on {}   auto {}",
+            us2(&times[0]),
+            us2(&times[1]),
+            us2(&times[2])
+        );
+        println!(
+            "  speed-up off/on {:.2}x   off/auto {:.2}x   auto: {} worker(s), hand-off {:.1} µs, \
+             predicted runs {:.1} µs sequential / {:.1} µs parallel, trial steps {:.1} µs / {:.1} µs",
+            off / on,
+            off / auto,
+            info.workers,
+            info.handoff.as_secs_f64() * 1e6,
+            info.sequential.as_secs_f64() * 1e6,
+            info.parallel.as_secs_f64() * 1e6,
+            info.trial_sequential.as_secs_f64() * 1e6,
+            info.trial_parallel.as_secs_f64() * 1e6
+        );
     }
 }

@@ -36,6 +36,10 @@ pub struct Settings {
     /// Finite-difference increment ε for the interface Jacobian.
     #[arg(long)]
     epsilon: Option<f64>,
+    /// Perturbed runs on other threads: auto (only when it pays), on or off
+    /// (overrides [coupling] parallel).
+    #[arg(long, value_parser = ["auto", "on", "off"])]
+    parallel: Option<String>,
 }
 
 impl Settings {
@@ -53,6 +57,9 @@ impl Settings {
         }
         if let Some(eps) = args.epsilon {
             spec.coupling.epsilon = eps;
+        }
+        if let Some(parallel) = &args.parallel {
+            spec.coupling.parallel = parallel.parse().map_err(anyhow::Error::msg)?;
         }
         let kind = args.method.as_deref().unwrap_or(spec.method.name());
         let current = spec.method;

@@ -18,6 +18,9 @@ pub(crate) struct View<'a> {
     pub slaves: &'a [Slave],
     pub base: &'a [Vec<f64>],
     pub live: Option<&'a [bool]>,
+    /// Latest values of live slaves kept outside the slaves (parallel perturbed
+    /// runs), instead of `slaves[s].coupled_values`.
+    pub latest: Option<&'a [Vec<f64>]>,
     pub u: &'a [f64],
     pub bump: Option<(usize, f64)>,
 }
@@ -28,7 +31,10 @@ impl View<'_> {
     pub fn value(&self, s: usize, slot: usize) -> f64 {
         match self.live {
             Some(live) if !live[s] => self.base[s][slot],
-            _ => self.slaves[s].coupled_values[slot],
+            _ => match self.latest {
+                Some(latest) => latest[s][slot],
+                None => self.slaves[s].coupled_values[slot],
+            },
         }
     }
 

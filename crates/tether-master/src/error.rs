@@ -165,4 +165,10 @@ pub enum MasterError {
     /// Writing results failed.
     #[error("recording results: {0}")]
     Recording(#[from] std::io::Error),
+    /// A worker thread for parallel perturbed runs could not be started.
+    #[error("cannot start a worker thread for parallel perturbed runs: {0}")]
+    Thread(String),
+    /// A worker thread panicked during perturbed runs.
+    #[error("a worker thread panicked during parallel perturbed runs")]
+    Worker,
 }

@@ -111,6 +111,7 @@ impl Simulation {
                 slaves: &self.slaves,
                 base: &work.base,
                 live: None,
+                latest: None,
                 u: &work.u,
                 bump: None,
             };
@@ -165,6 +166,7 @@ impl Simulation {
                     slaves: &self.slaves,
                     base: &work.base,
                     live: Some(&fw.live),
+                    latest: None,
                     u: &work.u,
                     bump: Some((m, work.delta[m])),
                 };

@@ -26,6 +26,7 @@ pub mod expr;
 mod joints;
 mod method;
 mod observer;
+mod parallel;
 pub mod polynomial;
 mod predictor_corrector;
 mod simulation;
@@ -38,6 +39,7 @@ mod stats;
 pub use error::MasterError;
 pub use method::Method;
 pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
+pub use parallel::{Parallel, ParallelInfo};
 pub use simulation::Simulation;
 pub use spec::{
     ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment, InitialMultiplier,

@@ -3,9 +3,10 @@
 
 use std::time::Instant;
 
-use crate::coupling::{RowLevel, View};
+use crate::coupling::{Coupling, RowLevel, View};
 use crate::polynomial::{extrapolation, interpolation};
-use crate::simulation::Simulation;
+use crate::simulation::{Simulation, Work};
+use crate::slave::Slave;
 use crate::{MasterError, Method};
 
 impl Simulation {
@@ -18,6 +19,7 @@ impl Simulation {
         let degree_pred = k.min(self.n as usize);
         let degree_corr = k.min(self.n as usize + 1);
         let nu = self.coupling.len();
+        let step_clock = Instant::now();
 
         // Step 1, predictor (eq. 56–58): extrapolated polynomials.
         let clock = Instant::now();
@@ -25,12 +27,47 @@ impl Simulation {
             self.work.polys[m] = extrapolation(&self.history[m], degree_pred, h);
             self.work.u_pred[m] = self.work.polys[m].at(h);
         }
+        // Parallel perturbed runs (docs/algorithm.md): the states at T_N go to
+        // the workers, which start together with the predictor.
+        if self.pool.as_ref().is_some_and(|p| p.deciding(self.n)) {
+            self.decide_parallel()?;
+        }
+        let parallel = self.pool.as_ref().is_some_and(|p| p.active);
+        if parallel {
+            for slave in self.slaves.iter_mut().filter(|s| s.is_coupled()) {
+                slave.save_state()?;
+            }
+            let pool = self.pool.as_mut().expect("parallel");
+            for (gi, group) in self.groups.iter().enumerate() {
+                let polys = &mut pool.polys[gi];
+                polys.copy_from_slice(&self.work.polys);
+                for &m in group {
+                    let delta = self.settings.epsilon * self.history[m][0].abs().max(1.0);
+                    self.work.delta[m] = delta;
+                    polys[m] = interpolation(
+                        self.work.u_pred[m] + delta,
+                        &self.history[m],
+                        degree_corr,
+                        h,
+                    );
+                }
+            }
+            pool.dispatch(&mut self.slaves, t, h, k)?;
+        }
+        let calibrating = self.pool.as_ref().is_some_and(|p| p.calibrating(self.n));
         for (s, slave) in self.slaves.iter_mut().enumerate() {
-            if slave.is_coupled() {
+            if slave.is_coupled() && !parallel {
                 slave.save_state()?;
             }
             slave.apply_inputs(&self.work.polys, k)?;
-            slave.do_step(t, h)?;
+            if calibrating {
+                let clock = Instant::now();
+                slave.do_step(t, h)?;
+                let cost = &mut self.pool.as_mut().expect("calibrating").step_cost[s];
+                *cost = (*cost).min(clock.elapsed());
+            } else {
+                slave.do_step(t, h)?;
+            }
             slave.read_coupled()?;
             self.work.base[s].copy_from_slice(&slave.coupled_values);
         }
@@ -40,6 +77,7 @@ impl Simulation {
                 slaves: &self.slaves,
                 base: &work.base,
                 live: None,
+                latest: None,
                 u: &work.u_pred,
                 bump: None,
             };
@@ -51,51 +89,58 @@ impl Simulation {
 
         // Step 2a, perturbed predictors (eq. 59–64): finite-difference columns.
         let clock = Instant::now();
-        for gi in 0..self.groups.len() {
-            self.work.perturbed.copy_from_slice(&self.work.polys);
-            self.work.live.fill(false);
-            for &m in &self.groups[gi] {
-                let delta = self.settings.epsilon * self.history[m][0].abs().max(1.0);
-                self.work.delta[m] = delta;
-                self.work.perturbed[m] = interpolation(
-                    self.work.u_pred[m] + delta,
-                    &self.history[m],
-                    degree_corr,
-                    h,
-                );
-                for &s in &self.owners[m] {
-                    self.work.live[s] = true;
-                }
+        if parallel {
+            let pool = self.pool.as_mut().expect("parallel");
+            for &(gi, s) in &pool.main_runs {
+                let slave = &mut self.slaves[s];
+                slave.restore_state()?;
+                slave.apply_inputs(&pool.polys[gi], k)?;
+                slave.do_step(t, h)?;
+                slave.read_coupled()?;
+                pool.values[gi][s].copy_from_slice(&slave.coupled_values);
             }
-            for (s, slave) in self.slaves.iter_mut().enumerate() {
-                if self.work.live[s] {
-                    slave.restore_state()?;
-                    slave.apply_inputs(&self.work.perturbed, k)?;
-                    slave.do_step(t, h)?;
-                    slave.read_coupled()?;
-                }
+            pool.collect()?;
+            let sim = Columns {
+                coupling: &self.coupling,
+                levels: &self.levels,
+                owners: &self.owners,
+                slaves: &self.slaves,
+            };
+            for (gi, group) in self.groups.iter().enumerate() {
+                columns(sim, &mut self.work, group, Some(&pool.values[gi]));
             }
-            for &m in &self.groups[gi] {
-                // Only the instances m drives count as perturbed for column m.
-                let work = &mut self.work;
-                work.live.fill(false);
-                for &s in &self.owners[m] {
-                    work.live[s] = true;
-                }
-                let delta = work.delta[m];
-                for (l, &level) in self.levels.iter().enumerate() {
-                    let view = View {
-                        slaves: &self.slaves,
-                        base: &work.base,
-                        live: Some(&work.live),
-                        u: &work.u_pred,
-                        bump: Some((m, delta)),
-                    };
-                    self.coupling.eval(level, &view, &mut work.rows);
-                    for r in 0..nu {
-                        work.jac[l][(r, m)] = (work.rows[r] - work.g[l][r]) / delta;
+        } else {
+            for gi in 0..self.groups.len() {
+                self.work.perturbed.copy_from_slice(&self.work.polys);
+                self.work.live.fill(false);
+                for &m in &self.groups[gi] {
+                    let delta = self.settings.epsilon * self.history[m][0].abs().max(1.0);
+                    self.work.delta[m] = delta;
+                    self.work.perturbed[m] = interpolation(
+                        self.work.u_pred[m] + delta,
+                        &self.history[m],
+                        degree_corr,
+                        h,
+                    );
+                    for &s in &self.owners[m] {
+                        self.work.live[s] = true;
                     }
                 }
+                for (s, slave) in self.slaves.iter_mut().enumerate() {
+                    if self.work.live[s] {
+                        slave.restore_state()?;
+                        slave.apply_inputs(&self.work.perturbed, k)?;
+                        slave.do_step(t, h)?;
+                        slave.read_coupled()?;
+                    }
+                }
+                let sim = Columns {
+                    coupling: &self.coupling,
+                    levels: &self.levels,
+                    owners: &self.owners,
+                    slaves: &self.slaves,
+                };
+                columns(sim, &mut self.work, &self.groups[gi], None);
             }
         }
         self.stats.times.jacobian += clock.elapsed();
@@ -124,6 +169,30 @@ impl Simulation {
         self.n += 1;
         self.read_accepted()?;
         self.stats.times.corrector += clock.elapsed();
+        if let Some(pool) = self.pool.as_mut().filter(|p| p.timing(self.n - 1)) {
+            pool.record(self.n - 1, step_clock.elapsed());
+            if let Some(keep) = pool.keep(self.n) {
+                self.stats.parallel = pool.info;
+                if !keep {
+                    // Join the workers and free the copies.
+                    pool.fold_counters(&mut self.slaves);
+                    self.pool = None;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// "auto": decide whether the perturbed runs go parallel (at T_N, before
+    /// the states are saved: the hand-off is timed with the previous ones).
+    fn decide_parallel(&mut self) -> Result<(), MasterError> {
+        let pool = self.pool.as_mut().expect("deciding");
+        let pays = pool.decide(&mut self.slaves)?;
+        self.stats.parallel = pool.info;
+        if !pays {
+            // Join the workers and free the copies.
+            self.pool = None;
+        }
         Ok(())
     }
 
@@ -199,4 +268,41 @@ impl Simulation {
         }
         Ok(())
     }
+}
+
+/// Finite-difference columns of the unknowns in `group` from one perturbed run:
+/// its outputs are the slaves' latest values, or `latest` (parallel runs).
+fn columns(sim: Columns, work: &mut Work, group: &[usize], latest: Option<&[Vec<f64>]>) {
+    let nu = sim.coupling.len();
+    for &m in group {
+        // Only the instances m drives count as perturbed for column m.
+        work.live.fill(false);
+        for &s in &sim.owners[m] {
+            work.live[s] = true;
+        }
+        let delta = work.delta[m];
+        for (l, &level) in sim.levels.iter().enumerate() {
+            let view = View {
+                slaves: sim.slaves,
+                base: &work.base,
+                live: Some(&work.live),
+                latest,
+                u: &work.u_pred,
+                bump: Some((m, delta)),
+            };
+            sim.coupling.eval(level, &view, &mut work.rows);
+            for r in 0..nu {
+                work.jac[l][(r, m)] = (work.rows[r] - work.g[l][r]) / delta;
+            }
+        }
+    }
+}
+
+/// What [`columns`] reads of the simulation.
+#[derive(Clone, Copy)]
+struct Columns<'a> {
+    coupling: &'a Coupling,
+    levels: &'a [RowLevel],
+    owners: &'a [Vec<usize>],
+    slaves: &'a [Slave],
 }

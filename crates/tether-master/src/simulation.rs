@@ -8,6 +8,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::coupling::{self, Coupling, RowLevel, View};
 use crate::explicit::Feedthrough;
 use crate::observer::{Observer, Sample};
+use crate::parallel::Pool;
 use crate::polynomial::Taylor;
 use crate::slave::Slave;
 use crate::solve::Solver;
@@ -38,6 +39,8 @@ pub struct Simulation {
     limits: Vec<f64>,
     steps: u64,
     pub(crate) stats: RunStats,
+    /// Workers for parallel perturbed runs (docs/algorithm.md), if any.
+    pub(crate) pool: Option<Pool>,
 }
 
 /// Buffers reused by every macro step.
@@ -111,6 +114,18 @@ impl Simulation {
         for slave in &mut slaves {
             slave.initialize(exp.start, stop, exp.tolerance)?;
         }
+        let pool = if method.needs_rollback() {
+            Pool::new(
+                settings.parallel,
+                &slaves,
+                &spec.instances,
+                &groups,
+                &owners,
+                (exp.start, stop, exp.tolerance),
+            )?
+        } else {
+            None
+        };
         let mut columns = Vec::new();
         for slave in &slaves {
             columns.extend(slave.recorded_names().iter().cloned());
@@ -159,6 +174,7 @@ impl Simulation {
             columns,
             steps: spec.macro_steps(),
             stats: RunStats::default(),
+            pool,
         };
         sim.initial_multipliers()?;
         sim.read_accepted()?;
@@ -200,6 +216,12 @@ impl Simulation {
     pub fn stats(&self) -> RunStats {
         let mut stats = self.stats.clone();
         stats.instances = self.slaves.iter().map(|s| s.counters().clone()).collect();
+        if let Some(pool) = &self.pool {
+            for (s, counters) in stats.instances.iter_mut().enumerate() {
+                pool.add_counters(s, counters);
+            }
+            stats.parallel = pool.info;
+        }
         stats
     }
 
@@ -285,6 +307,7 @@ impl Simulation {
             slaves: &self.slaves,
             base: &self.work.base,
             live: None,
+            latest: None,
             u: &self.work.u,
             bump: None,
         };

@@ -57,7 +57,57 @@ pub struct Slave {
 impl Slave {
     /// Open the FMU, instantiate it and apply the start values.
     pub(crate) fn instantiate(spec: &InstanceSpec) -> Result<Slave, MasterError> {
-        let fmu = Fmu::open(&spec.fmu)?;
+        Slave::instantiate_as(Fmu::open(&spec.fmu)?, spec, &spec.name)
+    }
+
+    /// Another instance of this slave's FMU with the same start values and the
+    /// same coupled inputs and outputs, initialised like the original (for
+    /// perturbed runs on another thread; its state is later copied over).
+    pub(crate) fn duplicate(
+        &self,
+        spec: &InstanceSpec,
+        copy: usize,
+        experiment: (f64, f64, Option<f64>),
+    ) -> Result<Slave, MasterError> {
+        let name = format!("{}#{copy}", spec.name);
+        let mut extra = Slave::instantiate_as(self.fmu.clone(), spec, &name)?;
+        extra.inputs = self.inputs.clone();
+        extra.coupled_outputs = self.coupled_outputs.clone();
+        extra.finalize();
+        let (start, stop, tolerance) = experiment;
+        extra.initialize(start, stop, tolerance)?;
+        Ok(extra)
+    }
+
+    /// Whether perturbed runs may go to other instances of the FMU: its state
+    /// can be serialised and it may be instantiated more than once.
+    pub(crate) fn can_run_in_parallel(&self) -> bool {
+        let cs = &self.fmu.model_description().co_simulation;
+        cs.can_get_and_set_fmu_state
+            && cs.can_serialize_fmu_state
+            && !cs.can_be_instantiated_only_once_per_process
+    }
+
+    /// Serialise the state saved by [`save_state`](Self::save_state) into `out`
+    /// (its capacity is reused).
+    pub(crate) fn serialize_saved(&mut self, out: &mut Vec<u8>) -> Result<(), MasterError> {
+        let state = self
+            .state
+            .as_ref()
+            .expect("serialize_saved is only called after save_state");
+        self.instance.serialize_fmu_state_into(state, out)?;
+        Ok(())
+    }
+
+    /// Set the state from bytes of [`serialize_saved`](Self::serialize_saved)
+    /// (of another instance of the same FMU) and keep it as the saved state.
+    pub(crate) fn load_serialized(&mut self, bytes: &[u8]) -> Result<(), MasterError> {
+        // The previous state is freed (fmi2FreeFMUstate) when replaced.
+        self.state = Some(self.instance.deserialize_fmu_state(bytes)?);
+        Ok(())
+    }
+
+    fn instantiate_as(fmu: Fmu, spec: &InstanceSpec, name: &str) -> Result<Slave, MasterError> {
         let md = fmu.model_description();
         let cs = &md.co_simulation;
         let can_interpolate_inputs = cs.can_interpolate_inputs;
@@ -72,9 +122,9 @@ impl Slave {
                 recorded_vrs.push(v.value_reference);
             }
         }
-        let instance = fmu.instantiate(&spec.name, Default::default())?;
+        let instance = fmu.instantiate(name, Default::default())?;
         let mut slave = Slave {
-            name: spec.name.clone(),
+            name: name.to_string(),
             model_name,
             instance,
             fmu,
@@ -95,7 +145,7 @@ impl Slave {
             recorded_names,
             recorded_vrs,
             counters: InstanceCounters {
-                name: spec.name.clone(),
+                name: name.to_string(),
                 ..Default::default()
             },
             can_interpolate_inputs,

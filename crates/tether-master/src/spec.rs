@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::{MasterError, Method};
+use crate::{MasterError, Method, Parallel};
 
 /// A whole system file.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -71,6 +71,8 @@ pub struct CouplingSettings {
     /// A quantity whose magnitude exceeds this factor times its scale at the
     /// start (at least 1) counts as diverged.
     pub divergence_factor: f64,
+    /// Perturbed runs on other threads: auto, on or off (docs/algorithm.md).
+    pub parallel: Parallel,
 }
 
 impl Default for CouplingSettings {
@@ -80,6 +82,7 @@ impl Default for CouplingSettings {
             epsilon: 1e-5,
             max_condition: 1e12,
             divergence_factor: 1e6,
+            parallel: Parallel::Auto,
         }
     }
 }

@@ -54,6 +54,8 @@ pub struct RunStats {
     pub times: PhaseTimes,
     /// Total wall time of [`crate::Simulation::run`] and setup.
     pub wall: Duration,
+    /// Parallel perturbed runs: workers used and the measurements behind it.
+    pub parallel: crate::ParallelInfo,
 }
 
 impl fmt::Display for RunStats {
@@ -79,6 +81,17 @@ impl fmt::Display for RunStats {
                 c.get_reals,
                 c.set_input_derivatives,
                 c.get_output_derivatives
+            )?;
+        }
+        let p = &self.parallel;
+        if p.workers > 0 || p.handoff > Duration::ZERO {
+            writeln!(
+                f,
+                "  parallel perturbed runs: {} worker(s)   hand-off {:.1} µs   predicted runs per step {:.1} µs sequential, {:.1} µs parallel",
+                p.workers,
+                p.handoff.as_secs_f64() * 1e6,
+                p.sequential.as_secs_f64() * 1e6,
+                p.parallel.as_secs_f64() * 1e6
             )?;
         }
         let t = &self.times;
