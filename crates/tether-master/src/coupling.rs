@@ -123,8 +123,6 @@ pub(crate) struct Variable {
 #[derive(Debug, Clone)]
 pub(crate) struct Port {
     pub unknown: usize,
-    /// (joint, condition, law component 0..12)
-    pub contributions: Vec<(usize, usize, usize)>,
 }
 
 /// A port found while resolving joints: slave, input value reference, column
@@ -185,24 +183,28 @@ impl Coupling {
                     let var = &self.variables[v];
                     view.unknown(var.unknown) - var.value.eval(view)
                 }
-                Row::Port(p) => {
-                    let port = &self.ports[p];
-                    let mut force = 0.0;
-                    for &(j, c, component) in &port.contributions {
-                        let joint = &self.joints[j];
-                        let (ki, kj) = joint.kinematics(view);
-                        let law = joint.conditions[c].law(&ki, &kj);
-                        force += view.unknown(joint.first_unknown + c) * law[component];
-                    }
-                    view.unknown(port.unknown) - force
-                }
+                // Port rows first accumulate Σ λ·law below.
+                Row::Port(_) => 0.0,
             };
         }
+        // One kinematics read and one force law per joint condition; each port
+        // sums its contributions in (joint, condition) order.
         for joint in &self.joints {
             let (ki, kj) = joint.kinematics(view);
+            let mut targets = joint.targets.iter().peekable();
             for (c, condition) in joint.conditions.iter().enumerate() {
                 out[joint.first_unknown + c] = condition.value(level, &ki, &kj);
+                if targets.peek().is_some_and(|t| t.0 == c) {
+                    let law = condition.law(&ki, &kj);
+                    let lambda = view.unknown(joint.first_unknown + c);
+                    while let Some(&(_, component, row)) = targets.next_if(|t| t.0 == c) {
+                        out[row] += lambda * law[component];
+                    }
+                }
             }
+        }
+        for port in &self.ports {
+            out[port.unknown] = view.unknown(port.unknown) - out[port.unknown];
         }
     }
 
@@ -261,16 +263,20 @@ impl Coupling {
         for (slave, vr, name, contributions) in port_specs {
             let m = coupling.unknowns.len();
             slaves[slave].add_input(vr, m, 1.0);
-            coupling.ports.push(Port {
-                unknown: m,
-                contributions,
-            });
+            for &(j, c, component) in &contributions {
+                coupling.joints[j].targets.push((c, component, m));
+            }
+            coupling.ports.push(Port { unknown: m });
             coupling.unknowns.push(Unknown {
                 name,
                 residual: None,
                 initial: InitialMultiplier::Consistent,
                 row: Row::Port(coupling.ports.len() - 1),
             });
+        }
+        for joint in &mut coupling.joints {
+            // Stable: each port keeps its contributions in condition order.
+            joint.targets.sort_by_key(|t| t.0);
         }
         check_capabilities(slaves, method, order)?;
         for slave in slaves.iter_mut() {
@@ -503,6 +509,7 @@ impl Coupling {
         }
         let [side_i, side_j]: [Side; 2] = sides.try_into().expect("two sides");
         self.joints.push(Joint {
+            targets: Vec::new(),
             sides: [side_i, side_j],
             conditions,
             first_unknown: first,

@@ -301,6 +301,9 @@ pub(crate) struct Joint {
     pub conditions: Vec<Condition>,
     /// Index of the first multiplier among the unknowns (one per condition).
     pub first_unknown: usize,
+    /// Force-port rows its conditions load: (condition, law component, row),
+    /// sorted by condition.
+    pub targets: Vec<(usize, usize, usize)>,
 }
 
 impl Joint {
