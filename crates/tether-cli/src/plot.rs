@@ -76,13 +76,25 @@ pub fn draw(tables: &[Table], columns: &[String], title: &str, out: &Path) -> Re
     Ok(())
 }
 
+/// Small files: every column. Otherwise the multipliers and residuals of
+/// constraints (`c.lambda`, `c.g`) and joints (`j.lambda[k]`, `j.g[k]`), plus
+/// outputs named like angles or energies of mechanisms (`*.phi`, `*.E`).
 fn default_columns(t: &Table) -> Vec<String> {
     if t.columns.len() <= 8 {
         return t.columns.clone();
     }
+    let base = |c: &str| -> String {
+        match c.rfind('[') {
+            Some(i) if c.ends_with(']') => c[..i].to_string(),
+            _ => c.to_string(),
+        }
+    };
     t.columns
         .iter()
-        .filter(|c| c.ends_with(".lambda") || c.ends_with(".g"))
+        .filter(|c| {
+            let b = base(c);
+            b.ends_with(".lambda") || b.ends_with(".g") || b.ends_with(".phi") || b.ends_with(".E")
+        })
         .cloned()
         .collect()
 }
