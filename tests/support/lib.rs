@@ -1,4 +1,5 @@
 //! Shared helpers for the integration tests in tests/.
 
+pub mod faulty;
 pub mod fmi;
 pub mod fmpy;

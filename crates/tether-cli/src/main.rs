@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod info;
+mod interrupt;
 mod run;
 mod simulate;
 
@@ -53,7 +54,17 @@ fn main() -> ExitCode {
         Err(e) => {
             let message = format!("{e:#}").replace('\n', " ");
             eprintln!("error: {message}");
-            ExitCode::FAILURE
+            let interrupted = e.chain().any(|cause| {
+                matches!(
+                    cause.downcast_ref::<tether_master::MasterError>(),
+                    Some(tether_master::MasterError::Interrupted { .. })
+                )
+            });
+            if interrupted {
+                ExitCode::from(interrupt::EXIT_CODE)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

@@ -51,6 +51,7 @@ pub struct Args {
 }
 
 pub fn main(args: Args) -> Result<()> {
+    crate::interrupt::install()?;
     let mut spec = SystemSpec::from_file(&args.system)?;
     apply_overrides(&mut spec, &args)?;
     let out = match &args.out {
@@ -81,7 +82,10 @@ pub fn main(args: Args) -> Result<()> {
             }
         }
     };
-    let outcome = sim.run(&mut [&mut recorder], &mut progress);
+    let outcome = sim.run(
+        &mut [&mut recorder, &mut crate::interrupt::Watch],
+        &mut progress,
+    );
     if let Some(bar) = &bar {
         bar.finish_and_clear();
     }

@@ -194,6 +194,17 @@ pub enum Error {
         operation: &'static str,
     },
 
+    /// A second instance of a model that declares `canBeInstantiatedOnlyOncePerProcess`.
+    #[error("model '{model}' declares canBeInstantiatedOnlyOncePerProcess=\"true\": cannot create instance '{instance}' while instance '{existing}' exists in this process")]
+    OnlyOncePerProcess {
+        /// The model name.
+        model: String,
+        /// The instance that was refused.
+        instance: String,
+        /// The live instance of the same model (same GUID).
+        existing: String,
+    },
+
     /// `fmi2Instantiate` returned NULL.
     #[error("fmi2Instantiate failed for instance '{instance}' of model '{model}'")]
     InstantiationFailed {
