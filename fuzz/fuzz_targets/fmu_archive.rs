@@ -41,9 +41,13 @@ fuzz_target!(|data: &[u8]| {
         }
     }
     // Every extraction directory is gone once the Fmu (or the error) is dropped.
-    let left = std::fs::read_dir(dir.join("tmp")).expect("read the scratch tmp").count();
+    let left = std::fs::read_dir(dir.join("tmp"))
+        .expect("read the scratch tmp")
+        .count();
     assert_eq!(left, 0, "an extraction directory was left behind");
     // Nothing escaped next to the input (a zip-slip entry would land here or above).
-    let beside = std::fs::read_dir(dir).expect("read the scratch directory").count();
+    let beside = std::fs::read_dir(dir)
+        .expect("read the scratch directory")
+        .count();
     assert_eq!(beside, 2, "something was written next to the archive");
 });

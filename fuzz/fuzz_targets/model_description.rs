@@ -10,7 +10,9 @@ fuzz_target!(|data: &[u8]| {
         Ok(md) => {
             // Every variable can be found by its own name and by its FMI index.
             for (i, v) in md.model_variables.iter().enumerate() {
-                let found = md.variable(&v.name).expect("a parsed variable is found by name");
+                let found = md
+                    .variable(&v.name)
+                    .expect("a parsed variable is found by name");
                 assert_eq!(found.value_reference, v.value_reference);
                 assert!(md.variable_by_index(i + 1).is_some());
             }
