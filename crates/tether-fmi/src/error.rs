@@ -60,7 +60,8 @@ pub enum Error {
     },
 
     /// An archive entry cannot be extracted safely for another reason (encryption,
-    /// compression method other than stored/deflate, duplicate name, NUL byte in the name).
+    /// compression method other than stored/deflate, duplicate name, control character
+    /// in the name).
     #[error("FMU archive '{}' has entry '{entry}' that cannot be extracted: {reason}", archive.display())]
     UnsupportedEntry {
         /// The archive.
