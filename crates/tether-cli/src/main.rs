@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod compare;
 mod info;
+mod interrupt;
 mod plot;
 mod run;
 mod settings;
@@ -70,7 +71,17 @@ fn main() -> ExitCode {
         Err(e) => {
             let message = format!("{e:#}").replace('\n', " ");
             eprintln!("error: {message}");
-            ExitCode::FAILURE
+            let interrupted = e.chain().any(|cause| {
+                matches!(
+                    cause.downcast_ref::<tether_master::MasterError>(),
+                    Some(tether_master::MasterError::Interrupted { .. })
+                )
+            });
+            if interrupted {
+                ExitCode::from(interrupt::EXIT_CODE)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

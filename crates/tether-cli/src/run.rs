@@ -32,6 +32,7 @@ pub struct Args {
 }
 
 pub fn main(args: Args) -> Result<()> {
+    crate::interrupt::install()?;
     let mut spec = SystemSpec::from_file(&args.system)?;
     args.settings.apply(&mut spec)?;
     let out = match &args.out {
@@ -63,7 +64,8 @@ pub fn main(args: Args) -> Result<()> {
         }
     };
     let mut memory = MemoryRecorder::default();
-    let mut observers: Vec<&mut dyn Observer> = vec![&mut recorder];
+    let mut watch = crate::interrupt::Watch;
+    let mut observers: Vec<&mut dyn Observer> = vec![&mut recorder, &mut watch];
     if args.plot.is_some() {
         observers.push(&mut memory);
     }

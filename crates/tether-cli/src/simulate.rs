@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use tether_fmi::{BaseType, Causality, Fmu};
-use tether_master::{apply_start_value, CsvRecorder, Observer, Sample, StartValue};
+use tether_master::{apply_start_value, CsvRecorder, MasterError, Observer, Sample, StartValue};
 
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
@@ -35,6 +35,7 @@ pub struct Args {
 }
 
 pub fn main(args: Args) -> Result<()> {
+    crate::interrupt::install()?;
     let fmu = Fmu::open(&args.fmu)?;
     let md = fmu.model_description().clone();
     let de = md.default_experiment.unwrap_or_default();
@@ -91,15 +92,7 @@ pub fn main(args: Args) -> Result<()> {
     let mut real_buf = vec![0.0; real.len()];
     let mut int_buf = vec![0; int.len()];
     let mut bool_buf = vec![false; boolean.len()];
-    let mut outcome = Ok(());
-    for n in 0..=steps {
-        let t = start + n as f64 * step;
-        if n > 0 {
-            if let Err(e) = instance.do_step(start + (n - 1) as f64 * step, step, true) {
-                outcome = Err(e);
-                break;
-            }
-        }
+    let mut record = |instance: &mut tether_fmi::Instance, n: u64| -> Result<()> {
         instance.get_real(&real_vrs, &mut real_buf)?;
         instance.get_integer(&int_vrs, &mut int_buf)?;
         instance.get_boolean(&bool_vrs, &mut bool_buf)?;
@@ -114,11 +107,31 @@ pub fn main(args: Args) -> Result<()> {
         }
         recorder.sample(Sample {
             step: n,
-            time: t,
+            time: start + n as f64 * step,
             values: &row,
         })?;
+        Ok(())
+    };
+    // Every failure after the header, the FMU's or ours, ends the CSV with its trailer.
+    let mut outcome = record(&mut instance, 0);
+    for n in 1..=steps {
+        if outcome.is_err() {
+            break;
+        }
+        if crate::interrupt::pending() {
+            outcome = Err(MasterError::Interrupted {
+                time: start + (n - 1) as f64 * step,
+                reason: crate::interrupt::REASON.into(),
+            }
+            .into());
+            break;
+        }
+        outcome = instance
+            .do_step(start + (n - 1) as f64 * step, step, true)
+            .map_err(anyhow::Error::from)
+            .and_then(|()| record(&mut instance, n));
     }
-    let failure = outcome.as_ref().err().map(|e| e.to_string());
+    let failure = outcome.as_ref().err().map(|e| format!("{e:#}"));
     recorder.finish(failure.as_deref())?;
     outcome.with_context(|| {
         format!(

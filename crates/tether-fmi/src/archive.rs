@@ -219,11 +219,13 @@ fn checked_relative_path(archive: &Path, name: &str) -> Result<PathBuf> {
         archive: archive.to_owned(),
         entry: name.to_owned(),
     };
-    if name.contains('\0') {
+    // A NUL or a newline in a name would truncate the path or split error messages
+    // (found by fuzzing); the name is shown escaped.
+    if name.chars().any(char::is_control) {
         return Err(Error::UnsupportedEntry {
             archive: archive.to_owned(),
             entry: name.escape_default().to_string(),
-            reason: "NUL byte in the name".into(),
+            reason: "control character in the name".into(),
         });
     }
     let unified = name.replace('\\', "/");
@@ -285,5 +287,12 @@ mod tests {
         assert!(matches!(rel("C:/x"), Err(Error::AbsoluteEntry { .. })));
         assert!(matches!(rel("\\x"), Err(Error::AbsoluteEntry { .. })));
         assert!(matches!(rel("a\0b"), Err(Error::UnsupportedEntry { .. })));
+        let err = rel("binaries/\nlinux64/x.so").unwrap_err();
+        assert!(matches!(err, Error::UnsupportedEntry { .. }), "{err:?}");
+        assert!(!err.to_string().contains('\n'), "{err}");
+        assert!(
+            err.to_string().contains("binaries/\\nlinux64/x.so"),
+            "{err}"
+        );
     }
 }

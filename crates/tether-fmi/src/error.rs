@@ -60,7 +60,8 @@ pub enum Error {
     },
 
     /// An archive entry cannot be extracted safely for another reason (encryption,
-    /// compression method other than stored/deflate, duplicate name, NUL byte in the name).
+    /// compression method other than stored/deflate, duplicate name, control character
+    /// in the name).
     #[error("FMU archive '{}' has entry '{entry}' that cannot be extracted: {reason}", archive.display())]
     UnsupportedEntry {
         /// The archive.
@@ -192,6 +193,17 @@ pub enum Error {
         capability: &'static str,
         /// The operation that needs it.
         operation: &'static str,
+    },
+
+    /// A second instance of a model that declares `canBeInstantiatedOnlyOncePerProcess`.
+    #[error("model '{model}' declares canBeInstantiatedOnlyOncePerProcess=\"true\": cannot create instance '{instance}' while instance '{existing}' exists in this process")]
+    OnlyOncePerProcess {
+        /// The model name.
+        model: String,
+        /// The instance that was refused.
+        instance: String,
+        /// The live instance of the same model (same GUID).
+        existing: String,
     },
 
     /// `fmi2Instantiate` returned NULL.

@@ -104,6 +104,12 @@ impl Fmu {
                 expected,
             });
         }
+        if model_description.co_simulation.needs_execution_tool {
+            log::warn!(
+                "FMU '{}' declares needsExecutionTool=\"true\": it needs an external tool that Tether does not provide or check; it may fail to instantiate",
+                origin.display()
+            );
+        }
         let library = Library::load(&so)?;
         Ok(Fmu {
             shared: Arc::new(FmuShared {
@@ -144,9 +150,18 @@ impl Fmu {
     /// Creates a co-simulation instance (`fmi2Instantiate` with the model description's
     /// GUID). The instance is in the *instantiated* state; call
     /// [`Instance::setup_experiment`] and the initialization-mode functions next.
+    ///
+    /// A model that declares `canBeInstantiatedOnlyOncePerProcess="true"` gets at most one
+    /// live instance per process, counted by GUID over every opened copy of it
+    /// ([`Error::OnlyOncePerProcess`] otherwise).
     pub fn instantiate(&self, instance_name: &str, options: InstanceOptions) -> Result<Instance> {
         let md = &self.shared.model_description;
-        let raw = RawComponent::fmi2Instantiate(
+        let once = if md.co_simulation.can_be_instantiated_only_once_per_process {
+            Some(OnceGuard::acquire(&md.guid, &md.model_name, instance_name)?)
+        } else {
+            None
+        };
+        let mut raw = RawComponent::fmi2Instantiate(
             Arc::clone(&self.shared.library),
             Arc::clone(&self.shared.dir),
             &InstantiateArgs {
@@ -158,9 +173,50 @@ impl Fmu {
                 logging_on: options.logging_on,
             },
         )?;
+        raw.once = once;
         Ok(Instance::new(
             Arc::new(Mutex::new(raw)),
             Arc::clone(&self.shared),
         ))
+    }
+}
+
+/// The live instances of models declaring `canBeInstantiatedOnlyOncePerProcess`:
+/// GUID → instance name.
+static ONCE_PER_PROCESS: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
+
+/// Marks the one live instance of a once-per-process model; released on drop.
+#[derive(Debug)]
+pub(crate) struct OnceGuard {
+    guid: String,
+}
+
+impl OnceGuard {
+    fn acquire(guid: &str, model: &str, instance: &str) -> Result<OnceGuard> {
+        let mut live = ONCE_PER_PROCESS
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, existing)) = live.iter().find(|(g, _)| g == guid) {
+            return Err(Error::OnlyOncePerProcess {
+                model: model.to_owned(),
+                instance: instance.to_owned(),
+                existing: existing.clone(),
+            });
+        }
+        live.push((guid.to_owned(), instance.to_owned()));
+        Ok(OnceGuard {
+            guid: guid.to_owned(),
+        })
+    }
+}
+
+impl Drop for OnceGuard {
+    fn drop(&mut self) {
+        let mut live = ONCE_PER_PROCESS
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(i) = live.iter().position(|(g, _)| *g == self.guid) {
+            live.swap_remove(i);
+        }
     }
 }

@@ -159,6 +159,14 @@ pub enum MasterError {
         /// The bound it crossed.
         limit: f64,
     },
+    /// An observer asked the run to stop (e.g. the user pressed Ctrl-C).
+    #[error("interrupted ({reason}) at t = {time}")]
+    Interrupted {
+        /// The last accepted macro time.
+        time: f64,
+        /// Why, e.g. `SIGINT`.
+        reason: String,
+    },
     /// An FMI call or FMU load failed.
     #[error(transparent)]
     Fmi(#[from] tether_fmi::Error),

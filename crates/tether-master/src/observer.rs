@@ -21,6 +21,11 @@ pub trait Observer {
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()>;
     /// Called once at the end; `failure` is the error that stopped the run, if any.
     fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()>;
+    /// Asked before every macro step: `Some(reason)` stops the run there with
+    /// [`crate::MasterError::Interrupted`] (results so far are kept). Default: never.
+    fn interrupt(&mut self) -> Option<String> {
+        None
+    }
 }
 
 /// Writes CSV: a `time` column, then one column per value. Numbers are written

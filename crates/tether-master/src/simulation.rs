@@ -251,6 +251,10 @@ impl Simulation {
         self.notify(observers)?;
         let outcome = (|| {
             while self.n < self.steps {
+                if let Some(reason) = observers.iter_mut().find_map(|o| o.interrupt()) {
+                    let time = self.time();
+                    return Err(MasterError::Interrupted { time, reason });
+                }
                 self.step()?;
                 self.notify(observers)?;
                 progress(self.n, self.steps);

@@ -1,6 +1,6 @@
 //! Applying start values (parameters, input starts) to an instance by name.
 
-use tether_fmi::{BaseType, Causality, Instance, ModelDescription, Variability};
+use tether_fmi::{BaseType, Causality, Instance, ModelDescription, Variability, VariableKind};
 
 use crate::coupling::describe;
 use crate::spec::StartValue;
@@ -32,6 +32,7 @@ pub fn apply_start_value(
         return Err(fail(format!("it is {} and cannot be set", describe(var))));
     }
     let vr = [var.value_reference];
+    check_range(&var.kind, value).map_err(fail)?;
     match (var.base_type(), value) {
         (BaseType::Real, StartValue::Real(x)) => instance.set_real(&vr, &[*x])?,
         (BaseType::Real, StartValue::Integer(i)) => instance.set_real(&vr, &[*i as f64])?,
@@ -43,6 +44,33 @@ pub fn apply_start_value(
         (BaseType::Boolean, StartValue::Boolean(b)) => instance.set_boolean(&vr, &[*b])?,
         (BaseType::String, StartValue::String(s)) => instance.set_string(&vr, &[s.as_str()])?,
         _ => return Err(fail(format!("the variable is {}", describe(var)))),
+    }
+    Ok(())
+}
+
+/// Refuses NaN/infinite Reals and values outside the variable's declared `min`/`max`
+/// before the FMU sees them (FMUs are not required to check, and many do not).
+fn check_range(kind: &VariableKind, value: &StartValue) -> Result<(), String> {
+    let (min, max, x) = match (kind, value) {
+        (VariableKind::Real(r), StartValue::Real(x)) => (r.attributes.min, r.attributes.max, *x),
+        (VariableKind::Real(r), StartValue::Integer(i)) => {
+            (r.attributes.min, r.attributes.max, *i as f64)
+        }
+        (VariableKind::Integer(v) | VariableKind::Enumeration(v), StartValue::Integer(i)) => (
+            v.attributes.min.map(f64::from),
+            v.attributes.max.map(f64::from),
+            *i as f64,
+        ),
+        _ => return Ok(()),
+    };
+    if !x.is_finite() {
+        return Err("not a finite number".into());
+    }
+    if let Some(min) = min.filter(|m| x < *m) {
+        return Err(format!("below the declared min = {min}"));
+    }
+    if let Some(max) = max.filter(|m| x > *m) {
+        return Err(format!("above the declared max = {max}"));
     }
     Ok(())
 }

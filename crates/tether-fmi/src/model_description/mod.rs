@@ -31,6 +31,13 @@ impl ModelDescription {
         parse_bytes(text.as_bytes(), file, file)
     }
 
+    /// Parses modelDescription.xml bytes (any encoding the importer accepts); errors
+    /// name the file `modelDescription.xml`.
+    pub fn from_bytes(bytes: &[u8]) -> Result<ModelDescription> {
+        let file = Path::new("modelDescription.xml");
+        parse_bytes(bytes, file, file)
+    }
+
     /// The variable called `name`, or [`Error::UnknownVariable`] with close matches.
     pub fn variable(&self, name: &str) -> Result<&ScalarVariable> {
         match self.by_name.get(name) {

@@ -48,6 +48,9 @@ pub(crate) struct RawComponent {
     _env: Box<LogEnv>,
     library: Arc<Library>,
     _dir: Arc<FmuDir>,
+    /// Held while the component lives when the model declares
+    /// `canBeInstantiatedOnlyOncePerProcess` (released after `fmi2FreeInstance`).
+    pub(crate) once: Option<crate::fmu::OnceGuard>,
 }
 
 // SAFETY: FMI 2.0 lets an instance be used from any thread as long as calls are not
@@ -137,6 +140,7 @@ impl RawComponent {
             _env: env,
             library,
             _dir: dir,
+            once: None,
         })
     }
 

@@ -1,0 +1,52 @@
+//! Ctrl-C (SIGINT), SIGTERM and SIGHUP: the first one asks the run to stop after the
+//! current macro step, so the CSV gets its `# incomplete` trailer, every FMU instance is
+//! freed and the FMU extraction directories are removed; the process then exits with
+//! code 130. A second signal exits at once (no cleanup).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use tether_master::{Observer, Sample};
+
+static SIGNALLED: AtomicBool = AtomicBool::new(false);
+
+/// What the error and the CSV trailer say stopped the run.
+pub const REASON: &str = "Ctrl-C or termination signal";
+
+/// The exit code of an interrupted run (128 + SIGINT).
+pub const EXIT_CODE: u8 = 130;
+
+/// Installs the handler (once per process).
+pub fn install() -> anyhow::Result<()> {
+    ctrlc::set_handler(|| {
+        if SIGNALLED.swap(true, Ordering::SeqCst) {
+            std::process::exit(i32::from(EXIT_CODE));
+        }
+    })
+    .map_err(|e| anyhow::anyhow!("cannot install the Ctrl-C handler: {e}"))
+}
+
+/// Whether a signal arrived.
+pub fn pending() -> bool {
+    SIGNALLED.load(Ordering::SeqCst)
+}
+
+/// An observer that records nothing and stops the run once a signal arrived.
+pub struct Watch;
+
+impl Observer for Watch {
+    fn start(&mut self, _columns: &[String]) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn sample(&mut self, _sample: Sample<'_>) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn finish(&mut self, _failure: Option<&str>) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn interrupt(&mut self) -> Option<String> {
+        pending().then(|| REASON.to_string())
+    }
+}

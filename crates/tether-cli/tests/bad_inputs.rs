@@ -1,0 +1,1041 @@
+//! The bad-input corpus: hostile and broken FMUs, mistyped system files, bad method
+//! parameters and FMUs that fail mid-run. Every case checks three things:
+//!
+//! 1. the exact error kind, from the library (`Fmu::open`, `SystemSpec` + `Simulation`);
+//! 2. the `tether` binary (`tether info FMU` or `tether run SYSTEM`) exits non-zero
+//!    with a last stderr line `error: …` that names the culprit, and never panics;
+//! 3. for failures mid-run, the CSV keeps every accepted step, flushed, and ends with
+//!    `# incomplete: <the error>`; no FMU extraction directory is left behind.
+//!
+//! Every FMU is real: archives are written here, binaries are the workspace oscillator
+//! or the faulty oscillator compiled from C at test time (tests/support/faulty.rs).
+//!
+//! Unknown *markers* (joints) are not covered yet: they arrive with the [[joint]] tables.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use tether_fmi::{Error, Fmu};
+use tether_master::{MasterError, MemoryRecorder, Simulation, SystemSpec};
+use tether_tests::faulty::{edited_oscillator, faulty_fmu, Capabilities};
+use tether_tests::fmi::{
+    compile_shared_library, model_description, oscillator_fmu, write_zip, zip_directory, Entry,
+};
+
+// ---------------------------------------------------------------- helpers
+
+fn tether(args: &[&str], dir: &Path) -> Output {
+    tether_env(args, dir, None)
+}
+
+/// Runs `tether` with `TMPDIR` (where FMUs are extracted) set to `tmp` if given.
+fn tether_env(args: &[&str], dir: &Path, tmp: Option<&Path>) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_tether"));
+    command.args(args).current_dir(dir);
+    if let Some(tmp) = tmp {
+        command.env("TMPDIR", tmp);
+    }
+    command.output().expect("run tether")
+}
+
+/// Asserts exit code 1, no panic, and a last stderr line `error: …` holding every
+/// fragment; returns that line.
+fn cli_error(out: &Output, fragments: &[&str]) -> String {
+    let text = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "exit code; stderr:\n{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    let line = text.lines().last().unwrap_or_default().to_string();
+    assert!(line.starts_with("error: "), "{text}");
+    for fragment in fragments {
+        assert!(line.contains(fragment), "{line:?} lacks {fragment:?}");
+    }
+    line
+}
+
+fn info_error(fmu: &Path, fragments: &[&str]) -> String {
+    let dir = fmu.parent().unwrap();
+    cli_error(&tether(&["info", fmu.to_str().unwrap()], dir), fragments)
+}
+
+fn open_err(path: &Path) -> Error {
+    match Fmu::open(path) {
+        Ok(_) => panic!("{} was accepted", path.display()),
+        Err(e) => e,
+    }
+}
+
+/// The error that keeps a system from starting (reading, validating, instantiating).
+fn setup_err(system: &Path) -> MasterError {
+    let result = SystemSpec::from_file(system).and_then(|spec| Simulation::new(&spec).map(drop));
+    match result {
+        Ok(()) => panic!("{} was accepted", system.display()),
+        Err(e) => e,
+    }
+}
+
+/// Runs a system in-process; returns the error that stopped it and what was recorded.
+fn run_err(system: &Path) -> (MasterError, MemoryRecorder) {
+    let spec = SystemSpec::from_file(system).expect("valid system file");
+    let mut sim = Simulation::new(&spec).expect("the system starts");
+    let mut recorder = MemoryRecorder::default();
+    let err = sim
+        .run(&mut [&mut recorder], &mut |_, _| {})
+        .expect_err("the run fails");
+    (err, recorder)
+}
+
+fn fmi(err: &MasterError) -> &Error {
+    match err {
+        MasterError::Fmi(e) => e,
+        other => panic!("expected an FMI error, got {other:?}"),
+    }
+}
+
+fn shown(path: &Path) -> String {
+    path.display().to_string()
+}
+
+fn with_description(dir: &Path, name: &str, xml: &str) -> PathBuf {
+    let path = dir.join(name);
+    write_zip(
+        &path,
+        &[Entry::File("modelDescription.xml", xml.as_bytes())],
+    );
+    path
+}
+
+fn cs_description() -> String {
+    model_description("2.0", "stub", true, false)
+}
+
+const OSCILLATOR_SYSTEM: &str = r#"
+name = "bad-input test"
+
+[experiment]
+start = 0.0
+stop = 0.1
+step = 1e-3
+
+[method]
+kind = "baumgarte"
+beta = 2e-3
+gamma = 1e-6
+
+[coupling]
+order = 0
+
+[[instance]]
+name = "mass1"
+fmu = "FMU1"
+parameters = { m = 1.0, c = 1000.0, d = 10.0, v0 = 100.0 }
+
+[[instance]]
+name = "mass2"
+fmu = "FMU2"
+parameters = { m = 2.0, c = 1000.0, d = 10.0, v0 = 100.0 }
+
+[[constraint]]
+name = "link"
+position = "mass2.x - mass1.x"
+velocity = "mass2.v - mass1.v"
+acceleration = "mass2.a - mass1.a"
+drives = "mass1.F - mass2.F"
+"#;
+
+/// Writes `<dir>/system.toml`: two coupled masses, `fmu2` for mass 2 (the oscillator
+/// for both when `None`), after `edit`.
+fn system_with(dir: &Path, fmu2: Option<&Path>, edit: impl Fn(String) -> String) -> PathBuf {
+    let osc = oscillator_fmu();
+    let text = OSCILLATOR_SYSTEM
+        .replace("FMU1", osc.to_str().unwrap())
+        .replace("FMU2", fmu2.unwrap_or(&osc).to_str().unwrap());
+    let path = dir.join("system.toml");
+    std::fs::write(&path, edit(text)).unwrap();
+    path
+}
+
+fn system(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {
+    system_with(dir, None, edit)
+}
+
+fn run_error(system: &Path, fragments: &[&str]) -> String {
+    let dir = system.parent().unwrap();
+    cli_error(&tether(&["run", system.to_str().unwrap()], dir), fragments)
+}
+
+/// Replaces `from` (which must occur) by `to`.
+fn swap(text: String, from: &str, to: &str) -> String {
+    assert!(text.contains(from), "{from:?} not in the system file");
+    text.replacen(from, to, 1)
+}
+
+// ---------------------------------------------------------------- archives
+
+#[test]
+fn not_a_zip() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("plain.fmu");
+    std::fs::write(&path, "this is not a zip archive").unwrap();
+    assert!(matches!(open_err(&path), Error::NotAnArchive { .. }));
+    info_error(&path, &[&shown(&path), "not an FMU archive"]);
+}
+
+#[test]
+fn an_empty_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.fmu");
+    std::fs::write(&path, b"").unwrap();
+    assert!(matches!(open_err(&path), Error::NotAnArchive { .. }));
+    info_error(&path, &[&shown(&path), "not an FMU archive"]);
+}
+
+#[test]
+fn a_truncated_zip() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("truncated.fmu");
+    let bytes = std::fs::read(oscillator_fmu()).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    assert!(matches!(open_err(&path), Error::NotAnArchive { .. }));
+    info_error(&path, &[&shown(&path), "not an FMU archive"]);
+}
+
+#[test]
+fn an_fmu_path_that_does_not_exist() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("missing.fmu");
+    assert!(matches!(open_err(&path), Error::Io { .. }));
+    info_error(&path, &[&shown(&path), "cannot access"]);
+}
+
+#[test]
+fn zip_slip_with_a_parent_entry() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("slip.fmu");
+    let name = format!("resources/../../tether-slip-{}", std::process::id());
+    write_zip(
+        &path,
+        &[
+            Entry::File("modelDescription.xml", cs_description().as_bytes()),
+            Entry::File(&name, b"owned"),
+        ],
+    );
+    assert!(matches!(open_err(&path), Error::EntryEscapes { .. }));
+    info_error(&path, &[&shown(&path), &name, "escapes"]);
+}
+
+#[test]
+fn zip_slip_with_an_absolute_entry() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("absolute.fmu");
+    write_zip(
+        &path,
+        &[
+            Entry::File("modelDescription.xml", cs_description().as_bytes()),
+            Entry::File("/tmp/tether-absolute-entry", b"x"),
+        ],
+    );
+    assert!(matches!(open_err(&path), Error::AbsoluteEntry { .. }));
+    info_error(
+        &path,
+        &[&shown(&path), "/tmp/tether-absolute-entry", "absolute"],
+    );
+}
+
+#[test]
+fn zip_slip_with_a_symlink_entry() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("symlink.fmu");
+    write_zip(
+        &path,
+        &[
+            Entry::File("modelDescription.xml", cs_description().as_bytes()),
+            Entry::Symlink("resources/shadow", "/etc/shadow"),
+        ],
+    );
+    assert!(matches!(open_err(&path), Error::SymlinkEntry { .. }));
+    info_error(&path, &[&shown(&path), "resources/shadow", "symbolic link"]);
+}
+
+/// Sets the uncompressed size of every central-directory entry to `size`.
+fn declare_size(path: &Path, size: u32) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let mut i = 0;
+    while i + 28 <= bytes.len() {
+        if bytes[i..i + 4] == [0x50, 0x4b, 0x01, 0x02] {
+            bytes[i + 24..i + 28].copy_from_slice(&size.to_le_bytes());
+        }
+        i += 1;
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn a_decompression_bomb_above_the_default_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bomb.fmu");
+    write_zip(&path, &[Entry::File("resources/bomb.bin", &[0u8; 4096])]);
+    // Declares 3.75 GiB, over the default 1 GiB budget: refused before any byte lands.
+    declare_size(&path, 0xF000_0000);
+    match open_err(&path) {
+        Error::ArchiveTooLarge { entry, .. } => assert_eq!(entry, "resources/bomb.bin"),
+        other => panic!("{other:?}"),
+    }
+    info_error(
+        &path,
+        &[
+            &shown(&path),
+            "resources/bomb.bin",
+            "4026531840",
+            "1073741824",
+        ],
+    );
+}
+
+#[test]
+fn an_entry_that_inflates_past_its_declared_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("liar.fmu");
+    write_zip(
+        &path,
+        &[Entry::File("resources/liar.bin", &vec![0u8; 1 << 20])],
+    );
+    declare_size(&path, 100);
+    assert!(matches!(open_err(&path), Error::UnsupportedEntry { .. }));
+    info_error(&path, &[&shown(&path), "resources/liar.bin"]);
+}
+
+// ---------------------------------------------------------------- model descriptions
+
+#[test]
+fn no_model_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nomd.fmu");
+    write_zip(
+        &path,
+        &[Entry::File("documentation/index.html", b"<html/>")],
+    );
+    assert!(matches!(
+        open_err(&path),
+        Error::MissingModelDescription { .. }
+    ));
+    info_error(&path, &[&shown(&path), "modelDescription.xml"]);
+}
+
+#[test]
+fn malformed_model_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = cs_description().replace("</ModelVariables>", "</ModelVariable>");
+    let line = 1 + xml
+        .lines()
+        .position(|l| l.contains("</ModelVariable>"))
+        .unwrap();
+    let path = with_description(dir.path(), "malformed.fmu", &xml);
+    match open_err(&path) {
+        Error::MalformedXml { line: l, .. } => assert_eq!(l, line),
+        other => panic!("{other:?}"),
+    }
+    info_error(
+        &path,
+        &[
+            &shown(&path),
+            "modelDescription.xml",
+            &format!("line {line}"),
+        ],
+    );
+}
+
+#[test]
+fn binary_garbage_as_model_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("garbage.fmu");
+    let garbage: Vec<u8> = (0..512u32).map(|i| (i * 97 % 251) as u8).collect();
+    write_zip(&path, &[Entry::File("modelDescription.xml", &garbage)]);
+    let err = open_err(&path);
+    assert!(
+        matches!(
+            err,
+            Error::MalformedXml { .. } | Error::InvalidModelDescription { .. }
+        ),
+        "{err:?}"
+    );
+    info_error(&path, &[&shown(&path), "modelDescription.xml"]);
+}
+
+#[test]
+fn model_description_violating_the_schema() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = cs_description().replace(r#"name="t" valueReference="1""#, r#"name="t""#);
+    let path = with_description(dir.path(), "novr.fmu", &xml);
+    assert!(matches!(
+        open_err(&path),
+        Error::InvalidModelDescription { line: 7, .. }
+    ));
+    info_error(
+        &path,
+        &["modelDescription.xml", "line 7", "'t'", "valueReference"],
+    );
+}
+
+#[test]
+fn fmi_1_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = r#"<?xml version="1.0"?>
+<fmiModelDescription fmiVersion="1.0" modelName="m" modelIdentifier="m" guid="{x}">
+  <ModelVariables/>
+  <Implementation><CoSimulation_StandAlone><Capabilities/></CoSimulation_StandAlone></Implementation>
+</fmiModelDescription>"#;
+    let path = with_description(dir.path(), "one.fmu", xml);
+    assert!(matches!(
+        open_err(&path),
+        Error::UnsupportedFmiVersion { .. }
+    ));
+    info_error(&path, &[&shown(&path), "FMI 1.0"]);
+}
+
+#[test]
+fn fmi_3_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = r#"<?xml version="1.0"?>
+<fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="{x}">
+  <CoSimulation modelIdentifier="m"/>
+  <ModelVariables><Float64 name="x" valueReference="0"/></ModelVariables>
+  <ModelStructure/>
+</fmiModelDescription>"#;
+    let path = with_description(dir.path(), "three.fmu", xml);
+    assert!(matches!(
+        open_err(&path),
+        Error::UnsupportedFmiVersion { .. }
+    ));
+    info_error(&path, &[&shown(&path), "FMI 3.0"]);
+}
+
+#[test]
+fn model_exchange_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = model_description("2.0", "stub", false, true);
+    let path = with_description(dir.path(), "me.fmu", &xml);
+    assert!(matches!(open_err(&path), Error::NotCoSimulation { .. }));
+    info_error(&path, &[&shown(&path), "model-exchange-only", "'stub'"]);
+}
+
+// ---------------------------------------------------------------- binaries
+
+#[test]
+fn no_binary_for_linux64() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = with_description(dir.path(), "nobinary.fmu", &cs_description());
+    assert!(matches!(open_err(&path), Error::MissingBinary { .. }));
+    info_error(&path, &["linux64", "binaries/linux64/stub.so", "'stub'"]);
+}
+
+#[test]
+fn a_binary_that_is_not_a_shared_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("notelf.fmu");
+    write_zip(
+        &path,
+        &[
+            Entry::File("modelDescription.xml", cs_description().as_bytes()),
+            Entry::File("binaries/linux64/stub.so", b"#!/bin/sh\necho not ELF\n"),
+        ],
+    );
+    assert!(matches!(open_err(&path), Error::LibraryLoad { .. }));
+    info_error(&path, &["cannot load FMU library", "stub.so"]);
+}
+
+#[test]
+fn a_binary_missing_fmi_functions() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("partial");
+    let binaries = root.join("binaries/linux64");
+    std::fs::create_dir_all(&binaries).unwrap();
+    std::fs::write(root.join("modelDescription.xml"), cs_description()).unwrap();
+    let source = r#"
+        const char *fmi2GetTypesPlatform(void) { return "default"; }
+        const char *fmi2GetVersion(void) { return "2.0"; }
+    "#;
+    compile_shared_library(&binaries, "stub", source, &[]);
+    let path = dir.path().join("partial.fmu");
+    zip_directory(&root, &path);
+    assert!(matches!(
+        open_err(&path),
+        Error::MissingSymbol {
+            symbol: "fmi2SetDebugLogging",
+            ..
+        }
+    ));
+    info_error(&path, &["fmi2SetDebugLogging", "stub.so"]);
+}
+
+// ---------------------------------------------------------------- system files
+
+#[test]
+fn a_system_file_that_is_not_toml() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| swap(t, "stop = 0.1", "stop = = 0.1"));
+    assert!(matches!(setup_err(&sys), MasterError::SystemFile { .. }));
+    run_error(&sys, &[&shown(&sys), "line"]);
+}
+
+#[test]
+fn a_system_file_with_an_unknown_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| {
+        swap(t, "stop = 0.1", "stop = 0.1\nstpe = 1e-3")
+    });
+    assert!(matches!(setup_err(&sys), MasterError::SystemFile { .. }));
+    run_error(&sys, &[&shown(&sys), "stpe"]);
+}
+
+#[test]
+fn a_system_file_naming_a_missing_fmu() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nowhere.fmu");
+    let sys = system_with(dir.path(), Some(&missing), |t| t);
+    assert!(matches!(fmi(&setup_err(&sys)), Error::Io { .. }));
+    run_error(&sys, &[&shown(&missing)]);
+}
+
+#[test]
+fn a_duplicate_instance_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| {
+        swap(t, "name = \"mass2\"", "name = \"mass1\"")
+    });
+    assert!(matches!(setup_err(&sys), MasterError::SystemFile { .. }));
+    run_error(&sys, &["'mass1'", "twice"]);
+}
+
+#[test]
+fn an_unknown_instance_in_a_constraint() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| {
+        swap(t, "position = \"mass2.x", "position = \"mass3.x")
+    });
+    assert!(matches!(
+        setup_err(&sys),
+        MasterError::UnknownInstance { .. }
+    ));
+    run_error(&sys, &["'mass3'", "'link'"]);
+}
+
+#[test]
+fn an_unknown_variable_in_a_constraint() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| {
+        swap(t, "mass2.v - mass1.v", "mass2.v - mass1.vv")
+    });
+    assert!(matches!(
+        fmi(&setup_err(&sys)),
+        Error::UnknownVariable { .. }
+    ));
+    run_error(&sys, &["'vv'", "did you mean 'v'"]);
+}
+
+#[test]
+fn an_unknown_parameter_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| swap(t, "m = 2.0", "mass = 2.0"));
+    assert!(matches!(
+        fmi(&setup_err(&sys)),
+        Error::UnknownVariable { .. }
+    ));
+    run_error(&sys, &["'mass'", "'oscillator'"]);
+}
+
+#[test]
+fn coupling_into_an_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| {
+        swap(t, "mass1.F - mass2.F", "mass1.F - mass2.x")
+    });
+    assert!(matches!(setup_err(&sys), MasterError::WrongVariable { .. }));
+    run_error(&sys, &["mass2.x", "output", "'drives'", "Real input"]);
+}
+
+#[test]
+fn a_constraint_on_an_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| {
+        swap(t, "mass2.x - mass1.x", "mass2.F - mass1.x")
+    });
+    assert!(matches!(setup_err(&sys), MasterError::WrongVariable { .. }));
+    run_error(&sys, &["mass2.F", "input", "Real output"]);
+}
+
+#[test]
+fn setting_an_output_as_a_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| {
+        swap(t, "v0 = 100.0 }", "v0 = 100.0, x = 1.0 }")
+    });
+    assert!(matches!(setup_err(&sys), MasterError::StartValue { .. }));
+    run_error(&sys, &["'mass1'", "x = 1", "output"]);
+}
+
+#[test]
+fn a_nan_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| swap(t, "c = 1000.0", "c = nan"));
+    assert!(matches!(setup_err(&sys), MasterError::StartValue { .. }));
+    run_error(&sys, &["'mass1'", "c = NaN", "not a finite number"]);
+}
+
+#[test]
+fn an_infinite_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| swap(t, "d = 10.0", "d = inf"));
+    assert!(matches!(setup_err(&sys), MasterError::StartValue { .. }));
+    run_error(&sys, &["'mass1'", "d = inf", "not a finite number"]);
+}
+
+#[test]
+fn a_parameter_below_its_declared_min() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| swap(t, "c = 1000.0", "c = -1000.0"));
+    assert!(matches!(setup_err(&sys), MasterError::StartValue { .. }));
+    run_error(
+        &sys,
+        &["'mass1'", "c = -1000", "below the declared min = 0"],
+    );
+}
+
+#[test]
+fn a_negative_mass_the_fmu_refuses() {
+    // m has no declared min; the oscillator itself refuses m <= 0 when it initializes.
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| swap(t, "m = 2.0", "m = -2.0"));
+    let err = setup_err(&sys);
+    assert!(
+        matches!(
+            fmi(&err),
+            Error::Failed {
+                function: "fmi2ExitInitializationMode",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    run_error(
+        &sys,
+        &["fmi2ExitInitializationMode", "fmi2Error", "'mass2'"],
+    );
+}
+
+// ---------------------------------------------------------------- method parameters
+
+fn invalid_parameter(edit: impl Fn(String) -> String, name: &str, fragments: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), edit);
+    match setup_err(&sys) {
+        MasterError::InvalidParameter { name: n, .. } => assert_eq!(n, name),
+        other => panic!("{other:?}"),
+    }
+    let mut all = vec![name];
+    all.extend_from_slice(fragments);
+    run_error(&sys, &all);
+}
+
+#[test]
+fn a_negative_beta() {
+    invalid_parameter(
+        |t| swap(t, "beta = 2e-3", "beta = -2e-3"),
+        "beta",
+        &["-0.002"],
+    );
+}
+
+#[test]
+fn a_polynomial_degree_above_two() {
+    invalid_parameter(
+        |t| swap(t, "order = 0", "order = 3"),
+        "order",
+        &["0, 1 or 2"],
+    );
+}
+
+#[test]
+fn a_zero_macro_step() {
+    invalid_parameter(|t| swap(t, "step = 1e-3", "step = 0.0"), "step", &["> 0"]);
+}
+
+#[test]
+fn a_nan_macro_step() {
+    invalid_parameter(|t| swap(t, "step = 1e-3", "step = nan"), "step", &["NaN"]);
+}
+
+#[test]
+fn a_stop_time_before_the_start() {
+    invalid_parameter(|t| swap(t, "stop = 0.1", "stop = -0.1"), "stop", &["-0.1"]);
+}
+
+#[test]
+fn a_finite_difference_increment_of_zero() {
+    invalid_parameter(
+        |t| swap(t, "order = 0", "order = 0\nepsilon = 0.0"),
+        "epsilon",
+        &["(0, 1)"],
+    );
+}
+
+#[test]
+fn an_infinite_initial_multiplier() {
+    invalid_parameter(
+        |t| {
+            swap(
+                t,
+                "drives = \"mass1.F - mass2.F\"",
+                "drives = \"mass1.F - mass2.F\"\ninitial = -inf",
+            )
+        },
+        "link.initial",
+        &["-inf"],
+    );
+}
+
+// ---------------------------------------------------------------- capabilities
+
+#[test]
+fn rollback_without_can_get_and_set_fmu_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = edited_oscillator(dir.path(), "nostate", |xml| {
+        xml.replace(
+            r#"canGetAndSetFMUstate="true""#,
+            r#"canGetAndSetFMUstate="false""#,
+        )
+    });
+    let sys = system_with(dir.path(), Some(&fmu), |t| t);
+    match setup_err(&sys) {
+        MasterError::MissingCapability { capability, .. } => {
+            assert_eq!(capability, "canGetAndSetFMUstate")
+        }
+        other => panic!("{other:?}"),
+    }
+    run_error(&sys, &["'mass2'", "canGetAndSetFMUstate", "baumgarte"]);
+}
+
+#[test]
+fn input_polynomials_without_can_interpolate_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = edited_oscillator(dir.path(), "nointerp", |xml| {
+        xml.replace(
+            r#"canInterpolateInputs="true""#,
+            r#"canInterpolateInputs="false""#,
+        )
+    });
+    let sys = system_with(dir.path(), Some(&fmu), |t| {
+        swap(t, "order = 0", "order = 1")
+    });
+    match setup_err(&sys) {
+        MasterError::MissingCapability { capability, .. } => {
+            assert_eq!(capability, "canInterpolateInputs")
+        }
+        other => panic!("{other:?}"),
+    }
+    run_error(&sys, &["'mass2'", "canInterpolateInputs", "k = 1"]);
+}
+
+#[test]
+fn two_instances_of_a_once_per_process_fmu() {
+    let dir = tempfile::tempdir().unwrap();
+    let caps = Capabilities {
+        only_once_per_process: true,
+        ..Capabilities::default()
+    };
+    let fmu = faulty_fmu(dir.path(), "once", caps);
+    let sys = system_with(dir.path(), Some(&fmu), |t| {
+        swap(t, "fmu = \"", &format!("fmu = \"{}\"\n#", fmu.display()))
+    });
+    match fmi(&setup_err(&sys)) {
+        Error::OnlyOncePerProcess {
+            instance, existing, ..
+        } => assert_eq!((instance.as_str(), existing.as_str()), ("mass2", "mass1")),
+        other => panic!("{other:?}"),
+    }
+    run_error(
+        &sys,
+        &[
+            "'faulty'",
+            "canBeInstantiatedOnlyOncePerProcess",
+            "'mass2'",
+            "'mass1'",
+        ],
+    );
+    // One instance is fine, and the slot is free again once it is dropped.
+    let one = Fmu::open(&fmu).unwrap();
+    drop(one.instantiate("first", Default::default()).unwrap());
+    drop(one.instantiate("again", Default::default()).unwrap());
+}
+
+// ---------------------------------------------------------------- failures mid-run
+
+#[test]
+fn a_singular_interface_jacobian() {
+    let dir = tempfile::tempdir().unwrap();
+    // g = x2 − x2 does not depend on the multiplier.
+    let sys = system(dir.path(), |t| {
+        let t = swap(t, "mass2.x - mass1.x", "mass2.x - mass2.x");
+        swap(t, "beta = 2e-3\ngamma = 1e-6", "")
+    });
+    let (err, _) = run_err(&sys);
+    assert!(
+        matches!(err, MasterError::SingularJacobian { .. }),
+        "{err:?}"
+    );
+    let csv = failed_run(&sys, &["singular interface Jacobian", "t = 0.001"]);
+    assert!(csv.trailer.starts_with("# incomplete: singular"));
+}
+
+/// A faulty oscillator as mass 2 that fails as told (`fail_in`: 0 doStep, 1 setFMUstate).
+fn faulty_system(dir: &Path, fail_status: i32, fail_in: i32) -> PathBuf {
+    let fmu = faulty_fmu(dir, "faulty", Capabilities::default());
+    system_with(dir, Some(&fmu), |t| {
+        swap(
+            t,
+            "m = 2.0, c = 1000.0, d = 10.0, v0 = 100.0",
+            &format!(
+                "m = 2.0, c = 1000.0, d = 10.0, v0 = 100.0, fail_time = 0.0505, fail_status = {fail_status}, fail_in = {fail_in}"
+            ),
+        )
+    })
+}
+
+/// What a failed CLI run left in its CSV.
+struct Csv {
+    rows: Vec<Vec<f64>>,
+    trailer: String,
+}
+
+/// Runs `tether run` with its own TMPDIR; checks the exit, the one-line error, that the
+/// CSV holds complete rows up to the time the error reports and ends with the error as
+/// trailer, and that no extraction directory remains.
+fn failed_run(system: &Path, fragments: &[&str]) -> Csv {
+    let dir = system.parent().unwrap();
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let csv_path = dir.join("out.csv");
+    let out = tether_env(
+        &[
+            "run",
+            system.to_str().unwrap(),
+            "--out",
+            csv_path.to_str().unwrap(),
+        ],
+        dir,
+        Some(&tmp),
+    );
+    let line = cli_error(&out, fragments);
+    check_results(&csv_path, &line, &tmp)
+}
+
+/// Checks a failed run's CSV against the CLI's error line and that `tmp` is empty.
+fn check_results(csv_path: &Path, line: &str, tmp: &Path) -> Csv {
+    let leftovers: Vec<_> = std::fs::read_dir(tmp).unwrap().collect();
+    assert!(leftovers.is_empty(), "left in TMPDIR: {leftovers:?}");
+    let text = std::fs::read_to_string(csv_path).unwrap();
+    assert!(text.ends_with('\n'), "flushed to the last byte");
+    let mut lines = text.lines();
+    let width = lines.next().unwrap().split(',').count();
+    let mut rows = Vec::new();
+    let mut trailer = String::new();
+    for l in lines {
+        assert!(trailer.is_empty(), "a line after the trailer: {l}");
+        if l.starts_with('#') {
+            trailer = l.to_string();
+        } else {
+            let row: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+            assert_eq!(row.len(), width, "complete row {l}");
+            rows.push(row);
+        }
+    }
+    assert!(trailer.starts_with("# incomplete: "), "{text}");
+    // The CLI line is "error: run stopped; results up to t = T kept in … : <reason>".
+    let reason = &trailer["# incomplete: ".len()..];
+    assert!(line.ends_with(reason), "{line:?} vs trailer {reason:?}");
+    let t: f64 = line
+        .split("results up to t = ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no time in {line:?}"));
+    assert_eq!(
+        rows.last().unwrap()[0],
+        t,
+        "last row is the last accepted step"
+    );
+    Csv { rows, trailer }
+}
+
+#[test]
+fn do_step_returns_discard_mid_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = faulty_system(dir.path(), 2, 0);
+    let (err, rec) = run_err(&sys);
+    assert!(
+        matches!(
+            fmi(&err),
+            Error::Discard {
+                function: "fmi2DoStep",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    assert_eq!(rec.times.last(), Some(&0.05));
+    let csv = failed_run(
+        &sys,
+        &["fmi2DoStep returned fmi2Discard", "'mass2'", "t=0.05"],
+    );
+    assert_eq!(csv.rows.len(), 51, "t = 0 … 0.05");
+}
+
+#[test]
+fn do_step_returns_error_mid_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = faulty_system(dir.path(), 3, 0);
+    let (err, _) = run_err(&sys);
+    assert!(
+        matches!(
+            fmi(&err),
+            Error::Failed {
+                function: "fmi2DoStep",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    let csv = failed_run(
+        &sys,
+        &["fmi2DoStep returned fmi2Error", "'mass2'", "t=0.05"],
+    );
+    assert_eq!(csv.rows.len(), 51);
+}
+
+#[test]
+fn do_step_returns_fatal_mid_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = faulty_system(dir.path(), 4, 0);
+    let (err, _) = run_err(&sys);
+    assert!(
+        matches!(
+            fmi(&err),
+            Error::Fatal {
+                function: "fmi2DoStep",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    let csv = failed_run(
+        &sys,
+        &["fmi2DoStep returned fmi2Fatal", "'mass2'", "t=0.05"],
+    );
+    assert_eq!(csv.rows.len(), 51);
+    assert!(csv.trailer.contains("fmi2Fatal"));
+}
+
+#[test]
+fn set_fmu_state_fails_mid_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = faulty_system(dir.path(), 3, 1);
+    let (err, _) = run_err(&sys);
+    assert!(
+        matches!(
+            fmi(&err),
+            Error::Failed {
+                function: "fmi2SetFMUstate",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    failed_run(&sys, &["fmi2SetFMUstate returned fmi2Error", "'mass2'"]);
+}
+
+#[test]
+fn set_fmu_state_is_fatal_mid_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = faulty_system(dir.path(), 4, 1);
+    let (err, _) = run_err(&sys);
+    assert!(
+        matches!(
+            fmi(&err),
+            Error::Fatal {
+                function: "fmi2SetFMUstate",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    failed_run(&sys, &["fmi2SetFMUstate returned fmi2Fatal", "'mass2'"]);
+}
+
+#[test]
+fn the_faulty_oscillator_runs_cleanly_when_told_not_to_fail() {
+    // The same FMU and system with the failure after the stop time: the run completes,
+    // so the failures above come from the injected status and nothing else.
+    let dir = tempfile::tempdir().unwrap();
+    let sys = faulty_system(dir.path(), 3, 0);
+    let text = std::fs::read_to_string(&sys).unwrap();
+    std::fs::write(&sys, text.replace("fail_time = 0.0505", "fail_time = 10.0")).unwrap();
+    let csv = dir.path().join("ok.csv");
+    let out = tether(
+        &["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().count(), 102);
+    assert!(!text.contains('#'));
+}
+
+// ---------------------------------------------------------------- Ctrl-C
+
+#[test]
+fn sigint_stops_the_run_keeps_the_results_and_removes_the_extractions() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| swap(t, "stop = 0.1", "stop = 1e4"));
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let csv = dir.path().join("long.csv");
+    let child = Command::new(env!("CARGO_BIN_EXE_tether"))
+        .args(["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()])
+        .current_dir(dir.path())
+        .env("TMPDIR", &tmp)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn tether");
+    // Wait until results are being written (the FMUs are extracted by then).
+    let started = std::time::Instant::now();
+    while std::fs::metadata(&csv).map(|m| m.len()).unwrap_or(0) == 0 {
+        assert!(started.elapsed().as_secs() < 120, "no results after 120 s");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    assert_eq!(
+        std::fs::read_dir(&tmp).unwrap().count(),
+        2,
+        "two extractions"
+    );
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("run kill");
+    assert!(status.success());
+    let out = child.wait_with_output().expect("wait for tether");
+    let text = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(130), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    let line = text.lines().last().unwrap().to_string();
+    assert!(
+        line.starts_with("error: ") && line.contains("interrupted (Ctrl-C or termination signal)"),
+        "{line}"
+    );
+    let csv = check_results(&csv, &line, &tmp);
+    assert!(csv.trailer.starts_with("# incomplete: interrupted"));
+    assert!(csv.rows.len() > 1);
+}
