@@ -1039,3 +1039,44 @@ fn sigint_stops_the_run_keeps_the_results_and_removes_the_extractions() {
     assert!(csv.trailer.starts_with("# incomplete: interrupted"));
     assert!(csv.rows.len() > 1);
 }
+
+// ---------------------------------------------------------------- joints
+
+/// The double pendulum example, edited, in `dir` with the FMU path made absolute.
+fn pendulum(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {
+    let fmu = tether_fmu_build::workspace_fmu("link").expect("package the link FMU");
+    let root = tether_fmu_build::workspace_root().expect("workspace root");
+    let text = std::fs::read_to_string(root.join("examples/double_pendulum.toml")).unwrap();
+    let text = text.replace("../target/fmus/link.fmu", &fmu.display().to_string());
+    let path = dir.join("pendulum.toml");
+    std::fs::write(&path, edit(text)).unwrap();
+    path
+}
+
+#[test]
+fn a_joint_naming_an_unknown_marker() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = pendulum(dir.path(), |t| {
+        swap(t, "i = \"link1.B\"", "i = \"link1.tip\"")
+    });
+    assert!(matches!(setup_err(&sys), MasterError::UnknownMarker { .. }));
+    run_error(&sys, &["joint 'hinge'", "'link1'", "'tip'", "A, B"]);
+}
+
+#[test]
+fn a_joint_of_an_unknown_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = pendulum(dir.path(), |t| {
+        swap(t, "kind = \"atpoint\"", "kind = \"hinge\"")
+    });
+    assert!(matches!(setup_err(&sys), MasterError::Joint { .. }));
+    run_error(&sys, &["joint 'hinge'", "unknown kind 'hinge'", "revolute"]);
+}
+
+#[test]
+fn a_spatial_joint_on_a_planar_marker_without_the_port() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = pendulum(dir.path(), |t| swap(t, "plane = \"xy\"", ""));
+    assert!(matches!(setup_err(&sys), MasterError::MissingPort { .. }));
+    run_error(&sys, &["joint 'hinge'", "'B.F[3]'", "'link1'"]);
+}
