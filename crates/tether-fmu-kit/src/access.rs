@@ -25,35 +25,53 @@ impl<M: Model> Instance<M> {
     }
 
     pub fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Outcome {
-        let slots = vrs
-            .iter()
-            .map(|&vr| self.slot(vr, "Real"))
-            .collect::<Outcome<Vec<_>>>()?;
-        let needs_model = slots
-            .iter()
-            .any(|s| matches!(s, Slot::Output(_) | Slot::State(_) | Slot::Derivative(_)));
-        let (y, dx) = if needs_model {
-            self.with_model(|model, d, u| {
-                let mut y = vec![0.0; M::DECLARATION.outputs.len()];
-                let mut dx = vec![0.0; d.states.len()];
-                model.outputs(d.time, &d.states, u, &mut y);
-                model.derivatives(d.time, &d.states, u, &mut dx);
-                (y, dx)
-            })?
-        } else {
-            (Vec::new(), Vec::new())
-        };
-        for (value, slot) in values.iter_mut().zip(slots) {
-            *value = match slot {
-                Slot::RealParameter(i) => self.data.reals[i],
-                Slot::Input(i) => self.data.inputs[i].value,
-                Slot::Output(i) => y[i],
-                Slot::State(i) => self.data.states[i],
-                Slot::Derivative(i) => dx[i],
-                Slot::IntegerParameter(_) | Slot::BooleanParameter(_) => 0.0,
-            };
+        let mut slots = std::mem::take(&mut self.scratch.slots);
+        let result = self.get_real_into(vrs, values, &mut slots);
+        self.scratch.slots = slots;
+        result
+    }
+
+    /// [`get_real`](Self::get_real) with a reused slot buffer; outputs and state
+    /// derivatives are evaluated only when asked for.
+    fn get_real_into(&mut self, vrs: &[u32], values: &mut [f64], slots: &mut Vec<Slot>) -> Outcome {
+        slots.clear();
+        for &vr in vrs {
+            slots.push(self.slot(vr, "Real")?);
         }
-        Ok(())
+        let wants_y = slots.iter().any(|s| matches!(s, Slot::Output(_)));
+        let wants_dx = slots.iter().any(|s| matches!(s, Slot::Derivative(_)));
+        let mut y = std::mem::take(&mut self.scratch.y);
+        let mut dx = std::mem::take(&mut self.scratch.dx);
+        let evaluated = if wants_y || wants_dx || slots.iter().any(|s| matches!(s, Slot::State(_)))
+        {
+            self.with_model(|model, d, u| {
+                if wants_y {
+                    y.resize(M::DECLARATION.outputs.len(), 0.0);
+                    model.outputs(d.time, &d.states, u, &mut y);
+                }
+                if wants_dx {
+                    dx.resize(d.states.len(), 0.0);
+                    model.derivatives(d.time, &d.states, u, &mut dx);
+                }
+            })
+        } else {
+            Ok(())
+        };
+        if evaluated.is_ok() {
+            for (value, &slot) in values.iter_mut().zip(slots.iter()) {
+                *value = match slot {
+                    Slot::RealParameter(i) => self.data.reals[i],
+                    Slot::Input(i) => self.data.inputs[i].value,
+                    Slot::Output(i) => y[i],
+                    Slot::State(i) => self.data.states[i],
+                    Slot::Derivative(i) => dx[i],
+                    Slot::IntegerParameter(_) | Slot::BooleanParameter(_) => 0.0,
+                };
+            }
+        }
+        self.scratch.y = y;
+        self.scratch.dx = dx;
+        evaluated
     }
 
     /// Parameters are `fixed`: settable until fmi2ExitInitializationMode.
@@ -73,7 +91,7 @@ impl<M: Model> Instance<M> {
 
     fn check_real(&self, vr: u32, value: f64) -> Outcome<Slot> {
         let slot = self.slot(vr, "Real")?;
-        let name = M::DECLARATION.name(slot);
+        let name = || M::DECLARATION.name(slot);
         let declared = match slot {
             Slot::RealParameter(i) => {
                 self.check_parameter_settable(slot)?;
@@ -82,7 +100,8 @@ impl<M: Model> Instance<M> {
             Slot::Input(i) => M::DECLARATION.inputs[i],
             _ => {
                 return Err(Failure::usage(format!(
-                    "{name} (value reference {vr}) cannot be set"
+                    "{} (value reference {vr}) cannot be set",
+                    name()
                 )))
             }
         };
@@ -90,7 +109,8 @@ impl<M: Model> Instance<M> {
         let above = declared.max.is_some_and(|m| value > m);
         if !value.is_finite() || below || above {
             return Err(Failure::usage(format!(
-                "{name} = {value} is outside [{}, {}]",
+                "{} = {value} is outside [{}, {}]",
+                name(),
                 declared.min.unwrap_or(f64::NEG_INFINITY),
                 declared.max.unwrap_or(f64::INFINITY)
             )));
@@ -101,22 +121,26 @@ impl<M: Model> Instance<M> {
     /// Setting an input resets its derivatives to 0 (the new value is held constant
     /// until fmi2SetRealInputDerivatives says otherwise).
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Outcome {
-        let slots = vrs
-            .iter()
-            .zip(values)
-            .map(|(&vr, &v)| self.check_real(vr, v))
-            .collect::<Outcome<Vec<_>>>()?;
-        for (slot, &value) in slots.into_iter().zip(values) {
-            match slot {
-                Slot::RealParameter(i) => {
-                    self.data.reals[i] = value;
-                    self.model = None;
+        let mut slots = std::mem::take(&mut self.scratch.slots);
+        slots.clear();
+        let checked = vrs.iter().zip(values).try_for_each(|(&vr, &v)| {
+            slots.push(self.check_real(vr, v)?);
+            Ok(())
+        });
+        if checked.is_ok() {
+            for (&slot, &value) in slots.iter().zip(values) {
+                match slot {
+                    Slot::RealParameter(i) => {
+                        self.data.reals[i] = value;
+                        self.model = None;
+                    }
+                    Slot::Input(i) => self.data.inputs[i] = InputJet::constant(value),
+                    _ => {}
                 }
-                Slot::Input(i) => self.data.inputs[i] = InputJet::constant(value),
-                _ => {}
             }
         }
-        Ok(())
+        self.scratch.slots = slots;
+        checked
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], values: &mut [i32]) -> Outcome {
@@ -192,8 +216,9 @@ impl<M: Model> Instance<M> {
         orders: &[i32],
         values: &[f64],
     ) -> Outcome {
-        let mut targets = Vec::with_capacity(vrs.len());
-        for ((&vr, &order), &value) in vrs.iter().zip(orders).zip(values) {
+        let mut targets = std::mem::take(&mut self.scratch.derivatives);
+        targets.clear();
+        let checked = vrs.iter().zip(orders).zip(values).try_for_each(|((&vr, &order), &value)| {
             let slot = self.slot(vr, "Real")?;
             let Slot::Input(i) = slot else {
                 return Err(Failure::usage(format!(
@@ -205,16 +230,20 @@ impl<M: Model> Instance<M> {
                 return Err(Failure::usage(format!("input derivative of order {order} = {value} is not supported (orders 1 and 2, finite values)")));
             }
             targets.push((i, order, value));
-        }
-        for (i, order, value) in targets {
-            let jet = &mut self.data.inputs[i];
-            if order == 1 {
-                jet.d1 = value
-            } else {
-                jet.d2 = value
+            Ok(())
+        });
+        if checked.is_ok() {
+            for &(i, order, value) in &targets {
+                let jet = &mut self.data.inputs[i];
+                if order == 1 {
+                    jet.d1 = value
+                } else {
+                    jet.d2 = value
+                }
             }
         }
-        Ok(())
+        self.scratch.derivatives = targets;
+        checked
     }
 
     pub fn get_real_output_derivatives(

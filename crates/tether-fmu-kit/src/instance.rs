@@ -73,6 +73,21 @@ pub struct Instance<M: Model> {
     fingerprint: u64,
     pub data: Snapshot,
     pub(crate) model: Option<M>,
+    /// Buffers reused by the value-access calls, so that the steady-state calls of a
+    /// co-simulation (get/set Real, input derivatives, doStep, get/set FMU state)
+    /// allocate nothing.
+    pub(crate) scratch: Scratch,
+}
+
+/// Per-instance work buffers (see [`Instance::scratch`]); taken out with
+/// `std::mem::take` while in use and put back afterwards.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    pub slots: Vec<Slot>,
+    pub u: Vec<f64>,
+    pub y: Vec<f64>,
+    pub dx: Vec<f64>,
+    pub derivatives: Vec<(usize, i32, f64)>,
 }
 
 impl<M: Model> Instance<M> {
@@ -87,6 +102,7 @@ impl<M: Model> Instance<M> {
             fingerprint: fingerprint::<M>(),
             data: initial_snapshot::<M>(),
             model: None,
+            scratch: Scratch::default(),
         }
     }
 
@@ -137,23 +153,36 @@ impl<M: Model> Instance<M> {
     /// Sends a message to the environment's logger. Errors and fatal errors are always
     /// sent; other messages only with logging on and their category enabled.
     pub fn log(&self, status: Status, message: &str) {
-        let category = match status {
+        if let (true, Some(logger)) = (self.logs(status), &self.logger) {
+            logger(status, LOG_CATEGORIES[Self::category(status)].0, message);
+        }
+    }
+
+    fn category(status: Status) -> usize {
+        match status {
             Status::Ok => 0,
             Status::Warning => 1,
             Status::Discard => 2,
             Status::Error => 3,
             Status::Fatal => 4,
-        };
-        let all = LOG_CATEGORIES.len() - 1;
-        let wanted = status as i32 >= Status::Error as i32
-            || (self.logging_on && (self.categories[category] || self.categories[all]));
-        if let (true, Some(logger)) = (wanted, &self.logger) {
-            logger(status, LOG_CATEGORIES[category].0, message);
         }
     }
 
-    fn log_event(&self, message: &str) {
-        self.log(Status::Ok, message);
+    /// Whether a message of this status would reach the logger (so that routine
+    /// messages are only formatted when somebody reads them).
+    fn logs(&self, status: Status) -> bool {
+        let all = LOG_CATEGORIES.len() - 1;
+        self.logger.is_some()
+            && (status as i32 >= Status::Error as i32
+                || (self.logging_on
+                    && (self.categories[Self::category(status)] || self.categories[all])))
+    }
+
+    /// Logs a routine event; `message` is only called when the event is logged.
+    fn log_event(&self, message: impl FnOnce() -> String) {
+        if self.logs(Status::Ok) {
+            self.log(Status::Ok, &message());
+        }
     }
 
     pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Outcome {
@@ -209,10 +238,12 @@ impl<M: Model> Instance<M> {
         self.data.step_base = self.data.time;
         self.data.step_size = 0.0;
         self.data.step_count = 0;
-        self.log_event(&format!(
-            "initialized at t = {}, states {:?}",
-            self.data.time, self.data.states
-        ));
+        self.log_event(|| {
+            format!(
+                "initialized at t = {}, states {:?}",
+                self.data.time, self.data.states
+            )
+        });
         Ok(())
     }
 
@@ -259,12 +290,15 @@ impl<M: Model> Instance<M> {
         f: impl FnOnce(&M, &Snapshot, &[f64]) -> T,
     ) -> Outcome<T> {
         self.ensure_model()?;
-        let mut u = vec![0.0; self.data.inputs.len()];
+        let mut u = std::mem::take(&mut self.scratch.u);
+        u.resize(self.data.inputs.len(), 0.0);
         eval_all(&self.data.inputs, 0.0, &mut u);
-        match &self.model {
+        let result = match &self.model {
             Some(model) => Ok(f(model, &self.data, &u)),
             None => Err(Failure::usage("model not built")),
-        }
+        };
+        self.scratch.u = u;
+        result
     }
 
     /// One communication step. The communication point must equal the FMU's time
@@ -318,7 +352,7 @@ impl<M: Model> Instance<M> {
             *jet = jet.shifted(new_time - t);
         }
         d.time = new_time;
-        self.log_event(&format!("step {t} -> {new_time} ({how})"));
+        self.log_event(|| format!("step {t} -> {new_time} ({how})"));
         Ok(())
     }
 
@@ -326,8 +360,22 @@ impl<M: Model> Instance<M> {
         if snapshot.shape() != Self::shape() {
             return Err(Failure::usage("FMU state does not fit this model"));
         }
+        // The model is a function of the parameters only; it is kept (with whatever it
+        // precomputed) unless the state brings other parameter values, or is from
+        // before the end of initialization, where building the model also sets the
+        // initial states.
+        let d = &self.data;
+        let same_model = d.reals == snapshot.reals
+            && d.integers == snapshot.integers
+            && d.booleans == snapshot.booleans
+            && !matches!(
+                snapshot.machine,
+                MachineState::Instantiated | MachineState::InitializationMode
+            );
         self.data.clone_from(snapshot);
-        self.model = None;
+        if !same_model {
+            self.model = None;
+        }
         Ok(())
     }
 }

@@ -21,7 +21,7 @@ pub const VERSION: u32 = 1;
 const HEADER_LEN: usize = 24;
 
 /// Everything that changes during a simulation.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug, PartialEq)]
 pub struct Snapshot {
     pub machine: MachineState,
     /// The FMU's current time (the next expected communication point).
@@ -38,6 +38,43 @@ pub struct Snapshot {
     pub booleans: Vec<bool>,
     pub inputs: Vec<InputJet>,
     pub states: Vec<f64>,
+}
+
+impl Clone for Snapshot {
+    fn clone(&self) -> Self {
+        Snapshot {
+            machine: self.machine,
+            time: self.time,
+            start_time: self.start_time,
+            stop_time: self.stop_time,
+            step_base: self.step_base,
+            step_size: self.step_size,
+            step_count: self.step_count,
+            reals: self.reals.clone(),
+            integers: self.integers.clone(),
+            booleans: self.booleans.clone(),
+            inputs: self.inputs.clone(),
+            states: self.states.clone(),
+        }
+    }
+
+    /// Field by field, so that `fmi2GetFMUstate` into an existing state and
+    /// `fmi2SetFMUstate` reuse the vectors' memory instead of allocating (the derived
+    /// `clone_from` would build a whole new snapshot).
+    fn clone_from(&mut self, source: &Self) {
+        self.machine = source.machine;
+        self.time = source.time;
+        self.start_time = source.start_time;
+        self.stop_time = source.stop_time;
+        self.step_base = source.step_base;
+        self.step_size = source.step_size;
+        self.step_count = source.step_count;
+        self.reals.clone_from(&source.reals);
+        self.integers.clone_from(&source.integers);
+        self.booleans.clone_from(&source.booleans);
+        self.inputs.clone_from(&source.inputs);
+        self.states.clone_from(&source.states);
+    }
 }
 
 /// The number of items of each kind a snapshot of one model has.

@@ -3,7 +3,7 @@
 //! for the oscillator) and the explicit baseline method (ALGORITHM.md §5, our
 //! reconstruction of the paper's ref. [16]).
 
-use std::time::Instant;
+use crate::stats::Lap;
 
 use crate::coupling::{RowLevel, View};
 use crate::polynomial::Taylor;
@@ -40,14 +40,13 @@ impl Simulation {
     /// One explicit macro step: hold u_N over [T_N, T_{N+1}], then compute
     /// u_{N+1} from the states at T_{N+1} so that μ² g̈ + 2μ ġ + g = 0 there.
     pub(crate) fn explicit_step(&mut self, mu: f64) -> Result<(), MasterError> {
-        let clock = Instant::now();
+        let mut lap = Lap::start();
         let (t, h) = (self.time(), self.experiment.step);
         for slave in self.slaves.iter_mut() {
             slave.do_step(t, h)?;
         }
         self.n += 1;
-        self.stats.times.predictor += clock.elapsed();
-        let clock = Instant::now();
+        self.stats.times.predictor += lap.split();
         let all = &mut self.work.feedthrough.unknowns;
         all.clear();
         all.extend(0..self.coupling.len());
@@ -57,7 +56,7 @@ impl Simulation {
         self.feedthrough_newton(Some(mu), self.time())?;
         self.set_constant_inputs()?;
         self.read_accepted()?;
-        self.stats.times.solve += clock.elapsed();
+        self.stats.times.solve += lap.split();
         Ok(())
     }
 

@@ -7,6 +7,7 @@ use crate::coupling::{Coupling, RowLevel, View};
 use crate::polynomial::{extrapolation, interpolation};
 use crate::simulation::{Simulation, Work};
 use crate::slave::Slave;
+use crate::stats::Lap;
 use crate::{MasterError, Method};
 
 impl Simulation {
@@ -19,10 +20,9 @@ impl Simulation {
         let degree_pred = k.min(self.n as usize);
         let degree_corr = k.min(self.n as usize + 1);
         let nu = self.coupling.len();
-        let step_clock = Instant::now();
+        let mut lap = Lap::start();
 
         // Step 1, predictor (eq. 56–58): extrapolated polynomials.
-        let clock = Instant::now();
         for m in 0..nu {
             self.work.polys[m] = extrapolation(&self.history[m], degree_pred, h);
             self.work.u_pred[m] = self.work.polys[m].at(h);
@@ -85,10 +85,9 @@ impl Simulation {
                 self.coupling.eval(level, &view, work.g[l].as_mut_slice());
             }
         }
-        self.stats.times.predictor += clock.elapsed();
+        self.stats.times.predictor += lap.split();
 
         // Step 2a, perturbed predictors (eq. 59–64): finite-difference columns.
-        let clock = Instant::now();
         if parallel {
             let pool = self.pool.as_mut().expect("parallel");
             for &(gi, s) in &pool.main_runs {
@@ -143,15 +142,13 @@ impl Simulation {
                 columns(sim, &mut self.work, &self.groups[gi], None);
             }
         }
-        self.stats.times.jacobian += clock.elapsed();
+        self.stats.times.jacobian += lap.split();
 
         // Step 2b, corrected unknowns (eq. 68 or eq. 73–76).
-        let clock = Instant::now();
         self.corrected_unknowns(self.time_at(self.n + 1))?;
-        self.stats.times.solve += clock.elapsed();
+        self.stats.times.solve += lap.split();
 
         // Step 3, corrector: repeat the step with interpolation polynomials.
-        let clock = Instant::now();
         for m in 0..nu {
             let corrected = self.work.corrected[m];
             self.work.polys[m] = interpolation(corrected, &self.history[m], degree_corr, h);
@@ -168,9 +165,9 @@ impl Simulation {
         }
         self.n += 1;
         self.read_accepted()?;
-        self.stats.times.corrector += clock.elapsed();
+        self.stats.times.corrector += lap.split();
         if let Some(pool) = self.pool.as_mut().filter(|p| p.timing(self.n - 1)) {
-            pool.record(self.n - 1, step_clock.elapsed());
+            pool.record(self.n - 1, lap.total());
             if let Some(keep) = pool.keep(self.n) {
                 self.stats.parallel = pool.info;
                 if !keep {

@@ -5,6 +5,8 @@
 //! the matrix exponential of the system augmented with the input polynomial, exact
 //! for inputs of degree ≤ 2.
 
+use std::cell::Cell;
+
 use nalgebra::{Matrix5, Vector5};
 use tether_fmu_kit::{
     export_fmu, Boolean, Declaration, DefaultExperiment, InputJet, Model, Output, Parameters, Real,
@@ -18,6 +20,11 @@ pub struct Oscillator {
     x0: f64,
     v0: f64,
     exact: bool,
+    /// The last step size's transition matrix exp(A h), keyed by the bits of h: a
+    /// co-simulation repeats one step size (the predictor, every perturbed run and the
+    /// corrector), so the exponential is computed once, not on every `fmi2DoStep`. The
+    /// model is rebuilt whenever a parameter changes, which drops the cache.
+    transition: Cell<Option<(u64, Matrix5<f64>)>>,
 }
 
 impl Oscillator {
@@ -37,6 +44,18 @@ impl Oscillator {
             0.0,    0.0,    0.0,     0.0, 0.0,
         );
         a
+    }
+
+    /// exp(A h), from the cache when h is the last step size.
+    fn transition(&self, h: f64) -> Matrix5<f64> {
+        match self.transition.get() {
+            Some((bits, phi)) if bits == h.to_bits() => phi,
+            _ => {
+                let phi = (self.augmented_matrix() * h).exp();
+                self.transition.set(Some((h.to_bits(), phi)));
+                phi
+            }
+        }
     }
 }
 
@@ -112,6 +131,7 @@ impl Model for Oscillator {
             x0: p.real("x0")?,
             v0: p.real("v0")?,
             exact: p.boolean("exact")?,
+            transition: Cell::new(None),
         })
     }
 
@@ -152,7 +172,7 @@ impl Model for Oscillator {
             return false;
         }
         let f = u[0];
-        let z = (self.augmented_matrix() * h).exp() * Vector5::new(x[0], x[1], f.value, f.d1, f.d2);
+        let z = self.transition(h) * Vector5::new(x[0], x[1], f.value, f.d1, f.d2);
         x.copy_from_slice(&[z[0], z[1]]);
         true
     }
