@@ -62,7 +62,29 @@ pub fn step<M: Model>(
         u: RefCell::new(vec![0.0; inputs.len()]),
     };
     let y0 = DVector::from_iterator(x.len() + 1, x.iter().copied().chain([0.0]));
-    let mut solver = Dop853::new(rhs, 0.0, h, h, y0, tolerance, tolerance);
+    let mut solver = match model.max_step().filter(|&max| max > 0.0 && max < h) {
+        // Dop853's defaults (safety 0.9, β 0, step factors 1/3..6, automatic first
+        // step, 100 000 steps, stiffness check every 1000), but at most `max` per step.
+        Some(max) => Dop853::from_param(
+            rhs,
+            0.0,
+            h,
+            h,
+            y0,
+            tolerance,
+            tolerance,
+            0.9,
+            0.0,
+            0.333,
+            6.0,
+            max,
+            0.0,
+            100_000,
+            1000,
+            OutputType::Sparse,
+        ),
+        None => Dop853::new(rhs, 0.0, h, h, y0, tolerance, tolerance),
+    };
     solver.set_output(OutputType::Sparse);
     solver
         .integrate()

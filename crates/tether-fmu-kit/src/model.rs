@@ -46,4 +46,11 @@ pub trait Model: Sized + 'static {
     fn exact_step(&self, _t: f64, _h: f64, _x: &mut [f64], _u: &[InputJet]) -> bool {
         false
     }
+
+    /// The largest internal step the numerical integrator may take, if the model
+    /// limits it (as a model exported with a fixed-rate solver does). `None`, the
+    /// default, leaves Dop853's step to its error control.
+    fn max_step(&self) -> Option<f64> {
+        None
+    }
 }

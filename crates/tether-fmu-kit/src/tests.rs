@@ -417,3 +417,69 @@ fn logging_honours_logging_on_and_categories_but_always_reports_errors() {
     assert!(log.borrow()[1]
         .starts_with("Error logStatusError fmi2SetDebugLogging: unknown log category"));
 }
+
+/// ẋ = 1 with a parameter-set limit on the integrator's step; counts right-hand
+/// side evaluations.
+struct Limited {
+    max_step: f64,
+    evaluations: std::cell::Cell<u32>,
+}
+
+impl Model for Limited {
+    const DECLARATION: Declaration = Declaration {
+        model_name: "limited",
+        model_identifier: "limited",
+        description: "x' = 1",
+        real_parameters: &[Real::new("max_step", 0.0).min(0.0)],
+        outputs: &[Output::new("x").depends_on(&["x"])],
+        states: &[State::new("x")],
+        ..Declaration::EMPTY
+    };
+
+    fn new(p: &Parameters) -> Result<Self, String> {
+        Ok(Limited {
+            max_step: p.real("max_step")?,
+            evaluations: Default::default(),
+        })
+    }
+    fn initial_states(&self, x: &mut [f64]) {
+        x[0] = 0.0;
+    }
+    fn derivatives(&self, _t: f64, _x: &[f64], _u: &[f64], dx: &mut [f64]) {
+        self.evaluations.set(self.evaluations.get() + 1);
+        dx[0] = 1.0;
+    }
+    fn outputs(&self, _t: f64, x: &[f64], _u: &[f64], y: &mut [f64]) {
+        y[0] = x[0];
+    }
+    fn max_step(&self) -> Option<f64> {
+        (self.max_step > 0.0).then_some(self.max_step)
+    }
+}
+
+#[test]
+fn max_step_limits_the_integrators_internal_step() {
+    let evaluations = |max_step: f64| {
+        let mut inst = Instance::<Limited>::new("limited", None, false);
+        let ok = |s| assert_eq!(s, Status::Ok);
+        ok(inst.call(Call::SetReal, |i| i.set_real(&[0], &[max_step])));
+        ok(inst.call(
+            Call::EnterInitializationMode,
+            Instance::enter_initialization_mode,
+        ));
+        ok(inst.call(
+            Call::ExitInitializationMode,
+            Instance::exit_initialization_mode,
+        ));
+        let before = inst.model.as_ref().unwrap().evaluations.get();
+        ok(inst.call(Call::DoStep, |i| i.do_step(0.0, 0.1)));
+        assert!((inst.data.states[0] - 0.1).abs() < 1e-15);
+        inst.model.as_ref().unwrap().evaluations.get() - before
+    };
+    let free = evaluations(0.0);
+    let limited = evaluations(1e-3);
+    // Dop853 takes 12 evaluations per step: at most 0.1 / 1e-3 = 100 steps' worth
+    // are forced, while x' = 1 alone is integrated in a few steps.
+    assert!(free < 200, "unlimited: {free} evaluations");
+    assert!(limited >= 100 * 11, "max_step 1e-3: {limited} evaluations");
+}

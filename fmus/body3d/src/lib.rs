@@ -107,8 +107,8 @@ macro_rules! marker_inputs {
     };
 }
 
-const fn concat_reals<const N: usize>(groups: [&[Real]; N]) -> [Real; 31] {
-    let mut out = [Real::new("", 0.0); 31];
+const fn concat_reals<const N: usize>(groups: [&[Real]; N]) -> [Real; 32] {
+    let mut out = [Real::new("", 0.0); 32];
     let mut k = 0;
     let mut g = 0;
     while g < N {
@@ -120,11 +120,11 @@ const fn concat_reals<const N: usize>(groups: [&[Real]; N]) -> [Real; 31] {
         }
         g += 1;
     }
-    assert!(k == 31, "the Real parameter count changed");
+    assert!(k == 32, "the Real parameter count changed");
     out
 }
 
-const REAL_PARAMETERS: [Real; 31] = concat_reals([
+const REAL_PARAMETERS: [Real; 32] = concat_reals([
     &[
         Real::new("m", 1.0)
             .unit("kg")
@@ -191,6 +191,10 @@ const REAL_PARAMETERS: [Real; 31] = concat_reals([
         "m",
         "Origin of marker B (body frame, from the CoM)"
     ),
+    &[Real::new("max_step", 0.0)
+        .min(0.0)
+        .unit("s")
+        .description("Largest internal integrator step (0: no limit), as in a model exported with a fixed-rate solver; makes a step costlier")],
 ]);
 
 /// The ground joint (`joint` parameter: 0 none, 1 spherical, 2 revolute).
@@ -225,6 +229,7 @@ pub struct Body3d {
     w0: Vector3<f64>,
     joint: GroundJoint,
     offsets: [Vector3<f64>; 2],
+    max_step: f64,
 }
 
 /// The body's motion at one instant (world frame unless named body).
@@ -474,7 +479,12 @@ impl Model for Body3d {
             w0,
             joint,
             offsets,
+            max_step: p.real("max_step")?,
         })
+    }
+
+    fn max_step(&self) -> Option<f64> {
+        (self.max_step > 0.0).then_some(self.max_step)
     }
 
     fn initial_states(&self, x: &mut [f64]) {
