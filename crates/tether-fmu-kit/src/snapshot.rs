@@ -62,18 +62,33 @@ impl Clone for Snapshot {
     /// `fmi2SetFMUstate` reuse the vectors' memory instead of allocating (the derived
     /// `clone_from` would build a whole new snapshot).
     fn clone_from(&mut self, source: &Self) {
-        self.machine = source.machine;
-        self.time = source.time;
-        self.start_time = source.start_time;
-        self.stop_time = source.stop_time;
-        self.step_base = source.step_base;
-        self.step_size = source.step_size;
-        self.step_count = source.step_count;
-        self.reals.clone_from(&source.reals);
-        self.integers.clone_from(&source.integers);
-        self.booleans.clone_from(&source.booleans);
-        self.inputs.clone_from(&source.inputs);
-        self.states.clone_from(&source.states);
+        // Exhaustive, so that a new field cannot be forgotten here.
+        let Snapshot {
+            machine,
+            time,
+            start_time,
+            stop_time,
+            step_base,
+            step_size,
+            step_count,
+            reals,
+            integers,
+            booleans,
+            inputs,
+            states,
+        } = source;
+        self.machine = *machine;
+        self.time = *time;
+        self.start_time = *start_time;
+        self.stop_time = *stop_time;
+        self.step_base = *step_base;
+        self.step_size = *step_size;
+        self.step_count = *step_count;
+        self.reals.clone_from(reals);
+        self.integers.clone_from(integers);
+        self.booleans.clone_from(booleans);
+        self.inputs.clone_from(inputs);
+        self.states.clone_from(states);
     }
 }
 
