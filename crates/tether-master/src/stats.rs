@@ -109,7 +109,7 @@ impl fmt::Display for RunStats {
 }
 
 /// Consecutive phase times from one clock read per phase boundary: a clock read
-/// costs 20–35 ns on the machines measured (docs/performance.md), a noticeable
+/// costs 30–33 ns on the machine measured (docs/performance.md), a noticeable
 /// part of a macro step of cheap FMUs, so phases share their boundaries instead
 /// of each reading the clock twice.
 pub(crate) struct Lap {
