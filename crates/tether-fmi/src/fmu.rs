@@ -174,10 +174,7 @@ impl Fmu {
             },
         )?;
         raw.once = once;
-        Ok(Instance::new(
-            Arc::new(Mutex::new(raw)),
-            Arc::clone(&self.shared),
-        ))
+        Ok(Instance::new(raw, Arc::clone(&self.shared)))
     }
 }
 

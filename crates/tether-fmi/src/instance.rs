@@ -1,21 +1,92 @@
 //! [`Instance`]: the safe co-simulation API of one FMU instance.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use crate::error::{Error, Result};
 use crate::fmu::FmuShared;
 use crate::model_description::{ModelDescription, ScalarVariable, ValueReference};
-use crate::raw::component::RawComponent;
+use crate::raw::component::{RawComponent, RawState};
 use crate::raw::{self, Status};
 
-/// The shared core of an instance: the raw component behind a mutex, so that
-/// [`FmuState`](crate::FmuState)s can keep it alive and free themselves after the
-/// `Instance` value is gone. `fmi2FreeInstance` runs when the last holder drops.
-pub(crate) type Core = Arc<Mutex<RawComponent>>;
+/// What an instance shares with its [`FmuState`](crate::FmuState)s.
+///
+/// The instance owns its component outright, so its calls take no lock (`&mut self`
+/// serialises them). A state dropped while the instance lives cannot call the FMU
+/// itself (the instance may be mid-call on another thread): it leaves its handle in
+/// `orphans` and raises `pending`, and the instance frees it with `fmi2FreeFMUstate`
+/// before its next call. When the `Instance` value goes while states remain, the
+/// component moves into `orphans`; the last state frees itself and then the component
+/// (`fmi2FreeInstance`).
+#[derive(Debug, Default)]
+pub(crate) struct Shared {
+    pending: AtomicBool,
+    orphans: Mutex<Orphans>,
+}
 
-/// Locks a core; a poisoned lock is still usable (no FMI call panics midway).
-pub(crate) fn lock(core: &Core) -> MutexGuard<'_, RawComponent> {
-    core.lock().unwrap_or_else(PoisonError::into_inner)
+#[derive(Debug, Default)]
+pub(crate) struct Orphans {
+    /// States dropped while the instance lives, to free before its next call.
+    dropped: Vec<RawState>,
+    /// The component, once the `Instance` value is gone and states remain.
+    component: Option<RawComponent>,
+    /// Live `FmuState` values of this instance.
+    states: usize,
+}
+
+impl Shared {
+    /// The orphans; a poisoned lock is still usable (no FMI call panics midway).
+    fn orphans(&self) -> MutexGuard<'_, Orphans> {
+        self.orphans.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Counts a new `FmuState`.
+    pub(crate) fn adopt_state(&self) {
+        self.orphans().states += 1;
+    }
+
+    /// A state of this instance is dropped: freed now if the instance is gone,
+    /// otherwise left for the instance to free before its next call.
+    pub(crate) fn drop_state(&self, state: &mut RawState) {
+        let mut orphans = self.orphans();
+        orphans.states -= 1;
+        let last = orphans.states == 0;
+        match orphans.component.as_mut() {
+            Some(component) => {
+                free_state(component, state);
+                if last {
+                    // fmi2FreeInstance after the last state.
+                    let component = orphans.component.take();
+                    drop(orphans);
+                    drop(component);
+                }
+            }
+            None => {
+                orphans.dropped.push(state.take());
+                self.pending.store(true, Ordering::Release);
+            }
+        }
+    }
+}
+
+/// `fmi2FreeFMUstate`, skipped after `fmi2Fatal` (no further call is allowed).
+fn free_state(component: &mut RawComponent, state: &mut RawState) {
+    if component.is_fatal() {
+        return;
+    }
+    if let Err(e) = component.fmi2FreeFMUstate(state) {
+        log::warn!(target: "tether_fmi::call", "{e}");
+    }
+}
+
+/// Frees the states dropped since the last call.
+#[cold]
+fn free_dropped(component: &mut RawComponent, shared: &Shared) {
+    let mut orphans = shared.orphans();
+    for mut state in orphans.dropped.drain(..) {
+        free_state(component, &mut state);
+    }
+    shared.pending.store(false, Ordering::Release);
 }
 
 /// Which status `fmi2Get*Status` reports (`fmi2StatusKind`).
@@ -51,19 +122,37 @@ impl StatusKind {
 /// `do_step`.
 #[derive(Debug)]
 pub struct Instance {
-    pub(crate) core: Core,
+    /// `None` only while dropping.
+    raw: Option<RawComponent>,
+    pub(crate) shared: Arc<Shared>,
     pub(crate) fmu: Arc<FmuShared>,
     name: Arc<str>,
 }
 
 impl Instance {
-    pub(crate) fn new(core: Core, fmu: Arc<FmuShared>) -> Instance {
-        let name = Arc::from(lock(&core).name());
-        Instance { core, fmu, name }
+    pub(crate) fn new(raw: RawComponent, fmu: Arc<FmuShared>) -> Instance {
+        let name = Arc::from(raw.name());
+        Instance {
+            raw: Some(raw),
+            shared: Arc::default(),
+            fmu,
+            name,
+        }
     }
 
-    pub(crate) fn lock(&self) -> MutexGuard<'_, RawComponent> {
-        lock(&self.core)
+    /// The component, for one FMI call: the states dropped since the last call are
+    /// freed first.
+    #[inline]
+    pub(crate) fn raw(&mut self) -> &mut RawComponent {
+        let raw = self.raw.as_mut().expect("the component lives until drop");
+        if self.shared.pending.load(Ordering::Acquire) {
+            free_dropped(raw, &self.shared);
+        }
+        raw
+    }
+
+    fn raw_ref(&self) -> &RawComponent {
+        self.raw.as_ref().expect("the component lives until drop")
     }
 
     /// The instance name given to `fmi2Instantiate`.
@@ -88,12 +177,12 @@ impl Instance {
 
     /// The current communication time as tracked by this instance.
     pub fn time(&self) -> f64 {
-        self.lock().time
+        self.raw_ref().time
     }
 
     /// Whether this FMU returned `fmi2Fatal` (every further call is refused).
     pub fn is_fatal(&self) -> bool {
-        self.lock().is_fatal()
+        self.raw_ref().is_fatal()
     }
 
     pub(crate) fn require(
@@ -115,7 +204,7 @@ impl Instance {
 
     /// `fmi2SetDebugLogging`.
     pub fn set_debug_logging(&mut self, logging_on: bool, categories: &[&str]) -> Result<()> {
-        self.lock().fmi2SetDebugLogging(logging_on, categories)
+        self.raw().fmi2SetDebugLogging(logging_on, categories)
     }
 
     /// `fmi2SetupExperiment`; the tracked time becomes `start`.
@@ -125,7 +214,7 @@ impl Instance {
         start: f64,
         stop: Option<f64>,
     ) -> Result<()> {
-        let mut raw = self.lock();
+        let raw = self.raw();
         raw.fmi2SetupExperiment(tolerance, start, stop)?;
         raw.time = start;
         Ok(())
@@ -133,52 +222,52 @@ impl Instance {
 
     /// `fmi2EnterInitializationMode`.
     pub fn enter_initialization_mode(&mut self) -> Result<()> {
-        self.lock().fmi2EnterInitializationMode()
+        self.raw().fmi2EnterInitializationMode()
     }
 
     /// `fmi2ExitInitializationMode`.
     pub fn exit_initialization_mode(&mut self) -> Result<()> {
-        self.lock().fmi2ExitInitializationMode()
+        self.raw().fmi2ExitInitializationMode()
     }
 
     /// `fmi2GetReal` into `out` (same length as `vrs`; no allocation).
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
-        self.lock().fmi2GetReal(vrs, out)
+        self.raw().fmi2GetReal(vrs, out)
     }
 
     /// `fmi2GetInteger` into `out`.
     pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
-        self.lock().fmi2GetInteger(vrs, out)
+        self.raw().fmi2GetInteger(vrs, out)
     }
 
     /// `fmi2GetBoolean` into `out`.
     pub fn get_boolean(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
-        self.lock().fmi2GetBoolean(vrs, out)
+        self.raw().fmi2GetBoolean(vrs, out)
     }
 
     /// `fmi2GetString` into `out` (the strings' buffers are reused).
     pub fn get_string(&mut self, vrs: &[ValueReference], out: &mut [String]) -> Result<()> {
-        self.lock().fmi2GetString(vrs, out)
+        self.raw().fmi2GetString(vrs, out)
     }
 
     /// `fmi2SetReal`.
     pub fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        self.lock().fmi2SetReal(vrs, values)
+        self.raw().fmi2SetReal(vrs, values)
     }
 
     /// `fmi2SetInteger`.
     pub fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
-        self.lock().fmi2SetInteger(vrs, values)
+        self.raw().fmi2SetInteger(vrs, values)
     }
 
     /// `fmi2SetBoolean`.
     pub fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
-        self.lock().fmi2SetBoolean(vrs, values)
+        self.raw().fmi2SetBoolean(vrs, values)
     }
 
     /// `fmi2SetString`.
     pub fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
-        self.lock().fmi2SetString(vrs, values)
+        self.raw().fmi2SetString(vrs, values)
     }
 
     /// `fmi2SetRealInputDerivatives`: `values[i]` is the `orders[i]`-th time derivative
@@ -198,7 +287,7 @@ impl Instance {
             "canInterpolateInputs",
             "fmi2SetRealInputDerivatives",
         )?;
-        self.lock().fmi2SetRealInputDerivatives(vrs, orders, values)
+        self.raw().fmi2SetRealInputDerivatives(vrs, orders, values)
     }
 
     /// `fmi2GetRealOutputDerivatives` into `out`.
@@ -208,7 +297,7 @@ impl Instance {
         orders: &[i32],
         out: &mut [f64],
     ) -> Result<()> {
-        self.lock().fmi2GetRealOutputDerivatives(vrs, orders, out)
+        self.raw().fmi2GetRealOutputDerivatives(vrs, orders, out)
     }
 
     /// `fmi2GetDirectionalDerivative`: `dv_unknown = J · dv_known`. Needs
@@ -228,7 +317,7 @@ impl Instance {
             "providesDirectionalDerivative",
             "fmi2GetDirectionalDerivative",
         )?;
-        self.lock()
+        self.raw()
             .fmi2GetDirectionalDerivative(unknowns, knowns, dv_known, dv_unknown)
     }
 
@@ -240,7 +329,7 @@ impl Instance {
         step: f64,
         no_set_fmu_state_prior: bool,
     ) -> Result<()> {
-        let mut raw = self.lock();
+        let raw = self.raw();
         raw.time = current_communication_point;
         raw.fmi2DoStep(current_communication_point, step, no_set_fmu_state_prior)?;
         raw.time = current_communication_point + step;
@@ -249,42 +338,42 @@ impl Instance {
 
     /// `fmi2CancelStep`.
     pub fn cancel_step(&mut self) -> Result<()> {
-        self.lock().fmi2CancelStep()
+        self.raw().fmi2CancelStep()
     }
 
     /// `fmi2Terminate`.
     pub fn terminate(&mut self) -> Result<()> {
-        self.lock().fmi2Terminate()
+        self.raw().fmi2Terminate()
     }
 
     /// `fmi2Reset`: back to the instantiated state.
     pub fn reset(&mut self) -> Result<()> {
-        self.lock().fmi2Reset()
+        self.raw().fmi2Reset()
     }
 
     /// `fmi2GetStatus`.
     pub fn get_status(&mut self, kind: StatusKind) -> Result<Status> {
-        self.lock().fmi2GetStatus(kind.raw())
+        self.raw().fmi2GetStatus(kind.raw())
     }
 
     /// `fmi2GetRealStatus`.
     pub fn get_real_status(&mut self, kind: StatusKind) -> Result<f64> {
-        self.lock().fmi2GetRealStatus(kind.raw())
+        self.raw().fmi2GetRealStatus(kind.raw())
     }
 
     /// `fmi2GetIntegerStatus`.
     pub fn get_integer_status(&mut self, kind: StatusKind) -> Result<i32> {
-        self.lock().fmi2GetIntegerStatus(kind.raw())
+        self.raw().fmi2GetIntegerStatus(kind.raw())
     }
 
     /// `fmi2GetBooleanStatus`.
     pub fn get_boolean_status(&mut self, kind: StatusKind) -> Result<bool> {
-        self.lock().fmi2GetBooleanStatus(kind.raw())
+        self.raw().fmi2GetBooleanStatus(kind.raw())
     }
 
     /// `fmi2GetStringStatus`.
     pub fn get_string_status(&mut self, kind: StatusKind) -> Result<String> {
-        self.lock().fmi2GetStringStatus(kind.raw())
+        self.raw().fmi2GetStringStatus(kind.raw())
     }
 
     /// `fmi2GetStatus(fmi2DoStepStatus)`.
@@ -300,6 +389,25 @@ impl Instance {
     /// `fmi2GetBooleanStatus(fmi2Terminated)`.
     pub fn terminated(&mut self) -> Result<bool> {
         self.get_boolean_status(StatusKind::Terminated)
+    }
+}
+
+impl Drop for Instance {
+    fn drop(&mut self) {
+        let Some(mut raw) = self.raw.take() else {
+            return;
+        };
+        let mut orphans = self.shared.orphans();
+        for mut state in orphans.dropped.drain(..) {
+            free_state(&mut raw, &mut state);
+        }
+        if orphans.states > 0 {
+            // The last state frees the component.
+            orphans.component = Some(raw);
+        } else {
+            drop(orphans);
+            drop(raw);
+        }
     }
 }
 

@@ -19,9 +19,10 @@
 //! # Lifetimes
 //!
 //! An [`Instance`] shares the unpacked directory and the loaded library with its
-//! [`Fmu`] through `Arc`s, so dropping the `Fmu` is harmless. An [`FmuState`] shares
-//! the instance's core, so it may outlive the `Instance` value; `fmi2FreeInstance` runs
-//! when the last of them is dropped. After any call returns `fmi2Fatal`, every further
+//! [`Fmu`] through `Arc`s, so dropping the `Fmu` is harmless. An [`FmuState`] may
+//! outlive the `Instance` value: the instance owns its component (its calls take no
+//! lock), a state dropped while it lives is freed before the instance's next call, and
+//! `fmi2FreeInstance` runs when the instance and its last state are gone. After any call returns `fmi2Fatal`, every further
 //! call on every instance of that FMU is refused and nothing is freed (the standard
 //! forbids further calls).
 //!

@@ -2,19 +2,19 @@
 
 use std::sync::Arc;
 
-use crate::error::{Error, Result};
-use crate::instance::{lock, Core, Instance};
+use crate::error::Result;
+use crate::instance::{Instance, Shared};
 use crate::raw::component::RawState;
 
 /// A saved FMU state, tied to the instance that created it.
 ///
-/// The state holds the instance's core alive, so it may outlive the [`Instance`]
-/// value; `fmi2FreeFMUstate` runs on drop, `fmi2FreeInstance` after the last state and
-/// the instance are gone. Using it with another instance is an
+/// The state may outlive the [`Instance`] value: `fmi2FreeFMUstate` runs on drop (by
+/// the instance before its next call, or at once if the instance is gone), and
+/// `fmi2FreeInstance` after the last state and the instance are gone. Using it with another instance is an
 /// [`Error::ForeignState`], never undefined behaviour.
 #[derive(Debug)]
 pub struct FmuState {
-    core: Core,
+    shared: Arc<Shared>,
     raw: RawState,
     time: Option<f64>,
 }
@@ -34,26 +34,18 @@ impl FmuState {
 
 impl Drop for FmuState {
     fn drop(&mut self) {
-        let mut component = lock(&self.core);
-        if component.is_fatal() {
-            return;
-        }
-        if let Err(e) = component.fmi2FreeFMUstate(&mut self.raw) {
-            log::warn!(target: "tether_fmi::call", "{e}");
-        }
+        self.shared.drop_state(&mut self.raw);
     }
 }
 
 impl Instance {
-    fn owns(&self, function: &'static str, state: &FmuState) -> Result<()> {
-        if Arc::ptr_eq(&self.core, &state.core) {
-            Ok(())
-        } else {
-            Err(Error::ForeignState {
-                function,
-                instance: self.name().to_owned(),
-                owner: state.instance_name().to_owned(),
-            })
+    /// A new state of this instance, counted until dropped.
+    fn own(&self, raw: RawState, time: Option<f64>) -> FmuState {
+        self.shared.adopt_state();
+        FmuState {
+            shared: Arc::clone(&self.shared),
+            raw,
+            time,
         }
     }
 
@@ -83,13 +75,10 @@ impl Instance {
     /// `fmi2GetFMUstate` into a new state. Needs `canGetAndSetFMUstate`.
     pub fn get_fmu_state(&mut self) -> Result<FmuState> {
         self.require_get_set("fmi2GetFMUstate")?;
-        let mut component = self.lock();
+        let component = self.raw();
         let raw = component.fmi2GetFMUstate_new()?;
-        Ok(FmuState {
-            core: Arc::clone(&self.core),
-            raw,
-            time: Some(component.time),
-        })
+        let time = Some(component.time);
+        Ok(self.own(raw, time))
     }
 
     /// `fmi2GetFMUstate` into an existing state of this instance, letting the FMU reuse
@@ -97,8 +86,7 @@ impl Instance {
     pub fn update_fmu_state(&mut self, state: &mut FmuState) -> Result<()> {
         const F: &str = "fmi2GetFMUstate";
         self.require_get_set(F)?;
-        self.owns(F, state)?;
-        let mut component = self.lock();
+        let component = self.raw();
         component.fmi2GetFMUstate_update(&mut state.raw)?;
         state.time = Some(component.time);
         Ok(())
@@ -108,8 +96,7 @@ impl Instance {
     pub fn set_fmu_state(&mut self, state: &FmuState) -> Result<()> {
         const F: &str = "fmi2SetFMUstate";
         self.require_get_set(F)?;
-        self.owns(F, state)?;
-        let mut component = self.lock();
+        let component = self.raw();
         component.fmi2SetFMUstate(&state.raw)?;
         if let Some(t) = state.time {
             component.time = t;
@@ -129,8 +116,7 @@ impl Instance {
     pub fn serialize_fmu_state_into(&mut self, state: &FmuState, out: &mut Vec<u8>) -> Result<()> {
         const F: &str = "fmi2SerializeFMUstate";
         self.require_serialize(F)?;
-        self.owns(F, state)?;
-        let mut component = self.lock();
+        let component = self.raw();
         let size = component.fmi2SerializedFMUstateSize(&state.raw)?;
         out.clear();
         out.resize(size, 0);
@@ -142,11 +128,7 @@ impl Instance {
     /// the same FMU). Needs `canSerializeFMUstate`.
     pub fn deserialize_fmu_state(&mut self, bytes: &[u8]) -> Result<FmuState> {
         self.require_serialize("fmi2DeSerializeFMUstate")?;
-        let raw = self.lock().fmi2DeSerializeFMUstate(bytes)?;
-        Ok(FmuState {
-            core: Arc::clone(&self.core),
-            raw,
-            time: None,
-        })
+        let raw = self.raw().fmi2DeSerializeFMUstate(bytes)?;
+        Ok(self.own(raw, None))
     }
 }

@@ -25,13 +25,23 @@ pub(crate) struct RawState {
 }
 
 // SAFETY: an fmi2FMUstate is an opaque handle only ever passed back to its owning
-// component, whose calls are serialised by the safe layer's mutex.
+// component, whose calls the safe layer serialises (`&mut Instance`, or the lock of
+// the instance's orphans once the instance is gone).
 unsafe impl Send for RawState {}
 
 impl RawState {
     /// The name of the instance that created this state.
     pub(crate) fn owner_name(&self) -> &Arc<str> {
         &self.owner_name
+    }
+
+    /// Moves the handle out, leaving this value marked freed (NULL).
+    pub(crate) fn take(&mut self) -> RawState {
+        RawState {
+            ptr: std::mem::replace(&mut self.ptr, std::ptr::null_mut()),
+            owner: self.owner,
+            owner_name: Arc::clone(&self.owner_name),
+        }
     }
 }
 
@@ -54,7 +64,8 @@ pub(crate) struct RawComponent {
 }
 
 // SAFETY: FMI 2.0 lets an instance be used from any thread as long as calls are not
-// concurrent; the safe layer holds the component behind a `Mutex`.
+// concurrent; the safe layer calls it through `&mut Instance`, or under the lock of
+// the instance's orphans once the `Instance` value is gone.
 unsafe impl Send for RawComponent {}
 
 impl std::fmt::Debug for RawComponent {
@@ -163,26 +174,45 @@ impl RawComponent {
     }
 
     /// Refuses calls after fmi2Fatal, runs `call`, records a new fatal status and checks
-    /// the result: every FMI call of an instance goes through here.
+    /// the result: every FMI call of an instance goes through here. The common case (OK,
+    /// no trace logging) is a load, the call and a compare.
+    #[inline]
     fn call(
         &mut self,
         function: &'static str,
         call: impl FnOnce(&Fmi2Functions, fmi2Component) -> fmi2Status,
     ) -> Result<()> {
         if self.library.is_fatal() {
-            return Err(Error::FmuDead {
-                function,
-                instance: self.name.to_string(),
-                time: self.time,
-            });
+            return Err(self.dead(function));
         }
         let status = call(self.library.functions(), self.component);
+        if status == fmi2OK && log::max_level() < log::LevelFilter::Trace {
+            return Ok(());
+        }
+        self.finish(function, status)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn dead(&self, function: &'static str) -> Error {
+        Error::FmuDead {
+            function,
+            instance: self.name.to_string(),
+            time: self.time,
+        }
+    }
+
+    /// A status other than OK, or any status with trace logging on.
+    #[cold]
+    #[inline(never)]
+    fn finish(&self, function: &'static str, status: fmi2Status) -> Result<()> {
         if status == fmi2Fatal {
             self.library.mark_fatal();
         }
         check(self.site(function), status)
     }
 
+    #[inline]
     fn same_len(
         &self,
         function: &'static str,
@@ -193,32 +223,53 @@ impl RawComponent {
         if expected == got {
             Ok(())
         } else {
-            Err(Error::LengthMismatch {
-                function,
-                instance: self.name.to_string(),
-                what,
-                expected,
-                got,
-            })
+            Err(self.length_mismatch(function, what, expected, got))
         }
     }
 
+    #[cold]
+    #[inline(never)]
+    fn length_mismatch(
+        &self,
+        function: &'static str,
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    ) -> Error {
+        Error::LengthMismatch {
+            function,
+            instance: self.name.to_string(),
+            what,
+            expected,
+            got,
+        }
+    }
+
+    /// Whether `state` is a live state of this component.
+    #[inline]
     fn owned(&self, function: &'static str, state: &RawState) -> Result<()> {
+        if !state.ptr.is_null() && state.owner == self.id {
+            Ok(())
+        } else {
+            Err(self.not_owned(function, state))
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn not_owned(&self, function: &'static str, state: &RawState) -> Error {
         if state.ptr.is_null() {
-            return Err(Error::InvalidArgument {
+            Error::InvalidArgument {
                 function,
                 instance: self.name.to_string(),
                 message: "the FMU state was already freed".into(),
-            });
-        }
-        if state.owner == self.id {
-            Ok(())
+            }
         } else {
-            Err(Error::ForeignState {
+            Error::ForeignState {
                 function,
                 instance: self.name.to_string(),
                 owner: state.owner_name.to_string(),
-            })
+            }
         }
     }
 
@@ -382,8 +433,8 @@ impl Drop for RawComponent {
             return;
         }
         log::trace!(target: "tether_fmi::call", "fmi2FreeInstance({})", self.name);
-        // SAFETY: the component is live and freed exactly once, here; every state of it
-        // holds the component alive, so none outlives this call.
+        // SAFETY: the component is live and freed exactly once, here; it is dropped
+        // only after every state of it was freed (see `instance::Orphans`).
         unsafe { (self.library.functions().fmi2FreeInstance)(self.component) };
     }
 }
