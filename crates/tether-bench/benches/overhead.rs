@@ -147,8 +147,8 @@ fn bench_floor() {
             println!(
                 "{}  {order}  {}    {}    {:5.2}×   {:5.2}×",
                 mode(exact),
-                us(median(floors)),
-                us(median(tethers)),
+                us(median(floors.clone())),
+                us(median(tethers.clone())),
                 median(ratios),
                 minimum(&tethers) / minimum(&floors)
             );
