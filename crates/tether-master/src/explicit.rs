@@ -57,6 +57,7 @@ impl Simulation {
         self.set_constant_inputs()?;
         self.read_accepted()?;
         self.stats.times.solve += lap.split();
+        self.step_end = Some(lap.last());
         Ok(())
     }
 

@@ -166,6 +166,7 @@ impl Simulation {
         self.n += 1;
         self.read_accepted()?;
         self.stats.times.corrector += lap.split();
+        self.step_end = Some(lap.last());
         if let Some(pool) = self.pool.as_mut().filter(|p| p.timing(self.n - 1)) {
             pool.record(self.n - 1, lap.total());
             if let Some(keep) = pool.keep(self.n) {

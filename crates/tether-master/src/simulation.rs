@@ -39,6 +39,9 @@ pub struct Simulation {
     limits: Vec<f64>,
     steps: u64,
     pub(crate) stats: RunStats,
+    /// The clock reading that ended the last macro step's phases, for the
+    /// recording phase that follows it in [`Simulation::run`].
+    pub(crate) step_end: Option<Instant>,
     /// Workers for parallel perturbed runs (docs/algorithm.md), if any.
     pub(crate) pool: Option<Pool>,
 }
@@ -174,6 +177,7 @@ impl Simulation {
             columns,
             steps: spec.macro_steps(),
             stats: RunStats::default(),
+            step_end: None,
             pool,
         };
         sim.initial_multipliers()?;
@@ -245,6 +249,7 @@ impl Simulation {
         progress: &mut dyn FnMut(u64, u64),
     ) -> Result<RunStats, MasterError> {
         let clock = Instant::now();
+        self.step_end = None;
         for o in observers.iter_mut() {
             o.start(&self.columns)?;
         }
@@ -273,7 +278,9 @@ impl Simulation {
         if observers.is_empty() {
             return Ok(());
         }
-        let clock = Instant::now();
+        // The recording phase starts where the step's last phase ended (it
+        // includes assembling and checking the row): one clock read fewer.
+        let clock = self.step_end.take().unwrap_or_else(Instant::now);
         let sample = Sample {
             step: self.n,
             time: self.time(),

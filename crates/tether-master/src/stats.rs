@@ -37,7 +37,8 @@ pub struct PhaseTimes {
     pub solve: Duration,
     /// Corrector runs.
     pub corrector: Duration,
-    /// Observers (recording results).
+    /// Observers (recording results), including assembling and checking the
+    /// row they receive.
     pub recording: Duration,
 }
 
@@ -137,5 +138,10 @@ impl Lap {
     /// From the start to the last split.
     pub fn total(&self) -> Duration {
         self.last - self.start
+    }
+
+    /// The clock reading of the last split (the next phase's start).
+    pub fn last(&self) -> Instant {
+        self.last
     }
 }
