@@ -10,8 +10,9 @@ use crate::raw::component::RawState;
 ///
 /// The state may outlive the [`Instance`] value: `fmi2FreeFMUstate` runs on drop (by
 /// the instance before its next call, or at once if the instance is gone), and
-/// `fmi2FreeInstance` after the last state and the instance are gone. Using it with another instance is an
-/// [`Error::ForeignState`], never undefined behaviour.
+/// `fmi2FreeInstance` after the last state and the instance are gone. Using it with
+/// another instance is an [`Error::ForeignState`](crate::Error::ForeignState), never
+/// undefined behaviour.
 #[derive(Debug)]
 pub struct FmuState {
     shared: Arc<Shared>,
