@@ -2,16 +2,10 @@
 //! dropped before the others, and instances and states move across threads.
 
 use tether_fmi::{Fmu, InstanceOptions};
-use tether_tests::fmi::oscillator_fmu;
+use tether_tests::fmi::{self, oscillator_fmu};
 
 fn initialized(fmu: &Fmu, name: &str) -> tether_fmi::Instance {
-    let mut inst = fmu
-        .instantiate(name, InstanceOptions::default())
-        .expect("instantiate");
-    inst.setup_experiment(None, 0.0, None).expect("setup");
-    inst.enter_initialization_mode().expect("enter init");
-    inst.exit_initialization_mode().expect("exit init");
-    inst
+    fmi::initialized(fmu, name, InstanceOptions::default())
 }
 
 #[test]

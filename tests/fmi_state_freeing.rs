@@ -8,7 +8,7 @@
 use std::sync::Mutex;
 
 use tether_fmi::{Fmu, Instance, InstanceOptions};
-use tether_tests::fmi::oscillator_fmu;
+use tether_tests::fmi::{self, oscillator_fmu};
 
 /// The messages of target `tether_fmi::call`, in order.
 struct Calls(Mutex<Vec<String>>);
@@ -51,13 +51,7 @@ fn count(calls: &[String], function: &str) -> usize {
 
 fn initialized(fmu: &Fmu, name: &str) -> Instance {
     calls_on(name); // installs the logger
-    let mut inst = fmu
-        .instantiate(name, InstanceOptions::default())
-        .expect("instantiate");
-    inst.setup_experiment(None, 0.0, None).expect("setup");
-    inst.enter_initialization_mode().expect("enter init");
-    inst.exit_initialization_mode().expect("exit init");
-    inst
+    fmi::initialized(fmu, name, InstanceOptions::default())
 }
 
 #[test]

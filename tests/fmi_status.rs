@@ -2,23 +2,17 @@
 //! at test time (tests/fixtures/fmi/stub_fmu.c) that logs the calls it receives.
 
 use tether_fmi::{Error, Fmu, InstanceOptions, Status, StatusKind};
-use tether_tests::fmi::{assert_one_line_naming, stub_calls, stub_fmu_dir};
+use tether_tests::fmi::{self, assert_one_line_naming, stub_calls, stub_fmu_dir};
+
+fn initialized(fmu: &Fmu, name: &str) -> tether_fmi::Instance {
+    fmi::initialized(fmu, name, InstanceOptions::default().with_logging(true))
+}
 
 fn stub() -> (tempfile::TempDir, Fmu, std::path::PathBuf) {
     let dir = tempfile::tempdir().expect("tempdir");
     let (root, log) = stub_fmu_dir(dir.path());
     let fmu = Fmu::open(&root).expect("open the stub FMU");
     (dir, fmu, log)
-}
-
-fn initialized(fmu: &Fmu, name: &str) -> tether_fmi::Instance {
-    let mut instance = fmu
-        .instantiate(name, InstanceOptions::default().with_logging(true))
-        .expect("instantiate");
-    instance.setup_experiment(None, 0.0, None).expect("setup");
-    instance.enter_initialization_mode().expect("enter init");
-    instance.exit_initialization_mode().expect("exit init");
-    instance
 }
 
 #[test]

@@ -5,6 +5,19 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// An instance of `fmu` called `name`, set up at t = 0 and through initialization mode.
+pub fn initialized(
+    fmu: &tether_fmi::Fmu,
+    name: &str,
+    options: tether_fmi::InstanceOptions,
+) -> tether_fmi::Instance {
+    let mut instance = fmu.instantiate(name, options).expect("instantiate");
+    instance.setup_experiment(None, 0.0, None).expect("setup");
+    instance.enter_initialization_mode().expect("enter init");
+    instance.exit_initialization_mode().expect("exit init");
+    instance
+}
+
 /// The oscillator FMU from `fmus/oscillator`, built and packaged once per process.
 pub fn oscillator_fmu() -> PathBuf {
     tether_fmu_build::workspace_fmu("oscillator")
