@@ -94,10 +94,12 @@ fn system(method: &str, order: usize, pairs: usize) -> SystemSpec {
     SystemSpec::from_toml(&text).expect("valid system")
 }
 
-/// Allocations during macro steps 10..=100, with a CSV recorder attached.
-fn steady_state_allocations(spec: &SystemSpec) -> u64 {
+/// Allocations during macro steps 10..=100, with a CSV recorder attached and
+/// the phases timed or not.
+fn steady_state_allocations(spec: &SystemSpec, timed: bool) -> u64 {
     const WARM_UP: u64 = 10;
     let mut sim = Simulation::new(spec).expect("simulation");
+    sim.time_phases(timed);
     let mut csv = CsvRecorder::new(std::io::sink());
     let mut at_warm_up = None;
     let mut at_end = 0;
@@ -139,10 +141,13 @@ fn macro_steps_do_not_allocate_for_any_method() {
     let mut failures = Vec::new();
     for (name, method, orders) in cases {
         for &k in orders {
-            // One pair, and two pairs (a vector of multipliers, a 2 × 2 solve).
-            for pairs in [1, 2] {
-                let n = steady_state_allocations(&system(method, k, pairs));
-                eprintln!("{name}, k = {k}, {pairs} pair(s): {n} allocations in 90 steps");
+            // One pair, and two pairs (a vector of multipliers, a 2 × 2 solve),
+            // with and without phase timing.
+            for (pairs, timed) in [(1, false), (1, true), (2, false), (2, true)] {
+                let n = steady_state_allocations(&system(method, k, pairs), timed);
+                eprintln!(
+                    "{name}, k = {k}, {pairs} pair(s), phases timed {timed}: {n} allocations in 90 steps"
+                );
                 if n != 0 {
                     failures.push(format!("{name}, k = {k}, {pairs} pair(s): {n}"));
                 }
@@ -186,7 +191,7 @@ fn joint_macro_steps_do_not_allocate() {
             let mut spec = base.clone();
             spec.method = method;
             spec.experiment.stop = 0.1;
-            let n = steady_state_allocations(&spec);
+            let n = steady_state_allocations(&spec, false);
             eprintln!("{file}, {method}: {n} allocations in 90 steps");
             if n != 0 {
                 failures.push(format!("{file}, {method}: {n}"));

@@ -241,6 +241,54 @@ fn call_counts_per_step_match_the_algorithm() {
     );
 }
 
+/// Phase times are taken only when asked, and asking changes no result.
+#[test]
+fn phases_are_timed_only_when_asked() {
+    let spec = system(VARIANTS[0].1, 1, 1e-3, 0.2);
+    let run = |timed: bool| {
+        let mut sim = Simulation::new(&spec).unwrap();
+        sim.time_phases(timed);
+        let mut rec = MemoryRecorder::default();
+        let stats = sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
+        (rec, stats)
+    };
+    let (plain, untimed) = run(false);
+    let (timed_rec, timed) = run(true);
+    assert_eq!(plain.rows, timed_rec.rows, "timing changed the results");
+
+    let t = untimed.times;
+    assert!(!t.measured);
+    let zero = std::time::Duration::ZERO;
+    assert_eq!(
+        [t.predictor, t.jacobian, t.solve, t.corrector, t.recording],
+        [zero; 5]
+    );
+    assert!(t.setup > zero && untimed.wall > t.setup, "{untimed}");
+    assert!(
+        untimed.to_string().contains("(phases not timed)"),
+        "{untimed}"
+    );
+
+    let t = timed.times;
+    assert!(t.measured);
+    for (name, phase) in [
+        ("predictor", t.predictor),
+        ("jacobian", t.jacobian),
+        ("solve", t.solve),
+        ("corrector", t.corrector),
+        ("recording", t.recording),
+    ] {
+        assert!(phase > zero, "{name} not timed: {timed}");
+    }
+    let phases = t.setup + t.predictor + t.jacobian + t.solve + t.corrector + t.recording;
+    assert!(
+        phases <= timed.wall,
+        "phases {phases:?} > wall {:?}",
+        timed.wall
+    );
+    assert!(timed.to_string().contains("predictor"), "{timed}");
+}
+
 #[test]
 fn explicit_method_converges_with_order_at_least_one() {
     let method = "kind = \"explicit\"\nmu = 1e-2";

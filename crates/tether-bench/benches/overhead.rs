@@ -86,12 +86,13 @@ fn mode(exact: bool) -> &'static str {
 
 fn bench_floor() {
     println!("\n== Macro step against the C floor (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps) ==");
-    println!("FMU     k   C floor/step   Tether/step    ratio   ratio of minima   (medians of {} runs; λ_N identical bit for bit)", reps());
+    println!("FMU     k   C floor/step   Tether/step    ratio   ratio of minima   phases timed   (medians of {} runs; λ_N identical bit for bit)", reps());
     for exact in [true, false] {
         for order in [0, 1] {
             let case = Case::example(exact, order);
             let fmu = Fmu::open(&case.spec().instances[0].fmu).expect("open the FMU");
             let (mut floors, mut tethers, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+            let mut timed_ratios = Vec::new();
             for rep in 0..reps() {
                 let (mut sim, before) = fresh(&case);
                 let lambda0 = sim.unknowns()[0];
@@ -140,24 +141,31 @@ fn bench_floor() {
                         }
                     }
                 }
+                // The same steps with phase timing on (`tether run --timing`).
+                let (mut timed, _) = fresh(&case);
+                timed.time_phases(true);
+                let t_timed = time_steps(&mut timed, case.steps);
                 floors.push(c_step);
                 tethers.push(t);
                 ratios.push(t / c_step);
+                timed_ratios.push(t_timed / c_step);
             }
             println!(
-                "{}  {order}  {}    {}    {:5.2}×   {:5.2}×",
+                "{}  {order}  {}    {}    {:5.2}×   {:5.2}×            {:5.2}×",
                 mode(exact),
                 us(median(floors.clone())),
                 us(median(tethers.clone())),
                 median(ratios),
-                minimum(&tethers) / minimum(&floors)
+                minimum(&tethers) / minimum(&floors),
+                median(timed_ratios)
             );
         }
     }
     let clock = clock_read_ns();
     println!(
         "        on this machine: one clock read (Instant::now) {clock:.1} ns; per macro step \
-         Tether reads the clock 5 times (phase timers); its FMI calls take no lock"
+         Tether reads the clock 5 times when its phases are timed, otherwise never; \
+         its FMI calls take no lock"
     );
 }
 
@@ -244,8 +252,11 @@ fn bench_recording() {
     let path = dir.join("oscillator.csv");
     let (mut plain, mut recorded, mut phase) = (Vec::new(), Vec::new(), Vec::new());
     for rep in 0..reps() {
-        let run = |csv: bool| {
+        // Phase timing is off (the default) in the two runs compared, and on
+        // in a third that measures the observer phase from the inside.
+        let run = |csv: bool, timed: bool| {
             let mut sim = Simulation::new(&case.spec()).expect("simulation");
+            sim.time_phases(timed);
             let stats = if csv {
                 let file = std::fs::File::create(&path).expect("create the CSV file");
                 let mut rec = CsvRecorder::new(file);
@@ -258,15 +269,16 @@ fn bench_recording() {
             (wall, stats.times.recording.as_secs_f64() / steps)
         };
         let (a, b) = if rep % 2 == 0 {
-            let a = run(false);
-            (a, run(true))
+            let a = run(false, false);
+            (a, run(true, false))
         } else {
-            let b = run(true);
-            (run(false), b)
+            let b = run(true, false);
+            (run(false, false), b)
         };
+        let timed = run(true, true);
         plain.push(a.0);
         recorded.push(b.0);
-        phase.push(b.1);
+        phase.push(timed.1);
     }
     // The recorder alone, on one row of the run's width, many times over.
     let columns: Vec<String> = Simulation::new(&case.spec())
@@ -355,6 +367,8 @@ fn bench_precision() {
                 steps,
             };
             let mut sim = Simulation::new(&case.spec()).expect("simulation");
+            // The error observer's time is taken out of the wall time.
+            sim.time_phases(true);
             let mut err = StateError::default();
             let stats = sim.run(&mut [&mut err], &mut |_, _| {}).expect("run");
             let wall = (stats.wall - stats.times.setup - stats.times.recording).as_secs_f64();

@@ -26,6 +26,11 @@ pub struct Args {
     /// residuals when there are more than eight).
     #[arg(long, value_delimiter = ',', requires = "plot")]
     columns: Vec<String>,
+    /// Time the phases of every macro step (predictor, Jacobian, solve,
+    /// corrector, recording) and print them in the run summary. Costs five
+    /// clock reads per macro step.
+    #[arg(long)]
+    timing: bool,
     /// Do not print the run summary.
     #[arg(long, short)]
     quiet: bool,
@@ -45,6 +50,7 @@ pub fn main(args: Args) -> Result<()> {
         ),
     };
     let mut sim = Simulation::new(&spec)?;
+    sim.time_phases(args.timing);
     let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let mut recorder = CsvRecorder::new(file);
     let steps = sim.total_steps();

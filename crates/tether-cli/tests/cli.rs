@@ -163,6 +163,29 @@ fn run_the_oscillator_example_writes_the_documented_columns() {
         "consistent λ0, got {}",
         first[7]
     );
+    assert!(summary.contains("(phases not timed)"), "{summary}");
+
+    // --timing adds the phase times to the summary and changes no number.
+    let timed_csv = dir.path().join("timed.csv");
+    let out = tether(
+        &[
+            "run",
+            example.to_str().unwrap(),
+            "--stop",
+            "0.1",
+            "--timing",
+            "--out",
+            timed_csv.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let summary = stderr(&out);
+    assert!(
+        summary.contains("predictor") && summary.contains("corrector"),
+        "{summary}"
+    );
+    assert_eq!(std::fs::read_to_string(&timed_csv).unwrap(), text);
 }
 
 fn write_system(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {

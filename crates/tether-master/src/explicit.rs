@@ -40,13 +40,13 @@ impl Simulation {
     /// One explicit macro step: hold u_N over [T_N, T_{N+1}], then compute
     /// u_{N+1} from the states at T_{N+1} so that μ² g̈ + 2μ ġ + g = 0 there.
     pub(crate) fn explicit_step(&mut self, mu: f64) -> Result<(), MasterError> {
-        let mut lap = Lap::start();
+        let mut lap = Lap::start(false, self.time_phases);
         let (t, h) = (self.time(), self.experiment.step);
         for slave in self.slaves.iter_mut() {
             slave.do_step(t, h)?;
         }
         self.n += 1;
-        self.stats.times.predictor += lap.split();
+        lap.split_into(&mut self.stats.times.predictor);
         let all = &mut self.work.feedthrough.unknowns;
         all.clear();
         all.extend(0..self.coupling.len());
@@ -56,8 +56,8 @@ impl Simulation {
         self.feedthrough_newton(Some(mu), self.time())?;
         self.set_constant_inputs()?;
         self.read_accepted()?;
-        self.stats.times.solve += lap.split();
-        self.step_end = Some(lap.last());
+        lap.split_into(&mut self.stats.times.solve);
+        self.step_end = lap.last();
         Ok(())
     }
 

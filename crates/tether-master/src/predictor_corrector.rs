@@ -20,7 +20,8 @@ impl Simulation {
         let degree_pred = k.min(self.n as usize);
         let degree_corr = k.min(self.n as usize + 1);
         let nu = self.coupling.len();
-        let mut lap = Lap::start();
+        let trial = self.pool.as_ref().is_some_and(|p| p.timing(self.n));
+        let mut lap = Lap::start(trial, self.time_phases);
 
         // Step 1, predictor (eq. 56–58): extrapolated polynomials.
         for m in 0..nu {
@@ -85,7 +86,7 @@ impl Simulation {
                 self.coupling.eval(level, &view, work.g[l].as_mut_slice());
             }
         }
-        self.stats.times.predictor += lap.split();
+        lap.split_into(&mut self.stats.times.predictor);
 
         // Step 2a, perturbed predictors (eq. 59–64): finite-difference columns.
         if parallel {
@@ -142,11 +143,11 @@ impl Simulation {
                 columns(sim, &mut self.work, &self.groups[gi], None);
             }
         }
-        self.stats.times.jacobian += lap.split();
+        lap.split_into(&mut self.stats.times.jacobian);
 
         // Step 2b, corrected unknowns (eq. 68 or eq. 73–76).
         self.corrected_unknowns(self.time_at(self.n + 1))?;
-        self.stats.times.solve += lap.split();
+        lap.split_into(&mut self.stats.times.solve);
 
         // Step 3, corrector: repeat the step with interpolation polynomials.
         for m in 0..nu {
@@ -165,8 +166,8 @@ impl Simulation {
         }
         self.n += 1;
         self.read_accepted()?;
-        self.stats.times.corrector += lap.split();
-        self.step_end = Some(lap.last());
+        lap.split_into(&mut self.stats.times.corrector);
+        self.step_end = lap.last();
         if let Some(pool) = self.pool.as_mut().filter(|p| p.timing(self.n - 1)) {
             pool.record(self.n - 1, lap.total());
             if let Some(keep) = pool.keep(self.n) {

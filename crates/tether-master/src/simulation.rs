@@ -39,6 +39,8 @@ pub struct Simulation {
     limits: Vec<f64>,
     steps: u64,
     pub(crate) stats: RunStats,
+    /// Whether the phases of each macro step are timed (off by default).
+    pub(crate) time_phases: bool,
     /// The clock reading that ended the last macro step's phases, for the
     /// recording phase that follows it in [`Simulation::run`].
     pub(crate) step_end: Option<Instant>,
@@ -177,6 +179,7 @@ impl Simulation {
             columns,
             steps: spec.macro_steps(),
             stats: RunStats::default(),
+            time_phases: false,
             step_end: None,
             pool,
         };
@@ -216,9 +219,20 @@ impl Simulation {
         self.history.iter().map(|h| h[0]).collect()
     }
 
+    /// Time the phases of every macro step from now on (predictor, Jacobian,
+    /// solve, corrector, recording; see [`crate::PhaseTimes`]). Off by default:
+    /// it reads the clock five times a macro step, 30–50 ns each on the
+    /// machine of docs/performance.md, which is a noticeable part of a step of
+    /// cheap FMUs. The setup and the whole run are always timed.
+    pub fn time_phases(&mut self, on: bool) {
+        self.time_phases = on;
+        self.step_end = None;
+    }
+
     /// Counters so far.
     pub fn stats(&self) -> RunStats {
         let mut stats = self.stats.clone();
+        stats.times.measured = self.time_phases;
         stats.instances = self.slaves.iter().map(|s| s.counters().clone()).collect();
         if let Some(pool) = &self.pool {
             for (s, counters) in stats.instances.iter_mut().enumerate() {
@@ -280,7 +294,10 @@ impl Simulation {
         }
         // The recording phase starts where the step's last phase ended (it
         // includes assembling and checking the row): one clock read fewer.
-        let clock = self.step_end.take().unwrap_or_else(Instant::now);
+        let clock = match self.step_end.take() {
+            Some(end) => Some(end),
+            None => self.time_phases.then(Instant::now),
+        };
         let sample = Sample {
             step: self.n,
             time: self.time(),
@@ -289,7 +306,9 @@ impl Simulation {
         for o in observers.iter_mut() {
             o.sample(sample)?;
         }
-        self.stats.times.recording += clock.elapsed();
+        if let Some(clock) = clock {
+            self.stats.times.recording += clock.elapsed();
+        }
         Ok(())
     }
 

@@ -24,9 +24,14 @@ pub struct InstanceCounters {
     pub get_output_derivatives: u64,
 }
 
-/// Wall time spent in each phase of the macro steps.
+/// Wall time spent in each phase of the macro steps. The setup is always
+/// timed; the phases only when phase timing is on
+/// ([`Simulation::time_phases`](crate::Simulation::time_phases)): it costs
+/// five clock reads per macro step, a noticeable part of a step of cheap FMUs.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PhaseTimes {
+    /// Whether the phases below were timed (otherwise they are zero).
+    pub measured: bool,
     /// Initialisation: instantiation, start values, consistent multipliers.
     pub setup: Duration,
     /// Predictor runs (eq. 56–58).
@@ -96,6 +101,14 @@ impl fmt::Display for RunStats {
             )?;
         }
         let t = &self.times;
+        if !t.measured {
+            return write!(
+                f,
+                "  time [s]: setup {:.3}  macro steps and recording {:.3}  (phases not timed)",
+                t.setup.as_secs_f64(),
+                self.wall.saturating_sub(t.setup).as_secs_f64()
+            );
+        }
         write!(
             f,
             "  time [s]: setup {:.3}  predictor {:.3}  jacobian {:.3}  solve {:.3}  corrector {:.3}  recording {:.3}",
@@ -110,38 +123,62 @@ impl fmt::Display for RunStats {
 }
 
 /// Consecutive phase times from one clock read per phase boundary: a clock read
-/// costs 30–33 ns on the machine measured (docs/performance.md), a noticeable
+/// costs 30–48 ns on the machine measured (docs/performance.md), a noticeable
 /// part of a macro step of cheap FMUs, so phases share their boundaries instead
-/// of each reading the clock twice.
+/// of each reading the clock twice, and a lap that is not `on` reads no clock
+/// at all (its splits are zero).
+/// A lap may read the clock without `record`ing its splits into the phase
+/// times (the parallel pool's timed trial steps with phase timing off).
 pub(crate) struct Lap {
-    start: Instant,
-    last: Instant,
+    start: Option<Instant>,
+    last: Option<Instant>,
+    record: bool,
 }
 
 impl Lap {
-    pub fn start() -> Lap {
-        let now = Instant::now();
+    /// A lap reading the clock if `clock` or `record`.
+    pub fn start(clock: bool, record: bool) -> Lap {
+        let now = (clock || record).then(Instant::now);
         Lap {
             start: now,
             last: now,
+            record,
+        }
+    }
+
+    /// Add the time since the previous split to `phase` if recording.
+    #[inline]
+    pub fn split_into(&mut self, phase: &mut Duration) {
+        let elapsed = self.split();
+        if self.record {
+            *phase += elapsed;
         }
     }
 
     /// The time since the previous split (or the start); starts the next phase.
+    #[inline]
     pub fn split(&mut self) -> Duration {
-        let now = Instant::now();
-        let phase = now - self.last;
-        self.last = now;
-        phase
+        match self.last {
+            Some(last) => {
+                let now = Instant::now();
+                self.last = Some(now);
+                now - last
+            }
+            None => Duration::ZERO,
+        }
     }
 
     /// From the start to the last split.
     pub fn total(&self) -> Duration {
-        self.last - self.start
+        match (self.start, self.last) {
+            (Some(start), Some(last)) => last - start,
+            _ => Duration::ZERO,
+        }
     }
 
-    /// The clock reading of the last split (the next phase's start).
-    pub fn last(&self) -> Instant {
-        self.last
+    /// The clock reading of the last split (the next phase's start), if
+    /// recording.
+    pub fn last(&self) -> Option<Instant> {
+        self.last.filter(|_| self.record)
     }
 }
