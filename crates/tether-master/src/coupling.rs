@@ -64,6 +64,83 @@ impl Level {
     }
 }
 
+/// The rows of a coupling made only of linear constraints, compiled for the
+/// levels a method evaluates. The slaves' coupled outputs are laid end to end
+/// in one flat array (slave `s` from `offsets[s]`), and each row at each level
+/// is a run of `(flat index, coefficient)` terms: one pass over contiguous
+/// memory instead of a dispatch per row and a lookup per value. The products
+/// are summed in the order of [`Level::eval`], so the values are bit for bit
+/// the same.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Compiled {
+    /// Start of each slave's coupled outputs in the flat array.
+    offsets: Vec<usize>,
+    /// Length of the flat array.
+    pub len: usize,
+    /// Per level, per row: its range in `terms`.
+    rows: Vec<Vec<std::ops::Range<usize>>>,
+    terms: Vec<(usize, f64)>,
+}
+
+impl Compiled {
+    /// `None` unless every row is a linear constraint defined on every level
+    /// in `levels` (none of them the explicit method's stabilised one).
+    pub fn new(coupling: &Coupling, levels: &[RowLevel], slaves: &[Slave]) -> Option<Compiled> {
+        let mut offsets = Vec::with_capacity(slaves.len());
+        let mut len = 0;
+        for slave in slaves {
+            offsets.push(len);
+            len += slave.coupled_values.len();
+        }
+        let mut compiled = Compiled {
+            offsets,
+            len,
+            rows: Vec::new(),
+            terms: Vec::new(),
+        };
+        for &level in levels {
+            let mut rows = Vec::with_capacity(coupling.len());
+            for unknown in &coupling.unknowns {
+                let Row::Constraint(c) = unknown.row else {
+                    return None;
+                };
+                let constraint = &coupling.constraints[c];
+                let terms = match level {
+                    RowLevel::Position => &constraint.position,
+                    RowLevel::Velocity => constraint.velocity.as_ref()?,
+                    RowLevel::Acceleration => constraint.acceleration.as_ref()?,
+                    RowLevel::Stabilised(_) => return None,
+                };
+                let start = compiled.terms.len();
+                for &(s, slot, c) in &terms.terms {
+                    compiled.terms.push((compiled.offsets[s] + slot, c));
+                }
+                rows.push(start..compiled.terms.len());
+            }
+            compiled.rows.push(rows);
+        }
+        Some(compiled)
+    }
+
+    /// Copy slave `s`'s coupled outputs into its part of `flat`.
+    #[inline]
+    pub fn gather(&self, flat: &mut [f64], s: usize, values: &[f64]) {
+        let start = self.offsets[s];
+        flat[start..start + values.len()].copy_from_slice(values);
+    }
+
+    /// Every row at level index `l` (into the levels compiled) from `flat`.
+    #[inline]
+    pub fn eval(&self, l: usize, flat: &[f64], out: &mut [f64]) {
+        for (out, range) in out.iter_mut().zip(&self.rows[l]) {
+            *out = self.terms[range.clone()]
+                .iter()
+                .map(|&(i, c)| c * flat[i])
+                .sum();
+        }
+    }
+}
+
 /// A linear constraint with its multiplier.
 #[derive(Debug, Clone)]
 pub(crate) struct Constraint {

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use crate::coupling::{Coupling, RowLevel, View};
+use crate::coupling::{Compiled, Coupling, RowLevel, View};
 use crate::polynomial::{extrapolation, interpolation};
 use crate::simulation::{Simulation, Work};
 use crate::slave::Slave;
@@ -70,9 +70,16 @@ impl Simulation {
                 slave.do_step(t, h)?;
             }
             slave.read_coupled()?;
-            self.work.base[s].copy_from_slice(&slave.coupled_values);
+            match &self.compiled {
+                Some(c) => c.gather(&mut self.work.flat_base, s, &slave.coupled_values),
+                None => self.work.base[s].copy_from_slice(&slave.coupled_values),
+            }
         }
-        {
+        if let Some(compiled) = &self.compiled {
+            for (l, g) in self.work.g.iter_mut().enumerate() {
+                compiled.eval(l, &self.work.flat_base, g.as_mut_slice());
+            }
+        } else {
             let work = &mut self.work;
             let view = View {
                 slaves: &self.slaves,
@@ -103,6 +110,7 @@ impl Simulation {
             let sim = Columns {
                 coupling: &self.coupling,
                 levels: &self.levels,
+                compiled: self.compiled.as_ref(),
                 owners: &self.owners,
                 slaves: &self.slaves,
             };
@@ -137,6 +145,7 @@ impl Simulation {
                 let sim = Columns {
                     coupling: &self.coupling,
                     levels: &self.levels,
+                    compiled: self.compiled.as_ref(),
                     owners: &self.owners,
                     slaves: &self.slaves,
                 };
@@ -274,12 +283,31 @@ impl Simulation {
 fn columns(sim: Columns, work: &mut Work, group: &[usize], latest: Option<&[Vec<f64>]>) {
     let nu = sim.coupling.len();
     for &m in group {
+        let delta = work.delta[m];
+        if let Some(compiled) = sim.compiled {
+            // The instances m drives at their latest values, the others at
+            // the predictor's.
+            work.flat.copy_from_slice(&work.flat_base);
+            for &s in &sim.owners[m] {
+                let values = match latest {
+                    Some(latest) => &latest[s],
+                    None => &sim.slaves[s].coupled_values,
+                };
+                compiled.gather(&mut work.flat, s, values);
+            }
+            for (l, jac) in work.jac.iter_mut().enumerate() {
+                compiled.eval(l, &work.flat, &mut work.rows);
+                for r in 0..nu {
+                    jac[(r, m)] = (work.rows[r] - work.g[l][r]) / delta;
+                }
+            }
+            continue;
+        }
         // Only the instances m drives count as perturbed for column m.
         work.live.fill(false);
         for &s in &sim.owners[m] {
             work.live[s] = true;
         }
-        let delta = work.delta[m];
         for (l, &level) in sim.levels.iter().enumerate() {
             let view = View {
                 slaves: sim.slaves,
@@ -302,6 +330,7 @@ fn columns(sim: Columns, work: &mut Work, group: &[usize], latest: Option<&[Vec<
 struct Columns<'a> {
     coupling: &'a Coupling,
     levels: &'a [RowLevel],
+    compiled: Option<&'a Compiled>,
     owners: &'a [Vec<usize>],
     slaves: &'a [Slave],
 }

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::coupling::{self, Coupling, RowLevel, View};
+use crate::coupling::{self, Compiled, Coupling, RowLevel, View};
 use crate::explicit::Feedthrough;
 use crate::observer::{Observer, Sample};
 use crate::parallel::Pool;
@@ -29,6 +29,8 @@ pub struct Simulation {
     pub(crate) groups: Vec<Vec<usize>>,
     /// Levels the method evaluates (position always first).
     pub(crate) levels: Vec<RowLevel>,
+    /// The rows compiled for `levels`, when they are all linear constraints.
+    pub(crate) compiled: Option<Compiled>,
     /// Per unknown: `[u_N, u_{N-1}, u_{N-2}]`.
     pub(crate) history: Vec<[f64; 3]>,
     /// Current macro point index N.
@@ -52,6 +54,10 @@ pub struct Simulation {
 pub(crate) struct Work {
     /// Coupled output values of each slave after the predictor (or base point).
     pub base: Vec<Vec<f64>>,
+    /// The same laid end to end, for compiled rows (empty otherwise).
+    pub flat_base: Vec<f64>,
+    /// Flat coupled outputs of one evaluation of compiled rows.
+    pub flat: Vec<f64>,
     /// Which slaves' latest values count as perturbed.
     pub live: Vec<bool>,
     pub polys: Vec<Taylor>,
@@ -89,11 +95,13 @@ impl Simulation {
                     .into(),
             });
         }
+        let mut opened = Vec::new();
         let mut slaves = spec
             .instances
             .iter()
-            .map(Slave::instantiate)
+            .map(|instance| Slave::instantiate(instance, &mut opened))
             .collect::<Result<Vec<_>, _>>()?;
+        drop(opened);
         let coupling = Coupling::build(spec, &mut slaves, &method, settings.order)?;
         let nu = coupling.len();
         let mut owners = vec![Vec::new(); nu];
@@ -114,6 +122,8 @@ impl Simulation {
         if method.needs_acceleration() {
             levels.push(RowLevel::Acceleration);
         }
+        let compiled = Compiled::new(&coupling, &levels, &slaves);
+        let flat_len = compiled.as_ref().map_or(0, |c| c.len);
         let exp = spec.experiment;
         let stop = exp.start + spec.macro_steps() as f64 * exp.step;
         for slave in &mut slaves {
@@ -142,6 +152,8 @@ impl Simulation {
                 .iter()
                 .map(|s| vec![0.0; s.coupled_values.len()])
                 .collect(),
+            flat_base: vec![0.0; flat_len],
+            flat: vec![0.0; flat_len],
             live: vec![false; slaves.len()],
             polys: vec![Taylor::default(); nu],
             perturbed: vec![Taylor::default(); nu],
@@ -172,6 +184,7 @@ impl Simulation {
             owners,
             groups,
             levels,
+            compiled,
             n: 0,
             work,
             row: vec![0.0; columns.len()],
@@ -332,6 +345,14 @@ impl Simulation {
         for h in &self.history {
             self.row[i] = h[0];
             i += 1;
+        }
+        if let Some(compiled) = &self.compiled {
+            // Every row is a constraint with a residual column.
+            for (s, slave) in self.slaves.iter().enumerate() {
+                compiled.gather(&mut self.work.flat, s, &slave.coupled_values);
+            }
+            compiled.eval(0, &self.work.flat, &mut self.row[i..]);
+            return;
         }
         for (m, h) in self.history.iter().enumerate() {
             self.work.u[m] = h[0];

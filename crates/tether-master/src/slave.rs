@@ -42,6 +42,9 @@ pub struct Slave {
     value_slots: Vec<usize>,
     value_buf: Vec<f64>,
     derivative_reads: Vec<(u32, i32, usize)>,
+    /// The outputs are all values (no derivatives), in `coupled_outputs`
+    /// order: `fmi2GetReal` writes straight into `coupled_values`.
+    direct_read: bool,
     /// Values of `coupled_outputs` after the latest run.
     pub(crate) coupled_values: Vec<f64>,
     pub(crate) recorded_names: Vec<String>,
@@ -55,9 +58,22 @@ pub struct Slave {
 }
 
 impl Slave {
-    /// Open the FMU, instantiate it and apply the start values.
-    pub(crate) fn instantiate(spec: &InstanceSpec) -> Result<Slave, MasterError> {
-        Slave::instantiate_as(Fmu::open(&spec.fmu)?, spec, &spec.name)
+    /// Instantiate the FMU of `spec` and apply the start values. Instances of
+    /// the same `.fmu` file share one opened FMU in `opened` (one extraction,
+    /// one loaded library), as the C floor of docs/performance.md does.
+    pub(crate) fn instantiate(
+        spec: &InstanceSpec,
+        opened: &mut Vec<(std::path::PathBuf, Fmu)>,
+    ) -> Result<Slave, MasterError> {
+        let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
+            Some((_, fmu)) => fmu.clone(),
+            None => {
+                let fmu = Fmu::open(&spec.fmu)?;
+                opened.push((spec.fmu.clone(), fmu.clone()));
+                fmu
+            }
+        };
+        Slave::instantiate_as(fmu, spec, &spec.name)
     }
 
     /// Another instance of this slave's FMU with the same start values and the
@@ -140,6 +156,7 @@ impl Slave {
             value_slots: Vec::new(),
             value_buf: Vec::new(),
             derivative_reads: Vec::new(),
+            direct_read: false,
             coupled_values: Vec::new(),
             recorded_values: vec![0.0; recorded_vrs.len()],
             recorded_names,
@@ -210,6 +227,7 @@ impl Slave {
         }
         self.value_buf = vec![0.0; self.value_vrs.len()];
         self.coupled_values = vec![0.0; self.coupled_outputs.len()];
+        self.direct_read = self.derivative_reads.is_empty();
     }
 
     /// Whether any unknown drives this instance.
@@ -298,6 +316,14 @@ impl Slave {
 
     /// Read the coupled outputs into `coupled_values`.
     pub(crate) fn read_coupled(&mut self) -> Result<(), MasterError> {
+        if self.direct_read {
+            if !self.value_vrs.is_empty() {
+                self.instance
+                    .get_real(&self.value_vrs, &mut self.coupled_values)?;
+                self.counters.get_reals += 1;
+            }
+            return Ok(());
+        }
         if !self.value_vrs.is_empty() {
             self.instance
                 .get_real(&self.value_vrs, &mut self.value_buf)?;

@@ -35,6 +35,13 @@ impl Solver {
     /// the matrix (column-major, like nalgebra's storage) and right-hand side to
     /// fill. Their previous contents are unspecified.
     pub fn system(&mut self, n: usize) -> (&mut [f64], &mut [f64]) {
+        if n != self.n || self.x.len() != n {
+            self.size(n);
+        }
+        (&mut self.a, &mut self.b)
+    }
+
+    fn size(&mut self, n: usize) {
         self.n = n;
         self.a.resize(n * n, 0.0);
         self.b.resize(n, 0.0);
@@ -42,7 +49,6 @@ impl Solver {
         self.pivots.resize(n, 0);
         self.inverse.resize(n * n, 0.0);
         self.x.resize(n, 0.0);
-        (&mut self.a, &mut self.b)
     }
 
     /// Load `A` and `b` (copies, no allocation once sized).
