@@ -231,6 +231,7 @@ impl Instance {
     }
 
     /// `fmi2GetReal` into `out` (same length as `vrs`; no allocation).
+    #[inline]
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
         self.raw().fmi2GetReal(vrs, out)
     }
@@ -251,6 +252,7 @@ impl Instance {
     }
 
     /// `fmi2SetReal`.
+    #[inline]
     pub fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
         self.raw().fmi2SetReal(vrs, values)
     }
@@ -273,6 +275,7 @@ impl Instance {
     /// `fmi2SetRealInputDerivatives`: `values[i]` is the `orders[i]`-th time derivative
     /// of input `vrs[i]` at the current communication point. Needs
     /// `canInterpolateInputs`.
+    #[inline]
     pub fn set_real_input_derivatives(
         &mut self,
         vrs: &[ValueReference],
@@ -323,6 +326,7 @@ impl Instance {
 
     /// `fmi2DoStep` from `current_communication_point` over `step`. On success the tracked
     /// time becomes `current_communication_point + step`.
+    #[inline]
     pub fn do_step(
         &mut self,
         current_communication_point: f64,

@@ -78,6 +78,22 @@ impl Solver {
             limit,
         };
         let n = self.n;
+        if n == 1 {
+            // One unknown: the same operations as below, without the loops.
+            let s = self.a[0].abs();
+            if !(s.is_finite() && s > 0.0) {
+                return Err(singular(f64::INFINITY));
+            }
+            let a = self.a[0] * (1.0 / s);
+            let b = self.b[0] / s;
+            let inverse = 1.0 / a;
+            let condition = a.abs() * inverse.abs();
+            if !(condition.is_finite() && condition <= limit) {
+                return Err(singular(condition));
+            }
+            self.x[0] = inverse * b;
+            return Ok(&self.x);
+        }
         let a = &mut self.a;
         for i in 0..n {
             let s = (0..n).map(|j| a[i + j * n].abs()).fold(0.0, f64::max);

@@ -345,6 +345,7 @@ impl RawComponent {
     }
 
     /// `fmi2DoStep`.
+    #[inline]
     pub(crate) fn fmi2DoStep(
         &mut self,
         t: f64,

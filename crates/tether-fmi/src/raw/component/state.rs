@@ -18,6 +18,7 @@ impl RawComponent {
     }
 
     /// `fmi2GetFMUstate` with an existing state the FMU may overwrite in place.
+    #[inline]
     pub(crate) fn fmi2GetFMUstate_update(&mut self, state: &mut RawState) -> Result<()> {
         const F: &str = "fmi2GetFMUstate";
         self.owned(F, state)?;
@@ -32,6 +33,7 @@ impl RawComponent {
     }
 
     /// `fmi2SetFMUstate`.
+    #[inline]
     pub(crate) fn fmi2SetFMUstate(&mut self, state: &RawState) -> Result<()> {
         const F: &str = "fmi2SetFMUstate";
         self.owned(F, state)?;

@@ -8,6 +8,7 @@ use crate::raw::*;
 
 impl RawComponent {
     /// `fmi2GetReal`.
+    #[inline]
     pub(crate) fn fmi2GetReal(
         &mut self,
         vrs: &[fmi2ValueReference],
@@ -83,6 +84,7 @@ impl RawComponent {
     }
 
     /// `fmi2SetReal`.
+    #[inline]
     pub(crate) fn fmi2SetReal(&mut self, vrs: &[fmi2ValueReference], values: &[f64]) -> Result<()> {
         self.same_len("fmi2SetReal", "the value slice", vrs.len(), values.len())?;
         // SAFETY: both arrays hold `vrs.len()` elements.
@@ -147,6 +149,7 @@ impl RawComponent {
     }
 
     /// `fmi2SetRealInputDerivatives`.
+    #[inline]
     pub(crate) fn fmi2SetRealInputDerivatives(
         &mut self,
         vrs: &[fmi2ValueReference],
