@@ -126,7 +126,10 @@ impl Compiled {
     #[inline]
     pub fn gather(&self, flat: &mut [f64], s: usize, values: &[f64]) {
         let start = self.offsets[s];
-        flat[start..start + values.len()].copy_from_slice(values);
+        // A few values: an element loop, not a call to memcpy.
+        for (to, &from) in flat[start..start + values.len()].iter_mut().zip(values) {
+            *to = from;
+        }
     }
 
     /// Every row at level index `l` (into the levels compiled) from `flat`.

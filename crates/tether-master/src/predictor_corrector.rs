@@ -217,10 +217,10 @@ impl Simulation {
                 a.copy_from_slice(work.jac[0].as_slice());
                 b.copy_from_slice(work.g[0].as_slice());
                 let mut add = |weight: f64, l: usize| {
-                    for (x, j) in a.iter_mut().zip(work.jac[l].iter()) {
+                    for (x, j) in a.iter_mut().zip(work.jac[l].as_slice()) {
                         *x += weight * j;
                     }
-                    for (x, g) in b.iter_mut().zip(work.g[l].iter()) {
+                    for (x, g) in b.iter_mut().zip(work.g[l].as_slice()) {
                         *x += weight * g;
                     }
                 };
