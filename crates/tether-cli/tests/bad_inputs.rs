@@ -995,6 +995,19 @@ fn the_faulty_oscillator_runs_cleanly_when_told_not_to_fail() {
 
 // ---------------------------------------------------------------- Ctrl-C
 
+/// Kills and reaps the child if the test fails before waiting for it (the run
+/// below would otherwise go on for hours).
+struct Reaper(Option<std::process::Child>);
+
+impl Drop for Reaper {
+    fn drop(&mut self) {
+        if let Some(child) = &mut self.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
 #[test]
 fn sigint_stops_the_run_keeps_the_results_and_removes_the_extractions() {
     let dir = tempfile::tempdir().unwrap();
@@ -1002,14 +1015,16 @@ fn sigint_stops_the_run_keeps_the_results_and_removes_the_extractions() {
     let tmp = dir.path().join("tmp");
     std::fs::create_dir_all(&tmp).unwrap();
     let csv = dir.path().join("long.csv");
-    let child = Command::new(env!("CARGO_BIN_EXE_tether"))
-        .args(["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()])
-        .current_dir(dir.path())
-        .env("TMPDIR", &tmp)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("spawn tether");
+    let mut child = Reaper(Some(
+        Command::new(env!("CARGO_BIN_EXE_tether"))
+            .args(["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()])
+            .current_dir(dir.path())
+            .env("TMPDIR", &tmp)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("spawn tether"),
+    ));
     // Wait until results are being written (the FMUs are extracted by then).
     let started = std::time::Instant::now();
     while std::fs::metadata(&csv).map(|m| m.len()).unwrap_or(0) == 0 {
@@ -1022,11 +1037,16 @@ fn sigint_stops_the_run_keeps_the_results_and_removes_the_extractions() {
         "one extraction, shared by the two instances of the FMU"
     );
     let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args(["-INT", &child.0.as_ref().expect("running").id().to_string()])
         .status()
         .expect("run kill");
     assert!(status.success());
-    let out = child.wait_with_output().expect("wait for tether");
+    let out = child
+        .0
+        .take()
+        .expect("running")
+        .wait_with_output()
+        .expect("wait for tether");
     let text = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(130), "{text}");
     assert!(!text.contains("panicked"), "{text}");
