@@ -250,6 +250,7 @@ impl Slave {
     }
 
     /// Save the current state (`fmi2GetFMUstate`, reusing the previous handle).
+    #[inline]
     pub(crate) fn save_state(&mut self) -> Result<(), MasterError> {
         match &mut self.state {
             Some(s) => self.instance.update_fmu_state(s)?,
@@ -260,6 +261,7 @@ impl Slave {
     }
 
     /// Roll back to the saved state (`fmi2SetFMUstate`).
+    #[inline]
     pub(crate) fn restore_state(&mut self) -> Result<(), MasterError> {
         let state = self
             .state
@@ -272,6 +274,7 @@ impl Slave {
 
     /// Set the coupled inputs from the unknowns' polynomials; `degree` > 0 also
     /// passes derivatives through `fmi2SetRealInputDerivatives`.
+    #[inline]
     pub(crate) fn apply_inputs(
         &mut self,
         polys: &[Taylor],
@@ -308,6 +311,7 @@ impl Slave {
     }
 
     /// One `fmi2DoStep` from `t` over `h`.
+    #[inline]
     pub(crate) fn do_step(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
         self.counters.do_steps += 1;
         self.instance.do_step(t, h, true)?;
@@ -315,6 +319,7 @@ impl Slave {
     }
 
     /// Read the coupled outputs into `coupled_values`.
+    #[inline]
     pub(crate) fn read_coupled(&mut self) -> Result<(), MasterError> {
         if self.direct_read {
             if !self.value_vrs.is_empty() {
