@@ -200,7 +200,13 @@ impl Simulation {
         sim.read_accepted()?;
         sim.fill_row();
         let factor = sim.settings.divergence_factor;
-        sim.limits = sim.row.iter().map(|v| factor * v.abs().max(1.0)).collect();
+        // Finite limits (the factor is finite, > 1), so that ±∞ is always
+        // beyond them in check_divergence.
+        sim.limits = sim
+            .row
+            .iter()
+            .map(|v| (factor * v.abs().max(1.0)).min(f64::MAX))
+            .collect();
         sim.check_divergence(sim.experiment.start)?;
         sim.stats.times.setup = clock.elapsed();
         Ok(sim)
@@ -372,13 +378,13 @@ impl Simulation {
     }
 
     fn check_divergence(&self, time: f64) -> Result<(), MasterError> {
-        for ((v, limit), name) in self.row.iter().zip(&self.limits).zip(&self.columns) {
-            if !v.is_finite() || v.abs() > *limit {
+        for (i, (&v, &limit)) in self.row.iter().zip(&self.limits).enumerate() {
+            if beyond(v, limit) {
                 return Err(MasterError::Diverged {
                     time,
-                    quantity: name.clone(),
-                    value: *v,
-                    limit: *limit,
+                    quantity: self.columns[i].clone(),
+                    value: v,
+                    limit,
                 });
             }
         }
@@ -391,5 +397,29 @@ impl Simulation {
             slave.apply_inputs(&self.work.polys, k)?;
         }
         Ok(())
+    }
+}
+
+/// Whether `value` is NaN, infinite or larger in magnitude than the finite
+/// `limit` (±∞ is larger than any finite limit).
+#[inline]
+fn beyond(value: f64, limit: f64) -> bool {
+    value.is_nan() || value.abs() > limit
+}
+
+#[cfg(test)]
+mod tests {
+    use super::beyond;
+
+    #[test]
+    fn divergence_catches_nan_infinities_and_large_values() {
+        let limit = 1e6;
+        for v in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1.1e6, -1.1e6] {
+            assert!(beyond(v, limit), "{v}");
+        }
+        for v in [0.0, -0.0, 1e6, -1e6, 5e-324, 123.0] {
+            assert!(!beyond(v, limit), "{v}");
+        }
+        assert!(beyond(f64::INFINITY, f64::MAX));
     }
 }
