@@ -101,7 +101,6 @@ impl Simulation {
             .iter()
             .map(|instance| Slave::instantiate(instance, &mut opened))
             .collect::<Result<Vec<_>, _>>()?;
-        drop(opened);
         let coupling = Coupling::build(spec, &mut slaves, &method, settings.order)?;
         let nu = coupling.len();
         let mut owners = vec![Vec::new(); nu];
@@ -313,10 +312,10 @@ impl Simulation {
         }
         // The recording phase starts where the step's last phase ended (it
         // includes assembling and checking the row): one clock read fewer.
-        let clock = match self.step_end.take() {
-            Some(end) => Some(end),
-            None => self.time_phases.then(Instant::now),
-        };
+        let clock = self
+            .step_end
+            .take()
+            .or_else(|| self.time_phases.then(Instant::now));
         let sample = Sample {
             step: self.n,
             time: self.time(),

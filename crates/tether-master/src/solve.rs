@@ -35,7 +35,7 @@ impl Solver {
     /// the matrix (column-major, like nalgebra's storage) and right-hand side to
     /// fill. Their previous contents are unspecified.
     pub fn system(&mut self, n: usize) -> (&mut [f64], &mut [f64]) {
-        if n != self.n || self.x.len() != n {
+        if n != self.n {
             self.size(n);
         }
         (&mut self.a, &mut self.b)
