@@ -2,7 +2,11 @@
 //! sequential path computes: every recorded value bit for bit, on the planar
 //! mechanisms, a 3D joint and the oscillator pair, for several methods.
 
-use tether_master::{MemoryRecorder, Method, Parallel, RunStats, Simulation, SystemSpec};
+use std::time::Duration;
+
+use tether_master::{
+    MemoryRecorder, Method, Parallel, RunStats, Simulation, StartValue, SystemSpec,
+};
 
 fn example(name: &str) -> SystemSpec {
     for fmu in ["link", "body3d", "oscillator"] {
@@ -78,6 +82,60 @@ fn parallel_runs_are_bit_identical_to_sequential() {
                 steps(&par_stats)
             );
         }
+    }
+}
+
+/// "auto" times the FMU steps of the first macro steps. When even a hand-off
+/// far cheaper than any real one (`HANDOFF_FLOOR`, 2 µs) could not pay, as for
+/// the exact oscillators (~0.1 µs a step), it stays sequential without
+/// starting a worker or timing a hand-off, and computes what "off" computes.
+/// An expensive FMU gets its workers started and its hand-off timed.
+#[test]
+fn auto_starts_workers_only_when_the_steps_could_pay() {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut cheap = example("oscillator.toml");
+    for instance in &mut cheap.instances {
+        instance
+            .parameters
+            .insert("exact".into(), StartValue::Boolean(true));
+    }
+    cheap.experiment.stop = 0.05;
+    let (off, _) = run(&cheap, Parallel::Off);
+    let (auto, stats) = run(&cheap, Parallel::Auto);
+    let p = stats.parallel;
+    assert_eq!(p.workers, 0, "{p:?}");
+    assert!(p.handoff.is_zero(), "a hand-off was timed: {p:?}");
+    if cores >= 2 {
+        assert!(
+            p.sequential > Duration::ZERO && p.sequential < Duration::from_micros(2),
+            "the first steps' runs were not measured as cheap: {p:?}"
+        );
+    }
+    assert_eq!(off.rows.len(), auto.rows.len());
+    for (k, (a, b)) in off.rows.iter().zip(&auto.rows).enumerate() {
+        for (c, (x, y)) in a.iter().zip(b).enumerate() {
+            assert_eq!(x.to_bits(), y.to_bits(), "step {k}, {}", off.columns[c]);
+        }
+    }
+
+    // The body integrated as if with a fixed-rate solver: ~400 µs a step.
+    let mut expensive = example("3d_revolute.toml");
+    for instance in &mut expensive.instances {
+        instance
+            .parameters
+            .insert("max_step".into(), StartValue::Real(1e-5));
+    }
+    expensive.experiment.stop = 8.0 * expensive.experiment.step;
+    let (_, stats) = run(&expensive, Parallel::Auto);
+    let p = stats.parallel;
+    if cores >= 2 {
+        assert!(p.handoff > Duration::ZERO, "no hand-off timed: {p:?}");
+        assert!(
+            p.sequential > Duration::from_micros(100),
+            "the expensive runs were measured as cheap: {p:?}"
+        );
+    } else {
+        assert_eq!(p, Default::default(), "one core: no pool at all");
     }
 }
 

@@ -503,8 +503,9 @@ fn parallel_cases() -> Vec<ParallelCase> {
 }
 
 /// Runs (setup excluded: it is the same FMU loading for every mode, plus the
-/// copies' instantiation for on and auto) per macro step with parallel = off,
-/// on, auto, interleaved repetitions; ratios of medians from the same run.
+/// copies' instantiation for on; "auto" instantiates its copies, if at all,
+/// within the run) per macro step with parallel = off, on, auto, interleaved
+/// repetitions; ratios of medians from the same run.
 fn bench_parallel() {
     println!("\n== parallel: perturbed runs on a worker thread (time per macro step) ==");
     let reps = reps();

@@ -56,7 +56,8 @@ pub struct ParallelInfo {
     /// Worker threads used (0: the run stayed sequential).
     pub workers: usize,
     /// Measured cost of one hand-off: serialising the states, waking the
-    /// worker, deserialising, waking the main thread (auto only).
+    /// worker, deserialising, waking the main thread (auto only; zero when
+    /// the step costs alone ruled the workers out and none was started).
     pub handoff: Duration,
     /// Predicted predictor + perturbed-run time of one step, sequential.
     pub sequential: Duration,
@@ -80,6 +81,13 @@ pub(crate) const PAYS: f64 = 0.9;
 
 /// Hand-offs timed for the decision (their median counts).
 const HANDOFF_SAMPLES: usize = 7;
+
+/// Less than any hand-off can cost: it wakes a sleeping thread and is woken
+/// back, two futex calls and two context switches at the least (measured
+/// 13–21 µs on the 2-core machine of docs/performance.md). If the runs of a
+/// step could not gain even against this, "auto" decides without starting a
+/// worker or timing a hand-off.
+pub(crate) const HANDOFF_FLOOR: Duration = Duration::from_micros(2);
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -175,7 +183,15 @@ struct Lane {
 /// The worker threads and the split of the perturbed runs.
 pub(crate) struct Pool {
     mode: Parallel,
+    /// Worker threads to start (one per extra core).
+    workers: usize,
+    /// The started workers: from the start for "on", for "auto" only once
+    /// the first steps' costs say they might pay.
     lanes: Vec<Lane>,
+    /// What a worker's copy of each capable instance is made from.
+    copies: Vec<Option<InstanceSpec>>,
+    /// (start, stop, tolerance) the copies are set up with.
+    experiment: (f64, f64, Option<f64>),
     /// Per instance: whether its perturbed runs may leave the main thread.
     capable: Vec<bool>,
     /// Per instance: the groups whose run it takes part in.
@@ -244,14 +260,61 @@ impl Pool {
             })
             .collect();
         let polys = vec![vec![Taylor::default(); nu]; groups.len()];
-        let mut lanes = Vec::with_capacity(workers);
-        for w in 0..workers {
+        let copies = specs
+            .iter()
+            .zip(&capable)
+            .map(|(spec, &c)| c.then(|| spec.clone()))
+            .collect();
+        let mut pool = Pool {
+            mode,
+            workers,
+            lanes: Vec::new(),
+            copies,
+            experiment,
+            capable,
+            runs_of,
+            main_runs: Vec::new(),
+            polys,
+            values,
+            bytes: vec![Vec::new(); slaves.len()],
+            step_cost: vec![Duration::MAX; slaves.len()],
+            active: false,
+            info: ParallelInfo::default(),
+            trial: [Duration::MAX; 2],
+        };
+        if mode == Parallel::On {
+            pool.start(slaves)?;
+            // Without measurements every run counts the same.
+            let unit = vec![Duration::from_micros(1); slaves.len()];
+            let lane_runs = pool.assign(&unit, Duration::ZERO, slaves.len());
+            pool.hand_out(lane_runs, slaves.len());
+            pool.active = true;
+            pool.info.workers = pool.lanes.len();
+        }
+        Ok(Some(pool))
+    }
+
+    /// Start the workers, each with its own copy of every capable instance
+    /// (instantiated and initialised like the original; its state is loaded
+    /// from the original's before each job).
+    fn start(&mut self, slaves: &[Slave]) -> Result<(), MasterError> {
+        let values: Vec<Vec<Vec<f64>>> = self
+            .polys
+            .iter()
+            .map(|_| {
+                slaves
+                    .iter()
+                    .map(|s| vec![0.0; s.coupled_values.len()])
+                    .collect()
+            })
+            .collect();
+        self.lanes.reserve(self.workers);
+        for w in 0..self.workers {
             let mut extras = Vec::with_capacity(slaves.len());
-            for (s, slave) in slaves.iter().enumerate() {
-                extras.push(if capable[s] {
-                    Some(slave.duplicate(&specs[s], w + 1, experiment)?)
-                } else {
-                    None
+            for (slave, copy) in slaves.iter().zip(&self.copies) {
+                extras.push(match copy {
+                    Some(spec) => Some(slave.duplicate(spec, w + 1, self.experiment)?),
+                    None => None,
                 });
             }
             let shared = Arc::new(Shared {
@@ -261,7 +324,7 @@ impl Pool {
                     used: Vec::new(),
                     runs: Vec::new(),
                     copy_only: false,
-                    polys: polys.clone(),
+                    polys: self.polys.clone(),
                     values: values.clone(),
                     t: 0.0,
                     h: 0.0,
@@ -279,33 +342,12 @@ impl Pool {
                     move || worker(shared)
                 })
                 .map_err(|e| MasterError::Thread(e.to_string()))?;
-            lanes.push(Lane {
+            self.lanes.push(Lane {
                 shared,
                 handle: Some(handle),
             });
         }
-        let mut pool = Pool {
-            mode,
-            lanes,
-            capable,
-            runs_of,
-            main_runs: Vec::new(),
-            polys,
-            values,
-            bytes: vec![Vec::new(); slaves.len()],
-            step_cost: vec![Duration::MAX; slaves.len()],
-            active: false,
-            info: ParallelInfo::default(),
-            trial: [Duration::MAX; 2],
-        };
-        if mode == Parallel::On {
-            // Without measurements every run counts the same.
-            let unit = vec![Duration::from_micros(1); slaves.len()];
-            pool.assign(&unit, Duration::ZERO, slaves.len());
-            pool.active = true;
-            pool.info.workers = pool.lanes.len();
-        }
-        Ok(Some(pool))
+        Ok(())
     }
 
     /// Whether "auto" is still timing the first steps.
@@ -351,11 +393,17 @@ impl Pool {
 
     /// Split the perturbed runs between the main thread and the workers by
     /// their cost (longest-processing-time greedy, in group order), and
-    /// predict the sequential and parallel times of a step's runs.
-    fn assign(&mut self, cost: &[Duration], handoff: Duration, instances: usize) {
+    /// predict the sequential and parallel times of a step's runs. Returns
+    /// each worker's (group, instance) runs.
+    fn assign(
+        &mut self,
+        cost: &[Duration],
+        handoff: Duration,
+        instances: usize,
+    ) -> Vec<Vec<(usize, usize)>> {
         let c = |s: usize| cost[s].as_secs_f64();
         self.main_runs.clear();
-        let mut lane_runs: Vec<Vec<(usize, usize)>> = vec![Vec::new(); self.lanes.len()];
+        let mut lane_runs: Vec<Vec<(usize, usize)>> = vec![Vec::new(); self.workers];
         // Predictor runs stay on the main thread, and so do the perturbed
         // runs of instances that cannot be copied.
         let step = |s: usize| {
@@ -378,7 +426,7 @@ impl Pool {
             }
         }
         runs.sort_unstable();
-        let mut loads = vec![handoff.as_secs_f64(); self.lanes.len()];
+        let mut loads = vec![handoff.as_secs_f64(); self.workers];
         for (g, s) in runs {
             let step = step(s);
             let (lane, load) = loads
@@ -399,6 +447,11 @@ impl Pool {
         self.info.sequential = Duration::from_secs_f64(sequential);
         self.info.parallel = Duration::from_secs_f64(parallel);
         self.info.handoff = handoff;
+        lane_runs
+    }
+
+    /// Give each started worker its runs (from [`assign`](Self::assign)).
+    fn hand_out(&self, lane_runs: Vec<Vec<(usize, usize)>>, instances: usize) {
         for (lane, runs) in self.lanes.iter().zip(lane_runs) {
             let mut job = lock(&lane.shared);
             job.used = (0..instances)
@@ -408,11 +461,29 @@ impl Pool {
         }
     }
 
-    /// "auto": time the hand-off with the states saved at T_{N-1}, split the
-    /// runs by the measured step costs, and start the parallel trial unless the
+    /// "auto": decide from the measured step costs whether the workers might
+    /// pay; if so start them, time the hand-off with the states saved at
+    /// T_{N-1}, split the runs and start the parallel trial unless the
     /// prediction says it cannot pay. Returns whether the pool stays.
     pub fn decide(&mut self, slaves: &mut [Slave]) -> Result<bool, MasterError> {
         let n = slaves.len();
+        let cost = self.step_cost.clone();
+        // Not even a hand-off cheaper than any real one would pay: stay
+        // sequential without starting a worker (small FMUs pay nothing more).
+        let lane_runs = self.assign(&cost, HANDOFF_FLOOR, n);
+        let hopeless = |info: &ParallelInfo, runs: &[Vec<(usize, usize)>]| {
+            info.parallel >= info.sequential || runs.iter().all(Vec::is_empty)
+        };
+        if hopeless(&self.info, &lane_runs) {
+            log::info!(
+                "parallel perturbed runs: predicted runs per step {:?} sequential, {:?} parallel with a hand-off of {HANDOFF_FLOOR:?}: off, no worker started",
+                self.info.sequential,
+                self.info.parallel,
+            );
+            self.info.handoff = Duration::ZERO;
+            return Ok(false);
+        }
+        self.start(slaves)?;
         // Every capable instance's state crosses over while timing.
         for lane in &self.lanes {
             let mut job = lock(&lane.shared);
@@ -431,12 +502,11 @@ impl Pool {
         for lane in &self.lanes {
             lock(&lane.shared).copy_only = false;
         }
-        let cost = self.step_cost.clone();
-        self.assign(&cost, handoff, n);
+        let lane_runs = self.assign(&cost, handoff, n);
         // Try the workers if the prediction from the measured FMU steps and
         // hand-off is not hopeless; the trial steps decide.
-        let pays = self.info.parallel < self.info.sequential
-            && self.lanes.iter().any(|l| !lock(&l.shared).runs.is_empty());
+        let pays = !hopeless(&self.info, &lane_runs);
+        self.hand_out(lane_runs, n);
         log::info!(
             "parallel perturbed runs: hand-off {:?}, predicted runs per step {:?} sequential, {:?} parallel: {}",
             handoff,

@@ -90,7 +90,14 @@ impl fmt::Display for RunStats {
             )?;
         }
         let p = &self.parallel;
-        if p.workers > 0 || p.handoff > Duration::ZERO {
+        if p.workers == 0 && p.handoff.is_zero() && !p.sequential.is_zero() {
+            writeln!(
+                f,
+                "  parallel perturbed runs: 0 worker(s)   predicted runs per step {:.1} µs sequential: \
+                 less than a hand-off could save, no worker started",
+                p.sequential.as_secs_f64() * 1e6
+            )?;
+        } else if p.workers > 0 || p.handoff > Duration::ZERO {
             writeln!(
                 f,
                 "  parallel perturbed runs: {} worker(s)   hand-off {:.1} µs   predicted runs per step {:.1} µs sequential, {:.1} µs parallel",
