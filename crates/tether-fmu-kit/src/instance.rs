@@ -406,7 +406,7 @@ fn initial_snapshot<M: Model>() -> Snapshot {
 
 /// Identifies the model in serialized states: FNV-1a of the GUID.
 pub fn fingerprint<M: Model>() -> u64 {
-    crate::xml::guid(&M::DECLARATION)
+    crate::xml::model_guid::<M>()
         .bytes()
         .fold(0xcbf2_9ce4_8422_2325, |h, b| {
             (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)

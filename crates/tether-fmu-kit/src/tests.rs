@@ -177,6 +177,20 @@ fn guid_is_a_deterministic_hash_of_the_declaration() {
 }
 
 #[test]
+fn the_cached_guid_is_rendered_once_per_model() {
+    let first = xml::model_guid::<Decay>();
+    assert_eq!(first, xml::guid(&Decay::DECLARATION));
+    // The second call returns the same string, not a new rendering.
+    assert!(std::ptr::eq(first, xml::model_guid::<Decay>()));
+    // Each model type has its own entry.
+    assert_eq!(
+        xml::model_guid::<Limited>(),
+        xml::guid(&Limited::DECLARATION)
+    );
+    assert_ne!(xml::model_guid::<Limited>(), first);
+}
+
+#[test]
 fn invalid_declarations_are_refused() {
     const DUPLICATE_INPUTS: &[Real] = &[Real::new("k", 0.0)];
     const UNKNOWN_DEPENDENCY: &[Output] = &[Output::new("y").depends_on(&["w"])];

@@ -52,6 +52,25 @@ pub fn model_description(declaration: &Declaration) -> Result<String, String> {
     Ok(render(declaration, &guid(declaration)))
 }
 
+/// The GUID of model `M`, rendered and hashed once per process: instantiating
+/// checks it and every instance keeps a fingerprint of it, and rendering a
+/// large declaration costs milliseconds (body3d: ~2.5 million instructions).
+pub fn model_guid<M: crate::Model>() -> &'static str {
+    use std::any::TypeId;
+    use std::sync::{Mutex, PoisonError};
+    // One entry per model type in the process (one in an FMU, a few in tests);
+    // the strings live as long as the process, as the library does.
+    static GUIDS: Mutex<Vec<(TypeId, &'static str)>> = Mutex::new(Vec::new());
+    let mut guids = GUIDS.lock().unwrap_or_else(PoisonError::into_inner);
+    let id = TypeId::of::<M>();
+    if let Some(&(_, guid)) = guids.iter().find(|(t, _)| *t == id) {
+        return guid;
+    }
+    let guid: &'static str = Box::leak(guid(&M::DECLARATION).into_boxed_str());
+    guids.push((id, guid));
+    guid
+}
+
 fn fnv1a64(bytes: &[u8], offset_basis: u64) -> u64 {
     bytes.iter().fold(offset_basis, |h, &b| {
         (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)

@@ -29,8 +29,8 @@ pub trait Observer {
 }
 
 /// Writes CSV: a `time` column, then one column per value. Numbers are written
-/// in the shortest form that parses back to the same `f64` (Ryū, through the
-/// `ryu` crate, into a stack buffer: no allocation and no `fmt` machinery per
+/// in the shortest form that parses back to the same `f64` (through the `zmij`
+/// crate, into a stack buffer: no allocation and no `fmt` machinery per
 /// value), e.g. `0.001`, `333.3333333333333`, `1e-7`, `NaN`, `inf`, into a
 /// 64 KiB buffered writer. A run that fails ends the file with a comment line
 /// `# incomplete: <error>` after the last accepted step.

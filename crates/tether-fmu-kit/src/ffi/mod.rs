@@ -190,7 +190,7 @@ pub unsafe fn instantiate<M: Model>(
             make_logger(callbacks, &name),
             logging_on == FMI2_TRUE,
         );
-        let expected = xml::guid(&M::DECLARATION);
+        let expected = xml::model_guid::<M>();
         let guid = if fmu_guid.is_null() {
             None
         } else {
@@ -206,7 +206,7 @@ pub unsafe fn instantiate<M: Model>(
                 "this FMU supports co-simulation only (fmuType must be fmi2CoSimulation)"
                     .to_string(),
             )
-        } else if guid.as_deref() != Some(expected.as_str()) {
+        } else if guid.as_deref() != Some(expected) {
             Some(format!(
                 "GUID {guid:?} does not match the model's GUID {expected}"
             ))
