@@ -275,7 +275,7 @@ impl Instance {
     /// `fmi2SetRealInputDerivatives`: `values[i]` is the `orders[i]`-th time derivative
     /// of input `vrs[i]` at the current communication point. Needs
     /// `canInterpolateInputs`.
-    #[inline]
+    #[inline(always)]
     pub fn set_real_input_derivatives(
         &mut self,
         vrs: &[ValueReference],

@@ -84,7 +84,7 @@ impl Instance {
 
     /// `fmi2GetFMUstate` into an existing state of this instance, letting the FMU reuse
     /// its memory (no allocation on the master's side).
-    #[inline]
+    #[inline(always)]
     pub fn update_fmu_state(&mut self, state: &mut FmuState) -> Result<()> {
         const F: &str = "fmi2GetFMUstate";
         self.require_get_set(F)?;
@@ -95,7 +95,7 @@ impl Instance {
     }
 
     /// `fmi2SetFMUstate`; the tracked time becomes the state's time when known.
-    #[inline]
+    #[inline(always)]
     pub fn set_fmu_state(&mut self, state: &FmuState) -> Result<()> {
         const F: &str = "fmi2SetFMUstate";
         self.require_get_set(F)?;

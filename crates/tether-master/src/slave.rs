@@ -250,7 +250,7 @@ impl Slave {
     }
 
     /// Save the current state (`fmi2GetFMUstate`, reusing the previous handle).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn save_state(&mut self) -> Result<(), MasterError> {
         match &mut self.state {
             Some(s) => self.instance.update_fmu_state(s)?,
@@ -261,7 +261,7 @@ impl Slave {
     }
 
     /// Roll back to the saved state (`fmi2SetFMUstate`).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn restore_state(&mut self) -> Result<(), MasterError> {
         let state = self
             .state
@@ -274,7 +274,7 @@ impl Slave {
 
     /// Set the coupled inputs from the unknowns' polynomials; `degree` > 0 also
     /// passes derivatives through `fmi2SetRealInputDerivatives`.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn apply_inputs(
         &mut self,
         polys: &[Taylor],
@@ -319,7 +319,7 @@ impl Slave {
     }
 
     /// Read the coupled outputs into `coupled_values`.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn read_coupled(&mut self) -> Result<(), MasterError> {
         if self.direct_read {
             if !self.value_vrs.is_empty() {
