@@ -84,7 +84,7 @@ const HANDOFF_SAMPLES: usize = 7;
 
 /// Less than any hand-off can cost: it wakes a sleeping thread and is woken
 /// back, two futex calls and two context switches at the least (measured
-/// 13–21 µs on the 2-core machine of docs/performance.md). If the runs of a
+/// 8–41 µs on the 2-core machine of docs/performance.md). If the runs of a
 /// step could not gain even against this, "auto" decides without starting a
 /// worker or timing a hand-off.
 pub(crate) const HANDOFF_FLOOR: Duration = Duration::from_micros(2);
@@ -483,7 +483,12 @@ impl Pool {
             self.info.handoff = Duration::ZERO;
             return Ok(false);
         }
-        self.start(slaves)?;
+        if let Err(e) = self.start(slaves) {
+            // The workers are an optimisation: the run goes on without them.
+            log::warn!("parallel perturbed runs: cannot start a worker ({e}); staying sequential");
+            self.info = ParallelInfo::default();
+            return Ok(false);
+        }
         // Every capable instance's state crosses over while timing.
         for lane in &self.lanes {
             let mut job = lock(&lane.shared);
