@@ -157,6 +157,32 @@ fn macro_steps_do_not_allocate_for_any_method() {
     assert!(failures.is_empty(), "allocations per run: {failures:?}");
 }
 
+/// With the CSV written from a writer thread (`CsvRecorder::background`, what
+/// `tether run` uses), the master's thread allocates nothing either, over
+/// 3000 steps: its blocks of rows go to the writer and come back several
+/// times (~900 rows a block for this width).
+#[test]
+fn background_csv_recording_does_not_allocate() {
+    const WARM_UP: u64 = 10;
+    let mut spec = system("kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6", 1, 1);
+    spec.experiment.stop = 3.0;
+    let mut sim = Simulation::new(&spec).expect("simulation");
+    let mut csv = CsvRecorder::background(std::io::sink());
+    let mut at_warm_up = None;
+    let mut at_end = 0;
+    sim.run(&mut [&mut csv], &mut |n, total| {
+        if n == WARM_UP {
+            at_warm_up = Some(allocations());
+        }
+        if n == total {
+            at_end = allocations();
+        }
+    })
+    .expect("run");
+    let n = at_end - at_warm_up.expect("ran past the warm-up");
+    assert_eq!(n, 0, "{n} allocations in 2990 steps");
+}
+
 /// The counter sees allocations at all (so zero above means something).
 #[test]
 fn the_counter_counts() {

@@ -52,7 +52,7 @@ pub fn main(args: Args) -> Result<()> {
     let mut sim = Simulation::new(&spec)?;
     sim.time_phases(args.timing);
     let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let mut recorder = CsvRecorder::new(file);
+    let mut recorder = CsvRecorder::background(file);
     let steps = sim.total_steps();
     let bar = (std::io::stderr().is_terminal() && steps >= 20_000 && !args.quiet).then(|| {
         let bar = indicatif::ProgressBar::new(steps);

@@ -83,7 +83,7 @@ pub fn main(args: Args) -> Result<()> {
         .out
         .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
     let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let mut recorder = CsvRecorder::new(file);
+    let mut recorder = CsvRecorder::background(file);
     recorder.start(&columns)?;
     let mut row = vec![0.0; columns.len()];
     let real_vrs: Vec<u32> = real.iter().map(|x| x.1).collect();

@@ -1,6 +1,9 @@
 //! Observers see every accepted macro point; recording results is one of them.
 
+use std::collections::VecDeque;
 use std::io::Write;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
 /// The values at one accepted macro point, in column order.
 #[derive(Debug, Clone, Copy)]
@@ -34,26 +37,139 @@ pub trait Observer {
 /// value), e.g. `0.001`, `333.3333333333333`, `1e-7`, `NaN`, `inf`, into a
 /// 64 KiB buffered writer. A run that fails ends the file with a comment line
 /// `# incomplete: <error>` after the last accepted step.
+///
+/// [`CsvRecorder::new`] formats and writes on the caller's thread;
+/// [`CsvRecorder::background`] hands the rows, unformatted, to a writer thread
+/// in blocks of ~64 KiB (what `tether run` uses when there is a second core).
+/// The file is the same byte for byte.
 pub struct CsvRecorder<W: Write> {
-    out: std::io::BufWriter<W>,
-    number: zmij::Buffer,
-    /// One row, assembled before a single write (reused, grows to the widest row).
-    line: Vec<u8>,
+    mode: Mode<W>,
+}
+
+enum Mode<W: Write> {
+    Direct(CsvText<W>),
+    Background(Background),
 }
 
 impl<W: Write> CsvRecorder<W> {
-    /// Record into `out`.
+    /// Record into `out`, formatting on the caller's thread.
     pub fn new(out: W) -> Self {
         CsvRecorder {
-            out: std::io::BufWriter::with_capacity(1 << 16, out),
-            number: zmij::Buffer::new(),
-            line: Vec::new(),
+            mode: Mode::Direct(CsvText::new(out)),
+        }
+    }
+}
+
+impl<W: Write + Send + 'static> CsvRecorder<W> {
+    /// Record into `out` from a writer thread, which formats and writes while
+    /// the run goes on; on a single core (or if the thread cannot be started)
+    /// the same as [`new`](Self::new). Errors of the writer are returned by the
+    /// next [`Observer::sample`] or by [`Observer::finish`]; rows recorded
+    /// before a failure are written before the `# incomplete` line.
+    pub fn background(out: W) -> Self {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if cores < 2 {
+            return Self::new(out);
+        }
+        let shared = Arc::new(Shared {
+            state: Mutex::new(Exchange {
+                header: None,
+                full: VecDeque::with_capacity(BLOCKS),
+                empty: Vec::with_capacity(BLOCKS),
+                width: 1,
+                end: None,
+                stopped: false,
+                error: None,
+            }),
+            wake_writer: Condvar::new(),
+            wake_master: Condvar::new(),
+        });
+        // The writer goes over once the thread runs, so that it is still ours
+        // if the thread cannot be started.
+        let (give, take) = std::sync::mpsc::sync_channel::<CsvText<W>>(1);
+        let spawned = std::thread::Builder::new()
+            .name("tether-csv".into())
+            .spawn({
+                let shared = Arc::clone(&shared);
+                move || {
+                    let Ok(mut text) = take.recv() else {
+                        return;
+                    };
+                    let result =
+                        catch_unwind(AssertUnwindSafe(|| write_blocks(&shared, &mut text)))
+                            .unwrap_or_else(|_| {
+                                Err(std::io::Error::other("the CSV writer thread panicked"))
+                            });
+                    let mut state = lock(&shared);
+                    state.stopped = true;
+                    state.error = result.err();
+                    shared.wake_master.notify_one();
+                }
+            });
+        let text = CsvText::new(out);
+        let Ok(thread) = spawned else {
+            return CsvRecorder {
+                mode: Mode::Direct(text),
+            };
+        };
+        if let Err(back) = give.send(text) {
+            // Only if the thread died before its first instruction.
+            return CsvRecorder {
+                mode: Mode::Direct(back.0),
+            };
+        }
+        CsvRecorder {
+            mode: Mode::Background(Background {
+                block: Vec::new(),
+                width: 1,
+                shared,
+                thread: Some(thread),
+            }),
         }
     }
 }
 
 impl<W: Write> Observer for CsvRecorder<W> {
     fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
+        match &mut self.mode {
+            Mode::Direct(text) => text.header(columns),
+            Mode::Background(bg) => bg.start(columns),
+        }
+    }
+
+    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
+        match &mut self.mode {
+            Mode::Direct(text) => text.row(sample.time, sample.values),
+            Mode::Background(bg) => bg.sample(sample),
+        }
+    }
+
+    fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()> {
+        match &mut self.mode {
+            Mode::Direct(text) => text.end(failure),
+            Mode::Background(bg) => bg.finish(failure),
+        }
+    }
+}
+
+/// The CSV text itself: header, rows, end.
+struct CsvText<W: Write> {
+    out: std::io::BufWriter<W>,
+    number: zmij::Buffer,
+    /// One row, assembled before a single write (reused, grows to the widest row).
+    line: Vec<u8>,
+}
+
+impl<W: Write> CsvText<W> {
+    fn new(out: W) -> Self {
+        CsvText {
+            out: std::io::BufWriter::with_capacity(1 << 16, out),
+            number: zmij::Buffer::new(),
+            line: Vec::new(),
+        }
+    }
+
+    fn header(&mut self, columns: &[String]) -> std::io::Result<()> {
         self.out.write_all(b"time")?;
         for c in columns {
             self.out.write_all(b",")?;
@@ -68,11 +184,12 @@ impl<W: Write> Observer for CsvRecorder<W> {
         self.out.write_all(b"\n")
     }
 
-    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
+    #[inline]
+    fn row(&mut self, time: f64, values: &[f64]) -> std::io::Result<()> {
         let line = &mut self.line;
         line.clear();
-        line.extend_from_slice(self.number.format(sample.time).as_bytes());
-        for &v in sample.values {
+        line.extend_from_slice(self.number.format(time).as_bytes());
+        for &v in values {
             line.push(b',');
             line.extend_from_slice(self.number.format(v).as_bytes());
         }
@@ -80,12 +197,192 @@ impl<W: Write> Observer for CsvRecorder<W> {
         self.out.write_all(line)
     }
 
-    fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()> {
+    fn end(&mut self, failure: Option<&str>) -> std::io::Result<()> {
         if let Some(reason) = failure {
             let line = reason.replace(['\n', '\r'], " ");
             writeln!(self.out, "# incomplete: {line}")?;
         }
         self.out.flush()
+    }
+}
+
+/// Blocks of rows in circulation between the master and the writer thread:
+/// one being filled, one queued, one being written. All are allocated by
+/// `start`, so recording allocates nothing afterwards.
+const BLOCKS: usize = 3;
+
+/// Values (time and the row) per block: 64 KiB of numbers, at least one row.
+const BLOCK_VALUES: usize = 8192;
+
+/// What the master and the writer thread exchange, under one mutex (no
+/// channel: std's channels allocate the first time a thread waits on them).
+struct Exchange {
+    /// Column names, until the writer has taken them.
+    header: Option<Vec<String>>,
+    /// Blocks to write, oldest first (capacity `BLOCKS`, never exceeded).
+    full: VecDeque<Vec<f64>>,
+    /// Written blocks, for the master to fill again (capacity `BLOCKS`).
+    empty: Vec<Vec<f64>>,
+    /// Numbers per row (time first).
+    width: usize,
+    /// Set by `finish` (with the failure, if any) or on drop: write the rest
+    /// and stop.
+    end: Option<Option<String>>,
+    /// The writer has stopped, after `end` or on an error.
+    stopped: bool,
+    /// Why the writer stopped early.
+    error: Option<std::io::Error>,
+}
+
+struct Shared {
+    state: Mutex<Exchange>,
+    wake_writer: Condvar,
+    wake_master: Condvar,
+}
+
+fn lock(shared: &Shared) -> MutexGuard<'_, Exchange> {
+    shared.state.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The writer thread's loop: header, blocks in order, end.
+fn write_blocks<W: Write>(shared: &Shared, text: &mut CsvText<W>) -> std::io::Result<()> {
+    let mut state = lock(shared);
+    loop {
+        if let Some(columns) = state.header.take() {
+            drop(state);
+            text.header(&columns)?;
+            state = lock(shared);
+        } else if let Some(block) = state.full.pop_front() {
+            let width = state.width;
+            drop(state);
+            for row in block.chunks_exact(width) {
+                text.row(row[0], &row[1..])?;
+            }
+            state = lock(shared);
+            state.empty.push(block);
+            shared.wake_master.notify_one();
+        } else if let Some(failure) = state.end.take() {
+            drop(state);
+            return text.end(failure.as_deref());
+        } else {
+            state = shared
+                .wake_writer
+                .wait(state)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+    }
+}
+
+/// The master's side of [`CsvRecorder::background`].
+struct Background {
+    /// Rows not yet handed over, time first in each.
+    block: Vec<f64>,
+    /// Numbers per row.
+    width: usize,
+    shared: Arc<Shared>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Background {
+    fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
+        self.width = columns.len() + 1;
+        let capacity = BLOCK_VALUES.max(self.width) / self.width * self.width;
+        self.block = Vec::with_capacity(capacity);
+        let mut state = lock(&self.shared);
+        if state.stopped {
+            return Err(stopped(&state));
+        }
+        state.width = self.width;
+        state.empty.clear();
+        state
+            .empty
+            .extend((1..BLOCKS).map(|_| Vec::with_capacity(capacity)));
+        state.header = Some(columns.to_vec());
+        self.shared.wake_writer.notify_one();
+        Ok(())
+    }
+
+    #[inline]
+    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
+        if self.block.len() + self.width > self.block.capacity() {
+            self.hand_over()?;
+        }
+        self.block.push(sample.time);
+        self.block.extend_from_slice(sample.values);
+        Ok(())
+    }
+
+    /// Queue the filled block and take an empty one, waiting for the writer
+    /// if all are in use (a slow disk holds the run back, it does not fill
+    /// memory).
+    fn hand_over(&mut self) -> std::io::Result<()> {
+        if self.block.capacity() == 0 {
+            return Err(std::io::Error::other("CsvRecorder: a sample before start"));
+        }
+        let mut state = lock(&self.shared);
+        if state.stopped {
+            return Err(stopped(&state));
+        }
+        state.full.push_back(std::mem::take(&mut self.block));
+        self.shared.wake_writer.notify_one();
+        loop {
+            if let Some(mut next) = state.empty.pop() {
+                next.clear();
+                self.block = next;
+                return Ok(());
+            }
+            if state.stopped {
+                return Err(stopped(&state));
+            }
+            state = self
+                .shared
+                .wake_master
+                .wait(state)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+    }
+
+    /// Hand over the last rows and the end, wait for the writer.
+    fn close(&mut self, failure: Option<&str>) -> std::io::Result<()> {
+        let Some(thread) = self.thread.take() else {
+            return Err(std::io::Error::other("the CSV writer thread has stopped"));
+        };
+        {
+            let mut state = lock(&self.shared);
+            if !self.block.is_empty() {
+                state.full.push_back(std::mem::take(&mut self.block));
+            }
+            state.end = Some(failure.map(str::to_string));
+            self.shared.wake_writer.notify_one();
+        }
+        let _ = thread.join();
+        let state = lock(&self.shared);
+        match state.error {
+            Some(_) => Err(stopped(&state)),
+            None => Ok(()),
+        }
+    }
+
+    fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()> {
+        self.close(failure)
+    }
+}
+
+/// The writer's error (every time it is asked: the run and its end both
+/// report it), or that it has stopped.
+fn stopped(state: &Exchange) -> std::io::Error {
+    match &state.error {
+        Some(e) => std::io::Error::new(e.kind(), e.to_string()),
+        None => std::io::Error::other("the CSV writer thread has stopped"),
+    }
+}
+
+impl Drop for Background {
+    /// Without `finish`, the rows recorded so far are still written.
+    fn drop(&mut self) {
+        if self.thread.is_some() {
+            let _ = self.close(None);
+        }
     }
 }
 
@@ -136,6 +433,122 @@ impl Observer for MemoryRecorder {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A writer the writer thread can own while the test reads it afterwards.
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Shared {
+        fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(bytes);
+            Ok(bytes.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// Fails every write once `left` bytes are written, as a full disk does.
+    struct Full {
+        left: usize,
+    }
+
+    impl Write for Full {
+        fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+            if self.left < bytes.len() {
+                return Err(std::io::Error::other("no space left on device"));
+            }
+            self.left -= bytes.len();
+            Ok(bytes.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// `rows` samples of 8 columns (one name with a comma), then `finish`.
+    fn record(rec: &mut impl Observer, rows: u64, failure: Option<&str>) -> std::io::Result<()> {
+        let columns: Vec<String> = (0..8)
+            .map(|i| {
+                if i == 3 {
+                    "b.R[1,2]".into()
+                } else {
+                    format!("c{i}")
+                }
+            })
+            .collect();
+        rec.start(&columns)?;
+        let mut values = [0.0; 8];
+        for n in 0..rows {
+            for (i, v) in values.iter_mut().enumerate() {
+                *v = (n as f64 + 1.0) / (i as f64 + 3.0) * 1e3 - 1e-7 * n as f64;
+            }
+            rec.sample(Sample {
+                step: n,
+                time: n as f64 * 1e-3,
+                values: &values,
+            })?;
+        }
+        rec.finish(failure)
+    }
+
+    /// The writer thread writes the same bytes as the caller's thread: no
+    /// rows, one, exactly one block (910 rows of 9 numbers), and several
+    /// blocks with a failure at the end.
+    #[test]
+    fn background_writes_the_same_bytes() {
+        for (rows, failure) in [
+            (0, None),
+            (1, None),
+            (910, None),
+            (5000, Some("coupling diverged\nat t = 5")),
+        ] {
+            let mut direct = Vec::new();
+            record(&mut CsvRecorder::new(&mut direct), rows, failure).unwrap();
+            let shared = Shared::default();
+            record(&mut CsvRecorder::background(shared.clone()), rows, failure).unwrap();
+            let threaded = shared.0.lock().unwrap().clone();
+            assert_eq!(
+                String::from_utf8(threaded).unwrap(),
+                String::from_utf8(direct).unwrap(),
+                "{rows} rows"
+            );
+        }
+    }
+
+    /// A write error on the writer thread comes back to the master as an
+    /// error of `sample` or `finish`, naming the cause; nothing hangs.
+    #[test]
+    fn background_write_errors_reach_the_master() {
+        let mut rec = CsvRecorder::background(Full { left: 200_000 });
+        let err = record(&mut rec, 50_000, None).unwrap_err();
+        assert!(err.to_string().contains("no space left"), "{err}");
+        // Also when the error happens only while the last rows are written.
+        let mut rec = CsvRecorder::background(Full { left: 70_000 });
+        let err = record(&mut rec, 700, Some("stopped")).unwrap_err();
+        assert!(err.to_string().contains("no space left"), "{err}");
+    }
+
+    /// Dropped without `finish`, the recorder still writes what it was given.
+    #[test]
+    fn background_rows_survive_a_drop_without_finish() {
+        let shared = Shared::default();
+        {
+            let mut rec = CsvRecorder::background(shared.clone());
+            rec.start(&["x".into()]).unwrap();
+            for n in 0..2000 {
+                rec.sample(Sample {
+                    step: n,
+                    time: n as f64,
+                    values: &[0.5],
+                })
+                .unwrap();
+            }
+        }
+        let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
+        assert_eq!(text.lines().count(), 2001);
+        assert_eq!(text.lines().last(), Some("1999.0,0.5"));
+    }
 
     #[test]
     fn csv_rows_round_trip_and_failures_are_marked() {
