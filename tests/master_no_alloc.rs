@@ -7,7 +7,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use tether_master::{CsvRecorder, Simulation, SystemSpec};
+use tether_master::{CsvRecorder, Observer, Simulation, SystemSpec};
 
 /// Counts allocations (and reallocations) made by the current thread, so the
 /// test harness's other threads do not disturb the count.
@@ -97,13 +97,17 @@ fn system(method: &str, order: usize, pairs: usize) -> SystemSpec {
 /// Allocations during macro steps 10..=100, with a CSV recorder attached and
 /// the phases timed or not.
 fn steady_state_allocations(spec: &SystemSpec, timed: bool) -> u64 {
-    const WARM_UP: u64 = 10;
     let mut sim = Simulation::new(spec).expect("simulation");
     sim.time_phases(timed);
-    let mut csv = CsvRecorder::new(std::io::sink());
+    allocations_after_warm_up(&mut sim, &mut CsvRecorder::new(std::io::sink()))
+}
+
+/// Allocations on this thread from macro step 10 to the end of the run.
+fn allocations_after_warm_up(sim: &mut Simulation, observer: &mut dyn Observer) -> u64 {
+    const WARM_UP: u64 = 10;
     let mut at_warm_up = None;
     let mut at_end = 0;
-    sim.run(&mut [&mut csv], &mut |n, total| {
+    sim.run(&mut [observer], &mut |n, total| {
         if n == WARM_UP {
             at_warm_up = Some(allocations());
         }
@@ -163,23 +167,10 @@ fn macro_steps_do_not_allocate_for_any_method() {
 /// times (~900 rows a block for this width).
 #[test]
 fn background_csv_recording_does_not_allocate() {
-    const WARM_UP: u64 = 10;
     let mut spec = system("kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6", 1, 1);
     spec.experiment.stop = 3.0;
     let mut sim = Simulation::new(&spec).expect("simulation");
-    let mut csv = CsvRecorder::background(std::io::sink());
-    let mut at_warm_up = None;
-    let mut at_end = 0;
-    sim.run(&mut [&mut csv], &mut |n, total| {
-        if n == WARM_UP {
-            at_warm_up = Some(allocations());
-        }
-        if n == total {
-            at_end = allocations();
-        }
-    })
-    .expect("run");
-    let n = at_end - at_warm_up.expect("ran past the warm-up");
+    let n = allocations_after_warm_up(&mut sim, &mut CsvRecorder::background(std::io::sink()));
     assert_eq!(n, 0, "{n} allocations in 2990 steps");
 }
 

@@ -298,16 +298,6 @@ impl Pool {
     /// (instantiated and initialised like the original; its state is loaded
     /// from the original's before each job).
     fn start(&mut self, slaves: &[Slave]) -> Result<(), MasterError> {
-        let values: Vec<Vec<Vec<f64>>> = self
-            .polys
-            .iter()
-            .map(|_| {
-                slaves
-                    .iter()
-                    .map(|s| vec![0.0; s.coupled_values.len()])
-                    .collect()
-            })
-            .collect();
         self.lanes.reserve(self.workers);
         for w in 0..self.workers {
             let mut extras = Vec::with_capacity(slaves.len());
@@ -325,7 +315,7 @@ impl Pool {
                     runs: Vec::new(),
                     copy_only: false,
                     polys: self.polys.clone(),
-                    values: values.clone(),
+                    values: self.values.clone(),
                     t: 0.0,
                     h: 0.0,
                     k: 0,
