@@ -371,3 +371,67 @@ fn higher_degree_polynomials_at_h_1e_3() {
         "weighted index 1, k = 2: {err}"
     );
 }
+
+/// An observer whose `finish` fails (as a results file on a full disk does).
+struct FailsToFinish;
+
+impl tether_master::Observer for FailsToFinish {
+    fn start(&mut self, _columns: &[String]) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn sample(&mut self, _sample: tether_master::Sample<'_>) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn finish(&mut self, _failure: Option<&str>) -> std::io::Result<()> {
+        Err(std::io::Error::other("disk full"))
+    }
+}
+
+/// Counts rows and `finish` calls.
+#[derive(Default)]
+struct Counts {
+    rows: usize,
+    finished: usize,
+}
+
+impl tether_master::Observer for Counts {
+    fn start(&mut self, _columns: &[String]) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn sample(&mut self, _sample: tether_master::Sample<'_>) -> std::io::Result<()> {
+        self.rows += 1;
+        Ok(())
+    }
+    fn finish(&mut self, _failure: Option<&str>) -> std::io::Result<()> {
+        self.finished += 1;
+        Ok(())
+    }
+}
+
+/// When one observer cannot finish, the others after it are still finished,
+/// the run reports the observer's error (naming its cause once), and the
+/// run's statistics keep its wall time.
+#[test]
+fn a_failing_observer_does_not_keep_the_others_from_finishing() {
+    let spec = system(
+        "kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6",
+        0,
+        1e-3,
+        0.01,
+    );
+    let mut sim = Simulation::new(&spec).expect("simulation");
+    let mut failing = FailsToFinish;
+    let mut counts = Counts::default();
+    let err = sim
+        .run(&mut [&mut failing, &mut counts], &mut |_, _| {})
+        .unwrap_err();
+    assert!(matches!(err, MasterError::Recording(_)), "{err}");
+    assert_eq!(err.to_string(), "recording results: disk full");
+    assert!(
+        std::error::Error::source(&err).is_none(),
+        "the cause is printed once"
+    );
+    assert_eq!(counts.rows, 11, "the second observer saw every row");
+    assert_eq!(counts.finished, 1, "and was finished");
+    assert!(sim.stats().wall > std::time::Duration::ZERO);
+}

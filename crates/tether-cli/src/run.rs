@@ -110,6 +110,14 @@ pub fn main(args: Args) -> Result<()> {
             }
             Ok(())
         }
+        // The results file itself failed: nothing says what it holds.
+        Err(e @ tether_master::MasterError::Recording(_)) => {
+            Err(anyhow::Error::new(e).context(format!(
+                "run stopped at t = {}: cannot write {}",
+                sim.time(),
+                out.display()
+            )))
+        }
         Err(e) => Err(anyhow::Error::new(e).context(format!(
             "run stopped; results up to t = {} kept in {} (marked incomplete)",
             sim.time(),

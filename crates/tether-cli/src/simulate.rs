@@ -84,7 +84,8 @@ pub fn main(args: Args) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
     let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let mut recorder = CsvRecorder::background(file);
-    recorder.start(&columns)?;
+    let cannot_write = || format!("cannot write {}", out.display());
+    recorder.start(&columns).with_context(cannot_write)?;
     let mut row = vec![0.0; columns.len()];
     let real_vrs: Vec<u32> = real.iter().map(|x| x.1).collect();
     let int_vrs: Vec<u32> = int.iter().map(|x| x.1).collect();
@@ -105,11 +106,13 @@ pub fn main(args: Args) -> Result<()> {
         for (k, &(slot, _)) in boolean.iter().enumerate() {
             row[slot] = if bool_buf[k] { 1.0 } else { 0.0 };
         }
-        recorder.sample(Sample {
-            step: n,
-            time: start + n as f64 * step,
-            values: &row,
-        })?;
+        recorder
+            .sample(Sample {
+                step: n,
+                time: start + n as f64 * step,
+                values: &row,
+            })
+            .with_context(cannot_write)?;
         Ok(())
     };
     // Every failure after the header, the FMU's or ours, ends the CSV with its trailer.
@@ -132,7 +135,9 @@ pub fn main(args: Args) -> Result<()> {
             .and_then(|()| record(&mut instance, n));
     }
     let failure = outcome.as_ref().err().map(|e| format!("{e:#}"));
-    recorder.finish(failure.as_deref())?;
+    recorder
+        .finish(failure.as_deref())
+        .with_context(cannot_write)?;
     outcome.with_context(|| {
         format!(
             "simulation stopped; results so far kept in {}",

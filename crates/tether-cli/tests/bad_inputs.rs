@@ -1100,3 +1100,52 @@ fn a_spatial_joint_on_a_planar_marker_without_the_port() {
     assert!(matches!(setup_err(&sys), MasterError::MissingPort { .. }));
     run_error(&sys, &["joint 'hinge'", "'B.F[3]'", "'link1'"]);
 }
+
+// ---------------------------------------------------------------- results file
+
+/// A results file that cannot be written (a full disk: `/dev/full`, Linux) stops
+/// `tether run` and `tether simulate` with one line naming the file and the cause
+/// once, whether the writer thread fails at the end (10 steps) or in the middle
+/// (20 000 steps, many blocks of rows).
+#[test]
+fn a_full_disk_for_the_results() {
+    if !Path::new("/dev/full").exists() {
+        eprintln!("no /dev/full here: skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), |t| t);
+    for stop in ["0.01", "20"] {
+        let out = tether(
+            &[
+                "run",
+                sys.to_str().unwrap(),
+                "--stop",
+                stop,
+                "-q",
+                "--out",
+                "/dev/full",
+            ],
+            dir.path(),
+        );
+        let line = cli_error(&out, &["cannot write /dev/full", "No space left on device"]);
+        assert_eq!(line.matches("No space left").count(), 1, "{line}");
+        assert!(!line.contains("kept"), "claims results were kept: {line}");
+        let fmu = oscillator_fmu();
+        let out = tether(
+            &[
+                "simulate",
+                fmu.to_str().unwrap(),
+                "--stop",
+                stop,
+                "--step",
+                "1e-3",
+                "--out",
+                "/dev/full",
+            ],
+            dir.path(),
+        );
+        let line = cli_error(&out, &["cannot write /dev/full", "No space left on device"]);
+        assert_eq!(line.matches("No space left").count(), 1, "{line}");
+    }
+}

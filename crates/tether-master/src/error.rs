@@ -170,13 +170,20 @@ pub enum MasterError {
     /// An FMI call or FMU load failed.
     #[error(transparent)]
     Fmi(#[from] tether_fmi::Error),
-    /// Writing results failed.
+    /// Writing results failed. (The I/O error is in the message, not also a
+    /// `source`, so that a printed chain names it once.)
     #[error("recording results: {0}")]
-    Recording(#[from] std::io::Error),
+    Recording(std::io::Error),
     /// A worker thread for parallel perturbed runs could not be started.
     #[error("cannot start a worker thread for parallel perturbed runs: {0}")]
     Thread(String),
     /// A worker thread panicked during perturbed runs.
     #[error("a worker thread panicked during parallel perturbed runs")]
     Worker,
+}
+
+impl From<std::io::Error> for MasterError {
+    fn from(e: std::io::Error) -> Self {
+        MasterError::Recording(e)
+    }
 }

@@ -299,11 +299,19 @@ impl Simulation {
             Ok(())
         })();
         let message = outcome.as_ref().err().map(|e: &MasterError| e.to_string());
+        // Every observer is finished, even after another one failed; the
+        // run's own error comes first, then the first observer's.
+        let mut finished = Ok(());
         for o in observers.iter_mut() {
-            o.finish(message.as_deref())?;
+            let result = o.finish(message.as_deref());
+            if finished.is_ok() {
+                finished = result;
+            }
         }
         self.stats.wall = clock.elapsed() + self.stats.times.setup;
-        outcome.map(|()| self.stats())
+        outcome?;
+        finished?;
+        Ok(self.stats())
     }
 
     fn notify(&mut self, observers: &mut [&mut dyn Observer]) -> Result<(), MasterError> {
