@@ -10,56 +10,74 @@
 //!
 //! The difference of the two counts, per function, divided by 20 000 is the
 //! instruction count of one macro step without the setup (docs/performance.md).
+//!
+//! `--first-steps K` prints the wall time of each of the first K macro steps
+//! (one-off costs such as the "auto" parallel decision at step 3 show there);
+//! `--system FILE` runs that system file instead of the oscillator pair.
 
 use tether_bench::{floor, Case};
 use tether_fmi::Fmu;
-use tether_master::Simulation;
+use tether_master::{Simulation, SystemSpec};
+
+fn fail(message: impl std::fmt::Display) -> ! {
+    eprintln!("steps: {message}");
+    std::process::exit(1);
+}
 
 fn main() {
-    let steps: u64 = match std::env::args().nth(1).map(|s| s.parse()) {
-        None => 20_000,
-        Some(Ok(n)) => n,
-        Some(Err(e)) => {
-            eprintln!("steps: the argument must be a number of macro steps ({e})");
-            std::process::exit(2);
-        }
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let option = |name: &str| {
+        args.iter().position(|a| a == name).map(|i| {
+            args.get(i + 1)
+                .unwrap_or_else(|| fail(format!("{name} needs a value")))
+        })
     };
+    let steps: u64 = match args.first().filter(|a| !a.starts_with("--")) {
+        None => 20_000,
+        Some(n) => n.parse().unwrap_or_else(|e| {
+            eprintln!("steps: the first argument must be a number of macro steps ({e})");
+            std::process::exit(2);
+        }),
+    };
+    let first: usize = option("--first-steps").map_or(0, |k| {
+        k.parse()
+            .unwrap_or_else(|e| fail(format!("--first-steps: {e}")))
+    });
     let mut case = Case::example(true, 1);
     case.steps = steps;
-    let mut sim = match Simulation::new(&case.spec()) {
-        Ok(sim) => sim,
-        Err(e) => {
-            eprintln!("steps: {e}");
-            std::process::exit(1);
+    let spec = match option("--system") {
+        Some(path) => {
+            let mut spec =
+                SystemSpec::from_file(std::path::Path::new(path)).unwrap_or_else(|e| fail(e));
+            spec.experiment.stop = spec.experiment.start + steps as f64 * spec.experiment.step;
+            spec
         }
+        None => case.spec(),
     };
-    if std::env::args().nth(2).as_deref() == Some("--floor") {
-        let fmu = match Fmu::open(&case.spec().instances[0].fmu) {
-            Ok(fmu) => fmu,
-            Err(e) => {
-                eprintln!("steps: {e}");
-                std::process::exit(1);
-            }
-        };
-        match floor(&case, &fmu, sim.unknowns()[0]) {
-            Ok(result) => println!(
-                "{steps} macro steps of the C floor, {:.3} µs per step",
-                result.seconds / steps.max(1) as f64 * 1e6
-            ),
-            Err(e) => {
-                eprintln!("steps: {e}");
-                std::process::exit(1);
-            }
-        }
+    let mut sim = Simulation::new(&spec).unwrap_or_else(|e| fail(e));
+    if args.iter().any(|a| a == "--floor") {
+        let fmu = Fmu::open(&case.spec().instances[0].fmu).unwrap_or_else(|e| fail(e));
+        let result = floor(&case, &fmu, sim.unknowns()[0]).unwrap_or_else(|e| fail(e));
+        println!(
+            "{steps} macro steps of the C floor, {:.3} µs per step",
+            result.seconds / steps.max(1) as f64 * 1e6
+        );
         return;
     }
     let clock = std::time::Instant::now();
-    for _ in 0..steps {
+    let mut times = Vec::with_capacity(first);
+    for n in 0..steps {
+        let step_clock = (n < first as u64).then(std::time::Instant::now);
         if let Err(e) = sim.step() {
-            eprintln!("steps: {e}");
-            std::process::exit(1);
+            fail(e);
+        }
+        if let Some(c) = step_clock {
+            times.push(format!("{:.1}", c.elapsed().as_secs_f64() * 1e6));
         }
     }
     let per_step = clock.elapsed().as_secs_f64() / steps.max(1) as f64;
     println!("{steps} macro steps, {:.3} µs per step", per_step * 1e6);
+    if first > 0 {
+        println!("first {} steps [µs]: {}", times.len(), times.join(" "));
+    }
 }

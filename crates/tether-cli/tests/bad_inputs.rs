@@ -1115,37 +1115,17 @@ fn a_full_disk_for_the_results() {
     }
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| t);
+    let (system, fmu) = (sys.to_str().unwrap(), oscillator_fmu());
+    let fmu = fmu.to_str().unwrap();
     for stop in ["0.01", "20"] {
-        let out = tether(
-            &[
-                "run",
-                sys.to_str().unwrap(),
-                "--stop",
-                stop,
-                "-q",
-                "--out",
-                "/dev/full",
-            ],
-            dir.path(),
-        );
-        let line = cli_error(&out, &["cannot write /dev/full", "No space left on device"]);
-        assert_eq!(line.matches("No space left").count(), 1, "{line}");
-        assert!(!line.contains("kept"), "claims results were kept: {line}");
-        let fmu = oscillator_fmu();
-        let out = tether(
-            &[
-                "simulate",
-                fmu.to_str().unwrap(),
-                "--stop",
-                stop,
-                "--step",
-                "1e-3",
-                "--out",
-                "/dev/full",
-            ],
-            dir.path(),
-        );
-        let line = cli_error(&out, &["cannot write /dev/full", "No space left on device"]);
-        assert_eq!(line.matches("No space left").count(), 1, "{line}");
+        for args in [
+            vec!["run", system, "--stop", stop, "-q"],
+            vec!["simulate", fmu, "--stop", stop, "--step", "1e-3"],
+        ] {
+            let out = tether(&[&args[..], &["--out", "/dev/full"]].concat(), dir.path());
+            let line = cli_error(&out, &["cannot write /dev/full", "No space left on device"]);
+            assert_eq!(line.matches("No space left").count(), 1, "{line}");
+            assert!(!line.contains("kept"), "claims results were kept: {line}");
+        }
     }
 }
