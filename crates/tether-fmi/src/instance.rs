@@ -15,7 +15,9 @@ use crate::raw::{self, Status};
 /// serialises them). A state dropped while the instance lives cannot call the FMU
 /// itself (the instance may be mid-call on another thread): it leaves its handle in
 /// `orphans` and raises `pending`, and the instance frees it with `fmi2FreeFMUstate`
-/// before its next call. When the `Instance` value goes while states remain, the
+/// before its next call other than a Real value access (`fmi2GetReal`,
+/// `fmi2SetReal`, `fmi2SetRealInputDerivatives`: the calls a macro step makes
+/// most, between steps and state calls, skip the check). When the `Instance` value goes while states remain, the
 /// component moves into `orphans`; the last state frees itself and then the component
 /// (`fmi2FreeInstance`).
 #[derive(Debug, Default)]
@@ -151,6 +153,13 @@ impl Instance {
         raw
     }
 
+    /// The component for a Real value access, without freeing dropped states
+    /// (the next other call does).
+    #[inline(always)]
+    fn values(&mut self) -> &mut RawComponent {
+        self.raw.as_mut().expect("the component lives until drop")
+    }
+
     fn raw_ref(&self) -> &RawComponent {
         self.raw.as_ref().expect("the component lives until drop")
     }
@@ -233,7 +242,7 @@ impl Instance {
     /// `fmi2GetReal` into `out` (same length as `vrs`; no allocation).
     #[inline]
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
-        self.raw().fmi2GetReal(vrs, out)
+        self.values().fmi2GetReal(vrs, out)
     }
 
     /// `fmi2GetInteger` into `out`.
@@ -254,7 +263,7 @@ impl Instance {
     /// `fmi2SetReal`.
     #[inline]
     pub fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        self.raw().fmi2SetReal(vrs, values)
+        self.values().fmi2SetReal(vrs, values)
     }
 
     /// `fmi2SetInteger`.
@@ -290,7 +299,8 @@ impl Instance {
             "canInterpolateInputs",
             "fmi2SetRealInputDerivatives",
         )?;
-        self.raw().fmi2SetRealInputDerivatives(vrs, orders, values)
+        self.values()
+            .fmi2SetRealInputDerivatives(vrs, orders, values)
     }
 
     /// `fmi2GetRealOutputDerivatives` into `out`.

@@ -2,76 +2,84 @@
 //! output derivatives. Every request is checked completely before anything is changed,
 //! so a refused call has no effect.
 
-use crate::declaration::Slot;
-use crate::input::InputJet;
+use crate::declaration::{Slot, VarType};
+use crate::input::{eval_all, InputJet};
 use crate::instance::{Failure, Instance, Outcome};
 use crate::machine::MachineState;
 use crate::model::Model;
 
 impl<M: Model> Instance<M> {
-    fn slot(&self, vr: u32, type_name: &str) -> Outcome<Slot> {
-        let slot = usize::try_from(vr)
-            .ok()
-            .and_then(|i| self.slots.get(i).copied());
-        let slot = slot.ok_or_else(|| Failure::usage(format!("unknown value reference {vr}")))?;
-        if slot.type_name() != type_name {
-            let name = M::DECLARATION.name(slot);
-            return Err(Failure::usage(format!(
-                "value reference {vr} ({name}) is a {} variable, not {type_name}",
-                slot.type_name()
-            )));
+    /// The variable behind `vr`, which must be of type `ty`.
+    #[inline]
+    fn slot(&self, vr: u32, ty: VarType) -> Outcome<Slot> {
+        match self.slots.get(vr as usize) {
+            Some(&slot) if slot.var_type() == ty => Ok(slot),
+            found => Err(Self::wrong_slot(vr, found.copied(), ty)),
         }
-        Ok(slot)
     }
 
+    #[cold]
+    #[inline(never)]
+    fn wrong_slot(vr: u32, found: Option<Slot>, ty: VarType) -> Failure {
+        match found {
+            None => Failure::usage(format!("unknown value reference {vr}")),
+            Some(slot) => Failure::usage(format!(
+                "value reference {vr} ({}) is a {} variable, not {}",
+                M::DECLARATION.name(slot),
+                slot.var_type().name(),
+                ty.name()
+            )),
+        }
+    }
+
+    /// Outputs and state derivatives are evaluated only when asked for, once per
+    /// call. The value references are checked before anything is evaluated.
     pub fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Outcome {
-        let mut slots = std::mem::take(&mut self.scratch.slots);
-        let result = self.get_real_into(vrs, values, &mut slots);
-        self.scratch.slots = slots;
-        result
-    }
-
-    /// [`get_real`](Self::get_real) with a reused slot buffer; outputs and state
-    /// derivatives are evaluated only when asked for.
-    fn get_real_into(&mut self, vrs: &[u32], values: &mut [f64], slots: &mut Vec<Slot>) -> Outcome {
-        slots.clear();
+        let (mut wants_y, mut wants_dx, mut wants_model) = (false, false, false);
         for &vr in vrs {
-            slots.push(self.slot(vr, "Real")?);
-        }
-        let wants_y = slots.iter().any(|s| matches!(s, Slot::Output(_)));
-        let wants_dx = slots.iter().any(|s| matches!(s, Slot::Derivative(_)));
-        let mut y = std::mem::take(&mut self.scratch.y);
-        let mut dx = std::mem::take(&mut self.scratch.dx);
-        let evaluated = if wants_y || wants_dx || slots.iter().any(|s| matches!(s, Slot::State(_)))
-        {
-            self.with_model(|model, d, u| {
-                if wants_y {
-                    y.resize(M::DECLARATION.outputs.len(), 0.0);
-                    model.outputs(d.time, &d.states, u, &mut y);
-                }
-                if wants_dx {
-                    dx.resize(d.states.len(), 0.0);
-                    model.derivatives(d.time, &d.states, u, &mut dx);
-                }
-            })
-        } else {
-            Ok(())
-        };
-        if evaluated.is_ok() {
-            for (value, &slot) in values.iter_mut().zip(slots.iter()) {
-                *value = match slot {
-                    Slot::RealParameter(i) => self.data.reals[i],
-                    Slot::Input(i) => self.data.inputs[i].value,
-                    Slot::Output(i) => y[i],
-                    Slot::State(i) => self.data.states[i],
-                    Slot::Derivative(i) => dx[i],
-                    Slot::IntegerParameter(_) | Slot::BooleanParameter(_) => 0.0,
-                };
+            match self.slot(vr, VarType::Real)? {
+                Slot::Output(_) => wants_y = true,
+                Slot::Derivative(_) => wants_dx = true,
+                Slot::State(_) => wants_model = true,
+                _ => {}
             }
         }
-        self.scratch.y = y;
-        self.scratch.dx = dx;
-        evaluated
+        if wants_y || wants_dx || wants_model {
+            self.ensure_model()?;
+            let Instance {
+                model: Some(model),
+                data: d,
+                scratch,
+                ..
+            } = self
+            else {
+                return Err(Failure::usage("model not built"));
+            };
+            if wants_y || wants_dx {
+                scratch.u.resize(d.inputs.len(), 0.0);
+                eval_all(&d.inputs, 0.0, &mut scratch.u);
+            }
+            if wants_y {
+                scratch.y.resize(M::DECLARATION.outputs.len(), 0.0);
+                model.outputs(d.time, &d.states, &scratch.u, &mut scratch.y);
+            }
+            if wants_dx {
+                scratch.dx.resize(d.states.len(), 0.0);
+                model.derivatives(d.time, &d.states, &scratch.u, &mut scratch.dx);
+            }
+        }
+        let d = &self.data;
+        for (value, &vr) in values.iter_mut().zip(vrs) {
+            *value = match self.slots[vr as usize] {
+                Slot::RealParameter(i) => d.reals[i],
+                Slot::Input(i) => d.inputs[i].value,
+                Slot::Output(i) => self.scratch.y[i],
+                Slot::State(i) => d.states[i],
+                Slot::Derivative(i) => self.scratch.dx[i],
+                Slot::IntegerParameter(_) | Slot::BooleanParameter(_) => 0.0,
+            };
+        }
+        Ok(())
     }
 
     /// Parameters are `fixed`: settable until fmi2ExitInitializationMode.
@@ -90,7 +98,7 @@ impl<M: Model> Instance<M> {
     }
 
     fn check_real(&self, vr: u32, value: f64) -> Outcome<Slot> {
-        let slot = self.slot(vr, "Real")?;
+        let slot = self.slot(vr, VarType::Real)?;
         let name = || M::DECLARATION.name(slot);
         let declared = match slot {
             Slot::RealParameter(i) => {
@@ -119,33 +127,28 @@ impl<M: Model> Instance<M> {
     }
 
     /// Setting an input resets its derivatives to 0 (the new value is held constant
-    /// until fmi2SetRealInputDerivatives says otherwise).
+    /// until fmi2SetRealInputDerivatives says otherwise). Every value is checked
+    /// before any is set.
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Outcome {
-        let mut slots = std::mem::take(&mut self.scratch.slots);
-        slots.clear();
-        let checked = vrs.iter().zip(values).try_for_each(|(&vr, &v)| {
-            slots.push(self.check_real(vr, v)?);
-            Ok(())
-        });
-        if checked.is_ok() {
-            for (&slot, &value) in slots.iter().zip(values) {
-                match slot {
-                    Slot::RealParameter(i) => {
-                        self.data.reals[i] = value;
-                        self.model = None;
-                    }
-                    Slot::Input(i) => self.data.inputs[i] = InputJet::constant(value),
-                    _ => {}
+        for (&vr, &value) in vrs.iter().zip(values) {
+            self.check_real(vr, value)?;
+        }
+        for (&vr, &value) in vrs.iter().zip(values) {
+            match self.slots[vr as usize] {
+                Slot::RealParameter(i) => {
+                    self.data.reals[i] = value;
+                    self.model = None;
                 }
+                Slot::Input(i) => self.data.inputs[i] = InputJet::constant(value),
+                _ => {}
             }
         }
-        self.scratch.slots = slots;
-        checked
+        Ok(())
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], values: &mut [i32]) -> Outcome {
         for (value, &vr) in values.iter_mut().zip(vrs) {
-            if let Slot::IntegerParameter(i) = self.slot(vr, "Integer")? {
+            if let Slot::IntegerParameter(i) = self.slot(vr, VarType::Integer)? {
                 *value = self.data.integers[i];
             }
         }
@@ -154,7 +157,7 @@ impl<M: Model> Instance<M> {
 
     pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Outcome {
         for (&vr, &value) in vrs.iter().zip(values) {
-            let slot = self.slot(vr, "Integer")?;
+            let slot = self.slot(vr, VarType::Integer)?;
             self.check_parameter_settable(slot)?;
             if let Slot::IntegerParameter(i) = slot {
                 let p = M::DECLARATION.integer_parameters[i];
@@ -167,7 +170,7 @@ impl<M: Model> Instance<M> {
             }
         }
         for (&vr, &value) in vrs.iter().zip(values) {
-            if let Ok(Slot::IntegerParameter(i)) = self.slot(vr, "Integer") {
+            if let Ok(Slot::IntegerParameter(i)) = self.slot(vr, VarType::Integer) {
                 self.data.integers[i] = value;
             }
         }
@@ -177,7 +180,7 @@ impl<M: Model> Instance<M> {
 
     pub fn get_boolean(&mut self, vrs: &[u32], values: &mut [bool]) -> Outcome {
         for (value, &vr) in values.iter_mut().zip(vrs) {
-            if let Slot::BooleanParameter(i) = self.slot(vr, "Boolean")? {
+            if let Slot::BooleanParameter(i) = self.slot(vr, VarType::Boolean)? {
                 *value = self.data.booleans[i];
             }
         }
@@ -186,11 +189,11 @@ impl<M: Model> Instance<M> {
 
     pub fn set_boolean(&mut self, vrs: &[u32], values: &[bool]) -> Outcome {
         for &vr in vrs {
-            let slot = self.slot(vr, "Boolean")?;
+            let slot = self.slot(vr, VarType::Boolean)?;
             self.check_parameter_settable(slot)?;
         }
         for (&vr, &value) in vrs.iter().zip(values) {
-            if let Ok(Slot::BooleanParameter(i)) = self.slot(vr, "Boolean") {
+            if let Ok(Slot::BooleanParameter(i)) = self.slot(vr, VarType::Boolean) {
                 self.data.booleans[i] = value;
             }
         }
@@ -216,24 +219,20 @@ impl<M: Model> Instance<M> {
         orders: &[i32],
         values: &[f64],
     ) -> Outcome {
-        let mut targets = std::mem::take(&mut self.scratch.derivatives);
-        targets.clear();
-        let checked = vrs.iter().zip(orders).zip(values).try_for_each(|((&vr, &order), &value)| {
-            let slot = self.slot(vr, "Real")?;
-            let Slot::Input(i) = slot else {
+        for ((&vr, &order), &value) in vrs.iter().zip(orders).zip(values) {
+            let slot = self.slot(vr, VarType::Real)?;
+            if !matches!(slot, Slot::Input(_)) {
                 return Err(Failure::usage(format!(
                     "{} is not an input",
                     M::DECLARATION.name(slot)
                 )));
-            };
+            }
             if !(1..=2).contains(&order) || !value.is_finite() {
                 return Err(Failure::usage(format!("input derivative of order {order} = {value} is not supported (orders 1 and 2, finite values)")));
             }
-            targets.push((i, order, value));
-            Ok(())
-        });
-        if checked.is_ok() {
-            for &(i, order, value) in &targets {
+        }
+        for ((&vr, &order), &value) in vrs.iter().zip(orders).zip(values) {
+            if let Slot::Input(i) = self.slots[vr as usize] {
                 let jet = &mut self.data.inputs[i];
                 if order == 1 {
                     jet.d1 = value
@@ -242,8 +241,7 @@ impl<M: Model> Instance<M> {
                 }
             }
         }
-        self.scratch.derivatives = targets;
-        checked
+        Ok(())
     }
 
     pub fn get_real_output_derivatives(
@@ -255,7 +253,7 @@ impl<M: Model> Instance<M> {
         let max = M::DECLARATION.max_output_derivative_order;
         let mut requests = Vec::with_capacity(vrs.len());
         for (&vr, &order) in vrs.iter().zip(orders) {
-            let slot = self.slot(vr, "Real")?;
+            let slot = self.slot(vr, VarType::Real)?;
             let Slot::Output(i) = slot else {
                 return Err(Failure::usage(format!(
                     "{} is not an output",

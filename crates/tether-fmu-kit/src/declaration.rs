@@ -231,12 +231,31 @@ pub enum Slot {
     Derivative(usize),
 }
 
-impl Slot {
-    pub fn type_name(self) -> &'static str {
+/// The FMI type of a variable, as the get/set functions see it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VarType {
+    Real,
+    Integer,
+    Boolean,
+}
+
+impl VarType {
+    pub fn name(self) -> &'static str {
         match self {
-            Slot::IntegerParameter(_) => "Integer",
-            Slot::BooleanParameter(_) => "Boolean",
-            _ => "Real",
+            VarType::Real => "Real",
+            VarType::Integer => "Integer",
+            VarType::Boolean => "Boolean",
+        }
+    }
+}
+
+impl Slot {
+    #[inline]
+    pub fn var_type(self) -> VarType {
+        match self {
+            Slot::IntegerParameter(_) => VarType::Integer,
+            Slot::BooleanParameter(_) => VarType::Boolean,
+            _ => VarType::Real,
         }
     }
 }

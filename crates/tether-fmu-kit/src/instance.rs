@@ -83,11 +83,9 @@ pub struct Instance<M: Model> {
 /// `std::mem::take` while in use and put back afterwards.
 #[derive(Default)]
 pub(crate) struct Scratch {
-    pub slots: Vec<Slot>,
     pub u: Vec<f64>,
     pub y: Vec<f64>,
     pub dx: Vec<f64>,
-    pub derivatives: Vec<(usize, i32, f64)>,
 }
 
 impl<M: Model> Instance<M> {
@@ -123,12 +121,13 @@ impl<M: Model> Instance<M> {
 
     /// Runs one FMI call: state-table check, the call, failure logging and the
     /// resulting state transition.
+    #[inline]
     pub fn call(&mut self, call: Call, f: impl FnOnce(&mut Self) -> Outcome) -> Status {
         let state = self.data.machine;
         let result = if call.allowed_in(state) {
             f(self)
         } else {
-            Err(Failure::usage(format!("not allowed in state {state:?}")))
+            Err(not_allowed(state))
         };
         match result {
             Ok(()) => Status::Ok,
@@ -137,6 +136,8 @@ impl<M: Model> Instance<M> {
     }
 
     /// Logs a failure of `call` and applies its state transition; returns its status.
+    #[cold]
+    #[inline(never)]
     pub fn fail(&mut self, call: Call, failure: Failure) -> Status {
         if failure.status == Status::Fatal {
             self.data.machine = MachineState::Fatal;
@@ -260,10 +261,16 @@ impl<M: Model> Instance<M> {
 
     /// Builds the model from the parameters if needed; before the end of
     /// initialization this also (re)computes the initial states.
+    #[inline]
     pub(crate) fn ensure_model(&mut self) -> Outcome {
         if self.model.is_some() {
             return Ok(());
         }
+        self.build_model()
+    }
+
+    #[inline(never)]
+    fn build_model(&mut self) -> Outcome {
         let tolerance = self.data.reals[self.data.reals.len() - 1];
         if !(tolerance > 0.0 && tolerance.is_finite()) {
             return Err(Failure::usage(format!(
@@ -378,6 +385,12 @@ impl<M: Model> Instance<M> {
         }
         Ok(())
     }
+}
+
+#[cold]
+#[inline(never)]
+fn not_allowed(state: MachineState) -> Failure {
+    Failure::usage(format!("not allowed in state {state:?}"))
 }
 
 /// The start values of every variable, in the Instantiated state.

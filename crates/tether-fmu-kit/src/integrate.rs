@@ -41,6 +41,7 @@ impl<M: Model> System<f64, DVector<f64>> for Rhs<'_, M> {
 
 /// Advances `x` from `t_c` to `t_c + h` with the inputs as Taylor polynomials around
 /// `t_c`; returns how (for the log) or why it failed.
+#[inline]
 pub fn step<M: Model>(
     model: &M,
     t_c: f64,
@@ -55,6 +56,18 @@ pub fn step<M: Model>(
     if model.exact_step(t_c, h, x, inputs) {
         return check_finite(x, t_c + h).map(|()| "exact step");
     }
+    dop853(model, t_c, h, x, inputs, tolerance)
+}
+
+#[inline(never)]
+fn dop853<M: Model>(
+    model: &M,
+    t_c: f64,
+    h: f64,
+    x: &mut [f64],
+    inputs: &[InputJet],
+    tolerance: f64,
+) -> Result<&'static str, String> {
     let rhs = Rhs {
         model,
         t_c,
@@ -94,7 +107,17 @@ pub fn step<M: Model>(
     check_finite(x, t_c + h).map(|()| "Dop853")
 }
 
+#[inline]
 fn check_finite(x: &[f64], t: f64) -> Result<(), String> {
+    if x.iter().all(|v| v.is_finite()) {
+        return Ok(());
+    }
+    not_finite(x, t)
+}
+
+#[cold]
+#[inline(never)]
+fn not_finite(x: &[f64], t: f64) -> Result<(), String> {
     match x.iter().position(|v| !v.is_finite()) {
         Some(i) => Err(format!("state {i} is not finite ({}) at t = {t}", x[i])),
         None => Ok(()),

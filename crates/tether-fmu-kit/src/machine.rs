@@ -170,6 +170,7 @@ impl Call {
         }
     }
 
+    #[inline]
     pub fn allowed_in(self, state: MachineState) -> bool {
         self.allowed_mask() & state.bit() != 0
     }

@@ -393,6 +393,48 @@ fn inputs_follow_their_taylor_polynomial_during_a_step() {
 }
 
 #[test]
+fn value_access_checks_every_reference_before_it_touches_anything() {
+    let mut inst = initialized(2.0);
+    let message = |outcome: crate::instance::Outcome| outcome.unwrap_err().message;
+    // One call may mix every kind of Real; outputs and derivatives are
+    // evaluated for it (x = x0 = 1, u = 0, ẋ = u − k x = −2).
+    let mut all = [f64::NAN; 7];
+    inst.get_real(&[K, X0, U, Y, Z, 6, DER_X], &mut all)
+        .unwrap();
+    assert_eq!(all, [2.0, 1.0, 0.0, 1.0, 1.0, 1.0, -2.0]);
+    // A bad reference anywhere in a get writes no value at all.
+    let mut out = [f64::NAN; 2];
+    let bad = message(inst.get_real(&[Y, 42], &mut out));
+    assert_eq!(bad, "unknown value reference 42");
+    assert!(out.iter().all(|v| v.is_nan()), "{out:?}");
+    // Real references through the Integer and Boolean functions name the type.
+    let wrong = message(inst.get_integer(&[K], &mut [0]));
+    assert_eq!(
+        wrong,
+        "value reference 0 (k) is a Real variable, not Integer"
+    );
+    let wrong = message(inst.set_boolean(&[U], &[true]));
+    assert_eq!(
+        wrong,
+        "value reference 3 (u) is a Real variable, not Boolean"
+    );
+    // A set refused at its last value changes none of the others.
+    assert!(inst.set_real(&[U, Y], &[5.0, 1.0]).is_err());
+    assert_eq!(inst.data.inputs[0], InputJet::constant(0.0));
+    let not_input =
+        message(inst.set_real_input_derivatives(&[U, U, Z], &[1, 2, 1], &[4.0, 5.0, 6.0]));
+    assert_eq!(not_input, "z is not an input");
+    assert!(inst
+        .set_real_input_derivatives(&[U, U], &[1, 2], &[4.0, f64::INFINITY])
+        .is_err());
+    assert_eq!(inst.data.inputs[0], InputJet::constant(0.0));
+    inst.set_real_input_derivatives(&[U, U], &[2, 1], &[5.0, 4.0])
+        .unwrap();
+    let jet = inst.data.inputs[0];
+    assert_eq!((jet.value, jet.d1, jet.d2), (0.0, 4.0, 5.0));
+}
+
+#[test]
 fn restoring_a_state_repeats_the_same_steps_bit_exactly() {
     let mut inst = initialized(2.0);
     step(&mut inst, 0.0, 0.1);

@@ -126,10 +126,7 @@ impl Compiled {
     #[inline]
     pub fn gather(&self, flat: &mut [f64], s: usize, values: &[f64]) {
         let start = self.offsets[s];
-        // A few values: an element loop, not a call to memcpy.
-        for (to, &from) in flat[start..start + values.len()].iter_mut().zip(values) {
-            *to = from;
-        }
+        copy_small(&mut flat[start..start + values.len()], values);
     }
 
     /// Every row at level index `l` (into the levels compiled) from `flat`.
@@ -141,6 +138,20 @@ impl Compiled {
                 .map(|&(i, c)| c * flat[i])
                 .sum();
         }
+    }
+}
+
+/// `to.copy_from_slice(from)`, with one to four elements as plain moves: a
+/// macro step copies a few values at a time (a body's coupled outputs, an
+/// unknown's polynomial), for which a call to `memcpy` costs more than the copy.
+#[inline(always)]
+pub(crate) fn copy_small<T: Copy>(to: &mut [T], from: &[T]) {
+    match (to, from) {
+        ([a], [w]) => *a = *w,
+        ([a, b], [w, x]) => (*a, *b) = (*w, *x),
+        ([a, b, c], [w, x, y]) => (*a, *b, *c) = (*w, *x, *y),
+        ([a, b, c, d], [w, x, y, z]) => (*a, *b, *c, *d) = (*w, *x, *y, *z),
+        (to, from) => to.copy_from_slice(from),
     }
 }
 

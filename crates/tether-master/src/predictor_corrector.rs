@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use crate::coupling::{Compiled, Coupling, RowLevel, View};
+use crate::coupling::{copy_small, Compiled, Coupling, RowLevel, View};
 use crate::polynomial::{extrapolation, interpolation};
 use crate::simulation::{Simulation, Work};
 use crate::slave::Slave;
@@ -72,7 +72,7 @@ impl Simulation {
             slave.read_coupled()?;
             match &self.compiled {
                 Some(c) => c.gather(&mut self.work.flat_base, s, &slave.coupled_values),
-                None => self.work.base[s].copy_from_slice(&slave.coupled_values),
+                None => copy_small(&mut self.work.base[s], &slave.coupled_values),
             }
         }
         if let Some(compiled) = &self.compiled {
@@ -119,7 +119,7 @@ impl Simulation {
             }
         } else {
             for gi in 0..self.groups.len() {
-                self.work.perturbed.copy_from_slice(&self.work.polys);
+                copy_small(&mut self.work.perturbed, &self.work.polys);
                 self.work.live.fill(false);
                 for &m in &self.groups[gi] {
                     let delta = self.settings.epsilon * self.history[m][0].abs().max(1.0);
@@ -208,14 +208,17 @@ impl Simulation {
     fn corrected_unknowns(&mut self, time: f64) -> Result<(), MasterError> {
         let limit = self.settings.max_condition;
         let nu = self.work.u_pred.len();
-        let level_index = |kind| self.levels.iter().position(|&l| l == kind);
+        let level_index = |kind: RowLevel| {
+            let same = |l: &RowLevel| std::mem::discriminant(l) == std::mem::discriminant(&kind);
+            self.levels.iter().position(same)
+        };
         let work = &mut self.work;
         match self.method {
             Method::Baumgarte { beta, gamma } => {
                 // Eq. 68: u = u^p − (G^B)⁻¹ g^B with g^B = g + β ġ + γ g̈.
                 let (a, b) = work.solver.system(nu);
-                a.copy_from_slice(work.jac[0].as_slice());
-                b.copy_from_slice(work.g[0].as_slice());
+                copy_small(a, work.jac[0].as_slice());
+                copy_small(b, work.g[0].as_slice());
                 let mut add = |weight: f64, l: usize| {
                     for (x, j) in a.iter_mut().zip(work.jac[l].as_slice()) {
                         *x += weight * j;
@@ -287,7 +290,7 @@ fn columns(sim: Columns, work: &mut Work, group: &[usize], latest: Option<&[Vec<
         if let Some(compiled) = sim.compiled {
             // The instances m drives at their latest values, the others at
             // the predictor's.
-            work.flat.copy_from_slice(&work.flat_base);
+            copy_small(&mut work.flat, &work.flat_base);
             for &s in &sim.owners[m] {
                 let values = match latest {
                     Some(latest) => &latest[s],

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::coupling::{self, Compiled, Coupling, RowLevel, View};
+use crate::coupling::{self, copy_small, Compiled, Coupling, RowLevel, View};
 use crate::explicit::Feedthrough;
 use crate::observer::{Observer, Sample};
 use crate::parallel::Pool;
@@ -350,10 +350,9 @@ impl Simulation {
     fn fill_row(&mut self) {
         let mut i = 0;
         for slave in &self.slaves {
-            for &v in slave.recorded_values() {
-                self.row[i] = v;
-                i += 1;
-            }
+            let values = slave.recorded_values();
+            copy_small(&mut self.row[i..i + values.len()], values);
+            i += values.len();
         }
         for h in &self.history {
             self.row[i] = h[0];
@@ -384,18 +383,33 @@ impl Simulation {
         }
     }
 
+    #[inline]
     fn check_divergence(&self, time: f64) -> Result<(), MasterError> {
-        for (i, (&v, &limit)) in self.row.iter().zip(&self.limits).enumerate() {
-            if beyond(v, limit) {
-                return Err(MasterError::Diverged {
-                    time,
-                    quantity: self.columns[i].clone(),
-                    value: v,
-                    limit,
-                });
-            }
+        // One branch-free pass in the common case; the culprit is searched
+        // only when there is one.
+        let any = self
+            .row
+            .iter()
+            .zip(&self.limits)
+            .fold(false, |any, (&v, &limit)| any | beyond(v, limit));
+        match any.then(|| self.diverged(time)).flatten() {
+            Some(error) => Err(error),
+            None => Ok(()),
         }
-        Ok(())
+    }
+
+    /// The first value beyond its limit, as an error.
+    #[cold]
+    #[inline(never)]
+    fn diverged(&self, time: f64) -> Option<MasterError> {
+        let mut values = self.row.iter().zip(&self.limits).enumerate();
+        let (i, (&value, &limit)) = values.find(|(_, (&v, &limit))| beyond(v, limit))?;
+        Some(MasterError::Diverged {
+            time,
+            quantity: self.columns[i].clone(),
+            value,
+            limit,
+        })
     }
 
     /// Set every coupled slave's inputs from `polys` (degree `k` derivatives).
@@ -411,7 +425,7 @@ impl Simulation {
 /// `limit` (±∞ is larger than any finite limit).
 #[inline]
 fn beyond(value: f64, limit: f64) -> bool {
-    value.is_nan() || value.abs() > limit
+    value.is_nan() | (value.abs() > limit)
 }
 
 #[cfg(test)]

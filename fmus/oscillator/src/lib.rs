@@ -7,7 +7,7 @@
 
 use std::cell::Cell;
 
-use nalgebra::{Matrix5, Vector5};
+use nalgebra::Matrix5;
 use tether_fmu_kit::{
     export_fmu, Boolean, Declaration, DefaultExperiment, InputJet, Model, Output, Parameters, Real,
     State,
@@ -23,8 +23,9 @@ pub struct Oscillator {
     /// The last step size's transition matrix exp(A h), keyed by the bits of h: a
     /// co-simulation repeats one step size (the predictor, every perturbed run and the
     /// corrector), so the exponential is computed once, not on every `fmi2DoStep`. The
-    /// model is rebuilt whenever a parameter changes, which drops the cache.
-    transition: Cell<Option<(u64, Matrix5<f64>)>>,
+    /// model is rebuilt whenever a parameter changes, which drops the cache. Only the
+    /// rows of x and v are kept: the input's rows are the known Taylor shift.
+    transition: Cell<Option<(u64, [[f64; 5]; 2])>>,
 }
 
 impl Oscillator {
@@ -46,14 +47,16 @@ impl Oscillator {
         a
     }
 
-    /// exp(A h), from the cache when h is the last step size.
-    fn transition(&self, h: f64) -> Matrix5<f64> {
+    /// The rows of x and v of exp(A h), from the cache when h is the last step size.
+    fn transition(&self, h: f64) -> [[f64; 5]; 2] {
         match self.transition.get() {
-            Some((bits, phi)) if bits == h.to_bits() => phi,
+            Some((bits, rows)) if bits == h.to_bits() => rows,
             _ => {
-                let phi = (self.augmented_matrix() * h).exp();
-                self.transition.set(Some((h.to_bits(), phi)));
-                phi
+                let phi: Matrix5<f64> = (self.augmented_matrix() * h).exp();
+                let row = |r: usize| std::array::from_fn(|j| phi[(r, j)]);
+                let rows = [row(0), row(1)];
+                self.transition.set(Some((h.to_bits(), rows)));
+                rows
             }
         }
     }
@@ -172,8 +175,11 @@ impl Model for Oscillator {
             return false;
         }
         let f = u[0];
-        let z = self.transition(h) * Vector5::new(x[0], x[1], f.value, f.d1, f.d2);
-        x.copy_from_slice(&[z[0], z[1]]);
+        let z = [x[0], x[1], f.value, f.d1, f.d2];
+        let rows = self.transition(h);
+        // Summed in column order, as nalgebra's matrix-vector product does.
+        let dot = |row: &[f64; 5]| (1..5).fold(row[0] * z[0], |acc, j| acc + row[j] * z[j]);
+        x.copy_from_slice(&[dot(&rows[0]), dot(&rows[1])]);
         true
     }
 }
