@@ -17,9 +17,9 @@ use crate::raw::{self, Status};
 /// `orphans` and raises `pending`, and the instance frees it with `fmi2FreeFMUstate`
 /// before its next call other than a Real value access (`fmi2GetReal`,
 /// `fmi2SetReal`, `fmi2SetRealInputDerivatives`: the calls a macro step makes
-/// most, between steps and state calls, skip the check). When the `Instance` value goes while states remain, the
-/// component moves into `orphans`; the last state frees itself and then the component
-/// (`fmi2FreeInstance`).
+/// most, between steps and state calls, skip the check). When the `Instance`
+/// value goes while states remain, the component moves into `orphans`; the last
+/// state frees itself and then the component (`fmi2FreeInstance`).
 #[derive(Debug, Default)]
 pub(crate) struct Shared {
     pending: AtomicBool,
