@@ -73,14 +73,15 @@ pub struct Instance<M: Model> {
     fingerprint: u64,
     pub data: Snapshot,
     pub(crate) model: Option<M>,
-    /// Buffers reused by the value-access calls, so that the steady-state calls of a
-    /// co-simulation (get/set Real, input derivatives, doStep, get/set FMU state)
-    /// allocate nothing.
+    /// Buffers for the inputs, outputs and state derivatives evaluated by
+    /// `fmi2GetReal`, reused so that the steady-state calls of a co-simulation
+    /// (get/set Real, input derivatives, doStep, get/set FMU state) allocate
+    /// nothing.
     pub(crate) scratch: Scratch,
 }
 
-/// Per-instance work buffers (see [`Instance::scratch`]); taken out with
-/// `std::mem::take` while in use and put back afterwards.
+/// Per-instance work buffers (see [`Instance::scratch`]), borrowed next to the
+/// model and the data (or taken out with `std::mem::take` and put back).
 #[derive(Default)]
 pub(crate) struct Scratch {
     pub u: Vec<f64>,
