@@ -59,6 +59,8 @@ pub fn step<M: Model>(
     dop853(model, t_c, h, x, inputs, tolerance)
 }
 
+/// [`step`] with Dop853: a separate, never inlined function, so that a model's
+/// exact step does not carry the integrator's set-up in its path.
 #[inline(never)]
 fn dop853<M: Model>(
     model: &M,

@@ -392,10 +392,10 @@ impl Simulation {
             .iter()
             .zip(&self.limits)
             .fold(false, |any, (&v, &limit)| any | beyond(v, limit));
-        match any.then(|| self.diverged(time)).flatten() {
-            Some(error) => Err(error),
-            None => Ok(()),
+        if !any {
+            return Ok(());
         }
+        self.diverged(time).map_or(Ok(()), Err)
     }
 
     /// The first value beyond its limit, as an error.
