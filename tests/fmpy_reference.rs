@@ -85,7 +85,11 @@ fn both(
     drop(csv);
 
     let python = python().expect("a Python with fmpy");
+    // The reference's own temporary directory: it must be empty afterwards
+    // (fmpy unpacks each FMU into a new directory and leaves it there).
+    let scratch = tempfile::tempdir().unwrap();
     let output = std::process::Command::new(python)
+        .env("TMPDIR", scratch.path())
         .arg(root.join("tools").join("fmpy_reference"))
         .arg(&file)
         .args(flags)
@@ -103,6 +107,14 @@ fn both(
         output.status.success(),
         outcome.is_ok(),
         "both hosts complete or both stop: tether {outcome:?}, fmpy reference: {stderr}"
+    );
+    let left: Vec<_> = std::fs::read_dir(scratch.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(
+        left.is_empty(),
+        "the fmpy reference removes the FMUs it unpacked: {left:?} left in its TMPDIR"
     );
     (read(&ours), read(&theirs))
 }

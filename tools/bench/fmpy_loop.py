@@ -12,6 +12,7 @@ Used by `cargo bench -p tether-bench` (docs/performance.md).
 """
 
 import argparse
+import shutil
 import time
 from ctypes import byref
 
@@ -55,6 +56,14 @@ def main():
     md = read_model_description(args.fmu)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     unzipdir = extract(args.fmu)
+    try:
+        run(args, md, vr, unzipdir)
+    finally:
+        # extract() unpacks into a fresh temporary directory and leaves it.
+        shutil.rmtree(unzipdir, ignore_errors=True)
+
+
+def run(args, md, vr, unzipdir):
     h, k, start = args.step, args.order, 0.0
     stop = start + args.steps * h
     masses = (1.0, 2.0)

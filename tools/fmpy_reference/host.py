@@ -1,7 +1,9 @@
 """FMU instances driven through fmpy's FMU2Slave: start values, coupled inputs
 (value and input derivatives), outputs and output derivatives, FMU states."""
 
+import atexit
 import os
+import shutil
 from ctypes import byref
 
 from fmpy import extract, read_model_description
@@ -54,6 +56,9 @@ class Host:
             key = os.path.realpath(path)
             if key not in Host._unpacked:
                 Host._unpacked[key] = extract(path)
+                # fmpy's extract() unpacks into a fresh temporary directory and
+                # leaves it there; remove it when the run ends.
+                atexit.register(shutil.rmtree, Host._unpacked[key], ignore_errors=True)
             unzipped = Host._unpacked[key]
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                              modelIdentifier=self.cs.modelIdentifier, instanceName=self.name)
