@@ -7,11 +7,14 @@
 # whose data fits in SIZE misses nothing there once warm. Two runs of different
 # length cancel the setup, as for the instruction counts. Needs valgrind.
 #
-# The two runs of each size go side by side (about 1.5 min a size on 2 cores).
+# The two runs of each size go side by side; a size takes a few minutes.
 #
 #   tools/bench/footprint.sh [SIZE ...]      default: 4096 6144 8192 12288 14336 16384
 set -eu
 cd "$(dirname "$0")/../.."
+for tool in valgrind callgrind_annotate; do
+    command -v "$tool" >/dev/null || { echo "footprint.sh: needs $tool (valgrind)" >&2; exit 1; }
+done
 cargo build --release -q -p tether-bench --example steps
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
