@@ -4,6 +4,8 @@
 //! * `floor`: the predictor/corrector macro step on the oscillator pair against
 //!   a C loop making exactly the same FMI calls (c/floor.c);
 //! * `fmpy`: the same algorithm driven from Python through fmpy;
+//! * `reference`: `tether run`'s work (the run and its CSV) against the fmpy
+//!   reference of docs/validation.md on the same system file;
 //! * `recording`: what writing CSV every step adds;
 //! * `precision`: wall time to a max state error of 1e-6, index 2 against the
 //!   explicit method;
@@ -11,7 +13,7 @@
 //!   against the sequential path, on a 3D joint with an expensive FMU step and
 //!   on the cheap oscillator pair.
 //!
-//! `cargo bench -p tether-bench [-- floor|fmpy|recording|precision|parallel ...]`;
+//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel ...]`;
 //! `TETHER_BENCH_REPS` repetitions (default 9, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
@@ -20,7 +22,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use tether_bench::{floor, fmpy_loop, workspace_root, Case, StateError};
+use tether_bench::{floor, fmpy_loop, fmpy_reference, workspace_root, Case, StateError};
 use tether_fmi::Fmu;
 use tether_master::{
     CsvRecorder, InstanceCounters, Method, Observer, Parallel, Sample, Simulation, SystemSpec,
@@ -187,16 +189,9 @@ fn clock_read_ns() -> f64 {
 
 fn bench_fmpy() {
     println!("\n== Against an fmpy-driven Python loop of the same algorithm (1000 steps) ==");
-    let python = match std::env::var_os("TETHER_PYTHON") {
-        Some(p) => PathBuf::from(p),
-        None => {
-            let venv = workspace_root().join("target/fmpy-venv/bin/python");
-            if !venv.exists() {
-                println!("skipped: set TETHER_PYTHON to a Python with fmpy");
-                return;
-            }
-            venv
-        }
+    let Some(python) = python() else {
+        println!("skipped: set TETHER_PYTHON to a Python with fmpy");
+        return;
     };
     let script = std::env::var_os("TETHER_FMPY_LOOP")
         .map(PathBuf::from)
@@ -269,6 +264,97 @@ fn bench_fmpy() {
                 us(t),
                 median(ratios),
                 us(median(firsts)),
+                if same { "identical" } else { "DIFFERS" }
+            );
+        }
+    }
+}
+
+/// The Python with fmpy: `TETHER_PYTHON`, else target/fmpy-venv (made by
+/// `.ci/run`), else none.
+fn python() -> Option<PathBuf> {
+    match std::env::var_os("TETHER_PYTHON") {
+        Some(p) => Some(PathBuf::from(p)),
+        None => {
+            let venv = workspace_root().join("target/fmpy-venv/bin/python");
+            venv.exists().then_some(venv)
+        }
+    }
+}
+
+fn bench_reference() {
+    // The fmpy reference is a general master like Tether (system file,
+    // expression rows, CSV every step). Both sides are timed as the difference
+    // of a run of LONG and one of SHORT macro steps, which cancels the setup
+    // (for the reference: the Python start, the imports, unpacking the FMU)
+    // and compares the same steps (the Dop853 FMUs' cost changes along the
+    // trajectory). Tether's runs are `tether run`'s work in process:
+    // `Simulation::run` with the background CSV recorder, setup excluded.
+    const SHORT: u64 = 250;
+    const LONG: u64 = 4250;
+    const BRACKET: usize = 3;
+    println!(
+        "\n== tether run against the fmpy reference (tools/fmpy_reference): same system file, CSV every step, steps {SHORT}..{LONG} =="
+    );
+    let Some(python) = python() else {
+        println!("skipped: set TETHER_PYTHON to a Python with fmpy");
+        return;
+    };
+    let dir = workspace_root().join("target/bench");
+    std::fs::create_dir_all(&dir).expect("target/bench");
+    println!(
+        "FMU     k   reference/step   Tether/step    reference/Tether   (medians of {} runs; Tether {} runs around each reference run)",
+        reps().min(3),
+        2 * BRACKET
+    );
+    for exact in [true, false] {
+        for order in [0, 1] {
+            let case = Case::example(exact, order);
+            let system = dir.join(format!("reference_{}_{order}.toml", mode(exact).trim()));
+            case.write_system(&system).expect("system file");
+            let csv = dir.join("tether_reference.csv");
+            // One `tether run` of `steps`: its wall time without the setup, and λ_N.
+            let tether = |steps: u64| {
+                let mut spec = SystemSpec::from_file(&system).expect("the bench's system file");
+                spec.method = case.method;
+                spec.coupling.order = order;
+                spec.experiment.step = case.step;
+                spec.experiment.stop = spec.experiment.start + steps as f64 * case.step;
+                let mut sim = Simulation::new(&spec).expect("simulation");
+                let file = std::fs::File::create(&csv).expect("create the CSV file");
+                let mut rec = CsvRecorder::background(file);
+                let stats = sim.run(&mut [&mut rec], &mut |_, _| {}).expect("run");
+                (
+                    (stats.wall - stats.times.setup).as_secs_f64(),
+                    sim.unknowns()[0],
+                )
+            };
+            let per_step = |short: f64, long: f64| (long - short) / (LONG - SHORT) as f64;
+            let pair = || per_step(tether(SHORT).0, tether(LONG).0);
+            let out = dir.join("fmpy_reference.csv");
+            let (mut refs, mut tethers, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+            let mut same = true;
+            for _ in 0..reps().min(3) {
+                let mut ts: Vec<f64> = (0..BRACKET).map(|_| pair()).collect();
+                let short =
+                    fmpy_reference(&python, &system, &case, SHORT, &out).expect("reference");
+                let long = fmpy_reference(&python, &system, &case, LONG, &out).expect("reference");
+                // The same λ after LONG steps, bit for bit (the reference's
+                // CSV holds the shortest text that reads back as the double).
+                same &= tether(LONG).1.to_bits() == long.lambda.to_bits();
+                ts.extend((0..BRACKET).map(|_| pair()));
+                let reference = per_step(short.seconds, long.seconds);
+                let t = median(ts);
+                refs.push(reference);
+                tethers.push(t);
+                ratios.push(reference / t);
+            }
+            println!(
+                "{}  {order}  {}      {}    {:8.0}×          λ_N {}",
+                mode(exact),
+                us(median(refs)),
+                us(median(tethers)),
+                median(ratios),
                 if same { "identical" } else { "DIFFERS" }
             );
         }
@@ -468,6 +554,9 @@ fn main() {
     }
     if run("fmpy") {
         bench_fmpy();
+    }
+    if run("reference") {
+        bench_reference();
     }
     if run("recording") {
         bench_recording();

@@ -1,6 +1,6 @@
 //! Shared pieces of the benchmarks in `benches/overhead.rs`: the oscillator
 //! system of `examples/oscillator.toml` in the variants measured, the C floor
-//! (`c/floor.c`, built by `build.rs`) and the fmpy loop.
+//! (`c/floor.c`, built by `build.rs`), the fmpy loop and the fmpy reference.
 //!
 //! Run with `cargo bench -p tether-bench`; see docs/performance.md.
 
@@ -247,6 +247,111 @@ pub fn fmpy_loop(
     })
 }
 
+/// What one run of the fmpy reference (`tools/fmpy_reference`) gave.
+#[derive(Debug, Clone, Copy)]
+pub struct ReferenceRun {
+    /// Wall time of the whole process (Python start, imports, unpacking the
+    /// FMU, setup, the run, writing the CSV), seconds.
+    pub seconds: f64,
+    /// `link.lambda` in the CSV's last row.
+    pub lambda: f64,
+}
+
+impl Case {
+    /// This case as a system file at `path`, for tools that read system files
+    /// (the fmpy reference): examples/oscillator.toml with the FMU's absolute
+    /// path and the `exact` parameter set. The method, order, step and stop
+    /// are passed on the command line (see [`fmpy_reference`]).
+    pub fn write_system(&self, path: &Path) -> Result<(), String> {
+        let spec = self.spec();
+        let example = workspace_root().join("examples/oscillator.toml");
+        let text = std::fs::read_to_string(&example)
+            .map_err(|e| format!("cannot read {}: {e}", example.display()))?;
+        let fmu = format!("fmu = {:?}", spec.instances[0].fmu.display().to_string());
+        let exact = format!("v0 = 100.0, exact = {} }}", self.exact);
+        let edits = [
+            (r#"fmu = "../target/fmus/oscillator.fmu""#, fmu.as_str()),
+            ("v0 = 100.0 }", exact.as_str()),
+        ];
+        let mut text = text;
+        for (from, to) in edits {
+            if text.matches(from).count() != 2 {
+                return Err(format!(
+                    "{} no longer has two instances with `{from}`: update Case::write_system",
+                    example.display()
+                ));
+            }
+            text = text.replace(from, to);
+        }
+        std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    }
+}
+
+/// Run the fmpy reference of `tether run` (`tools/fmpy_reference`, the one
+/// docs/validation.md compares against) on the system file `system` for
+/// `steps` macro steps of `case`, writing its CSV to `out`.
+pub fn fmpy_reference(
+    python: &Path,
+    system: &Path,
+    case: &Case,
+    steps: u64,
+    out: &Path,
+) -> Result<ReferenceRun, String> {
+    let Method::Baumgarte { beta, gamma } = case.method else {
+        return Err("the reference bench uses Method 1 (baumgarte) only".into());
+    };
+    let script = workspace_root().join("tools/fmpy_reference");
+    let clock = std::time::Instant::now();
+    let output = Command::new(python)
+        .arg(&script)
+        .arg(system)
+        .args(["--method", "baumgarte"])
+        .args(["--beta", &format!("{beta:e}")])
+        .args(["--gamma", &format!("{gamma:e}")])
+        .args(["--order", &case.order.to_string()])
+        .args(["--step", &format!("{:e}", case.step)])
+        .args(["--stop", &format!("{:e}", steps as f64 * case.step)])
+        .arg("--out")
+        .arg(out)
+        .arg("--quiet")
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
+    let seconds = clock.elapsed().as_secs_f64();
+    if !output.status.success() {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        return Err(format!(
+            "{} {} failed ({}): {}",
+            python.display(),
+            script.display(),
+            output.status,
+            stderr.lines().last().unwrap_or("")
+        ));
+    }
+    Ok(ReferenceRun {
+        seconds,
+        lambda: last_value(out, "link.lambda")?,
+    })
+}
+
+/// The value of column `name` in the last row of the CSV file `path`.
+pub fn last_value(path: &Path, name: &str) -> Result<f64, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or("");
+    let column = header
+        .split(',')
+        .position(|c| c == name)
+        .ok_or_else(|| format!("{} has no column {name}", path.display()))?;
+    let last = lines
+        .last()
+        .ok_or_else(|| format!("{} has no rows", path.display()))?;
+    last.split(',')
+        .nth(column)
+        .and_then(|v| v.parse().ok())
+        .ok_or_else(|| format!("{}: no number in column {name} of {last:?}", path.display()))
+}
+
 /// Closed form of the coupled oscillator of examples/oscillator.toml (one
 /// damped oscillator with m = m1 + m2, c = c1 + c2, d = d1 + d2, as in
 /// tests/master_oscillator.rs): (x, v) at time t.
@@ -290,5 +395,48 @@ impl tether_master::Observer for StateError {
 
     fn finish(&mut self, _failure: Option<&str>) -> std::io::Result<()> {
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_written_system_file_is_the_case() {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        for exact in [true, false] {
+            let case = Case::example(exact, 1);
+            let path = dir.path().join("system.toml");
+            case.write_system(&path).expect("write the system file");
+            let written = SystemSpec::from_file(&path).expect("the written file reads back");
+            let expected = case.spec();
+            assert_eq!(written.instances.len(), expected.instances.len());
+            for (w, e) in written.instances.iter().zip(&expected.instances) {
+                assert_eq!(w.name, e.name);
+                assert!(w.fmu.is_absolute() && w.fmu.exists(), "{}", w.fmu.display());
+                assert_eq!(w.fmu.canonicalize().ok(), e.fmu.canonicalize().ok());
+                assert_eq!(w.parameters, e.parameters, "instance {}", w.name);
+            }
+        }
+    }
+
+    #[test]
+    fn last_value_reads_the_named_column_of_the_last_row() {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let path = dir.path().join("out.csv");
+        std::fs::write(
+            &path,
+            "time,link.lambda,link.g\n0.0,1.5,0.0\n0.001,333.25,-2e-9\n",
+        )
+        .expect("write");
+        assert_eq!(last_value(&path, "link.lambda"), Ok(333.25));
+        assert_eq!(last_value(&path, "link.g"), Ok(-2e-9));
+        let missing = last_value(&path, "link.x").unwrap_err();
+        assert!(missing.contains("has no column link.x"), "{missing}");
+        std::fs::write(&path, "time,link.lambda\n").expect("write");
+        assert!(last_value(&path, "link.lambda")
+            .unwrap_err()
+            .contains("has no rows"));
     }
 }
