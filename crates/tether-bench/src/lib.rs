@@ -220,16 +220,7 @@ pub fn fmpy_loop(
         .output()
         .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
     let stdout = String::from_utf8_lossy(&output.stdout);
-    if !output.status.success() {
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        return Err(format!(
-            "{} {} failed ({}): {}",
-            python.display(),
-            script.display(),
-            output.status,
-            stderr.lines().last().unwrap_or("")
-        ));
-    }
+    succeeded(python, script, &output)?;
     let line = stdout
         .lines()
         .find(|l| l.starts_with("per_step_s="))
@@ -245,6 +236,21 @@ pub fn fmpy_loop(
         lambda: field("lambda=")?,
         x1: field("x1=")?,
     })
+}
+
+/// `Err` with the last line of the script's stderr unless it exited with 0.
+fn succeeded(python: &Path, script: &Path, output: &std::process::Output) -> Result<(), String> {
+    if output.status.success() {
+        return Ok(());
+    }
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    Err(format!(
+        "{} {} failed ({}): {}",
+        python.display(),
+        script.display(),
+        output.status,
+        stderr.lines().last().unwrap_or("")
+    ))
 }
 
 /// What one run of the fmpy reference (`tools/fmpy_reference`) gave.
@@ -301,6 +307,7 @@ pub fn fmpy_reference(
         return Err("the reference bench uses Method 1 (baumgarte) only".into());
     };
     let script = workspace_root().join("tools/fmpy_reference");
+    let start = case.spec().experiment.start;
     let clock = std::time::Instant::now();
     let output = Command::new(python)
         .arg(&script)
@@ -310,23 +317,14 @@ pub fn fmpy_reference(
         .args(["--gamma", &format!("{gamma:e}")])
         .args(["--order", &case.order.to_string()])
         .args(["--step", &format!("{:e}", case.step)])
-        .args(["--stop", &format!("{:e}", steps as f64 * case.step)])
+        .args(["--stop", &format!("{:e}", start + steps as f64 * case.step)])
         .arg("--out")
         .arg(out)
         .arg("--quiet")
         .output()
         .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
     let seconds = clock.elapsed().as_secs_f64();
-    if !output.status.success() {
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        return Err(format!(
-            "{} {} failed ({}): {}",
-            python.display(),
-            script.display(),
-            output.status,
-            stderr.lines().last().unwrap_or("")
-        ));
-    }
+    succeeded(python, &script, &output)?;
     Ok(ReferenceRun {
         seconds,
         lambda: last_value(out, "link.lambda")?,
