@@ -190,7 +190,6 @@ fn clock_read_ns() -> f64 {
 fn bench_fmpy() {
     println!("\n== Against an fmpy-driven Python loop of the same algorithm (1000 steps) ==");
     let Some(python) = python() else {
-        println!("skipped: set TETHER_PYTHON to a Python with fmpy");
         return;
     };
     let script = std::env::var_os("TETHER_FMPY_LOOP")
@@ -271,15 +270,19 @@ fn bench_fmpy() {
 }
 
 /// The Python with fmpy: `TETHER_PYTHON`, else target/fmpy-venv (made by
-/// `.ci/run`), else none.
+/// `.ci/run`), else none (the part is skipped, and says so).
 fn python() -> Option<PathBuf> {
-    match std::env::var_os("TETHER_PYTHON") {
+    let python = match std::env::var_os("TETHER_PYTHON") {
         Some(p) => Some(PathBuf::from(p)),
         None => {
             let venv = workspace_root().join("target/fmpy-venv/bin/python");
             venv.exists().then_some(venv)
         }
+    };
+    if python.is_none() {
+        println!("skipped: set TETHER_PYTHON to a Python with fmpy");
     }
+    python
 }
 
 fn bench_reference() {
@@ -297,7 +300,6 @@ fn bench_reference() {
         "\n== tether run against the fmpy reference (tools/fmpy_reference): same system file, CSV every step, steps {SHORT}..{LONG} =="
     );
     let Some(python) = python() else {
-        println!("skipped: set TETHER_PYTHON to a Python with fmpy");
         return;
     };
     let dir = workspace_root().join("target/bench");
