@@ -83,14 +83,16 @@ def main():
         sys.exit("code_lines.py: --long must be larger than --short")
     if shutil.which("valgrind") is None:
         sys.exit("code_lines.py: needs valgrind")
-    subprocess.run(["cargo", "build", "--release", "-q", "-p", "tether-bench",
-                    "--example", "steps"], cwd=ROOT, check=True)
+    build = subprocess.run(["cargo", "build", "--release", "-q", "-p", "tether-bench",
+                            "--example", "steps"], cwd=ROOT)
+    if build.returncode != 0:
+        sys.exit("code_lines.py: building the steps example failed (cargo's message above)")
     with tempfile.TemporaryDirectory() as tmp:
         for who, floor in (("Tether", False), ("C floor", True)):
             files = [os.path.join(tmp, f"{who}.{n}") for n in (args.short, args.long)]
             # The two runs go side by side.
             runs = [profile(n, floor, path) for n, path in zip((args.short, args.long), files)]
-            if any(run.wait() != 0 for run in runs):
+            if [run.wait() for run in runs] != [0, 0]:
                 sys.exit(f"code_lines.py: callgrind failed for {who}")
             short, _ = counts(files[0])
             long, owner = counts(files[1])
