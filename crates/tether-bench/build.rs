@@ -1,9 +1,12 @@
-//! Builds the C floor: the FMI calls of one macro step and nothing else.
+//! Builds the C floor (the FMI calls of one macro step and nothing else) and
+//! the host-state probe.
 
 fn main() {
     println!("cargo:rerun-if-changed=c/floor.c");
+    println!("cargo:rerun-if-changed=c/probe.c");
     cc::Build::new()
         .file("c/floor.c")
+        .file("c/probe.c")
         .opt_level(2)
         .warnings(true)
         .compile("tether_floor");

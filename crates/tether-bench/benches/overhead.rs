@@ -22,7 +22,9 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use tether_bench::{floor, fmpy_loop, fmpy_reference, workspace_root, Case, StateError};
+use tether_bench::{
+    floor, fmpy_loop, fmpy_reference, host_probe, workspace_root, Case, StateError,
+};
 use tether_fmi::Fmu;
 use tether_master::{
     CsvRecorder, InstanceCounters, Method, Observer, Parallel, Sample, Simulation, SystemSpec,
@@ -88,14 +90,18 @@ fn mode(exact: bool) -> &'static str {
 
 fn bench_floor() {
     println!("\n== Macro step against the C floor (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps) ==");
-    println!("FMU     k   C floor/step   Tether/step    ratio   ratio of minima   phases timed   (medians of {} runs; λ_N identical bit for bit)", reps());
+    println!("FMU     k   C floor/step   Tether/step    ratio   ratio of minima   phases timed   host probe: independent / dependent   (medians of {} runs; λ_N identical bit for bit)", reps());
     for exact in [true, false] {
         for order in [0, 1] {
             let case = Case::example(exact, order);
             let fmu = Fmu::open(&case.spec().instances[0].fmu).expect("open the FMU");
             let (mut floors, mut tethers, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
             let mut timed_ratios = Vec::new();
+            let (mut independent, mut dependent) = (Vec::new(), Vec::new());
             for rep in 0..reps() {
+                let probe = host_probe();
+                independent.push(probe.independent);
+                dependent.push(probe.dependent);
                 let (mut sim, before) = fresh(&case);
                 let lambda0 = sim.unknowns()[0];
                 // Alternate which goes first, so drifting load hits both alike.
@@ -153,13 +159,15 @@ fn bench_floor() {
                 timed_ratios.push(t_timed / c_step);
             }
             println!(
-                "{}  {order}  {}    {}    {:5.2}×   {:5.2}×            {:5.2}×",
+                "{}  {order}  {}    {}    {:5.2}×   {:5.2}×            {:5.2}×         {:5.2} / {:4.2} ns",
                 mode(exact),
                 us(median(floors.clone())),
                 us(median(tethers.clone())),
                 median(ratios),
                 minimum(&tethers) / minimum(&floors),
-                median(timed_ratios)
+                median(timed_ratios),
+                median(independent),
+                median(dependent)
             );
         }
     }
@@ -168,6 +176,11 @@ fn bench_floor() {
         "        on this machine: one clock read (Instant::now) {clock:.1} ns; per macro step \
          Tether reads the clock 5 times when its phases are timed, otherwise never; \
          its FMI calls take no lock"
+    );
+    println!(
+        "        host probe (c/probe.c): ns per iteration of 8 independent integer chains / of one \
+         dependent chain, timed before each repetition; the first rises when the host is \
+         busy, the second does not (docs/performance.md, \"The host's two states\")"
     );
 }
 

@@ -106,12 +106,39 @@ pub struct FloorResult {
 }
 
 extern "C" {
+    fn tether_probe_independent(n: c_long) -> f64;
+    fn tether_probe_dependent(n: c_long) -> f64;
     fn tether_floor_run(
         cfg: *const FloorConfig,
         res: *mut FloorResult,
         err: *mut c_char,
         errlen: usize,
     ) -> c_int;
+}
+
+/// The host-state probe of c/probe.c, about 0.1 ms: nanoseconds per iteration
+/// of eight independent integer chains and of one dependent chain. When the
+/// host is busy the first rises (to 1.4–1.8× its quiet value on the machine of
+/// docs/performance.md) while the second stays.
+pub fn host_probe() -> HostProbe {
+    const N: c_long = 20_000;
+    // SAFETY: both functions take a count and touch only their locals and a
+    // static of c/probe.c.
+    let (independent, dependent) =
+        unsafe { (tether_probe_independent(N), tether_probe_dependent(N)) };
+    HostProbe {
+        independent,
+        dependent,
+    }
+}
+
+/// What [`host_probe`] measured, ns per iteration.
+#[derive(Debug, Clone, Copy)]
+pub struct HostProbe {
+    /// Eight independent add/xor chains (16 integer operations).
+    pub independent: f64,
+    /// One dependent multiply-add.
+    pub dependent: f64,
 }
 
 /// The C floor for `case`: the same FMU binary (its own unpacked copy), the same
