@@ -178,7 +178,7 @@ fn bench_floor() {
          its FMI calls take no lock"
     );
     println!(
-        "        host probe (c/probe.c): ns per iteration of 8 independent integer chains / of one \
+        "        host probe (c/probe.c): ns per iteration of 8 interleaved integer chains / of one \
          dependent chain, timed before each repetition; the first rises when the host is \
          busy, the second does not (docs/performance.md, \"The host's two states\")"
     );

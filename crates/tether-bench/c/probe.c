@@ -3,8 +3,9 @@
  * core's execution resources (on a hyperthreaded host, a busy sibling thread):
  * independent work then runs at a lower rate while a chain of dependent
  * instructions barely changes. The two loops below time both:
- * nanoseconds per iteration of eight independent add/xor chains (16 integer
- * operations an iteration, limited by how many the core issues per cycle) and
+ * nanoseconds per iteration of eight interleaved add/xor chains (16 integer
+ * operations an iteration, most of them independent of each other, so limited
+ * by how many the core issues per cycle) and
  * of one dependent multiply-add (limited by its latency). */
 #include <stdint.h>
 #include <time.h>

@@ -117,9 +117,10 @@ extern "C" {
 }
 
 /// The host-state probe of c/probe.c, about 0.1 ms: nanoseconds per iteration
-/// of eight independent integer chains and of one dependent chain. When the
-/// host is busy the first rises (to 1.4–1.8× its quiet value on the machine of
-/// docs/performance.md) while the second stays.
+/// of eight interleaved integer chains (work that can run in parallel) and of
+/// one dependent chain. When the host is busy the first rises (to about twice
+/// its quiet value on the machine of docs/performance.md) while the second
+/// stays.
 pub fn host_probe() -> HostProbe {
     const N: c_long = 20_000;
     // SAFETY: both functions take a count and touch only their locals and a
@@ -135,7 +136,7 @@ pub fn host_probe() -> HostProbe {
 /// What [`host_probe`] measured, ns per iteration.
 #[derive(Debug, Clone, Copy)]
 pub struct HostProbe {
-    /// Eight independent add/xor chains (16 integer operations).
+    /// Eight interleaved add/xor chains (16 integer operations an iteration).
     pub independent: f64,
     /// One dependent multiply-add.
     pub dependent: f64,
