@@ -45,6 +45,12 @@ fn main() {
     });
     let mut case = Case::example(true, 1);
     case.steps = steps;
+    // The case's FMU is packaged from the workspace the program is run in.
+    if let Err(e) = tether_fmu_build::workspace_fmu("oscillator") {
+        fail(format!(
+            "cannot package the oscillator FMU (run from the Tether workspace): {e}"
+        ));
+    }
     let spec = match option("--system") {
         Some(path) => {
             let mut spec =
