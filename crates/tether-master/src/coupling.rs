@@ -66,19 +66,20 @@ impl Level {
 
 /// The rows of a coupling made only of linear constraints, compiled for the
 /// levels a method evaluates. The slaves' coupled outputs are laid end to end
-/// in one flat array (slave `s` from `offsets[s]`), and each row at each level
-/// is a run of `(flat index, coefficient)` terms: one pass over contiguous
-/// memory instead of a dispatch per row and a lookup per value. The products
-/// are summed in the order of [`Level::eval`], so the values are bit for bit
-/// the same.
+/// in one flat array (slave `s` from `offsets[s]`), and the rows of every
+/// level, level after level, are runs of `(flat index, coefficient)` terms:
+/// one pass over contiguous memory for all levels instead of a dispatch per
+/// row and a lookup per value. The products are summed in the order of
+/// [`Level::eval`], so the values are bit for bit the same.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Compiled {
-    /// Start of each slave's coupled outputs in the flat array.
-    offsets: Vec<usize>,
+    /// Each slave's coupled outputs in the flat array.
+    parts: Vec<std::ops::Range<usize>>,
     /// Length of the flat array.
     pub len: usize,
-    /// Per level, per row: its range in `terms`.
-    rows: Vec<Vec<std::ops::Range<usize>>>,
+    /// Where each row's terms end in `terms` (a row starts where the one
+    /// before it ends); rows of the first level first.
+    ends: Vec<usize>,
     terms: Vec<(usize, f64)>,
 }
 
@@ -86,20 +87,19 @@ impl Compiled {
     /// `None` unless every row is a linear constraint defined on every level
     /// in `levels` (none of them the explicit method's stabilised one).
     pub fn new(coupling: &Coupling, levels: &[RowLevel], slaves: &[Slave]) -> Option<Compiled> {
-        let mut offsets = Vec::with_capacity(slaves.len());
+        let mut parts = Vec::with_capacity(slaves.len());
         let mut len = 0;
         for slave in slaves {
-            offsets.push(len);
+            parts.push(len..len + slave.coupled_values.len());
             len += slave.coupled_values.len();
         }
         let mut compiled = Compiled {
-            offsets,
+            parts,
             len,
-            rows: Vec::new(),
+            ends: Vec::with_capacity(levels.len() * coupling.len()),
             terms: Vec::new(),
         };
         for &level in levels {
-            let mut rows = Vec::with_capacity(coupling.len());
             for unknown in &coupling.unknowns {
                 let Row::Constraint(c) = unknown.row else {
                     return None;
@@ -111,32 +111,38 @@ impl Compiled {
                     RowLevel::Acceleration => constraint.acceleration.as_ref()?,
                     RowLevel::Stabilised(_) => return None,
                 };
-                let start = compiled.terms.len();
                 for &(s, slot, c) in &terms.terms {
-                    compiled.terms.push((compiled.offsets[s] + slot, c));
+                    compiled.terms.push((compiled.parts[s].start + slot, c));
                 }
-                rows.push(start..compiled.terms.len());
+                compiled.ends.push(compiled.terms.len());
             }
-            compiled.rows.push(rows);
         }
         Some(compiled)
     }
 
-    /// Copy slave `s`'s coupled outputs into its part of `flat`.
+    /// Slave `s`'s coupled outputs in `flat`.
     #[inline]
-    pub fn gather(&self, flat: &mut [f64], s: usize, values: &[f64]) {
-        let start = self.offsets[s];
-        copy_small(&mut flat[start..start + values.len()], values);
+    pub fn part<'a>(&self, flat: &'a [f64], s: usize) -> &'a [f64] {
+        &flat[self.parts[s].clone()]
     }
 
-    /// Every row at level index `l` (into the levels compiled) from `flat`.
+    /// Slave `s`'s coupled outputs in `flat`, to write.
     #[inline]
-    pub fn eval(&self, l: usize, flat: &[f64], out: &mut [f64]) {
-        for (out, range) in out.iter_mut().zip(&self.rows[l]) {
-            *out = self.terms[range.clone()]
+    pub fn part_mut<'a>(&self, flat: &'a mut [f64], s: usize) -> &'a mut [f64] {
+        &mut flat[self.parts[s].clone()]
+    }
+
+    /// The first `out.len()` rows from `flat`: every level (`out` as long as
+    /// the levels times the unknowns), or the first level only.
+    #[inline]
+    pub fn eval(&self, flat: &[f64], out: &mut [f64]) {
+        let mut start = 0;
+        for (out, &end) in out.iter_mut().zip(&self.ends) {
+            *out = self.terms[start..end]
                 .iter()
                 .map(|&(i, c)| c * flat[i])
                 .sum();
+            start = end;
         }
     }
 }

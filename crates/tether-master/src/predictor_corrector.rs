@@ -69,16 +69,16 @@ impl Simulation {
             } else {
                 slave.do_step(t, h)?;
             }
-            slave.read_coupled()?;
             match &self.compiled {
-                Some(c) => c.gather(&mut self.work.flat_base, s, &slave.coupled_values),
-                None => copy_small(&mut self.work.base[s], &slave.coupled_values),
+                Some(c) => slave.read_coupled_into(c.part_mut(&mut self.work.flat_base, s))?,
+                None => {
+                    slave.read_coupled()?;
+                    copy_small(&mut self.work.base[s], &slave.coupled_values);
+                }
             }
         }
         if let Some(compiled) = &self.compiled {
-            for (l, g) in self.work.g.iter_mut().enumerate() {
-                compiled.eval(l, &self.work.flat_base, g.as_mut_slice());
-            }
+            compiled.eval(&self.work.flat_base, &mut self.work.g);
         } else {
             let work = &mut self.work;
             let view = View {
@@ -89,8 +89,8 @@ impl Simulation {
                 u: &work.u_pred,
                 bump: None,
             };
-            for (l, &level) in self.levels.iter().enumerate() {
-                self.coupling.eval(level, &view, work.g[l].as_mut_slice());
+            for (&level, g) in self.levels.iter().zip(work.g.chunks_exact_mut(nu)) {
+                self.coupling.eval(level, &view, g);
             }
         }
         lap.split_into(&mut self.stats.times.predictor);
@@ -120,7 +120,6 @@ impl Simulation {
         } else {
             for gi in 0..self.groups.len() {
                 copy_small(&mut self.work.perturbed, &self.work.polys);
-                self.work.live.fill(false);
                 for &m in &self.groups[gi] {
                     let delta = self.settings.epsilon * self.history[m][0].abs().max(1.0);
                     self.work.delta[m] = delta;
@@ -130,16 +129,15 @@ impl Simulation {
                         degree_corr,
                         h,
                     );
-                    for &s in &self.owners[m] {
-                        self.work.live[s] = true;
-                    }
                 }
-                for (s, slave) in self.slaves.iter_mut().enumerate() {
-                    if self.work.live[s] {
-                        slave.restore_state()?;
-                        slave.apply_inputs(&self.work.perturbed, k)?;
-                        slave.do_step(t, h)?;
-                        slave.read_coupled()?;
+                for &s in &self.group_slaves[gi] {
+                    let slave = &mut self.slaves[s];
+                    slave.restore_state()?;
+                    slave.apply_inputs(&self.work.perturbed, k)?;
+                    slave.do_step(t, h)?;
+                    match &self.compiled {
+                        Some(c) => slave.read_coupled_into(c.part_mut(&mut self.work.flat, s))?,
+                        None => slave.read_coupled()?,
                     }
                 }
                 let sim = Columns {
@@ -207,41 +205,20 @@ impl Simulation {
     /// The corrected unknowns into `work.corrected` (buffers reused, no allocation).
     fn corrected_unknowns(&mut self, time: f64) -> Result<(), MasterError> {
         let limit = self.settings.max_condition;
-        let nu = self.work.u_pred.len();
-        let level_index = |kind: RowLevel| {
-            let same = |l: &RowLevel| std::mem::discriminant(l) == std::mem::discriminant(&kind);
-            self.levels.iter().position(same)
-        };
         let work = &mut self.work;
         match self.method {
             Method::Baumgarte { beta, gamma } => {
-                // Eq. 68: u = u^p − (G^B)⁻¹ g^B with g^B = g + β ġ + γ g̈.
-                let (a, b) = work.solver.system(nu);
-                copy_small(a, work.jac[0].as_slice());
-                copy_small(b, work.g[0].as_slice());
-                let mut add = |weight: f64, l: usize| {
-                    for (x, j) in a.iter_mut().zip(work.jac[l].as_slice()) {
-                        *x += weight * j;
-                    }
-                    for (x, g) in b.iter_mut().zip(work.g[l].as_slice()) {
-                        *x += weight * g;
-                    }
-                };
-                if let Some(v) = level_index(RowLevel::Velocity) {
-                    add(beta, v);
-                }
-                if let Some(acc) = level_index(RowLevel::Acceleration) {
-                    add(gamma, acc);
-                }
-                // Port and coupling-variable rows are not stabilised.
-                for (r, unknown) in self.coupling.unknowns.iter().enumerate() {
-                    if unknown.is_algebraic() {
-                        for c in 0..nu {
-                            a[r + c * nu] = work.jac[0][(r, c)];
-                        }
-                        b[r] = work.g[0][r];
-                    }
-                }
+                // Eq. 68: u = u^p − (G^B)⁻¹ g^B with g^B = g + β ġ + γ g̈;
+                // port and coupling-variable rows are not stabilised.
+                let (a, b) = work.solver.system(work.u_pred.len());
+                work.jac.baumgarte(
+                    &work.g,
+                    self.velocity_level.map(|v| (v, beta)),
+                    self.acceleration_level.map(|acc| (acc, gamma)),
+                    &self.algebraic_rows,
+                    a,
+                    b,
+                );
                 let level = if self.levels.len() == 1 {
                     "position"
                 } else {
@@ -264,7 +241,7 @@ impl Simulation {
                         _ => (1.0, "position"),
                     };
                     self.stats.jacobian_solves += 1;
-                    work.solver.load(&work.jac[l], &work.g[l]);
+                    work.solver.load_level(&work.jac, &work.g, l);
                     let step = work.solver.solve(time, name, limit)?;
                     for ((c, p), s) in work.corrected.iter_mut().zip(&work.u_pred).zip(step) {
                         *c += weight * (p - s);
@@ -282,36 +259,36 @@ impl Simulation {
 }
 
 /// Finite-difference columns of the unknowns in `group` from one perturbed run:
-/// its outputs are the slaves' latest values, or `latest` (parallel runs).
+/// its outputs are the slaves' latest values (compiled rows: `work.flat`), or
+/// `latest` (parallel runs).
 fn columns(sim: Columns, work: &mut Work, group: &[usize], latest: Option<&[Vec<f64>]>) {
     let nu = sim.coupling.len();
     for &m in group {
         let delta = work.delta[m];
         if let Some(compiled) = sim.compiled {
-            // The instances m drives at their latest values, the others at
-            // the predictor's.
-            copy_small(&mut work.flat, &work.flat_base);
-            for &s in &sim.owners[m] {
-                let values = match latest {
-                    Some(latest) => &latest[s],
-                    None => &sim.slaves[s].coupled_values,
-                };
-                compiled.gather(&mut work.flat, s, values);
-            }
-            for (l, jac) in work.jac.iter_mut().enumerate() {
-                compiled.eval(l, &work.flat, &mut work.rows);
-                for r in 0..nu {
-                    jac[(r, m)] = (work.rows[r] - work.g[l][r]) / delta;
+            // The instances m drives at their latest values (in `flat`, or
+            // `latest` for parallel runs), the others at the predictor's.
+            let owners = &sim.owners[m];
+            let flat = if latest.is_none() && owners.len() == sim.slaves.len() {
+                &work.flat
+            } else {
+                work.mixed.copy_from_slice(&work.flat_base);
+                for &s in owners {
+                    let values = match latest {
+                        Some(latest) => &latest[s],
+                        None => compiled.part(&work.flat, s),
+                    };
+                    copy_small(compiled.part_mut(&mut work.mixed, s), values);
                 }
+                &work.mixed
+            };
+            compiled.eval(flat, &mut work.rows);
+        } else {
+            // Only the instances m drives count as perturbed for column m.
+            work.live.fill(false);
+            for &s in &sim.owners[m] {
+                work.live[s] = true;
             }
-            continue;
-        }
-        // Only the instances m drives count as perturbed for column m.
-        work.live.fill(false);
-        for &s in &sim.owners[m] {
-            work.live[s] = true;
-        }
-        for (l, &level) in sim.levels.iter().enumerate() {
             let view = View {
                 slaves: sim.slaves,
                 base: &work.base,
@@ -320,10 +297,13 @@ fn columns(sim: Columns, work: &mut Work, group: &[usize], latest: Option<&[Vec<
                 u: &work.u_pred,
                 bump: Some((m, delta)),
             };
-            sim.coupling.eval(level, &view, &mut work.rows);
-            for r in 0..nu {
-                work.jac[l][(r, m)] = (work.rows[r] - work.g[l][r]) / delta;
+            for (&level, rows) in sim.levels.iter().zip(work.rows.chunks_exact_mut(nu)) {
+                sim.coupling.eval(level, &view, rows);
             }
+        }
+        let column = work.jac.column_mut(m);
+        for ((j, row), g) in column.iter_mut().zip(&work.rows).zip(&work.g) {
+            *j = (row - g) / delta;
         }
     }
 }

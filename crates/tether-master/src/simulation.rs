@@ -3,15 +3,13 @@
 
 use std::time::Instant;
 
-use nalgebra::{DMatrix, DVector};
-
 use crate::coupling::{self, copy_small, Compiled, Coupling, RowLevel, View};
 use crate::explicit::Feedthrough;
 use crate::observer::{Observer, Sample};
 use crate::parallel::Pool;
 use crate::polynomial::Taylor;
 use crate::slave::Slave;
-use crate::solve::Solver;
+use crate::solve::{Jacobians, Solver};
 use crate::spec::{CouplingSettings, Experiment, InitialMultiplier, SystemSpec};
 use crate::stats::RunStats;
 use crate::{MasterError, Method};
@@ -27,8 +25,15 @@ pub struct Simulation {
     pub(crate) owners: Vec<Vec<usize>>,
     /// Unknowns whose perturbations share one run.
     pub(crate) groups: Vec<Vec<usize>>,
+    /// Per group, the slaves its perturbed run steps (those its unknowns drive).
+    pub(crate) group_slaves: Vec<Vec<usize>>,
     /// Levels the method evaluates (position always first).
     pub(crate) levels: Vec<RowLevel>,
+    /// Indices of the velocity and acceleration levels in `levels`, if evaluated.
+    pub(crate) velocity_level: Option<usize>,
+    pub(crate) acceleration_level: Option<usize>,
+    /// Rows that are the same on every level (coupling variables and ports).
+    pub(crate) algebraic_rows: Vec<usize>,
     /// The rows compiled for `levels`, when they are all linear constraints.
     pub(crate) compiled: Option<Compiled>,
     /// Per unknown: `[u_N, u_{N-1}, u_{N-2}]`.
@@ -56,19 +61,23 @@ pub(crate) struct Work {
     pub base: Vec<Vec<f64>>,
     /// The same laid end to end, for compiled rows (empty otherwise).
     pub flat_base: Vec<f64>,
-    /// Flat coupled outputs of one evaluation of compiled rows.
+    /// Latest coupled outputs laid end to end (compiled rows): of the last
+    /// perturbed run, or of the accepted point.
     pub flat: Vec<f64>,
+    /// `flat` for the instances an unknown drives, `flat_base` for the others.
+    pub mixed: Vec<f64>,
     /// Which slaves' latest values count as perturbed.
     pub live: Vec<bool>,
     pub polys: Vec<Taylor>,
     pub perturbed: Vec<Taylor>,
     pub u_pred: Vec<f64>,
     pub delta: Vec<f64>,
-    /// Condition values `g`, `ġ`, `g̈` at the predictor, indexed like `levels`.
-    pub g: Vec<DVector<f64>>,
-    /// Interface Jacobians ∂g/∂u, ∂ġ/∂u, ∂g̈/∂u, indexed like `levels`.
-    pub jac: Vec<DMatrix<f64>>,
-    /// Row values of one perturbed evaluation.
+    /// Condition values `g`, `ġ`, `g̈` at the predictor: every row of each
+    /// level in `levels`, level after level.
+    pub g: Vec<f64>,
+    /// Interface Jacobians ∂g/∂u, ∂ġ/∂u, ∂g̈/∂u of the levels in `levels`.
+    pub jac: Jacobians,
+    /// Row values of one perturbed evaluation, laid out like `g`.
     pub rows: Vec<f64>,
     /// Current unknowns u_N.
     pub u: Vec<f64>,
@@ -114,6 +123,14 @@ impl Simulation {
             }
         }
         let groups = coupling::perturbation_groups(&owners);
+        let group_slaves = groups
+            .iter()
+            .map(|group| {
+                (0..slaves.len())
+                    .filter(|s| group.iter().any(|&m| owners[m].contains(s)))
+                    .collect()
+            })
+            .collect();
         let mut levels = vec![RowLevel::Position];
         if method.needs_velocity() {
             levels.push(RowLevel::Velocity);
@@ -153,19 +170,23 @@ impl Simulation {
                 .collect(),
             flat_base: vec![0.0; flat_len],
             flat: vec![0.0; flat_len],
+            mixed: vec![0.0; flat_len],
             live: vec![false; slaves.len()],
             polys: vec![Taylor::default(); nu],
             perturbed: vec![Taylor::default(); nu],
             u_pred: vec![0.0; nu],
             delta: vec![0.0; nu],
-            g: levels.iter().map(|_| DVector::zeros(nu)).collect(),
-            jac: levels.iter().map(|_| DMatrix::zeros(nu, nu)).collect(),
-            rows: vec![0.0; nu],
+            g: vec![0.0; levels.len() * nu],
+            jac: Jacobians::new(nu, levels.len()),
+            rows: vec![0.0; levels.len() * nu],
             u: vec![0.0; nu],
             corrected: vec![0.0; nu],
             solver: Solver::default(),
             feedthrough: Feedthrough::default(),
         };
+        let algebraic_rows = (0..nu)
+            .filter(|&r| coupling.unknowns[r].is_algebraic())
+            .collect();
         let mut sim = Simulation {
             experiment: exp,
             method,
@@ -182,6 +203,10 @@ impl Simulation {
             coupling,
             owners,
             groups,
+            group_slaves,
+            velocity_level: levels.iter().position(|&l| l == RowLevel::Velocity),
+            acceleration_level: levels.iter().position(|&l| l == RowLevel::Acceleration),
+            algebraic_rows,
             levels,
             compiled,
             n: 0,
@@ -338,10 +363,14 @@ impl Simulation {
         Ok(())
     }
 
-    /// Read coupled and recorded outputs of every slave at an accepted point.
+    /// Read coupled and recorded outputs of every slave at an accepted point
+    /// (the coupled ones into `work.flat` for compiled rows).
     pub(crate) fn read_accepted(&mut self) -> Result<(), MasterError> {
-        for slave in &mut self.slaves {
-            slave.read_coupled()?;
+        for (s, slave) in self.slaves.iter_mut().enumerate() {
+            match &self.compiled {
+                Some(c) => slave.read_coupled_into(c.part_mut(&mut self.work.flat, s))?,
+                None => slave.read_coupled()?,
+            }
             slave.read_recorded()?;
         }
         Ok(())
@@ -359,11 +388,9 @@ impl Simulation {
             i += 1;
         }
         if let Some(compiled) = &self.compiled {
-            // Every row is a constraint with a residual column.
-            for (s, slave) in self.slaves.iter().enumerate() {
-                compiled.gather(&mut self.work.flat, s, &slave.coupled_values);
-            }
-            compiled.eval(0, &self.work.flat, &mut self.row[i..]);
+            // Every row is a constraint with a residual column; the accepted
+            // coupled outputs are in `flat`.
+            compiled.eval(&self.work.flat, &mut self.row[i..]);
             return;
         }
         for (m, h) in self.history.iter().enumerate() {

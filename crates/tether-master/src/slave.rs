@@ -321,10 +321,18 @@ impl Slave {
     /// Read the coupled outputs into `coupled_values`.
     #[inline(always)]
     pub(crate) fn read_coupled(&mut self) -> Result<(), MasterError> {
+        let mut values = std::mem::take(&mut self.coupled_values);
+        let read = self.read_coupled_into(&mut values);
+        self.coupled_values = values;
+        read
+    }
+
+    /// Read the coupled outputs into `out` (as long as `coupled_values`).
+    #[inline(always)]
+    pub(crate) fn read_coupled_into(&mut self, out: &mut [f64]) -> Result<(), MasterError> {
         if self.direct_read {
             if !self.value_vrs.is_empty() {
-                self.instance
-                    .get_real(&self.value_vrs, &mut self.coupled_values)?;
+                self.instance.get_real(&self.value_vrs, out)?;
                 self.counters.get_reals += 1;
             }
             return Ok(());
@@ -334,15 +342,15 @@ impl Slave {
                 .get_real(&self.value_vrs, &mut self.value_buf)?;
             self.counters.get_reals += 1;
             for (k, &slot) in self.value_slots.iter().enumerate() {
-                self.coupled_values[slot] = self.value_buf[k];
+                out[slot] = self.value_buf[k];
             }
         }
         for &(vr, order, slot) in &self.derivative_reads {
-            let mut out = [0.0];
+            let mut value = [0.0];
             self.instance
-                .get_real_output_derivatives(&[vr], &[order], &mut out)?;
+                .get_real_output_derivatives(&[vr], &[order], &mut value)?;
             self.counters.get_output_derivatives += 1;
-            self.coupled_values[slot] = out[0];
+            out[slot] = value[0];
         }
         Ok(())
     }

@@ -8,9 +8,98 @@
 //! `try_inverse` and matrix–vector product in the same order, so the results are
 //! bit for bit what `DMatrix::lu` gave before (checked by a test below).
 
+#[cfg(test)]
 use nalgebra::{DMatrix, DVector};
 
 use crate::MasterError;
+
+/// The interface Jacobians ∂g/∂u of every level a method evaluates
+/// (position first), column after column: column `m` holds its rows of every
+/// level in turn, so the finite difference in unknown `m` fills one
+/// contiguous run of `levels × n` values.
+#[derive(Debug, Default, Clone)]
+pub(crate) struct Jacobians {
+    n: usize,
+    levels: usize,
+    data: Vec<f64>,
+}
+
+impl Jacobians {
+    /// Zero Jacobians of `levels` levels for `n` unknowns.
+    pub fn new(n: usize, levels: usize) -> Jacobians {
+        Jacobians {
+            n,
+            levels,
+            data: vec![0.0; n * n * levels],
+        }
+    }
+
+    /// Column `m` of every level, level after level.
+    #[inline]
+    pub fn column_mut(&mut self, m: usize) -> &mut [f64] {
+        let len = self.levels * self.n;
+        &mut self.data[m * len..(m + 1) * len]
+    }
+
+    /// Entry `(r, c)` of level `l`.
+    #[inline]
+    pub fn get(&self, l: usize, r: usize, c: usize) -> f64 {
+        self.data[(c * self.levels + l) * self.n + r]
+    }
+
+    /// Level `l` into `a` (column-major `n × n`).
+    pub fn level_into(&self, l: usize, a: &mut [f64]) {
+        let n = self.n;
+        for (c, column) in a.chunks_exact_mut(n).enumerate() {
+            for (r, x) in column.iter_mut().enumerate() {
+                *x = self.get(l, r, c);
+            }
+        }
+    }
+
+    /// `G^B = G + β Ġ + γ G̈` into `a` (column-major `n × n`) and
+    /// `g^B = g + β ġ + γ g̈` into `b`, from `g` (the conditions of every
+    /// level, level after level); a level is added with its weight when it
+    /// is evaluated (`Some(index)`). Rows in `plain` (coupling variables and
+    /// ports) keep their position level.
+    pub fn baumgarte(
+        &self,
+        g: &[f64],
+        velocity: Option<(usize, f64)>,
+        acceleration: Option<(usize, f64)>,
+        plain: &[usize],
+        a: &mut [f64],
+        b: &mut [f64],
+    ) {
+        let n = self.n;
+        let stabilised = |level: &[f64], r: usize| {
+            let mut sum = level[r];
+            if let Some((v, beta)) = velocity {
+                sum += beta * level[v * n + r];
+            }
+            if let Some((acc, gamma)) = acceleration {
+                sum += gamma * level[acc * n + r];
+            }
+            sum
+        };
+        let len = self.levels * n;
+        for c in 0..n {
+            let column = &self.data[c * len..(c + 1) * len];
+            for r in 0..n {
+                a[r + c * n] = stabilised(column, r);
+            }
+        }
+        for (r, x) in b.iter_mut().enumerate() {
+            *x = stabilised(g, r);
+        }
+        for &r in plain {
+            for c in 0..n {
+                a[r + c * n] = self.get(0, r, c);
+            }
+            b[r] = g[r];
+        }
+    }
+}
 
 /// A reusable solver for `A x = b` with `n × n` systems.
 #[derive(Debug, Default, Clone)]
@@ -51,7 +140,16 @@ impl Solver {
         self.x.resize(n, 0.0);
     }
 
+    /// Load level `l` of `jac` and of `g` (every level, level after level).
+    pub fn load_level(&mut self, jac: &Jacobians, g: &[f64], l: usize) {
+        let n = jac.n;
+        let (sa, sb) = self.system(n);
+        jac.level_into(l, sa);
+        sb.copy_from_slice(&g[l * n..(l + 1) * n]);
+    }
+
     /// Load `A` and `b` (copies, no allocation once sized).
+    #[cfg(test)]
     pub fn load(&mut self, a: &DMatrix<f64>, b: &DVector<f64>) {
         let n = b.len();
         debug_assert_eq!(a.shape(), (n, n));
@@ -311,5 +409,50 @@ mod tests {
                 Err(e) => panic!("trial {trial}: {e}, nalgebra condition {condition}"),
             }
         }
+    }
+
+    #[test]
+    fn jacobian_levels_combine_like_separate_matrices() {
+        // Three levels of a 3 × 3 Jacobian, filled column by column as the
+        // finite differences do, against one matrix per level.
+        let (n, levels) = (3, 3);
+        let value = |l: usize, r: usize, c: usize| ((l * 7 + r * 3 + c) as f64).sin() * 1e3;
+        let mut jac = Jacobians::new(n, levels);
+        for c in 0..n {
+            for (i, x) in jac.column_mut(c).iter_mut().enumerate() {
+                *x = value(i / n, i % n, c);
+            }
+        }
+        let mats: Vec<DMatrix<f64>> = (0..levels)
+            .map(|l| DMatrix::from_fn(n, n, |r, c| value(l, r, c)))
+            .collect();
+        let g: Vec<f64> = (0..levels * n).map(|i| (i as f64).cos()).collect();
+        let (beta, gamma) = (0.3, 0.07);
+        let (mut a, mut b) = (vec![0.0; n * n], vec![0.0; n]);
+        // Row 1 is a coupling variable: not stabilised.
+        jac.baumgarte(&g, Some((1, beta)), Some((2, gamma)), &[1], &mut a, &mut b);
+        for c in 0..n {
+            for r in 0..n {
+                let mut expected = mats[0][(r, c)];
+                if r != 1 {
+                    expected += beta * mats[1][(r, c)];
+                    expected += gamma * mats[2][(r, c)];
+                }
+                assert_eq!(a[r + c * n].to_bits(), expected.to_bits(), "({r}, {c})");
+            }
+        }
+        for r in 0..n {
+            let mut expected = g[r];
+            if r != 1 {
+                expected += beta * g[n + r];
+                expected += gamma * g[2 * n + r];
+            }
+            assert_eq!(b[r].to_bits(), expected.to_bits(), "row {r}");
+        }
+        let mut solver = Solver::default();
+        solver.load_level(&jac, &g, 2);
+        let (sa, sb) = solver.system(n);
+        assert_eq!(sa, mats[2].as_slice());
+        assert_eq!(sb, &g[2 * n..]);
     }
 }
