@@ -231,7 +231,7 @@ impl Simulation {
             .iter()
             .map(|v| (factor * v.abs().max(1.0)).min(f64::MAX))
             .collect();
-        sim.check_divergence(sim.experiment.start)?;
+        sim.check_divergence()?;
         sim.stats.times.setup = clock.elapsed();
         Ok(sim)
     }
@@ -294,7 +294,7 @@ impl Simulation {
         }
         self.stats.macro_steps += 1;
         self.fill_row();
-        self.check_divergence(self.time())
+        self.check_divergence()
     }
 
     /// Run to the stop time, feeding every accepted point to the observers.
@@ -383,10 +383,10 @@ impl Simulation {
             copy_small(&mut self.row[i..i + values.len()], values);
             i += values.len();
         }
-        for h in &self.history {
-            self.row[i] = h[0];
-            i += 1;
+        for (x, h) in self.row[i..].iter_mut().zip(&self.history) {
+            *x = h[0];
         }
+        i += self.history.len();
         if let Some(compiled) = &self.compiled {
             // Every row is a constraint with a residual column; the accepted
             // coupled outputs are in `flat`.
@@ -411,7 +411,7 @@ impl Simulation {
     }
 
     #[inline]
-    fn check_divergence(&self, time: f64) -> Result<(), MasterError> {
+    fn check_divergence(&self) -> Result<(), MasterError> {
         // One branch-free pass in the common case; the culprit is searched
         // only when there is one.
         let any = self
@@ -422,7 +422,7 @@ impl Simulation {
         if !any {
             return Ok(());
         }
-        self.diverged(time).map_or(Ok(()), Err)
+        self.diverged(self.time()).map_or(Ok(()), Err)
     }
 
     /// The first value beyond its limit, as an error.
