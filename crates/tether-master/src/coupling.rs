@@ -66,7 +66,7 @@ impl Level {
 
 /// The rows of a coupling made only of linear constraints, compiled for the
 /// levels a method evaluates. The slaves' coupled outputs are laid end to end
-/// in one flat array (slave `s` from `offsets[s]`), and the rows of every
+/// in one flat array (slave `s` in `parts[s]`), and the rows of every
 /// level, level after level, are runs of `(flat index, coefficient)` terms:
 /// one pass over contiguous memory for all levels instead of a dispatch per
 /// row and a lookup per value. The products are summed in the order of

@@ -1,7 +1,7 @@
 //! Multipliers from direct feedthrough, without a macro-step repetition: the
 //! consistent initial multipliers (acceleration-level condition at T_0, eq. 3
 //! for the oscillator) and the explicit baseline method (ALGORITHM.md §5, our
-//! reconstruction of the paper's ref. [16]).
+//! reconstruction of the paper's ref. \[16\]).
 
 use crate::stats::Lap;
 

@@ -31,7 +31,7 @@ pub enum Method {
         b: f64,
     },
     /// Explicit index-1 baseline with constant approximation (our
-    /// reconstruction of the paper's ref. [16], see docs/algorithm.md):
+    /// reconstruction of the paper's ref. \[16\], see docs/algorithm.md):
     /// λ_N solves `μ² g̈ + 2μ ġ + g = 0` at T_N and is held over the step.
     Explicit {
         /// Stabilisation time constant μ_B (> 0).

@@ -45,7 +45,9 @@ pub struct Slave {
     /// The outputs are all values (no derivatives), in `coupled_outputs`
     /// order: `fmi2GetReal` writes straight into `coupled_values`.
     direct_read: bool,
-    /// Values of `coupled_outputs` after the latest run.
+    /// Values of `coupled_outputs` after the latest [`read_coupled`](Self::read_coupled)
+    /// (compiled rows read the predictor's, perturbed and accepted values
+    /// into the simulation's flat buffers instead).
     pub(crate) coupled_values: Vec<f64>,
     pub(crate) recorded_names: Vec<String>,
     recorded_vrs: Vec<u32>,
