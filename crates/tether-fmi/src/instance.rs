@@ -1,5 +1,6 @@
 //! [`Instance`]: the safe co-simulation API of one FMU instance.
 
+use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
@@ -125,7 +126,8 @@ impl StatusKind {
 #[derive(Debug)]
 pub struct Instance {
     /// `None` only while dropping.
-    raw: Option<RawComponent>,
+    /// Taken out only by `Drop` (to free it now or hand it to the last state).
+    raw: ManuallyDrop<RawComponent>,
     pub(crate) shared: Arc<Shared>,
     pub(crate) fmu: Arc<FmuShared>,
     name: Arc<str>,
@@ -135,7 +137,7 @@ impl Instance {
     pub(crate) fn new(raw: RawComponent, fmu: Arc<FmuShared>) -> Instance {
         let name = Arc::from(raw.name());
         Instance {
-            raw: Some(raw),
+            raw: ManuallyDrop::new(raw),
             shared: Arc::default(),
             fmu,
             name,
@@ -146,22 +148,21 @@ impl Instance {
     /// freed first.
     #[inline]
     pub(crate) fn raw(&mut self) -> &mut RawComponent {
-        let raw = self.raw.as_mut().expect("the component lives until drop");
         if self.shared.pending.load(Ordering::Acquire) {
-            free_dropped(raw, &self.shared);
+            free_dropped(&mut self.raw, &self.shared);
         }
-        raw
+        &mut self.raw
     }
 
-    /// The component for a Real value access, without freeing dropped states
-    /// (the next other call does).
+    /// The component for Real value accesses and `fmi2SetFMUstate`, without
+    /// freeing dropped states: `fmi2DoStep` and every other call do.
     #[inline(always)]
-    fn values(&mut self) -> &mut RawComponent {
-        self.raw.as_mut().expect("the component lives until drop")
+    pub(crate) fn live(&mut self) -> &mut RawComponent {
+        &mut self.raw
     }
 
     fn raw_ref(&self) -> &RawComponent {
-        self.raw.as_ref().expect("the component lives until drop")
+        &self.raw
     }
 
     /// The instance name given to `fmi2Instantiate`.
@@ -242,7 +243,7 @@ impl Instance {
     /// `fmi2GetReal` into `out` (same length as `vrs`; no allocation).
     #[inline]
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
-        self.values().fmi2GetReal(vrs, out)
+        self.live().fmi2GetReal(vrs, out)
     }
 
     /// `fmi2GetInteger` into `out`.
@@ -263,7 +264,7 @@ impl Instance {
     /// `fmi2SetReal`.
     #[inline]
     pub fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        self.values().fmi2SetReal(vrs, values)
+        self.live().fmi2SetReal(vrs, values)
     }
 
     /// `fmi2SetInteger`.
@@ -299,8 +300,7 @@ impl Instance {
             "canInterpolateInputs",
             "fmi2SetRealInputDerivatives",
         )?;
-        self.values()
-            .fmi2SetRealInputDerivatives(vrs, orders, values)
+        self.live().fmi2SetRealInputDerivatives(vrs, orders, values)
     }
 
     /// `fmi2GetRealOutputDerivatives` into `out`.
@@ -408,9 +408,8 @@ impl Instance {
 
 impl Drop for Instance {
     fn drop(&mut self) {
-        let Some(mut raw) = self.raw.take() else {
-            return;
-        };
+        // SAFETY: `drop` runs once, and nothing reads `self.raw` after this line.
+        let mut raw = unsafe { ManuallyDrop::take(&mut self.raw) };
         let mut orphans = self.shared.orphans();
         for mut state in orphans.dropped.drain(..) {
             free_state(&mut raw, &mut state);

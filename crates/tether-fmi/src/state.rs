@@ -86,8 +86,9 @@ impl Instance {
     /// its memory (no allocation on the master's side).
     #[inline(always)]
     pub fn update_fmu_state(&mut self, state: &mut FmuState) -> Result<()> {
-        const F: &str = "fmi2GetFMUstate";
-        self.require_get_set(F)?;
+        // A state of this instance exists only if the FMU can get and set
+        // states (`get_fmu_state` and `deserialize_fmu_state` checked that);
+        // the component refuses any other state.
         let component = self.raw();
         component.fmi2GetFMUstate_update(&mut state.raw)?;
         state.time = Some(component.time);
@@ -97,9 +98,8 @@ impl Instance {
     /// `fmi2SetFMUstate`; the tracked time becomes the state's time when known.
     #[inline(always)]
     pub fn set_fmu_state(&mut self, state: &FmuState) -> Result<()> {
-        const F: &str = "fmi2SetFMUstate";
-        self.require_get_set(F)?;
-        let component = self.raw();
+        // No capability check: as in `update_fmu_state`.
+        let component = self.live();
         component.fmi2SetFMUstate(&state.raw)?;
         if let Some(t) = state.time {
             component.time = t;

@@ -81,43 +81,64 @@ pub(crate) struct Compiled {
     /// before it ends); rows of the first level first.
     ends: Vec<usize>,
     terms: Vec<(usize, f64)>,
+    /// The same rows when each has exactly two terms (a joint's condition on
+    /// two markers' outputs, the usual case): evaluated without a loop per row.
+    pairs: Vec<[(usize, f64); 2]>,
 }
 
 impl Compiled {
     /// `None` unless every row is a linear constraint defined on every level
     /// in `levels` (none of them the explicit method's stabilised one).
     pub fn new(coupling: &Coupling, levels: &[RowLevel], slaves: &[Slave]) -> Option<Compiled> {
-        let mut parts = Vec::with_capacity(slaves.len());
-        let mut len = 0;
-        for slave in slaves {
-            parts.push(len..len + slave.coupled_values.len());
-            len += slave.coupled_values.len();
-        }
-        let mut compiled = Compiled {
-            parts,
-            len,
-            ends: Vec::with_capacity(levels.len() * coupling.len()),
-            terms: Vec::new(),
-        };
+        let mut rows = Vec::with_capacity(levels.len() * coupling.len());
         for &level in levels {
             for unknown in &coupling.unknowns {
                 let Row::Constraint(c) = unknown.row else {
                     return None;
                 };
                 let constraint = &coupling.constraints[c];
-                let terms = match level {
+                rows.push(match level {
                     RowLevel::Position => &constraint.position,
                     RowLevel::Velocity => constraint.velocity.as_ref()?,
                     RowLevel::Acceleration => constraint.acceleration.as_ref()?,
                     RowLevel::Stabilised(_) => return None,
-                };
-                for &(s, slot, c) in &terms.terms {
-                    compiled.terms.push((compiled.parts[s].start + slot, c));
-                }
-                compiled.ends.push(compiled.terms.len());
+                });
             }
         }
-        Some(compiled)
+        let lens: Vec<usize> = slaves.iter().map(|s| s.coupled_values.len()).collect();
+        Some(Compiled::from_rows(&lens, &rows))
+    }
+
+    /// The rows `rows` (levels of linear constraints) over slaves with `lens`
+    /// coupled outputs each.
+    fn from_rows(lens: &[usize], rows: &[&Level]) -> Compiled {
+        let mut parts = Vec::with_capacity(lens.len());
+        let mut len = 0;
+        for &n in lens {
+            parts.push(len..len + n);
+            len += n;
+        }
+        let mut compiled = Compiled {
+            parts,
+            len,
+            ends: Vec::with_capacity(rows.len()),
+            terms: Vec::new(),
+            pairs: Vec::new(),
+        };
+        for row in rows {
+            for &(s, slot, c) in &row.terms {
+                compiled.terms.push((compiled.parts[s].start + slot, c));
+            }
+            compiled.ends.push(compiled.terms.len());
+        }
+        if rows.iter().all(|row| row.terms.len() == 2) {
+            compiled.pairs = compiled
+                .terms
+                .chunks_exact(2)
+                .map(|pair| [pair[0], pair[1]])
+                .collect();
+        }
+        compiled
     }
 
     /// Slave `s`'s coupled outputs in `flat`.
@@ -136,6 +157,13 @@ impl Compiled {
     /// the levels times the unknowns), or the first level only.
     #[inline]
     pub fn eval(&self, flat: &[f64], out: &mut [f64]) {
+        if !self.pairs.is_empty() {
+            // `-0.0 + p` is `p`: the same bits as the general sum below.
+            for (out, &[(i, a), (j, b)]) in out.iter_mut().zip(&self.pairs) {
+                *out = a * flat[i] + b * flat[j];
+            }
+            return;
+        }
         let mut start = 0;
         for (out, &end) in out.iter_mut().zip(&self.ends) {
             *out = self.terms[start..end]
@@ -913,6 +941,53 @@ mod tests {
         let owners = vec![vec![0, 1], vec![0], vec![2], vec![1]];
         let groups = perturbation_groups(&owners);
         assert_eq!(groups, vec![vec![0, 2], vec![1, 3]]);
+    }
+
+    /// Compiled rows give the bits of `Level::eval`, in the two-term form
+    /// and in the general one, signed zeros and non-finite values included.
+    #[test]
+    fn compiled_rows_match_level_eval_bit_for_bit() {
+        let values = vec![
+            vec![0.1, -0.0, 3.0e-9, f64::INFINITY],
+            vec![-0.3, 0.0, 7.25, f64::NAN],
+        ];
+        let level = |terms: &[(usize, usize, f64)]| Level {
+            terms: terms.to_vec(),
+        };
+        let pairs = [
+            level(&[(0, 0, 1.0), (1, 0, -1.0)]),
+            level(&[(0, 1, 1.0), (1, 1, -1.0)]),
+            level(&[(0, 1, -2.0), (1, 1, 0.5)]),
+            level(&[(0, 2, 1.0), (1, 2, -1.0)]),
+            level(&[(0, 3, 1.0), (1, 0, -1.0)]),
+            level(&[(1, 3, 1.0), (0, 0, 0.0)]),
+        ];
+        let mut mixed: Vec<Level> = pairs.iter().map(|l| level(&l.terms)).collect();
+        mixed.push(level(&[(0, 0, 1.0), (0, 2, 2.0), (1, 0, -1.0)]));
+        mixed.push(level(&[(1, 1, -1.0)]));
+        let flat: Vec<f64> = values.concat();
+        let view = View {
+            slaves: &[],
+            base: &values,
+            live: None,
+            latest: Some(&values),
+            u: &[],
+            bump: None,
+        };
+        for rows in [&pairs[..], &mixed[..]] {
+            let refs: Vec<&Level> = rows.iter().collect();
+            let compiled = Compiled::from_rows(&[4, 4], &refs);
+            assert_eq!(compiled.pairs.is_empty(), rows.len() != pairs.len());
+            let mut out = vec![f64::NAN; rows.len()];
+            compiled.eval(&flat, &mut out);
+            for (row, got) in rows.iter().zip(&out) {
+                assert_eq!(got.to_bits(), row.eval(&view).to_bits());
+            }
+            // The first rows only.
+            let mut first = vec![f64::NAN; 2];
+            compiled.eval(&flat, &mut first);
+            assert_eq!(first[1].to_bits(), out[1].to_bits());
+        }
     }
 
     #[test]
