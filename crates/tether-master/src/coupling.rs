@@ -405,7 +405,7 @@ impl Coupling {
         }
         check_capabilities(slaves, method, order)?;
         for slave in slaves.iter_mut() {
-            slave.finalize();
+            slave.finalize(order);
         }
         Ok(coupling)
     }

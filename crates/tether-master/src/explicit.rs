@@ -68,7 +68,7 @@ impl Simulation {
                 ..Taylor::default()
             };
         }
-        self.apply_all(0)
+        self.apply_all()
     }
 
     /// One Newton step on the residual r = g̈ (+ 2ġ/μ + g/μ²) for the unknowns
@@ -147,7 +147,7 @@ impl Simulation {
             }
             for (s, slave) in self.slaves.iter_mut().enumerate() {
                 if fw.touched[s] {
-                    slave.apply_inputs(&self.work.perturbed, 0)?;
+                    slave.apply_inputs(&self.work.perturbed)?;
                     slave.read_coupled()?;
                 }
             }
@@ -178,7 +178,7 @@ impl Simulation {
             }
             for (s, slave) in self.slaves.iter_mut().enumerate() {
                 if fw.touched[s] {
-                    slave.apply_inputs(&self.work.polys, 0)?;
+                    slave.apply_inputs(&self.work.polys)?;
                 }
             }
         }

@@ -132,7 +132,7 @@ impl Job {
         for &(g, s) in &self.runs {
             let extra = self.extras[s].as_mut().expect("capable instance");
             extra.restore_state()?;
-            extra.apply_inputs(&self.polys[g], self.k)?;
+            extra.apply_inputs(&self.polys[g])?;
             extra.do_step(self.t, self.h)?;
             extra.read_coupled()?;
             self.values[g][s].copy_from_slice(&extra.coupled_values);

@@ -60,7 +60,7 @@ impl Simulation {
             if slave.is_coupled() && !parallel {
                 slave.save_state()?;
             }
-            slave.apply_inputs(&self.work.polys, k)?;
+            slave.apply_inputs(&self.work.polys)?;
             if calibrating {
                 let clock = Instant::now();
                 slave.do_step(t, h)?;
@@ -101,7 +101,7 @@ impl Simulation {
             for &(gi, s) in &pool.main_runs {
                 let slave = &mut self.slaves[s];
                 slave.restore_state()?;
-                slave.apply_inputs(&pool.polys[gi], k)?;
+                slave.apply_inputs(&pool.polys[gi])?;
                 slave.do_step(t, h)?;
                 slave.read_coupled()?;
                 pool.values[gi][s].copy_from_slice(&slave.coupled_values);
@@ -133,7 +133,7 @@ impl Simulation {
                 for &s in &self.group_slaves[gi] {
                     let slave = &mut self.slaves[s];
                     slave.restore_state()?;
-                    slave.apply_inputs(&self.work.perturbed, k)?;
+                    slave.apply_inputs(&self.work.perturbed)?;
                     slave.do_step(t, h)?;
                     match &self.compiled {
                         Some(c) => slave.read_coupled_into(c.part_mut(&mut self.work.flat, s))?,
@@ -164,7 +164,7 @@ impl Simulation {
         for slave in self.slaves.iter_mut() {
             if slave.is_coupled() {
                 slave.restore_state()?;
-                slave.apply_inputs(&self.work.polys, k)?;
+                slave.apply_inputs(&self.work.polys)?;
                 slave.do_step(t, h)?;
             }
         }

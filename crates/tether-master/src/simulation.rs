@@ -439,10 +439,10 @@ impl Simulation {
         })
     }
 
-    /// Set every coupled slave's inputs from `polys` (degree `k` derivatives).
-    pub(crate) fn apply_all(&mut self, k: usize) -> Result<(), MasterError> {
+    /// Set every coupled slave's inputs from `work.polys`.
+    pub(crate) fn apply_all(&mut self) -> Result<(), MasterError> {
         for slave in &mut self.slaves {
-            slave.apply_inputs(&self.work.polys, k)?;
+            slave.apply_inputs(&self.work.polys)?;
         }
         Ok(())
     }

@@ -37,6 +37,8 @@ pub struct Slave {
     input_d_vrs: Vec<u32>,
     input_d_orders: Vec<i32>,
     input_d_values: Vec<f64>,
+    /// The degree k of the unknowns' polynomials (`finalize`).
+    order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
     value_vrs: Vec<u32>,
     value_slots: Vec<usize>,
@@ -91,7 +93,7 @@ impl Slave {
         let mut extra = Slave::instantiate_as(self.fmu.clone(), spec, &name)?;
         extra.inputs = self.inputs.clone();
         extra.coupled_outputs = self.coupled_outputs.clone();
-        extra.finalize();
+        extra.finalize(self.order);
         let (start, stop, tolerance) = experiment;
         extra.initialize(start, stop, tolerance)?;
         Ok(extra)
@@ -153,6 +155,7 @@ impl Slave {
             input_d_vrs: Vec::new(),
             input_d_orders: Vec::new(),
             input_d_values: Vec::new(),
+            order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
             value_slots: Vec::new(),
@@ -203,13 +206,16 @@ impl Slave {
         self.coupled_outputs.len() - 1
     }
 
-    /// Size the buffers once the coupling is known (no allocation afterwards).
-    pub(crate) fn finalize(&mut self) {
+    /// Size the buffers once the coupling is known (no allocation afterwards);
+    /// `order` is the degree k of the unknowns' polynomials: the inputs'
+    /// derivatives up to order min(k, 2) go to the FMU.
+    pub(crate) fn finalize(&mut self, order: usize) {
+        self.order = order;
         self.input_vrs = self.inputs.iter().map(|i| i.vr).collect();
         self.input_values = vec![0.0; self.inputs.len()];
         self.input_d_vrs.clear();
         self.input_d_orders.clear();
-        for order in 1..=2 {
+        for order in 1..=order.min(2) as i32 {
             for i in &self.inputs {
                 self.input_d_vrs.push(i.vr);
                 self.input_d_orders.push(order);
@@ -274,14 +280,10 @@ impl Slave {
         Ok(())
     }
 
-    /// Set the coupled inputs from the unknowns' polynomials; `degree` > 0 also
-    /// passes derivatives through `fmi2SetRealInputDerivatives`.
+    /// Set the coupled inputs from the unknowns' polynomials, and their
+    /// derivatives through `fmi2SetRealInputDerivatives` when k > 0 (`finalize`).
     #[inline(always)]
-    pub(crate) fn apply_inputs(
-        &mut self,
-        polys: &[Taylor],
-        degree: usize,
-    ) -> Result<(), MasterError> {
+    pub(crate) fn apply_inputs(&mut self, polys: &[Taylor]) -> Result<(), MasterError> {
         if self.inputs.is_empty() {
             return Ok(());
         }
@@ -294,18 +296,22 @@ impl Slave {
                 p.d2 += c * polys[m].d2;
             }
             self.input_values[k] = p.value;
-            self.input_d_values[k] = p.d1;
-            self.input_d_values[n + k] = p.d2;
+            // The derivatives as far as k asks (`input_d_values` holds n·min(k, 2)).
+            if let Some(d1) = self.input_d_values.get_mut(k) {
+                *d1 = p.d1;
+            }
+            if let Some(d2) = self.input_d_values.get_mut(n + k) {
+                *d2 = p.d2;
+            }
         }
         self.instance
             .set_real(&self.input_vrs, &self.input_values)?;
         self.counters.set_reals += 1;
-        if degree > 0 {
-            let count = n * degree.min(2);
+        if !self.input_d_vrs.is_empty() {
             self.instance.set_real_input_derivatives(
-                &self.input_d_vrs[..count],
-                &self.input_d_orders[..count],
-                &self.input_d_values[..count],
+                &self.input_d_vrs,
+                &self.input_d_orders,
+                &self.input_d_values,
             )?;
             self.counters.set_input_derivatives += 1;
         }
