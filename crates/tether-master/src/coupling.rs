@@ -71,19 +71,28 @@ impl Level {
 /// one pass over contiguous memory for all levels instead of a dispatch per
 /// row and a lookup per value. The products are summed in the order of
 /// [`Level::eval`], so the values are bit for bit the same.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub(crate) struct Compiled {
     /// Each slave's coupled outputs in the flat array.
     parts: Vec<std::ops::Range<usize>>,
     /// Length of the flat array.
     pub len: usize,
-    /// Where each row's terms end in `terms` (a row starts where the one
-    /// before it ends); rows of the first level first.
-    ends: Vec<usize>,
-    terms: Vec<(usize, f64)>,
-    /// The same rows when each has exactly two terms (a joint's condition on
-    /// two markers' outputs, the usual case): evaluated without a loop per row.
-    pairs: Vec<[(usize, f64); 2]>,
+    /// The rows, those of the first level first.
+    rows: Rows,
+}
+
+/// Compiled rows as `(flat index, coefficient)` terms.
+#[derive(Debug, Clone)]
+enum Rows {
+    /// Every row has exactly two terms (a joint's condition on two markers'
+    /// outputs, the usual case): evaluated without a loop per row.
+    Pairs(Vec<[(usize, f64); 2]>),
+    /// Any number of terms a row: a row's terms end at its `ends` entry and
+    /// start where the row before it ends.
+    Runs {
+        ends: Vec<usize>,
+        terms: Vec<(usize, f64)>,
+    },
 }
 
 impl Compiled {
@@ -118,27 +127,27 @@ impl Compiled {
             parts.push(len..len + n);
             len += n;
         }
-        let mut compiled = Compiled {
-            parts,
-            len,
-            ends: Vec::with_capacity(rows.len()),
-            terms: Vec::new(),
-            pairs: Vec::new(),
-        };
-        for row in rows {
-            for &(s, slot, c) in &row.terms {
-                compiled.terms.push((compiled.parts[s].start + slot, c));
+        let term = |&(s, slot, c): &(usize, usize, f64)| (parts[s].start + slot, c);
+        let rows = match rows
+            .iter()
+            .map(|row| match &row.terms[..] {
+                [a, b] => Some([term(a), term(b)]),
+                _ => None,
+            })
+            .collect()
+        {
+            Some(pairs) => Rows::Pairs(pairs),
+            None => {
+                let mut ends = Vec::with_capacity(rows.len());
+                let mut terms = Vec::new();
+                for row in rows {
+                    terms.extend(row.terms.iter().map(term));
+                    ends.push(terms.len());
+                }
+                Rows::Runs { ends, terms }
             }
-            compiled.ends.push(compiled.terms.len());
-        }
-        if rows.iter().all(|row| row.terms.len() == 2) {
-            compiled.pairs = compiled
-                .terms
-                .chunks_exact(2)
-                .map(|pair| [pair[0], pair[1]])
-                .collect();
-        }
-        compiled
+        };
+        Compiled { parts, len, rows }
     }
 
     /// Slave `s`'s coupled outputs in `flat`.
@@ -157,20 +166,20 @@ impl Compiled {
     /// the levels times the unknowns), or the first level only.
     #[inline]
     pub fn eval(&self, flat: &[f64], out: &mut [f64]) {
-        if !self.pairs.is_empty() {
-            // `-0.0 + p` is `p`: the same bits as the general sum below.
-            for (out, &[(i, a), (j, b)]) in out.iter_mut().zip(&self.pairs) {
-                *out = a * flat[i] + b * flat[j];
+        match &self.rows {
+            Rows::Pairs(pairs) => {
+                // `-0.0 + p` is `p`: the same bits as the sum below.
+                for (out, &[(i, a), (j, b)]) in out.iter_mut().zip(pairs) {
+                    *out = a * flat[i] + b * flat[j];
+                }
             }
-            return;
-        }
-        let mut start = 0;
-        for (out, &end) in out.iter_mut().zip(&self.ends) {
-            *out = self.terms[start..end]
-                .iter()
-                .map(|&(i, c)| c * flat[i])
-                .sum();
-            start = end;
+            Rows::Runs { ends, terms } => {
+                let mut start = 0;
+                for (out, &end) in out.iter_mut().zip(ends) {
+                    *out = terms[start..end].iter().map(|&(i, c)| c * flat[i]).sum();
+                    start = end;
+                }
+            }
         }
     }
 }
@@ -977,7 +986,8 @@ mod tests {
         for rows in [&pairs[..], &mixed[..]] {
             let refs: Vec<&Level> = rows.iter().collect();
             let compiled = Compiled::from_rows(&[4, 4], &refs);
-            assert_eq!(compiled.pairs.is_empty(), rows.len() != pairs.len());
+            let two_terms = matches!(compiled.rows, Rows::Pairs(_));
+            assert_eq!(two_terms, rows.len() == pairs.len());
             let mut out = vec![f64::NAN; rows.len()];
             compiled.eval(&flat, &mut out);
             for (row, got) in rows.iter().zip(&out) {

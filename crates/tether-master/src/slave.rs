@@ -215,10 +215,10 @@ impl Slave {
         self.input_values = vec![0.0; self.inputs.len()];
         self.input_d_vrs.clear();
         self.input_d_orders.clear();
-        for order in 1..=order.min(2) as i32 {
+        for d in 1..=order.min(2) as i32 {
             for i in &self.inputs {
                 self.input_d_vrs.push(i.vr);
-                self.input_d_orders.push(order);
+                self.input_d_orders.push(d);
             }
         }
         self.input_d_values = vec![0.0; self.input_d_vrs.len()];
