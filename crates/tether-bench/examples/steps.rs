@@ -13,7 +13,8 @@
 //!
 //! `--first-steps K` prints the wall time of each of the first K macro steps
 //! (one-off costs such as the "auto" parallel decision at step 3 show there);
-//! `--system FILE` runs that system file instead of the oscillator pair.
+//! `--system FILE` runs that system file instead of the oscillator pair;
+//! `--order 0` extrapolates the inputs with k = 0 instead of k = 1.
 
 use tether_bench::{floor, Case};
 use tether_fmi::Fmu;
@@ -43,7 +44,13 @@ fn main() {
         k.parse()
             .unwrap_or_else(|e| fail(format!("--first-steps: {e}")))
     });
-    let mut case = Case::example(true, 1);
+    let order: usize = option("--order").map_or(1, |k| {
+        k.parse()
+            .ok()
+            .filter(|k| *k <= 1)
+            .unwrap_or_else(|| fail(format!("--order: 0 or 1, not {k}")))
+    });
+    let mut case = Case::example(true, order);
     case.steps = steps;
     // The case's FMU is packaged from the workspace the program is run in.
     if let Err(e) = tether_fmu_build::workspace_fmu("oscillator") {

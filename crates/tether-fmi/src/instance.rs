@@ -125,7 +125,6 @@ impl StatusKind {
 /// `do_step`.
 #[derive(Debug)]
 pub struct Instance {
-    /// `None` only while dropping.
     /// Taken out only by `Drop` (to free it now or hand it to the last state).
     raw: ManuallyDrop<RawComponent>,
     pub(crate) shared: Arc<Shared>,

@@ -1,6 +1,7 @@
 //! A coupled run: instantiate the FMUs, resolve the coupling, pick consistent
 //! initial multipliers, then march over the macro grid `T_n = T_0 + n·H`.
 
+use std::cmp::Ordering::{Equal, Less};
 use std::time::Instant;
 
 use crate::coupling::{self, copy_small, Compiled, Coupling, RowLevel, View};
@@ -383,16 +384,21 @@ impl Simulation {
             copy_small(&mut self.row[i..i + values.len()], values);
             i += values.len();
         }
-        for (x, h) in self.row[i..].iter_mut().zip(&self.history) {
-            *x = h[0];
+        for (m, h) in self.history.iter().enumerate() {
+            self.row[i + m] = h[0];
         }
         i += self.history.len();
-        if let Some(compiled) = &self.compiled {
+        match &self.compiled {
             // Every row is a constraint with a residual column; the accepted
             // coupled outputs are in `flat`.
-            compiled.eval(&self.work.flat, &mut self.row[i..]);
-            return;
+            Some(compiled) => compiled.eval(&self.work.flat, &mut self.row[i..]),
+            None => self.fill_residuals(i),
         }
+    }
+
+    /// The residual columns from `i` on, from the rows' own evaluation.
+    #[inline(never)]
+    fn fill_residuals(&mut self, mut i: usize) {
         for (m, h) in self.history.iter().enumerate() {
             self.work.u[m] = h[0];
         }
@@ -452,7 +458,8 @@ impl Simulation {
 /// `limit` (±∞ is larger than any finite limit).
 #[inline]
 fn beyond(value: f64, limit: f64) -> bool {
-    value.is_nan() | (value.abs() > limit)
+    // One comparison: NaN is not within the limit (it compares as None).
+    !matches!(value.abs().partial_cmp(&limit), Some(Less | Equal))
 }
 
 #[cfg(test)]
