@@ -14,9 +14,12 @@
 //! `--first-steps K` prints the wall time of each of the first K macro steps
 //! (one-off costs such as the "auto" parallel decision at step 3 show there);
 //! `--system FILE` runs that system file instead of the oscillator pair;
-//! `--order 0` extrapolates the inputs with k = 0 instead of k = 1.
+//! `--order 0` extrapolates the inputs with k = 0 instead of k = 1;
+//! `--floor-extra MODE` runs the C floor with synthetic work added to every
+//! macro step (`nothing`, `lines`, `one-line`, `straight`, `looped`; see
+//! `tether_bench::Extra` and tools/bench/extra_ab.py).
 
-use tether_bench::{floor, Case};
+use tether_bench::{floor, floor_extra, Case, Extra};
 use tether_fmi::Fmu;
 use tether_master::{Simulation, SystemSpec};
 
@@ -68,11 +71,18 @@ fn main() {
         None => case.spec(),
     };
     let mut sim = Simulation::new(&spec).unwrap_or_else(|e| fail(e));
-    if args.iter().any(|a| a == "--floor") {
+    let extra = option("--floor-extra").map(|m| m.parse::<Extra>().unwrap_or_else(|e| fail(e)));
+    if extra.is_some() || args.iter().any(|a| a == "--floor") {
         let fmu = Fmu::open(&case.spec().instances[0].fmu).unwrap_or_else(|e| fail(e));
-        let result = floor(&case, &fmu, sim.unknowns()[0]).unwrap_or_else(|e| fail(e));
+        let lambda0 = sim.unknowns()[0];
+        let result = match extra {
+            Some(extra) => floor_extra(&case, &fmu, lambda0, extra),
+            None => floor(&case, &fmu, lambda0),
+        }
+        .unwrap_or_else(|e| fail(e));
         println!(
-            "{steps} macro steps of the C floor, {:.3} µs per step",
+            "{steps} macro steps of the C floor{}, {:.3} µs per step",
+            extra.map_or(String::new(), |e| format!(" with extra work {e:?}")),
             result.seconds / steps.max(1) as f64 * 1e6
         );
         return;
