@@ -70,30 +70,44 @@ fn main() {
         }
         None => case.spec(),
     };
-    let mut sim = Simulation::new(&spec).unwrap_or_else(|e| fail(e));
     let extra = option("--floor-extra").map(|m| m.parse::<Extra>().unwrap_or_else(|e| fail(e)));
-    if extra.is_some() || args.iter().any(|a| a == "--floor") {
-        let fmu = Fmu::open(&case.spec().instances[0].fmu).unwrap_or_else(|e| fail(e));
+    let floor_only = extra.is_some() || args.iter().any(|a| a == "--floor");
+    // Errors from here on return through `run`, so that the simulation and
+    // the FMUs' unpacked copies are dropped (their temporary directories
+    // removed) before the process exits.
+    if let Err(e) = run(&case, &spec, steps, first, floor_only.then_some(extra)) {
+        fail(e);
+    }
+}
+
+/// Tether's macro steps (`floor_with` None), or the C floor's with `extra` work.
+fn run(
+    case: &Case,
+    spec: &SystemSpec,
+    steps: u64,
+    first: usize,
+    floor_with: Option<Option<Extra>>,
+) -> Result<(), String> {
+    let mut sim = Simulation::new(spec).map_err(|e| e.to_string())?;
+    if let Some(extra) = floor_with {
+        let fmu = Fmu::open(&case.spec().instances[0].fmu).map_err(|e| e.to_string())?;
         let lambda0 = sim.unknowns()[0];
         let result = match extra {
-            Some(extra) => floor_extra(&case, &fmu, lambda0, extra),
-            None => floor(&case, &fmu, lambda0),
-        }
-        .unwrap_or_else(|e| fail(e));
+            Some(extra) => floor_extra(case, &fmu, lambda0, extra),
+            None => floor(case, &fmu, lambda0),
+        }?;
         println!(
             "{steps} macro steps of the C floor{}, {:.3} µs per step",
             extra.map_or(String::new(), |e| format!(" with extra work {e:?}")),
             result.seconds / steps.max(1) as f64 * 1e6
         );
-        return;
+        return Ok(());
     }
     let clock = std::time::Instant::now();
     let mut times = Vec::with_capacity(first);
     for n in 0..steps {
         let step_clock = (n < first as u64).then(std::time::Instant::now);
-        if let Err(e) = sim.step() {
-            fail(e);
-        }
+        sim.step().map_err(|e| e.to_string())?;
         if let Some(c) = step_clock {
             times.push(format!("{:.1}", c.elapsed().as_secs_f64() * 1e6));
         }
@@ -103,4 +117,5 @@ fn main() {
     if first > 0 {
         println!("first {} steps [µs]: {}", times.len(), times.join(" "));
     }
+    Ok(())
 }
