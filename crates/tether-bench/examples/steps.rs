@@ -71,25 +71,27 @@ fn main() {
         None => case.spec(),
     };
     let extra = option("--floor-extra").map(|m| m.parse::<Extra>().unwrap_or_else(|e| fail(e)));
-    let floor_only = extra.is_some() || args.iter().any(|a| a == "--floor");
+    let on_floor = extra.is_some() || args.iter().any(|a| a == "--floor");
     // Errors from here on return through `run`, so that the simulation and
     // the FMUs' unpacked copies are dropped (their temporary directories
     // removed) before the process exits.
-    if let Err(e) = run(&case, &spec, steps, first, floor_only.then_some(extra)) {
+    if let Err(e) = run(&case, &spec, steps, first, on_floor, extra) {
         fail(e);
     }
 }
 
-/// Tether's macro steps (`floor_with` None), or the C floor's with `extra` work.
+/// Tether's macro steps, or with `on_floor` the C floor's (with `extra` work
+/// if given).
 fn run(
     case: &Case,
     spec: &SystemSpec,
     steps: u64,
     first: usize,
-    floor_with: Option<Option<Extra>>,
+    on_floor: bool,
+    extra: Option<Extra>,
 ) -> Result<(), String> {
     let mut sim = Simulation::new(spec).map_err(|e| e.to_string())?;
-    if let Some(extra) = floor_with {
+    if on_floor {
         let fmu = Fmu::open(&case.spec().instances[0].fmu).map_err(|e| e.to_string())?;
         let lambda0 = sim.unknowns()[0];
         let result = match extra {
