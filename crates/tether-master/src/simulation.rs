@@ -249,7 +249,9 @@ impl Simulation {
     }
 
     pub(crate) fn time_at(&self, n: u64) -> f64 {
-        self.experiment.start + n as f64 * self.experiment.step
+        // Through i64: one conversion instruction instead of the unsigned
+        // sequence, and the same value below 2^63 steps.
+        self.experiment.start + n as i64 as f64 * self.experiment.step
     }
 
     /// Number of macro steps the experiment asks for.
@@ -384,8 +386,9 @@ impl Simulation {
             copy_small(&mut self.row[i..i + values.len()], values);
             i += values.len();
         }
-        for (m, h) in self.history.iter().enumerate() {
-            self.row[i + m] = h[0];
+        let unknowns = &mut self.row[i..i + self.history.len()];
+        for (value, h) in unknowns.iter_mut().zip(&self.history) {
+            *value = h[0];
         }
         i += self.history.len();
         match &self.compiled {

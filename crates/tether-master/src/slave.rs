@@ -37,6 +37,9 @@ pub struct Slave {
     input_d_vrs: Vec<u32>,
     input_d_orders: Vec<i32>,
     input_d_values: Vec<f64>,
+    /// `(unknown, coefficient)` of each input when every input has exactly one
+    /// term (a joint's force on one body), else empty (`finalize`).
+    single_terms: Vec<(usize, f64)>,
     /// The degree k of the unknowns' polynomials (`finalize`).
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
@@ -155,6 +158,7 @@ impl Slave {
             input_d_vrs: Vec::new(),
             input_d_orders: Vec::new(),
             input_d_values: Vec::new(),
+            single_terms: Vec::new(),
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
@@ -222,6 +226,11 @@ impl Slave {
             }
         }
         self.input_d_values = vec![0.0; self.input_d_vrs.len()];
+        self.single_terms = if self.inputs.iter().all(|i| i.terms.len() == 1) {
+            self.inputs.iter().map(|i| i.terms[0]).collect()
+        } else {
+            Vec::new()
+        };
         self.value_vrs.clear();
         self.value_slots.clear();
         self.derivative_reads.clear();
@@ -287,22 +296,21 @@ impl Slave {
         if self.inputs.is_empty() {
             return Ok(());
         }
-        let n = self.inputs.len();
-        for (k, input) in self.inputs.iter().enumerate() {
-            let mut p = Taylor::default();
-            for &(m, c) in &input.terms {
-                p.value += c * polys[m].value;
-                p.d1 += c * polys[m].d1;
-                p.d2 += c * polys[m].d2;
-            }
-            self.input_values[k] = p.value;
-            // The derivatives as far as k asks (`input_d_values` holds n·min(k, 2)).
-            if let Some(d1) = self.input_d_values.get_mut(k) {
-                *d1 = p.d1;
-            }
-            if let Some(d2) = self.input_d_values.get_mut(n + k) {
-                *d2 = p.d2;
-            }
+        if self.single_terms.is_empty() {
+            combine_inputs(
+                &self.inputs,
+                polys,
+                &mut self.input_values,
+                &mut self.input_d_values,
+            );
+        } else {
+            scale_inputs(
+                &self.single_terms,
+                self.order,
+                polys,
+                &mut self.input_values,
+                &mut self.input_d_values,
+            );
         }
         self.instance
             .set_real(&self.input_vrs, &self.input_values)?;
@@ -386,5 +394,162 @@ impl Slave {
     /// Call counters.
     pub fn counters(&self) -> &InstanceCounters {
         &self.counters
+    }
+}
+
+/// The values (`values`, n) and derivatives up to order min(k, 2)
+/// (`derivatives`, n·min(k, 2): the first derivatives, then the second) of
+/// inputs with one term each, `c · p`. `0.0 + c · p` gives the bits of the
+/// sum in [`combine_inputs`] (−0.0 becomes +0.0).
+#[inline(always)]
+fn scale_inputs(
+    terms: &[(usize, f64)],
+    k: usize,
+    polys: &[Taylor],
+    values: &mut [f64],
+    derivatives: &mut [f64],
+) {
+    let n = terms.len();
+    let values = &mut values[..n];
+    match k {
+        0 => {
+            for i in 0..n {
+                let (m, c) = terms[i];
+                values[i] = 0.0 + c * polys[m].value;
+            }
+        }
+        1 => {
+            let d1s = &mut derivatives[..n];
+            for i in 0..n {
+                let (m, c) = terms[i];
+                let p = &polys[m];
+                values[i] = 0.0 + c * p.value;
+                d1s[i] = 0.0 + c * p.d1;
+            }
+        }
+        _ => {
+            let (d1s, d2s) = derivatives.split_at_mut(n);
+            let d2s = &mut d2s[..n];
+            for i in 0..n {
+                let (m, c) = terms[i];
+                let p = &polys[m];
+                values[i] = 0.0 + c * p.value;
+                d1s[i] = 0.0 + c * p.d1;
+                d2s[i] = 0.0 + c * p.d2;
+            }
+        }
+    }
+}
+
+/// The inputs' values and derivatives (laid out as for [`scale_inputs`]) as
+/// sums over their terms; `derivatives` is as long as min(k, 2) asks.
+#[inline(never)]
+fn combine_inputs(
+    inputs: &[CoupledInput],
+    polys: &[Taylor],
+    values: &mut [f64],
+    derivatives: &mut [f64],
+) {
+    let n = inputs.len();
+    for (k, input) in inputs.iter().enumerate() {
+        let mut p = Taylor::default();
+        for &(m, c) in &input.terms {
+            p.value += c * polys[m].value;
+            p.d1 += c * polys[m].d1;
+            p.d2 += c * polys[m].d2;
+        }
+        values[k] = p.value;
+        if let Some(d1) = derivatives.get_mut(k) {
+            *d1 = p.d1;
+        }
+        if let Some(d2) = derivatives.get_mut(n + k) {
+            *d2 = p.d2;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn single_term_inputs_match_the_general_sums_bit_for_bit() {
+        // Values, derivatives, signs and zeros of both signs.
+        let xs = [
+            0.0,
+            -0.0,
+            1.5,
+            -2.25e-3,
+            7.0e8,
+            -1.0e-300,
+            f64::MIN_POSITIVE,
+        ];
+        let polys: Vec<Taylor> = (0..xs.len())
+            .map(|i| Taylor {
+                value: xs[i],
+                d1: xs[(i + 3) % xs.len()],
+                d2: xs[(i + 5) % xs.len()],
+            })
+            .collect();
+        let coefficients = [1.0, -1.0, 0.5, -3.0, 0.0, -0.0];
+        for n in 1..=3 {
+            for k in 0..=3 {
+                for shift in 0..polys.len() {
+                    let terms: Vec<(usize, f64)> = (0..n)
+                        .map(|i| {
+                            let j = (shift + 2 * i) % polys.len();
+                            (j, coefficients[(shift + i) % coefficients.len()])
+                        })
+                        .collect();
+                    let inputs: Vec<CoupledInput> = terms
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &t)| CoupledInput {
+                            vr: i as u32,
+                            terms: vec![t],
+                        })
+                        .collect();
+                    let d = n * k.min(2);
+                    let (mut v1, mut d1) = (vec![9.0; n], vec![9.0; d]);
+                    let (mut v2, mut d2) = (vec![7.0; n], vec![7.0; d]);
+                    scale_inputs(&terms, k, &polys, &mut v1, &mut d1);
+                    combine_inputs(&inputs, &polys, &mut v2, &mut d2);
+                    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&v1), bits(&v2), "values, n = {n}, k = {k}");
+                    assert_eq!(bits(&d1), bits(&d2), "derivatives, n = {n}, k = {k}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn inputs_with_several_terms_are_sums() {
+        // Two inputs: u0 − 2·u1, and 0.5·u1; first and second derivatives (k = 2).
+        let polys = [
+            Taylor {
+                value: 1.0,
+                d1: 2.0,
+                d2: 3.0,
+            },
+            Taylor {
+                value: 10.0,
+                d1: 20.0,
+                d2: 30.0,
+            },
+        ];
+        let inputs = [
+            CoupledInput {
+                vr: 0,
+                terms: vec![(0, 1.0), (1, -2.0)],
+            },
+            CoupledInput {
+                vr: 1,
+                terms: vec![(1, 0.5)],
+            },
+        ];
+        let (mut values, mut derivatives) = ([0.0; 2], [0.0; 4]);
+        combine_inputs(&inputs, &polys, &mut values, &mut derivatives);
+        assert_eq!(values, [-19.0, 5.0]);
+        assert_eq!(derivatives, [-38.0, 10.0, -57.0, 15.0]);
     }
 }

@@ -82,6 +82,15 @@ impl Jacobians {
             }
             sum
         };
+        if n == 1 {
+            // One unknown: the same sums as below, without the loops.
+            a[0] = stabilised(&self.data, 0);
+            b[0] = stabilised(g, 0);
+            if !plain.is_empty() {
+                (a[0], b[0]) = (self.data[0], g[0]);
+            }
+            return;
+        }
         let len = self.levels * n;
         for c in 0..n {
             let column = &self.data[c * len..(c + 1) * len];
@@ -413,46 +422,59 @@ mod tests {
 
     #[test]
     fn jacobian_levels_combine_like_separate_matrices() {
-        // Three levels of a 3 × 3 Jacobian, filled column by column as the
-        // finite differences do, against one matrix per level.
-        let (n, levels) = (3, 3);
-        let value = |l: usize, r: usize, c: usize| ((l * 7 + r * 3 + c) as f64).sin() * 1e3;
-        let mut jac = Jacobians::new(n, levels);
-        for c in 0..n {
-            for (i, x) in jac.column_mut(c).iter_mut().enumerate() {
-                *x = value(i / n, i % n, c);
-            }
-        }
-        let mats: Vec<DMatrix<f64>> = (0..levels)
-            .map(|l| DMatrix::from_fn(n, n, |r, c| value(l, r, c)))
-            .collect();
-        let g: Vec<f64> = (0..levels * n).map(|i| (i as f64).cos()).collect();
-        let (beta, gamma) = (0.3, 0.07);
-        let (mut a, mut b) = (vec![0.0; n * n], vec![0.0; n]);
-        // Row 1 is a coupling variable: not stabilised.
-        jac.baumgarte(&g, Some((1, beta)), Some((2, gamma)), &[1], &mut a, &mut b);
-        for c in 0..n {
-            for r in 0..n {
-                let mut expected = mats[0][(r, c)];
-                if r != 1 {
-                    expected += beta * mats[1][(r, c)];
-                    expected += gamma * mats[2][(r, c)];
+        // Three levels of an n × n Jacobian, filled column by column as the
+        // finite differences do, against one matrix per level; n = 1 takes the
+        // loop-free path. `plain` rows are coupling variables: not stabilised.
+        for (n, plain) in [(3, vec![1]), (3, vec![]), (1, vec![]), (1, vec![0])] {
+            let levels = 3;
+            let value = |l: usize, r: usize, c: usize| ((l * 7 + r * 3 + c) as f64).sin() * 1e3;
+            let mut jac = Jacobians::new(n, levels);
+            for c in 0..n {
+                for (i, x) in jac.column_mut(c).iter_mut().enumerate() {
+                    *x = value(i / n, i % n, c);
                 }
-                assert_eq!(a[r + c * n].to_bits(), expected.to_bits(), "({r}, {c})");
             }
-        }
-        for r in 0..n {
-            let mut expected = g[r];
-            if r != 1 {
-                expected += beta * g[n + r];
-                expected += gamma * g[2 * n + r];
+            let mats: Vec<DMatrix<f64>> = (0..levels)
+                .map(|l| DMatrix::from_fn(n, n, |r, c| value(l, r, c)))
+                .collect();
+            let g: Vec<f64> = (0..levels * n).map(|i| (i as f64 + 0.5).cos()).collect();
+            let (beta, gamma) = (0.3, 0.07);
+            let (mut a, mut b) = (vec![0.0; n * n], vec![0.0; n]);
+            jac.baumgarte(
+                &g,
+                Some((1, beta)),
+                Some((2, gamma)),
+                &plain,
+                &mut a,
+                &mut b,
+            );
+            for c in 0..n {
+                for r in 0..n {
+                    let mut expected = mats[0][(r, c)];
+                    if !plain.contains(&r) {
+                        expected += beta * mats[1][(r, c)];
+                        expected += gamma * mats[2][(r, c)];
+                    }
+                    assert_eq!(
+                        a[r + c * n].to_bits(),
+                        expected.to_bits(),
+                        "n = {n}, ({r}, {c})"
+                    );
+                }
             }
-            assert_eq!(b[r].to_bits(), expected.to_bits(), "row {r}");
+            for r in 0..n {
+                let mut expected = g[r];
+                if !plain.contains(&r) {
+                    expected += beta * g[n + r];
+                    expected += gamma * g[2 * n + r];
+                }
+                assert_eq!(b[r].to_bits(), expected.to_bits(), "n = {n}, row {r}");
+            }
+            let mut solver = Solver::default();
+            solver.load_level(&jac, &g, 2);
+            let (sa, sb) = solver.system(n);
+            assert_eq!(sa, mats[2].as_slice());
+            assert_eq!(sb, &g[2 * n..]);
         }
-        let mut solver = Solver::default();
-        solver.load_level(&jac, &g, 2);
-        let (sa, sb) = solver.system(n);
-        assert_eq!(sa, mats[2].as_slice());
-        assert_eq!(sb, &g[2 * n..]);
     }
 }
