@@ -451,18 +451,18 @@ fn combine_inputs(
     derivatives: &mut [f64],
 ) {
     let n = inputs.len();
-    for (k, input) in inputs.iter().enumerate() {
+    for (i, input) in inputs.iter().enumerate() {
         let mut p = Taylor::default();
         for &(m, c) in &input.terms {
             p.value += c * polys[m].value;
             p.d1 += c * polys[m].d1;
             p.d2 += c * polys[m].d2;
         }
-        values[k] = p.value;
-        if let Some(d1) = derivatives.get_mut(k) {
+        values[i] = p.value;
+        if let Some(d1) = derivatives.get_mut(i) {
             *d1 = p.d1;
         }
-        if let Some(d2) = derivatives.get_mut(n + k) {
+        if let Some(d2) = derivatives.get_mut(n + i) {
             *d2 = p.d2;
         }
     }
