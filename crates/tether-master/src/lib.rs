@@ -23,23 +23,28 @@ mod coupling;
 mod error;
 mod explicit;
 pub mod expr;
+mod feedthrough;
 mod joints;
 mod method;
+mod names;
 mod observer;
-mod parallel;
 pub mod polynomial;
 mod predictor_corrector;
+mod resolve;
+mod rows;
+mod runs;
 mod simulation;
 mod slave;
 mod solve;
 pub mod spec;
 mod start;
 mod stats;
+mod system;
+mod threads;
 
 pub use error::MasterError;
 pub use method::Method;
 pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
-pub use parallel::{Parallel, ParallelInfo};
 pub use simulation::Simulation;
 pub use spec::{
     ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment, InitialMultiplier,
@@ -47,3 +52,4 @@ pub use spec::{
 };
 pub use start::apply_start_value;
 pub use stats::{InstanceCounters, PhaseTimes, RunStats};
+pub use threads::{Parallel, ParallelInfo};

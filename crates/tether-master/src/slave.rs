@@ -37,9 +37,6 @@ pub struct Slave {
     input_d_vrs: Vec<u32>,
     input_d_orders: Vec<i32>,
     input_d_values: Vec<f64>,
-    /// `(unknown, coefficient)` of each input when every input has exactly one
-    /// term (a joint's force on one body), else empty (`finalize`).
-    single_terms: Vec<(usize, f64)>,
     /// The degree k of the unknowns' polynomials (`finalize`).
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
@@ -47,13 +44,6 @@ pub struct Slave {
     value_slots: Vec<usize>,
     value_buf: Vec<f64>,
     derivative_reads: Vec<(u32, i32, usize)>,
-    /// The outputs are all values (no derivatives), in `coupled_outputs`
-    /// order: `fmi2GetReal` writes straight into `coupled_values`.
-    direct_read: bool,
-    /// Values of `coupled_outputs` after the latest [`read_coupled`](Self::read_coupled)
-    /// (compiled rows read the predictor's, perturbed and accepted values
-    /// into the simulation's flat buffers instead).
-    pub(crate) coupled_values: Vec<f64>,
     pub(crate) recorded_names: Vec<String>,
     recorded_vrs: Vec<u32>,
     /// Recorded outputs after the latest read.
@@ -158,15 +148,12 @@ impl Slave {
             input_d_vrs: Vec::new(),
             input_d_orders: Vec::new(),
             input_d_values: Vec::new(),
-            single_terms: Vec::new(),
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
             value_slots: Vec::new(),
             value_buf: Vec::new(),
             derivative_reads: Vec::new(),
-            direct_read: false,
-            coupled_values: Vec::new(),
             recorded_values: vec![0.0; recorded_vrs.len()],
             recorded_names,
             recorded_vrs,
@@ -226,11 +213,6 @@ impl Slave {
             }
         }
         self.input_d_values = vec![0.0; self.input_d_vrs.len()];
-        self.single_terms = if self.inputs.iter().all(|i| i.terms.len() == 1) {
-            self.inputs.iter().map(|i| i.terms[0]).collect()
-        } else {
-            Vec::new()
-        };
         self.value_vrs.clear();
         self.value_slots.clear();
         self.derivative_reads.clear();
@@ -243,8 +225,11 @@ impl Slave {
             }
         }
         self.value_buf = vec![0.0; self.value_vrs.len()];
-        self.coupled_values = vec![0.0; self.coupled_outputs.len()];
-        self.direct_read = self.derivative_reads.is_empty();
+    }
+
+    /// Number of coupled outputs (the length [`read_coupled`](Self::read_coupled) fills).
+    pub(crate) fn coupled_len(&self) -> usize {
+        self.coupled_outputs.len()
     }
 
     /// Whether any unknown drives this instance.
@@ -267,7 +252,6 @@ impl Slave {
     }
 
     /// Save the current state (`fmi2GetFMUstate`, reusing the previous handle).
-    #[inline(always)]
     pub(crate) fn save_state(&mut self) -> Result<(), MasterError> {
         match &mut self.state {
             Some(s) => self.instance.update_fmu_state(s)?,
@@ -278,7 +262,6 @@ impl Slave {
     }
 
     /// Roll back to the saved state (`fmi2SetFMUstate`).
-    #[inline(always)]
     pub(crate) fn restore_state(&mut self) -> Result<(), MasterError> {
         let state = self
             .state
@@ -291,27 +274,16 @@ impl Slave {
 
     /// Set the coupled inputs from the unknowns' polynomials, and their
     /// derivatives through `fmi2SetRealInputDerivatives` when k > 0 (`finalize`).
-    #[inline(always)]
     pub(crate) fn apply_inputs(&mut self, polys: &[Taylor]) -> Result<(), MasterError> {
         if self.inputs.is_empty() {
             return Ok(());
         }
-        if self.single_terms.is_empty() {
-            combine_inputs(
-                &self.inputs,
-                polys,
-                &mut self.input_values,
-                &mut self.input_d_values,
-            );
-        } else {
-            scale_inputs(
-                &self.single_terms,
-                self.order,
-                polys,
-                &mut self.input_values,
-                &mut self.input_d_values,
-            );
-        }
+        combine_inputs(
+            &self.inputs,
+            polys,
+            &mut self.input_values,
+            &mut self.input_d_values,
+        );
         self.instance
             .set_real(&self.input_vrs, &self.input_values)?;
         self.counters.set_reals += 1;
@@ -327,38 +299,20 @@ impl Slave {
     }
 
     /// One `fmi2DoStep` from `t` over `h`.
-    #[inline]
     pub(crate) fn do_step(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
         self.counters.do_steps += 1;
         self.instance.do_step(t, h, true)?;
         Ok(())
     }
 
-    /// Read the coupled outputs into `coupled_values`.
-    #[inline(always)]
-    pub(crate) fn read_coupled(&mut self) -> Result<(), MasterError> {
-        let mut values = std::mem::take(&mut self.coupled_values);
-        let read = self.read_coupled_into(&mut values);
-        self.coupled_values = values;
-        read
-    }
-
-    /// Read the coupled outputs into `out` (as long as `coupled_values`).
-    #[inline(always)]
-    pub(crate) fn read_coupled_into(&mut self, out: &mut [f64]) -> Result<(), MasterError> {
-        if self.direct_read {
-            if !self.value_vrs.is_empty() {
-                self.instance.get_real(&self.value_vrs, out)?;
-                self.counters.get_reals += 1;
-            }
-            return Ok(());
-        }
+    /// Read the coupled outputs into `out` (as long as [`coupled_len`](Self::coupled_len)).
+    pub(crate) fn read_coupled(&mut self, out: &mut [f64]) -> Result<(), MasterError> {
         if !self.value_vrs.is_empty() {
             self.instance
                 .get_real(&self.value_vrs, &mut self.value_buf)?;
             self.counters.get_reals += 1;
-            for (k, &slot) in self.value_slots.iter().enumerate() {
-                out[slot] = self.value_buf[k];
+            for (&value, &slot) in self.value_buf.iter().zip(&self.value_slots) {
+                out[slot] = value;
             }
         }
         for &(vr, order, slot) in &self.derivative_reads {
@@ -369,6 +323,25 @@ impl Slave {
             out[slot] = value[0];
         }
         Ok(())
+    }
+
+    /// A perturbed or corrector run: roll back to the saved state, set the
+    /// inputs from `polys`, step from `t` over `h`; with `out`, read the
+    /// coupled outputs into it.
+    pub(crate) fn rerun(
+        &mut self,
+        polys: &[Taylor],
+        t: f64,
+        h: f64,
+        out: Option<&mut [f64]>,
+    ) -> Result<(), MasterError> {
+        self.restore_state()?;
+        self.apply_inputs(polys)?;
+        self.do_step(t, h)?;
+        match out {
+            Some(out) => self.read_coupled(out),
+            None => Ok(()),
+        }
     }
 
     /// Read every Real output into `recorded_values`.
@@ -397,53 +370,9 @@ impl Slave {
     }
 }
 
-/// The values (`values`, n) and derivatives up to order min(k, 2)
-/// (`derivatives`, n·min(k, 2): the first derivatives, then the second) of
-/// inputs with one term each, `c · p`. `0.0 + c · p` gives the bits of the
-/// sum in [`combine_inputs`] (−0.0 becomes +0.0).
-#[inline(always)]
-fn scale_inputs(
-    terms: &[(usize, f64)],
-    k: usize,
-    polys: &[Taylor],
-    values: &mut [f64],
-    derivatives: &mut [f64],
-) {
-    let n = terms.len();
-    let values = &mut values[..n];
-    match k {
-        0 => {
-            for i in 0..n {
-                let (m, c) = terms[i];
-                values[i] = 0.0 + c * polys[m].value;
-            }
-        }
-        1 => {
-            let d1s = &mut derivatives[..n];
-            for i in 0..n {
-                let (m, c) = terms[i];
-                let p = &polys[m];
-                values[i] = 0.0 + c * p.value;
-                d1s[i] = 0.0 + c * p.d1;
-            }
-        }
-        _ => {
-            let (d1s, d2s) = derivatives.split_at_mut(n);
-            let d2s = &mut d2s[..n];
-            for i in 0..n {
-                let (m, c) = terms[i];
-                let p = &polys[m];
-                values[i] = 0.0 + c * p.value;
-                d1s[i] = 0.0 + c * p.d1;
-                d2s[i] = 0.0 + c * p.d2;
-            }
-        }
-    }
-}
-
-/// The inputs' values and derivatives (laid out as for [`scale_inputs`]) as
-/// sums over their terms; `derivatives` is as long as min(k, 2) asks.
-#[inline(never)]
+/// The inputs' values (`values`) and derivatives (`derivatives`: the first
+/// derivatives of every input, then the second, as far as min(k, 2) asks) as
+/// sums over their terms.
 fn combine_inputs(
     inputs: &[CoupledInput],
     polys: &[Taylor],
@@ -471,56 +400,6 @@ fn combine_inputs(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn single_term_inputs_match_the_general_sums_bit_for_bit() {
-        // Values, derivatives, signs and zeros of both signs.
-        let xs = [
-            0.0,
-            -0.0,
-            1.5,
-            -2.25e-3,
-            7.0e8,
-            -1.0e-300,
-            f64::MIN_POSITIVE,
-        ];
-        let polys: Vec<Taylor> = (0..xs.len())
-            .map(|i| Taylor {
-                value: xs[i],
-                d1: xs[(i + 3) % xs.len()],
-                d2: xs[(i + 5) % xs.len()],
-            })
-            .collect();
-        let coefficients = [1.0, -1.0, 0.5, -3.0, 0.0, -0.0];
-        for n in 1..=3 {
-            for k in 0..=3 {
-                for shift in 0..polys.len() {
-                    let terms: Vec<(usize, f64)> = (0..n)
-                        .map(|i| {
-                            let j = (shift + 2 * i) % polys.len();
-                            (j, coefficients[(shift + i) % coefficients.len()])
-                        })
-                        .collect();
-                    let inputs: Vec<CoupledInput> = terms
-                        .iter()
-                        .enumerate()
-                        .map(|(i, &t)| CoupledInput {
-                            vr: i as u32,
-                            terms: vec![t],
-                        })
-                        .collect();
-                    let d = n * k.min(2);
-                    let (mut v1, mut d1) = (vec![9.0; n], vec![9.0; d]);
-                    let (mut v2, mut d2) = (vec![7.0; n], vec![7.0; d]);
-                    scale_inputs(&terms, k, &polys, &mut v1, &mut d1);
-                    combine_inputs(&inputs, &polys, &mut v2, &mut d2);
-                    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(bits(&v1), bits(&v2), "values, n = {n}, k = {k}");
-                    assert_eq!(bits(&d1), bits(&d2), "derivatives, n = {n}, k = {k}");
-                }
-            }
-        }
-    }
 
     #[test]
     fn inputs_with_several_terms_are_sums() {

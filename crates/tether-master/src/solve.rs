@@ -82,15 +82,6 @@ impl Jacobians {
             }
             sum
         };
-        if n == 1 {
-            // One unknown: the same sums as below, without the loops.
-            a[0] = stabilised(&self.data, 0);
-            b[0] = stabilised(g, 0);
-            if !plain.is_empty() {
-                (a[0], b[0]) = (self.data[0], g[0]);
-            }
-            return;
-        }
         let len = self.levels * n;
         for c in 0..n {
             let column = &self.data[c * len..(c + 1) * len];
@@ -185,22 +176,6 @@ impl Solver {
             limit,
         };
         let n = self.n;
-        if n == 1 {
-            // One unknown: the same operations as below, without the loops.
-            let s = self.a[0].abs();
-            if !(s.is_finite() && s > 0.0) {
-                return Err(singular(f64::INFINITY));
-            }
-            let a = self.a[0] * (1.0 / s);
-            let b = self.b[0] / s;
-            let inverse = 1.0 / a;
-            let condition = a.abs() * inverse.abs();
-            if !(condition.is_finite() && condition <= limit) {
-                return Err(singular(condition));
-            }
-            self.x[0] = inverse * b;
-            return Ok(&self.x);
-        }
         let a = &mut self.a;
         for i in 0..n {
             let s = (0..n).map(|j| a[i + j * n].abs()).fold(0.0, f64::max);
@@ -423,8 +398,8 @@ mod tests {
     #[test]
     fn jacobian_levels_combine_like_separate_matrices() {
         // Three levels of an n × n Jacobian, filled column by column as the
-        // finite differences do, against one matrix per level; n = 1 takes the
-        // loop-free path. `plain` rows are coupling variables: not stabilised.
+        // finite differences do, against one matrix per level. `plain` rows
+        // are coupling variables: not stabilised.
         for (n, plain) in [(3, vec![1]), (3, vec![]), (1, vec![]), (1, vec![0])] {
             let levels = 3;
             let value = |l: usize, r: usize, c: usize| ((l * 7 + r * 3 + c) as f64).sin() * 1e3;

@@ -2,7 +2,7 @@
 
 use tether_fmi::{BaseType, Causality, Instance, ModelDescription, Variability, VariableKind};
 
-use crate::coupling::describe;
+use crate::names::describe;
 use crate::spec::StartValue;
 use crate::MasterError;
 

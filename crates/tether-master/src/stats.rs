@@ -129,71 +129,31 @@ impl fmt::Display for RunStats {
     }
 }
 
-/// Consecutive phase times from one clock read per phase boundary: a clock read
-/// costs 30–48 ns on the machine measured (docs/performance.md), a noticeable
-/// part of a macro step of cheap FMUs, so phases share their boundaries instead
-/// of each reading the clock twice, and a lap that is not `on` reads no clock
-/// at all (its splits are zero).
-/// A lap may read the clock without `record`ing its splits into the phase
-/// times (the parallel pool's timed trial steps with phase timing off).
+/// The clock of one macro step's phases: each split adds the time since the
+/// previous one to a phase. Without phase timing it never reads the clock.
 pub(crate) struct Lap {
-    start: Option<Instant>,
     last: Option<Instant>,
-    record: bool,
 }
 
 impl Lap {
-    /// A lap reading the clock if `clock` or `record`.
-    pub fn start(clock: bool, record: bool) -> Lap {
-        let now = (clock || record).then(Instant::now);
+    /// A lap that reads the clock if `on`.
+    pub fn start(on: bool) -> Lap {
         Lap {
-            start: now,
-            last: now,
-            record,
+            last: on.then(Instant::now),
         }
     }
 
-    /// Add the time since the previous split to `phase` if recording. A lap
-    /// without a clock costs one test here, in the middle of the macro step.
-    #[inline(always)]
+    /// Add the time since the previous split (or the start) to `phase`.
     pub fn split_into(&mut self, phase: &mut Duration) {
-        if self.last.is_some() {
-            self.split_into_timed(phase);
+        if let Some(last) = self.last {
+            let now = Instant::now();
+            *phase += now - last;
+            self.last = Some(now);
         }
     }
 
-    #[inline(never)]
-    fn split_into_timed(&mut self, phase: &mut Duration) {
-        let elapsed = self.split();
-        if self.record {
-            *phase += elapsed;
-        }
-    }
-
-    /// The time since the previous split (or the start); starts the next phase.
-    #[inline]
-    pub fn split(&mut self) -> Duration {
-        match self.last {
-            Some(last) => {
-                let now = Instant::now();
-                self.last = Some(now);
-                now - last
-            }
-            None => Duration::ZERO,
-        }
-    }
-
-    /// From the start to the last split.
-    pub fn total(&self) -> Duration {
-        match (self.start, self.last) {
-            (Some(start), Some(last)) => last - start,
-            _ => Duration::ZERO,
-        }
-    }
-
-    /// The clock reading of the last split (the next phase's start), if
-    /// recording.
+    /// The clock reading of the last split (the next phase's start), if timed.
     pub fn last(&self) -> Option<Instant> {
-        self.last.filter(|_| self.record)
+        self.last
     }
 }

@@ -1,5 +1,5 @@
 //! The joint library: every joint is a list of scalar conditions of two
-//! fundamental types (paper Sect. 3.1–3.2, `ALGORITHM.md` §4), evaluated from
+//! fundamental types (paper Sect. 3.1–3.2, `docs/joints.md`), evaluated from
 //! the marker ports of the two sides (`docs/marker-ports.md`).
 //!
 //! - a *point* condition `d·e = 0`, with `d = C_i − C_j` the distance of the
@@ -25,7 +25,7 @@ mod universal;
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::coupling::{RowLevel, View};
+use crate::rows::{RowLevel, View};
 
 /// The joint kinds a system file may name.
 pub(crate) const KINDS: [&str; 10] = [
@@ -255,10 +255,10 @@ impl Condition {
         }
     }
 
-    /// Force law per unit multiplier (`ALGORITHM.md` §4): a point condition
-    /// pushes i with `e` at C_i and j with `−e` (at C_j for a world axis, at
-    /// C_i for a vector fixed on j); a perpendicular condition turns i with
-    /// `a × b` and j with `−a × b`.
+    /// Force law per unit multiplier (`docs/joints.md`, "How the force
+    /// reaches the FMUs"): a point condition pushes i with `e` at C_i and j
+    /// with `−e` (at C_j for a world axis, at C_i for a vector fixed on j); a
+    /// perpendicular condition turns i with `a × b` and j with `−a × b`.
     pub fn law(&self, i: &Kinematics, j: &Kinematics) -> Law {
         let (f_i, t_i, f_j, t_j) = match self {
             Condition::Point(direction) => {

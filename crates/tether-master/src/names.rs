@@ -1,0 +1,105 @@
+//! Names in error messages: what a variable is ("a Real output"), and which
+//! instance a misspelt name probably meant.
+
+use tether_fmi::{BaseType, Causality, ScalarVariable};
+
+use crate::MasterError;
+
+/// "a Real output", "an Integer parameter", … for error messages.
+pub(crate) fn describe(var: &ScalarVariable) -> String {
+    let ty = match var.base_type() {
+        BaseType::Real => "Real",
+        BaseType::Integer => "Integer",
+        BaseType::Boolean => "Boolean",
+        BaseType::String => "String",
+        BaseType::Enumeration => "Enumeration",
+    };
+    let causality = match var.causality {
+        Causality::Parameter => "parameter",
+        Causality::CalculatedParameter => "calculated parameter",
+        Causality::Input => "input",
+        Causality::Output => "output",
+        Causality::Local => "local variable",
+        Causality::Independent => "independent variable",
+    };
+    let article = if matches!(var.base_type(), BaseType::Integer | BaseType::Enumeration) {
+        "an"
+    } else {
+        "a"
+    };
+    format!("{article} {ty} {causality}")
+}
+
+/// The index of `instance` among `names`, or an error naming `owner` with the
+/// close names ("did you mean …?") or, without any, all of them.
+pub(crate) fn find_instance<'a>(
+    owner: &str,
+    instance: &str,
+    names: impl Iterator<Item = &'a str> + Clone,
+) -> Result<usize, MasterError> {
+    if let Some(i) = names.clone().position(|n| n == instance) {
+        return Ok(i);
+    }
+    let close: Vec<&str> = names.clone().filter(|n| similar(n, instance)).collect();
+    let hint = if close.is_empty() {
+        let all: Vec<&str> = names.collect();
+        format!("; instances are: {}", all.join(", "))
+    } else {
+        format!("; did you mean '{}'?", close.join("', '"))
+    };
+    Err(MasterError::UnknownInstance {
+        owner: owner.to_string(),
+        instance: instance.to_string(),
+        hint,
+    })
+}
+
+/// Names within edit distance 2 or sharing a prefix of 3 characters.
+fn similar(a: &str, b: &str) -> bool {
+    let prefix = a.chars().zip(b.chars()).take_while(|(x, y)| x == y).count();
+    prefix >= 3 || edit_distance(a, b) <= 2
+}
+
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn close_names_are_suggested() {
+        assert!(similar("mass1", "mas1"));
+        assert!(similar("pendulum", "pendulum_b"));
+        assert!(!similar("mass1", "crank"));
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        let names = ["mass1", "mass2", "crank"];
+        assert_eq!(
+            find_instance("x", "crank", names.iter().copied()).unwrap(),
+            2
+        );
+        let err = find_instance("constraint 'c'", "mas1", names.iter().copied()).unwrap_err();
+        assert!(
+            err.to_string().contains("did you mean 'mass1', 'mass2'?"),
+            "{err}"
+        );
+        let err = find_instance("constraint 'c'", "zzz", names.iter().copied()).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("instances are: mass1, mass2, crank"),
+            "{err}"
+        );
+    }
+}

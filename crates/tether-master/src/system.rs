@@ -1,0 +1,173 @@
+//! The coupled system every coupling method works on — the instances, the
+//! coupling rows and unknowns, the unknowns' history, which instances each
+//! unknown drives — and [`MacroStep`], a coupling method's step on it.
+
+use crate::coupling::Coupling;
+use crate::polynomial::Taylor;
+use crate::slave::Slave;
+use crate::spec::{InitialMultiplier, SystemSpec};
+use crate::stats::{Lap, RunStats};
+use crate::{MasterError, Method};
+
+/// The instances and their coupling, as every method sees them.
+pub(crate) struct System {
+    pub slaves: Vec<Slave>,
+    pub coupling: Coupling,
+    /// Coupled outputs of each instance at the last accepted point.
+    pub outputs: Vec<Vec<f64>>,
+    /// Per unknown: `[u_N, u_{N-1}, u_{N-2}]`.
+    pub history: Vec<[f64; 3]>,
+    /// For each unknown, the instances whose inputs it drives (its owners).
+    pub owners: Vec<Vec<usize>>,
+    /// Unknowns whose perturbations share one run: no two drive the same instance.
+    pub groups: Vec<Vec<usize>>,
+    /// Per group, the instances its perturbed run steps (those its unknowns drive).
+    pub group_slaves: Vec<Vec<usize>>,
+    /// Finite-difference increment ε (`coupling.epsilon`).
+    pub epsilon: f64,
+    /// Largest condition number a linear solve accepts (`coupling.max_condition`).
+    pub max_condition: f64,
+}
+
+impl System {
+    /// Instantiate the FMUs with their start values, resolve the coupling
+    /// against them and initialise them for `[start, stop]`.
+    pub fn new(spec: &SystemSpec, method: &Method, stop: f64) -> Result<System, MasterError> {
+        let order = spec.coupling.order;
+        let mut opened = Vec::new();
+        let mut slaves = spec
+            .instances
+            .iter()
+            .map(|instance| Slave::instantiate(instance, &mut opened))
+            .collect::<Result<Vec<_>, _>>()?;
+        let coupling = Coupling::build(spec, &mut slaves, method, order)?;
+        let mut owners = vec![Vec::new(); coupling.len()];
+        for (s, slave) in slaves.iter().enumerate() {
+            for input in &slave.inputs {
+                for &(m, _) in &input.terms {
+                    if !owners[m].contains(&s) {
+                        owners[m].push(s);
+                    }
+                }
+            }
+        }
+        let groups = perturbation_groups(&owners);
+        let group_slaves = groups
+            .iter()
+            .map(|group| {
+                (0..slaves.len())
+                    .filter(|s| group.iter().any(|&m| owners[m].contains(s)))
+                    .collect()
+            })
+            .collect();
+        let exp = spec.experiment;
+        for slave in &mut slaves {
+            slave.initialize(exp.start, stop, exp.tolerance)?;
+        }
+        let history = coupling
+            .unknowns
+            .iter()
+            .map(|c| match c.initial {
+                InitialMultiplier::Value(v) => [v; 3],
+                InitialMultiplier::Consistent => [0.0; 3],
+            })
+            .collect();
+        Ok(System {
+            outputs: slaves.iter().map(|s| vec![0.0; s.coupled_len()]).collect(),
+            slaves,
+            coupling,
+            history,
+            owners,
+            groups,
+            group_slaves,
+            epsilon: spec.coupling.epsilon,
+            max_condition: spec.coupling.max_condition,
+        })
+    }
+
+    /// The finite-difference increment of unknown `m`: `ε·max(1, |u_{m,N}|)`.
+    pub fn delta(&self, m: usize) -> f64 {
+        self.epsilon * self.history[m][0].abs().max(1.0)
+    }
+
+    /// Set every instance's coupled inputs from the unknowns' polynomials.
+    pub fn apply_inputs(&mut self, polys: &[Taylor]) -> Result<(), MasterError> {
+        for slave in &mut self.slaves {
+            slave.apply_inputs(polys)?;
+        }
+        Ok(())
+    }
+
+    /// Read the coupled outputs (into `outputs`) and the recorded outputs of
+    /// every instance at an accepted point.
+    pub fn read_accepted(&mut self) -> Result<(), MasterError> {
+        for (slave, out) in self.slaves.iter_mut().zip(&mut self.outputs) {
+            slave.read_coupled(out)?;
+            slave.read_recorded()?;
+        }
+        Ok(())
+    }
+}
+
+/// Where a macro step T_N → T_{N+1} is on the grid.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct StepAt {
+    /// N, the index of the step's start.
+    pub n: u64,
+    /// T_N.
+    pub t: f64,
+    /// H.
+    pub h: f64,
+    /// T_{N+1} (from N + 1, not T_N + H).
+    pub t_next: f64,
+}
+
+/// One macro step of a coupling method: predictor/corrector or explicit.
+pub(crate) trait MacroStep: Send {
+    /// Advance every instance and the unknowns from T_N to T_{N+1}, leave
+    /// u_{N+1} at the head of the history and the accepted outputs read;
+    /// count solves in `stats`, split the phases on `lap`.
+    fn step(
+        &mut self,
+        system: &mut System,
+        at: StepAt,
+        stats: &mut RunStats,
+        lap: &mut Lap,
+    ) -> Result<(), MasterError>;
+
+    /// Add what the method's helpers did (FMI calls made on worker threads,
+    /// the parallel decision) to `stats`.
+    fn report(&self, _stats: &mut RunStats) {}
+}
+
+/// Group unknowns so that no two in a group drive the same instance: one
+/// perturbed run per group serves every unknown in it (greedy colouring).
+fn perturbation_groups(owners: &[Vec<usize>]) -> Vec<Vec<usize>> {
+    let mut groups: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
+    for (m, own) in owners.iter().enumerate() {
+        match groups
+            .iter_mut()
+            .find(|(_, used)| own.iter().all(|s| !used.contains(s)))
+        {
+            Some((members, used)) => {
+                members.push(m);
+                used.extend(own.iter().copied());
+            }
+            None => groups.push((vec![m], own.clone())),
+        }
+    }
+    groups.into_iter().map(|(members, _)| members).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknowns_on_different_instances_share_a_perturbed_run() {
+        // λ0 drives A and B, λ1 drives only A, λ2 only C, λ3 only B.
+        let owners = vec![vec![0, 1], vec![0], vec![2], vec![1]];
+        let groups = perturbation_groups(&owners);
+        assert_eq!(groups, vec![vec![0, 2], vec![1, 3]]);
+    }
+}
