@@ -26,6 +26,7 @@ pub mod expr;
 mod joints;
 mod method;
 mod observer;
+mod overrides;
 mod parallel;
 pub mod polynomial;
 mod predictor_corrector;
@@ -39,6 +40,7 @@ mod stats;
 pub use error::MasterError;
 pub use method::Method;
 pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
+pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use parallel::{Parallel, ParallelInfo};
 pub use simulation::Simulation;
 pub use spec::{
