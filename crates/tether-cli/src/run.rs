@@ -39,7 +39,7 @@ pub struct Args {
 pub fn main(args: Args) -> Result<()> {
     crate::interrupt::install()?;
     let mut spec = SystemSpec::from_file(&args.system)?;
-    args.settings.apply(&mut spec)?;
+    crate::settings::apply(&args.settings.overrides()?, &mut spec)?;
     let out = match &args.out {
         Some(p) => p.clone(),
         None => PathBuf::from(

@@ -1,8 +1,9 @@
-//! Flags that change a system file's time grid and coupling method, shared by
-//! `tether run` and `tether sweep`.
+//! Flags that change a system file's time grid, coupling method and FMU
+//! parameters, shared by `tether run` and `tether sweep`. They build the
+//! shared [`Overrides`] of tether-master.
 
-use anyhow::{bail, Result};
-use tether_master::{Method, SystemSpec};
+use anyhow::{anyhow, Result};
+use tether_master::{MethodChange, OverrideError, Overrides, SystemSpec};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct Settings {
@@ -40,76 +41,58 @@ pub struct Settings {
     /// (overrides [coupling] parallel).
     #[arg(long, value_parser = ["auto", "on", "off"])]
     parallel: Option<String>,
+    /// Set an FMU start value for every run: INSTANCE.PARAMETER=VALUE (repeatable).
+    #[arg(long = "set", value_name = "INSTANCE.PARAMETER=VALUE")]
+    set: Vec<String>,
 }
 
 impl Settings {
-    /// Apply the flags that were given to a system.
-    pub fn apply(&self, spec: &mut SystemSpec) -> Result<()> {
-        let args = self;
-        if let Some(stop) = args.stop {
-            spec.experiment.stop = stop;
-        }
-        if let Some(step) = args.step {
-            spec.experiment.step = step;
-        }
-        if let Some(order) = args.order {
-            spec.coupling.order = order;
-        }
-        if let Some(eps) = args.epsilon {
-            spec.coupling.epsilon = eps;
-        }
-        if let Some(parallel) = &args.parallel {
-            spec.coupling.parallel = parallel.parse().map_err(anyhow::Error::msg)?;
-        }
-        let kind = args.method.as_deref().unwrap_or(spec.method.name());
-        let current = spec.method;
-        spec.method = match kind {
-            "baumgarte" => {
-                let (beta, gamma) = match current {
-                    Method::Baumgarte { beta, gamma } => (beta, gamma),
-                    _ => (0.0, 0.0),
-                };
-                Method::Baumgarte {
-                    beta: args.beta.unwrap_or(beta),
-                    gamma: args.gamma.unwrap_or(gamma),
-                }
-            }
-            "weighted" => {
-                let (a, b) = match current {
-                    Method::Weighted { a, b } => (a, b),
-                    _ => (0.0, 0.0),
-                };
-                Method::Weighted {
-                    a: args.a.unwrap_or(a),
-                    b: args.b.unwrap_or(b),
-                }
-            }
-            _ => {
-                let mu = match current {
-                    Method::Explicit { mu } => Some(mu),
-                    _ => None,
-                };
-                match args.mu.or(mu) {
-                    Some(mu) => Method::Explicit { mu },
-                    None => bail!("method explicit needs --mu (or mu in [method])"),
-                }
-            }
+    /// The changes the given flags make.
+    pub fn overrides(&self) -> Result<Overrides> {
+        let mut overrides = Overrides {
+            method: MethodChange {
+                kind: self.method.as_deref().map(str::parse).transpose()?,
+                beta: self.beta,
+                gamma: self.gamma,
+                a: self.a,
+                b: self.b,
+                mu: self.mu,
+            },
+            order: self.order,
+            step: self.step,
+            stop: self.stop,
+            epsilon: self.epsilon,
+            divergence_factor: None,
+            parallel: self
+                .parallel
+                .as_deref()
+                .map(str::parse)
+                .transpose()
+                .map_err(anyhow::Error::msg)?,
+            parameters: Default::default(),
         };
-        let misplaced = [
-            ("--beta", args.beta.is_some(), "baumgarte"),
-            ("--gamma", args.gamma.is_some(), "baumgarte"),
-            ("--a", args.a.is_some(), "weighted"),
-            ("--b", args.b.is_some(), "weighted"),
-            ("--mu", args.mu.is_some(), "explicit"),
-        ];
-        for (flag, given, method) in misplaced {
-            if given && spec.method.name() != method {
-                bail!(
-                    "{flag} applies to method {method}, but the method is {}",
-                    spec.method.name()
-                );
-            }
+        for setting in &self.set {
+            overrides.set(setting).map_err(flag_error)?;
         }
-        Ok(())
+        Ok(overrides)
+    }
+}
+
+/// Apply overrides made from these flags; errors name the flags.
+pub fn apply(overrides: &Overrides, spec: &mut SystemSpec) -> Result<()> {
+    overrides.apply(spec).map_err(flag_error)
+}
+
+/// An override error in the words of the command line.
+fn flag_error(e: OverrideError) -> anyhow::Error {
+    match e {
+        OverrideError::Setting { setting, reason } => anyhow!("--set {setting}: {reason}"),
+        OverrideError::Misplaced {
+            parameter,
+            method,
+            current,
+        } => anyhow!("--{parameter} applies to method {method}, but the method is {current}"),
+        OverrideError::MissingMu => anyhow!("method explicit needs --mu (or mu in [method])"),
+        e => e.into(),
     }
 }

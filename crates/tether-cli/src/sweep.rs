@@ -4,9 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use tether_master::SystemSpec;
-use tether_study::{
-    Axis, Convergence, Kind, Overrides, ReferenceSpec, Stability, Study, VariantSpec,
-};
+use tether_study::{Axis, Convergence, Kind, ReferenceSpec, Stability, Study, VariantSpec};
 
 use crate::settings::Settings;
 
@@ -32,9 +30,6 @@ struct Common {
     system: PathBuf,
     #[command(flatten)]
     settings: Settings,
-    /// Set an FMU start value for every run: INSTANCE.PARAMETER=VALUE (repeatable).
-    #[arg(long = "set", value_name = "INSTANCE.PARAMETER=VALUE")]
-    set: Vec<String>,
     /// Folder for the results (CSV, text summary, plots).
     #[arg(long, default_value = ".")]
     out_dir: PathBuf,
@@ -113,27 +108,11 @@ pub fn main(args: Args) -> Result<()> {
             (s.common, kind, "stability")
         }
     };
-    // The flags act on the system file like `tether run`'s; the result is
-    // handed to the study as settings for every run.
+    // The flags act on the system file like `tether run`'s (errors show
+    // here, before any run) and are the study's settings for every run.
     let mut spec = SystemSpec::from_file(&common.system)?;
-    common.settings.apply(&mut spec)?;
-    let mut set = Overrides {
-        method: Some(spec.method),
-        order: Some(spec.coupling.order),
-        step: Some(spec.experiment.step),
-        stop: Some(spec.experiment.stop),
-        epsilon: Some(spec.coupling.epsilon),
-        ..Overrides::default()
-    };
-    for item in &common.set {
-        let (target, value) = item
-            .split_once('=')
-            .ok_or_else(|| anyhow::anyhow!("--set {item}: expected INSTANCE.PARAMETER=VALUE"))?;
-        set.parameters.insert(
-            target.to_string(),
-            tether_master::StartValue::parse_cli(value),
-        );
-    }
+    let set = common.settings.overrides()?;
+    crate::settings::apply(&set, &mut spec)?;
     let name = common.name.unwrap_or_else(|| default_name.to_string());
     let study = Study {
         title: format!(

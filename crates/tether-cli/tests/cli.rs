@@ -237,6 +237,56 @@ fn bad_method_parameters_are_refused() {
     }
 }
 
+/// The first multiplier of a run: the consistent λ0, set by the masses.
+fn first_lambda(csv: &Path) -> f64 {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|c| *c == "link.lambda").unwrap();
+    text.lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .nth(col)
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn run_set_changes_an_fmu_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = write_system(dir.path(), |t| t);
+    let s = sys.to_str().unwrap();
+    let run = |extra: &[&str], out: &str| {
+        let mut args = vec!["run", s, "--stop", "0.01", "--out", out, "-q"];
+        args.extend(extra);
+        let result = tether(&args, dir.path());
+        assert!(result.status.success(), "{}", stderr(&result));
+        first_lambda(&dir.path().join(out))
+    };
+    // m1 = 1, m2 = 2 as in the file: λ0 = 1000/3. With m2 = 4 the masses'
+    // equal accelerations need λ0 = 600; with m2 = 1 none at all.
+    assert!((run(&[], "file.csv") - 1000.0 / 3.0).abs() < 1e-6);
+    assert!((run(&["--set", "mass2.m=4"], "heavy.csv") - 600.0).abs() < 1e-6);
+    let both = run(&["--set", "mass2.m=4", "--set", "mass2.m=1"], "same.csv");
+    assert!(both.abs() < 1e-9, "the last --set wins: {both}");
+
+    for (set, needles) in [
+        ("mass3.m=4", &["mass3", "no instance", "mass1, mass2"][..]),
+        (
+            "mass2.m",
+            &["--set mass2.m", "INSTANCE.PARAMETER=VALUE"][..],
+        ),
+        ("mass2m=4", &["'mass2m'", "instance.parameter"][..]),
+        ("mass2.mass=4", &["mass"][..]),
+    ] {
+        let line = error_line(&tether(&["run", s, "--set", set], dir.path()));
+        for needle in needles {
+            assert!(line.contains(needle), "{set}: {line}");
+        }
+    }
+}
+
 #[test]
 fn divergence_keeps_the_results_and_marks_them_incomplete() {
     let dir = tempfile::tempdir().unwrap();

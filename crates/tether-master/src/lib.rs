@@ -28,6 +28,7 @@ mod joints;
 mod method;
 mod names;
 mod observer;
+mod overrides;
 pub mod polynomial;
 mod predictor_corrector;
 mod resolve;
@@ -45,6 +46,7 @@ mod threads;
 pub use error::MasterError;
 pub use method::Method;
 pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
+pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::Simulation;
 pub use spec::{
     ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment, InitialMultiplier,

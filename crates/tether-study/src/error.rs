@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use tether_master::MasterError;
+use tether_master::{MasterError, OverrideError};
 
 /// Everything that keeps a study from running or from writing its results.
 #[derive(Debug, thiserror::Error)]
@@ -18,14 +18,9 @@ pub enum StudyError {
     /// A study setting is out of range or inconsistent.
     #[error("invalid study: {0}")]
     Invalid(String),
-    /// A parameter target `instance.parameter` names no instance of the system.
-    #[error("target '{target}': {reason}")]
-    Target {
-        /// The target as written.
-        target: String,
-        /// What is wrong with it.
-        reason: String,
-    },
+    /// A setting (`[set]`, a variant, an axis target) does not fit the system.
+    #[error(transparent)]
+    Override(#[from] OverrideError),
     /// A column asked for is not among the results.
     #[error("no column '{column}' in {source_name}; columns are: {available}")]
     UnknownColumn {

@@ -2,9 +2,9 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use tether_master::{Overrides, StartValue};
 
 use crate::axis::Axis;
-use crate::overrides::set_target;
 use crate::runner::{self, Outcome, RunResult};
 use crate::{StudyError, Variant};
 
@@ -89,6 +89,19 @@ impl Stability {
     }
 }
 
+/// Set one axis target to a number: `step` (the macro-step size H), `stop`,
+/// or an FMU parameter `instance.parameter` (checked when applied).
+fn set_target(set: &mut Overrides, target: &str, value: f64) {
+    match target {
+        "step" => set.step = Some(value),
+        "stop" => set.stop = Some(value),
+        _ => {
+            set.parameters
+                .insert(target.to_string(), StartValue::Real(value));
+        }
+    }
+}
+
 /// Run every cell of every variant in parallel and classify it.
 pub fn stability(
     variants: &[Variant],
@@ -97,13 +110,15 @@ pub fn stability(
 ) -> Result<Vec<StabilityMap>, StudyError> {
     let (xs, ys) = study.validate()?;
     let cell_spec = |v: &Variant, x: f64, y: f64| -> Result<_, StudyError> {
-        let mut spec = v.spec.clone();
+        let mut set = Overrides::default();
         for t in &study.x.targets {
-            set_target(&mut spec, t, x)?;
+            set_target(&mut set, t, x);
         }
         for t in &study.y.targets {
-            set_target(&mut spec, t, y)?;
+            set_target(&mut set, t, y);
         }
+        let mut spec = v.spec.clone();
+        set.apply(&mut spec)?;
         Ok(spec)
     };
     // Names, capabilities and parameters are checked once, at the first cell.
@@ -186,4 +201,21 @@ fn classify(run: &RunResult, x: f64, y: f64, study: &Stability) -> Result<Cell, 
         }
     }
     Ok(cell(Class::Stable, String::new()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_targets_become_settings() {
+        let mut set = Overrides::default();
+        set_target(&mut set, "step", 5e-3);
+        set_target(&mut set, "stop", 2.0);
+        set_target(&mut set, "mass1.c", 1e3);
+        set_target(&mut set, "mass1.c", 2e3);
+        assert_eq!((set.step, set.stop), (Some(5e-3), Some(2.0)));
+        assert_eq!(set.parameters["mass1.c"], StartValue::Real(2e3));
+        assert_eq!(set.parameters.len(), 1);
+    }
 }

@@ -1,11 +1,10 @@
 //! A study file: a system file, variants of it, and one study over them.
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
-use tether_master::{Method, StartValue, SystemSpec};
+use serde::Deserialize;
+use tether_master::SystemSpec;
 
 use crate::convergence::{convergence, Convergence};
 use crate::output;
@@ -14,48 +13,15 @@ use crate::stability::{stability, Stability};
 use crate::{Overrides, StudyError};
 
 /// One variant of the system: a label and the settings that differ.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct VariantSpec {
     /// Name in legends and CSV files (default: the method and k).
     #[serde(default)]
     pub label: Option<String>,
-    /// The coupling method, e.g. `{ kind = "weighted", a = 1.0, b = 1.0 }`.
-    #[serde(default)]
-    pub method: Option<Method>,
-    /// Degree k of the coupling polynomials.
-    #[serde(default)]
-    pub order: Option<usize>,
-    /// Macro-step size H.
-    #[serde(default)]
-    pub step: Option<f64>,
-    /// Stop time.
-    #[serde(default)]
-    pub stop: Option<f64>,
-    /// Finite-difference increment ε.
-    #[serde(default)]
-    pub epsilon: Option<f64>,
-    /// The master's divergence bound.
-    #[serde(default)]
-    pub divergence_factor: Option<f64>,
-    /// FMU start values by `instance.parameter`.
-    #[serde(default)]
-    pub parameters: BTreeMap<String, StartValue>,
-}
-
-impl VariantSpec {
-    /// The settings this variant changes.
-    pub fn overrides(&self) -> Overrides {
-        Overrides {
-            method: self.method,
-            order: self.order,
-            step: self.step,
-            stop: self.stop,
-            epsilon: self.epsilon,
-            divergence_factor: self.divergence_factor,
-            parameters: self.parameters.clone(),
-        }
-    }
+    /// The settings this variant changes (the keys of `[set]`).
+    #[serde(flatten)]
+    pub set: Overrides,
 }
 
 /// A system ready to run, with its label.
@@ -193,16 +159,7 @@ impl Study {
     pub fn variants(&self) -> Result<Vec<Variant>, StudyError> {
         let system = SystemSpec::from_file(&self.system)?;
         let specs = if self.variants.is_empty() {
-            vec![VariantSpec {
-                label: None,
-                method: None,
-                order: None,
-                step: None,
-                stop: None,
-                epsilon: None,
-                divergence_factor: None,
-                parameters: BTreeMap::new(),
-            }]
+            vec![VariantSpec::default()]
         } else {
             self.variants.clone()
         };
@@ -210,7 +167,7 @@ impl Study {
             .iter()
             .map(|v| {
                 let mut spec = system.clone();
-                self.set.merged(&v.overrides()).apply(&mut spec)?;
+                self.set.merged(&v.set).apply(&mut spec)?;
                 let label = v
                     .label
                     .clone()
@@ -298,5 +255,44 @@ impl Study {
         let mut files = vec![csv, txt];
         files.extend(plots);
         Ok(StudyReport { files, summary })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use tether_master::{Method, StartValue};
+
+    use super::*;
+
+    fn study_file(variant: &str) -> Result<Study, StudyError> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("study.toml");
+        let text = format!(
+            "system = 'osc.toml'\n[set]\nstop = 0.5\n[[variant]]\n{variant}\n[series]\ncolumns = ['mass1.x']\n"
+        );
+        std::fs::write(&path, text).unwrap();
+        Study::from_file(&path)
+    }
+
+    #[test]
+    fn a_variant_is_a_label_and_the_keys_of_set() {
+        let study = study_file(
+            "label = 'w'\nmethod = { kind = 'weighted', a = 1.0 }\norder = 1\nparameters = { 'mass1.c' = 5 }",
+        )
+        .unwrap();
+        assert_eq!(study.set.stop, Some(0.5));
+        let v = &study.variants[0];
+        assert_eq!(v.label.as_deref(), Some("w"));
+        assert_eq!(v.set.method, Method::Weighted { a: 1.0, b: 0.0 }.into());
+        assert_eq!(v.set.order, Some(1));
+        assert_eq!(v.set.parameters["mass1.c"], StartValue::Integer(5));
+    }
+
+    #[test]
+    fn a_variant_with_an_unknown_key_is_refused() {
+        let e = study_file("label = 'w'\nordre = 1")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("ordre"), "{e}");
     }
 }
