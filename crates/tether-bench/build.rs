@@ -1,14 +1,12 @@
 //! Builds the C floor (the FMI calls of one macro step and nothing else) and
-//! the host-state probe, and the floor with synthetic extra work (c/extra.c).
+//! the host-state probe.
 
 fn main() {
     println!("cargo:rerun-if-changed=c/floor.c");
     println!("cargo:rerun-if-changed=c/probe.c");
-    println!("cargo:rerun-if-changed=c/extra.c");
     cc::Build::new()
         .file("c/floor.c")
         .file("c/probe.c")
-        .file("c/extra.c")
         .opt_level(2)
         .warnings(true)
         .compile("tether_floor");

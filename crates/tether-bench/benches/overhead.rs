@@ -2,7 +2,8 @@
 //! same run (docs/performance.md):
 //!
 //! * `floor`: the predictor/corrector macro step on the oscillator pair against
-//!   a C loop making exactly the same FMI calls (c/floor.c);
+//!   a C loop making exactly the same FMI calls (c/floor.c), with the overhead
+//!   guard's PASS/FAIL;
 //! * `fmpy`: the same algorithm driven from Python through fmpy;
 //! * `reference`: `tether run`'s work (the run and its CSV) against the fmpy
 //!   reference of docs/validation.md on the same system file;
@@ -14,7 +15,7 @@
 //!   on the cheap oscillator pair.
 //!
 //! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel ...]`;
-//! `TETHER_BENCH_REPS` repetitions (default 9, medians reported),
+//! `TETHER_BENCH_REPS` repetitions (default 10, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
 
@@ -61,7 +62,7 @@ fn reps() -> usize {
     std::env::var("TETHER_BENCH_REPS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(9)
+        .unwrap_or(GUARD_REPS)
 }
 
 /// A fresh simulation at T_0 (setup not timed) and the per-instance counters.
@@ -88,89 +89,154 @@ fn mode(exact: bool) -> &'static str {
     }
 }
 
+/// The overhead guard of docs/performance.md: Tether's macro step on the
+/// oscillator pair at most `GUARD_EXACT` times the C floor's with the exact
+/// FMUs and at most `GUARD_DOP853` times with the Dop853 ones, each the median
+/// of at least `GUARD_REPS` alternated repetitions. Printed, not asserted: a
+/// timing on a shared machine is no test.
+const GUARD_EXACT: f64 = 2.0;
+const GUARD_DOP853: f64 = 1.15;
+const GUARD_REPS: usize = 10;
+
+/// The FMI calls of one run, per instance: [doStep, getFMUstate, setFMUstate,
+/// setReal, getReal, setRealInputDerivatives].
+fn calls(after: &[InstanceCounters], before: &[InstanceCounters]) -> Vec<[u64; 6]> {
+    after
+        .iter()
+        .zip(before)
+        .map(|(a, b)| {
+            assert_eq!(a.get_output_derivatives, b.get_output_derivatives);
+            [
+                a.do_steps - b.do_steps,
+                a.state_gets - b.state_gets,
+                a.state_sets - b.state_sets,
+                a.set_reals - b.set_reals,
+                a.get_reals - b.get_reals,
+                a.set_input_derivatives - b.set_input_derivatives,
+            ]
+        })
+        .collect()
+}
+
 fn bench_floor() {
+    let reps = reps();
     println!("\n== Macro step against the C floor (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps) ==");
-    println!("FMU     k   C floor/step   Tether/step    ratio   ratio of minima   phases timed   host probe: independent / dependent   (medians of {} runs; λ_N identical bit for bit)", reps());
+    println!(
+        "Each repetition runs C, Tether, Tether, C (odd ones Tether, C, C, Tether); its ratio is \
+         Tether's two runs over the C floor's two. Medians of {reps} repetitions; λ_N identical \
+         bit for bit in every run."
+    );
+    println!("FMU     k   C floor/step   Tether/step   Tether/C   ratio of minima   phases timed   guard           host probe: independent / dependent");
+    let mut verdicts = Vec::new();
     for exact in [true, false] {
         for order in [0, 1] {
             let case = Case::example(exact, order);
             let fmu = Fmu::open(&case.spec().instances[0].fmu).expect("open the FMU");
+            let lambda0 = fresh(&case).0.unknowns()[0];
+            // One Tether run from λ_0: its time per step, λ_N and FMI calls.
+            let tether = || {
+                let (mut sim, before) = fresh(&case);
+                let t = time_steps(&mut sim, case.steps);
+                let calls = calls(&sim.stats().instances, &before);
+                (t, sim.unknowns()[0], calls)
+            };
+            let c_floor = || floor(&case, &fmu, lambda0).expect("C floor");
+            // Warm-up, untimed: the first run of each pays for cold caches.
+            let (_, lambda, tether_calls) = tether();
+            let c = c_floor();
+            assert_eq!(
+                lambda.to_bits(),
+                c.lambda.to_bits(),
+                "the C floor computes the same λ_N: {lambda} vs {}",
+                c.lambda
+            );
+            for (s, calls) in tether_calls.iter().enumerate() {
+                assert_eq!(
+                    *calls,
+                    c.calls[s].map(|x| x as u64),
+                    "instance {s}: [doStep, getFMUstate, setFMUstate, setReal, getReal, setRealInputDerivatives]"
+                );
+            }
+            if exact && order == 1 {
+                let per: Vec<String> = tether_calls[0]
+                    .iter()
+                    .map(|x| format!("{}", *x as f64 / case.steps as f64))
+                    .collect();
+                println!(
+                    "        FMI calls per step and instance (k = 1), Tether = C: doStep {}, getFMUstate {}, setFMUstate {}, setReal {}, getReal {}, setRealInputDerivatives {}",
+                    per[0], per[1], per[2], per[3], per[4], per[5]
+                );
+            }
             let (mut floors, mut tethers, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
             let mut timed_ratios = Vec::new();
             let (mut independent, mut dependent) = (Vec::new(), Vec::new());
-            for rep in 0..reps() {
+            for rep in 0..reps {
                 let probe = host_probe();
                 independent.push(probe.independent);
                 dependent.push(probe.dependent);
-                let (mut sim, before) = fresh(&case);
-                let lambda0 = sim.unknowns()[0];
-                // Alternate which goes first, so drifting load hits both alike.
-                let (c, t) = if rep % 2 == 0 {
-                    let c = floor(&case, &fmu, lambda0).expect("C floor");
-                    (c, time_steps(&mut sim, case.steps))
-                } else {
-                    let t = time_steps(&mut sim, case.steps);
-                    (floor(&case, &fmu, lambda0).expect("C floor"), t)
-                };
-                let c_step = c.seconds / case.steps as f64;
-                assert_eq!(
-                    sim.unknowns()[0].to_bits(),
-                    c.lambda.to_bits(),
-                    "the C floor computes the same λ_N: {} vs {}",
-                    sim.unknowns()[0],
-                    c.lambda
-                );
-                if rep == 0 {
-                    let after = sim.stats().instances;
-                    for (s, (a, b)) in after.iter().zip(&before).enumerate() {
-                        let tether = [
-                            a.do_steps - b.do_steps,
-                            a.state_gets - b.state_gets,
-                            a.state_sets - b.state_sets,
-                            a.set_reals - b.set_reals,
-                            a.get_reals - b.get_reals,
-                            a.set_input_derivatives - b.set_input_derivatives,
-                        ];
-                        let floor_calls = c.calls[s].map(|x| x as u64);
+                let (mut c_sum, mut t_sum) = (0.0, 0.0);
+                for slot in 0..4 {
+                    // C T T C, then T C C T: drifting load hits both alike.
+                    if (slot == 1 || slot == 2) == (rep % 2 == 0) {
+                        let (t, lambda, _) = tether();
+                        assert_eq!(lambda.to_bits(), c.lambda.to_bits(), "Tether's λ_N");
+                        tethers.push(t);
+                        t_sum += t;
+                    } else {
+                        let run = c_floor();
                         assert_eq!(
-                            tether, floor_calls,
-                            "instance {s}: [doStep, getFMUstate, setFMUstate, setReal, getReal, setRealInputDerivatives]"
+                            run.lambda.to_bits(),
+                            c.lambda.to_bits(),
+                            "the C floor's λ_N"
                         );
-                        assert_eq!(a.get_output_derivatives, b.get_output_derivatives);
-                        if s == 0 && exact && order == 1 {
-                            let per: Vec<String> = tether
-                                .iter()
-                                .map(|x| format!("{}", *x as f64 / case.steps as f64))
-                                .collect();
-                            println!(
-                                "        FMI calls per step and instance (k = 1), Tether = C: doStep {}, getFMUstate {}, setFMUstate {}, setReal {}, getReal {}, setRealInputDerivatives {}",
-                                per[0], per[1], per[2], per[3], per[4], per[5]
-                            );
-                        }
+                        let c_step = run.seconds / case.steps as f64;
+                        floors.push(c_step);
+                        c_sum += c_step;
                     }
                 }
+                ratios.push(t_sum / c_sum);
                 // The same steps with phase timing on (`tether run --timing`).
                 let (mut timed, _) = fresh(&case);
                 timed.time_phases(true);
-                let t_timed = time_steps(&mut timed, case.steps);
-                floors.push(c_step);
-                tethers.push(t);
-                ratios.push(t / c_step);
-                timed_ratios.push(t_timed / c_step);
+                timed_ratios.push(time_steps(&mut timed, case.steps) / (0.5 * c_sum));
             }
+            let ratio = median(ratios);
+            let limit = if exact { GUARD_EXACT } else { GUARD_DOP853 };
+            let pass = ratio <= limit;
+            verdicts.push((exact, order, ratio, limit, pass));
             println!(
-                "{}  {order}  {}    {}    {:5.2}×   {:5.2}×            {:5.2}×         {:5.2} / {:4.2} ns",
+                "{}  {order}  {}   {}   {:5.2}×     {:5.2}×            {:5.2}×         ≤ {limit:.2}× {}   {:5.2} / {:4.2} ns",
                 mode(exact),
                 us(median(floors.clone())),
                 us(median(tethers.clone())),
-                median(ratios),
+                ratio,
                 minimum(&tethers) / minimum(&floors),
                 median(timed_ratios),
+                if pass { "PASS" } else { "FAIL" },
                 median(independent),
                 median(dependent)
             );
         }
     }
+    let failed: Vec<String> = verdicts
+        .iter()
+        .filter(|v| !v.4)
+        .map(|(exact, order, ratio, limit, _)| {
+            format!(
+                "{} k = {order}: {ratio:.2}× > {limit:.2}×",
+                mode(*exact).trim()
+            )
+        })
+        .collect();
+    println!(
+        "overhead guard (Tether/C ≤ {GUARD_EXACT:.2}× exact, ≤ {GUARD_DOP853:.2}× Dop853, median of ≥ {GUARD_REPS} alternated repetitions): {}{}",
+        if failed.is_empty() { "PASS".to_string() } else { format!("FAIL ({})", failed.join("; ")) },
+        if reps < GUARD_REPS {
+            format!(" — only {reps} repetitions, not a guard verdict")
+        } else {
+            String::new()
+        }
+    );
     let clock = clock_read_ns();
     println!(
         "        on this machine: one clock read (Instant::now) {clock:.1} ns; per macro step \
@@ -179,8 +245,8 @@ fn bench_floor() {
     );
     println!(
         "        host probe (c/probe.c): ns per iteration of 8 interleaved integer chains / of one \
-         dependent chain, timed before each repetition; the first rises when the host is \
-         busy, the second does not (docs/performance.md, \"The host's two states\")"
+         dependent chain, timed before each repetition; the first rises when another \
+         tenant shares the core, the second does not (docs/performance.md, \"Reading the numbers\")"
     );
 }
 

@@ -19,14 +19,6 @@
 #include <string.h>
 #include <time.h>
 
-/* c/extra.c compiles this file a second time with FLOOR_EXTRA defined, to add
- * synthetic work at four points of the step (docs/performance.md, "Extra
- * data and extra code, tried on the C floor"). In the floor itself it is
- * empty. */
-#ifndef FLOOR_EXTRA
-#define FLOOR_EXTRA(point)
-#endif
-
 typedef void *fmi2Component;
 typedef void *fmi2ComponentEnvironment;
 typedef void *fmi2FMUstate;
@@ -209,7 +201,6 @@ int tether_floor_run(const FloorConfig *cfg, FloorResult *res, char *err, size_t
         const int degree_pred = k < n ? k : (int)n;
         const int degree_corr = k < n + 1 ? k : (int)n + 1;
 
-        FLOOR_EXTRA(0);
         /* Predictor. */
         const Taylor pred = extrapolation(hist, degree_pred, h);
         const double u_pred = at(pred, h);
@@ -222,7 +213,6 @@ int tether_floor_run(const FloorConfig *cfg, FloorResult *res, char *err, size_t
             CALL(GetReal(inst[s], outs, 3, y[s]));
             calls[s][4]++;
         }
-        FLOOR_EXTRA(1);
         double g[3];
         for (int l = 0; l < 3; l++) g[l] = 0.0 + y[1][l] + -1.0 * y[0][l];
 
@@ -238,7 +228,6 @@ int tether_floor_run(const FloorConfig *cfg, FloorResult *res, char *err, size_t
             CALL(GetReal(inst[s], outs, 3, y[s]));
             calls[s][4]++;
         }
-        FLOOR_EXTRA(2);
         double jac[3];
         for (int l = 0; l < 3; l++) jac[l] = ((0.0 + y[1][l] + -1.0 * y[0][l]) - g[l]) / delta;
 
@@ -260,7 +249,6 @@ int tether_floor_run(const FloorConfig *cfg, FloorResult *res, char *err, size_t
             CALL(DoStep(inst[s], t, h, 1));
             calls[s][0]++;
         }
-        FLOOR_EXTRA(3);
         hist[2] = hist[1];
         hist[1] = hist[0];
         hist[0] = corrected;

@@ -1,5 +1,5 @@
-/* Host-state probe for the floor bench (docs/performance.md, "The host's two
- * states"). On a shared host another tenant's work can take part of this
+/* Host-state probe for the floor bench (docs/performance.md, "Reading the
+ * numbers"). On a shared host another tenant's work can take part of this
  * core's execution resources (on a hyperthreaded host, a busy sibling thread):
  * independent work then runs at a lower rate while a chain of dependent
  * instructions barely changes. The two loops below time both:

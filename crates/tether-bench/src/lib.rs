@@ -114,13 +114,6 @@ extern "C" {
         err: *mut c_char,
         errlen: usize,
     ) -> c_int;
-    fn tether_floor_extra_run(
-        cfg: *const FloorConfig,
-        res: *mut FloorResult,
-        err: *mut c_char,
-        errlen: usize,
-    ) -> c_int;
-    fn tether_extra_set(mode: c_int);
 }
 
 /// The host-state probe of c/probe.c, about 0.1 ms: nanoseconds per iteration
@@ -152,63 +145,6 @@ pub struct HostProbe {
 /// The C floor for `case`: the same FMU binary (its own unpacked copy), the same
 /// FMI calls and scalar arithmetic per macro step, starting from `lambda0`.
 pub fn floor(case: &Case, fmu: &Fmu, lambda0: f64) -> Result<FloorResult, String> {
-    floor_with(case, fmu, lambda0, tether_floor_run)
-}
-
-/// Synthetic work c/extra.c can add to every macro step of the C floor: pairs
-/// of modes that differ in one thing only (docs/performance.md, "Extra data
-/// and extra code, tried on the C floor").
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Extra {
-    /// Only the call to the (empty) extra work.
-    Nothing = 0,
-    /// 96 loads a step from 96 different 64-byte lines (6 KiB).
-    Lines = 1,
-    /// The same 96 loads from one line.
-    OneLine = 2,
-    /// 1280 loads as straight-line code (about 10 KiB of it).
-    Straight = 3,
-    /// The same 1280 loads in a loop (135 bytes of code).
-    Looped = 4,
-}
-
-impl std::str::FromStr for Extra {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Extra, String> {
-        Ok(match s {
-            "nothing" => Extra::Nothing,
-            "lines" => Extra::Lines,
-            "one-line" => Extra::OneLine,
-            "straight" => Extra::Straight,
-            "looped" => Extra::Looped,
-            _ => {
-                return Err(format!(
-                    "unknown extra work {s:?} (nothing, lines, one-line, straight, looped)"
-                ))
-            }
-        })
-    }
-}
-
-/// The C floor of [`floor`] with `extra` work added at four points of every
-/// macro step: a second compiled copy of c/floor.c (c/extra.c); in the
-/// floor of [`floor`] the hooks are empty.
-pub fn floor_extra(
-    case: &Case,
-    fmu: &Fmu,
-    lambda0: f64,
-    extra: Extra,
-) -> Result<FloorResult, String> {
-    // SAFETY: sets two thread-local statics of c/extra.c, which the run
-    // below reads on this same thread.
-    unsafe { tether_extra_set(extra as c_int) };
-    floor_with(case, fmu, lambda0, tether_floor_extra_run)
-}
-
-type FloorRun =
-    unsafe extern "C" fn(*const FloorConfig, *mut FloorResult, *mut c_char, usize) -> c_int;
-
-fn floor_with(case: &Case, fmu: &Fmu, lambda0: f64, run: FloorRun) -> Result<FloorResult, String> {
     let spec = case.spec();
     let Method::Baumgarte { beta, gamma } = case.method else {
         return Err("the C floor implements Method 1 (baumgarte) only".into());
@@ -258,8 +194,8 @@ fn floor_with(case: &Case, fmu: &Fmu, lambda0: f64, run: FloorRun) -> Result<Flo
     let mut err = [0 as c_char; 256];
     // SAFETY: `cfg` and its strings outlive the call, `result` and `err` are
     // valid for writes of their sizes; the C side reads and writes nothing else
-    // of ours (c/extra.c's copy touches only its own statics).
-    let status = unsafe { run(&cfg, &mut result, err.as_mut_ptr(), err.len()) };
+    // of ours.
+    let status = unsafe { tether_floor_run(&cfg, &mut result, err.as_mut_ptr(), err.len()) };
     if status != 0 {
         let bytes: Vec<u8> = err
             .iter()
