@@ -35,6 +35,27 @@ fn a_file_that_is_not_a_zip_is_refused() {
 }
 
 #[test]
+fn an_empty_file_is_refused_as_not_a_zip() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.fmu");
+    std::fs::write(&path, b"").unwrap();
+    let err = open_err(&path);
+    assert!(matches!(err, Error::NotAnArchive { .. }), "{err:?}");
+    assert_one_line_naming(&err, &[&shown(&path), "not an FMU archive"]);
+}
+
+#[test]
+fn a_truncated_zip_is_refused_as_not_a_zip() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("truncated.fmu");
+    let bytes = std::fs::read(oscillator_fmu()).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let err = open_err(&path);
+    assert!(matches!(err, Error::NotAnArchive { .. }), "{err:?}");
+    assert_one_line_naming(&err, &[&shown(&path), "not an FMU archive"]);
+}
+
+#[test]
 fn a_missing_path_is_an_io_error_naming_it() {
     let path = PathBuf::from("/nonexistent/tether/none.fmu");
     let err = open_err(&path);
@@ -61,23 +82,37 @@ fn a_zip_without_model_description_is_refused() {
 #[test]
 fn an_entry_escaping_the_extraction_directory_is_refused_before_writing() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("escape.fmu");
-    let name = format!("../tether-evil-{}", std::process::id());
-    write_zip(
-        &path,
-        &[
-            Entry::File("modelDescription.xml", cs_description().as_bytes()),
-            Entry::File(&name, b"owned"),
-        ],
-    );
-    let err = open_err(&path);
-    match &err {
-        Error::EntryEscapes { entry, .. } => assert_eq!(entry, &name),
-        other => panic!("{other:?}"),
+    let pid = std::process::id();
+    // A leading `..`, and one that first enters a directory and then climbs out of it.
+    for (file, name, landed) in [
+        (
+            "escape.fmu",
+            format!("../tether-evil-{pid}"),
+            format!("tether-evil-{pid}"),
+        ),
+        (
+            "slip.fmu",
+            format!("resources/../../tether-slip-{pid}"),
+            format!("tether-slip-{pid}"),
+        ),
+    ] {
+        let path = dir.path().join(file);
+        write_zip(
+            &path,
+            &[
+                Entry::File("modelDescription.xml", cs_description().as_bytes()),
+                Entry::File(&name, b"owned"),
+            ],
+        );
+        let err = open_err(&path);
+        match &err {
+            Error::EntryEscapes { entry, .. } => assert_eq!(entry, &name),
+            other => panic!("{other:?}"),
+        }
+        assert_one_line_naming(&err, &[&shown(&path), &name, "escapes"]);
+        let landed = std::env::temp_dir().join(landed);
+        assert!(!landed.exists(), "{} was written", landed.display());
     }
-    assert_one_line_naming(&err, &[&shown(&path), &name, "escapes"]);
-    let landed = std::env::temp_dir().join(&name[3..]);
-    assert!(!landed.exists(), "{} was written", landed.display());
 }
 
 #[test]
@@ -140,13 +175,45 @@ fn a_decompression_bomb_is_refused_by_the_declared_size() {
     assert_one_line_naming(&err, &[&shown(&path), "resources/zeros.bin", "1048576"]);
 }
 
-/// Overwrites the uncompressed-size fields of every local and central header.
-fn understate_sizes(path: &Path, size: u32) {
+#[test]
+fn a_declared_size_above_the_default_limit_is_refused_before_extraction() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bomb.fmu");
+    write_zip(&path, &[Entry::File("resources/bomb.bin", &[0u8; 4096])]);
+    // Declares 3.75 GiB, over the default 1 GiB budget: refused before any byte lands.
+    declare_sizes(&path, 0xF000_0000, Headers::Central);
+    let err = open_err(&path);
+    match &err {
+        Error::ArchiveTooLarge { entry, .. } => assert_eq!(entry, "resources/bomb.bin"),
+        other => panic!("{other:?}"),
+    }
+    assert_one_line_naming(
+        &err,
+        &[
+            &shown(&path),
+            "resources/bomb.bin",
+            "4026531840",
+            "1073741824",
+        ],
+    );
+}
+
+/// Which zip headers [`declare_sizes`] rewrites.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Headers {
+    /// The central directory only (what the extraction budget reads first).
+    Central,
+    /// Every local and central header.
+    All,
+}
+
+/// Overwrites the uncompressed-size fields of the chosen headers with `size`.
+fn declare_sizes(path: &Path, size: u32, headers: Headers) {
     let mut bytes = std::fs::read(path).unwrap();
     let mut i = 0;
     while i + 4 <= bytes.len() {
         let offset = match &bytes[i..i + 4] {
-            [0x50, 0x4b, 0x03, 0x04] => Some(22),
+            [0x50, 0x4b, 0x03, 0x04] if headers == Headers::All => Some(22),
             [0x50, 0x4b, 0x01, 0x02] => Some(24),
             _ => None,
         };
@@ -164,12 +231,33 @@ fn an_entry_inflating_past_its_declared_size_is_refused() {
     let path = dir.path().join("liar.fmu");
     let zeros = vec![0u8; 1 << 20];
     write_zip(&path, &[Entry::File("resources/zeros.bin", &zeros)]);
-    understate_sizes(&path, 100);
+    declare_sizes(&path, 100, Headers::All);
     let err = open_err(&path);
     // The zip reader notices the overrun first; Tether's own byte count (ArchiveTooLarge)
     // is the second line of defence.
     assert!(matches!(err, Error::UnsupportedEntry { .. }), "{err:?}");
     assert_one_line_naming(&err, &[&shown(&path), "resources/zeros.bin", "declared"]);
+}
+
+#[test]
+fn a_binary_that_is_not_a_shared_library_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("notelf.fmu");
+    write_zip(
+        &path,
+        &[
+            Entry::File("modelDescription.xml", cs_description().as_bytes()),
+            Entry::File("binaries/linux64/stub.so", b"#!/bin/sh\necho not ELF\n"),
+        ],
+    );
+    let err = open_err(&path);
+    match &err {
+        Error::LibraryLoad { path: so, .. } => {
+            assert!(so.ends_with("binaries/linux64/stub.so"), "{}", so.display())
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_one_line_naming(&err, &["cannot load FMU library", "stub.so"]);
 }
 
 #[test]
@@ -336,6 +424,23 @@ fn a_schema_violation_is_reported_with_file_and_line() {
         &err,
         &["modelDescription.xml", "line 7", "'t'", "valueReference"],
     );
+}
+
+#[test]
+fn binary_garbage_as_model_description_is_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("garbage.fmu");
+    let garbage: Vec<u8> = (0..512u32).map(|i| (i * 97 % 251) as u8).collect();
+    write_zip(&path, &[Entry::File("modelDescription.xml", &garbage)]);
+    let err = open_err(&path);
+    assert!(
+        matches!(
+            err,
+            Error::MalformedXml { .. } | Error::InvalidModelDescription { .. }
+        ),
+        "{err:?}"
+    );
+    assert_one_line_naming(&err, &[&shown(&path), "modelDescription.xml"]);
 }
 
 #[test]

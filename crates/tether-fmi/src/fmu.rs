@@ -1,7 +1,7 @@
 //! [`Fmu`]: an opened FMU (unpacked files, parsed model description, loaded library).
 
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::path::Path;
+use std::sync::Arc;
 
 use crate::archive::{self, ExtractLimits, FmuDir};
 use crate::error::{Error, Result};
@@ -9,6 +9,7 @@ use crate::instance::Instance;
 use crate::library::{binary_path, Library};
 use crate::model_description::{self, ModelDescription};
 use crate::raw::component::{InstantiateArgs, RawComponent};
+use crate::shared::{FmuShared, OnceGuard};
 use crate::uri::file_uri;
 
 /// Options for [`Fmu::open_with`].
@@ -33,15 +34,6 @@ impl InstanceOptions {
         self.logging_on = logging_on;
         self
     }
-}
-
-/// What every instance of an FMU shares: the files, the description, the code.
-#[derive(Debug)]
-pub(crate) struct FmuShared {
-    pub origin: PathBuf,
-    pub dir: Arc<FmuDir>,
-    pub model_description: ModelDescription,
-    pub library: Arc<Library>,
 }
 
 /// An opened FMI 2.0 co-simulation FMU.
@@ -175,45 +167,5 @@ impl Fmu {
         )?;
         raw.once = once;
         Ok(Instance::new(raw, Arc::clone(&self.shared)))
-    }
-}
-
-/// The live instances of models declaring `canBeInstantiatedOnlyOncePerProcess`:
-/// GUID → instance name.
-static ONCE_PER_PROCESS: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
-
-/// Marks the one live instance of a once-per-process model; released on drop.
-#[derive(Debug)]
-pub(crate) struct OnceGuard {
-    guid: String,
-}
-
-impl OnceGuard {
-    fn acquire(guid: &str, model: &str, instance: &str) -> Result<OnceGuard> {
-        let mut live = ONCE_PER_PROCESS
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some((_, existing)) = live.iter().find(|(g, _)| g == guid) {
-            return Err(Error::OnlyOncePerProcess {
-                model: model.to_owned(),
-                instance: instance.to_owned(),
-                existing: existing.clone(),
-            });
-        }
-        live.push((guid.to_owned(), instance.to_owned()));
-        Ok(OnceGuard {
-            guid: guid.to_owned(),
-        })
-    }
-}
-
-impl Drop for OnceGuard {
-    fn drop(&mut self) {
-        let mut live = ONCE_PER_PROCESS
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some(i) = live.iter().position(|(g, _)| *g == self.guid) {
-            live.swap_remove(i);
-        }
     }
 }

@@ -5,10 +5,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use crate::error::{Error, Result};
-use crate::fmu::FmuShared;
 use crate::model_description::{ModelDescription, ScalarVariable, ValueReference};
 use crate::raw::component::{RawComponent, RawState};
 use crate::raw::{self, Status};
+use crate::shared::FmuShared;
 
 /// What an instance shares with its [`FmuState`](crate::FmuState)s.
 ///

@@ -54,6 +54,7 @@ mod library;
 mod logger;
 pub mod model_description;
 pub mod raw;
+mod shared;
 mod state;
 mod uri;
 mod xml;

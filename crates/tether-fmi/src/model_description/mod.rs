@@ -4,6 +4,7 @@
 mod attrs;
 mod lookup;
 mod parse;
+mod type_attrs;
 mod types;
 mod variables;
 

@@ -3,6 +3,7 @@
 use std::collections::HashMap;
 
 use super::attrs::Attrs;
+use super::type_attrs::{integer_type, real_type};
 use super::types::*;
 use super::variables::parse_variables;
 use crate::error::Result;
@@ -172,37 +173,6 @@ fn unit(at: Attrs<'_>, u: &Element) -> Result<Unit> {
         name: at.required(u, "name")?,
         base_unit,
         display_units,
-    })
-}
-
-/// Reads the Real attributes of a type definition or variable element.
-pub(crate) fn real_type(at: Attrs<'_>, e: &Element, base: Option<&RealType>) -> Result<RealType> {
-    let base = base.cloned().unwrap_or_default();
-    Ok(RealType {
-        quantity: at.string(e, "quantity").or(base.quantity),
-        unit: at.string(e, "unit").or(base.unit),
-        display_unit: at.string(e, "displayUnit").or(base.display_unit),
-        relative_quantity: at
-            .boolean(e, "relativeQuantity")?
-            .unwrap_or(base.relative_quantity),
-        min: at.parsed(e, "min")?.or(base.min),
-        max: at.parsed(e, "max")?.or(base.max),
-        nominal: at.parsed(e, "nominal")?.or(base.nominal),
-        unbounded: at.boolean(e, "unbounded")?.unwrap_or(base.unbounded),
-    })
-}
-
-/// Reads the Integer/Enumeration attributes of a type definition or variable element.
-pub(crate) fn integer_type(
-    at: Attrs<'_>,
-    e: &Element,
-    base: Option<&IntegerType>,
-) -> Result<IntegerType> {
-    let base = base.cloned().unwrap_or_default();
-    Ok(IntegerType {
-        quantity: at.string(e, "quantity").or(base.quantity),
-        min: at.parsed(e, "min")?.or(base.min),
-        max: at.parsed(e, "max")?.or(base.max),
     })
 }
 

@@ -2,7 +2,7 @@
 //! causality, variability and initial applied (standard, section 2.2.7).
 
 use super::attrs::Attrs;
-use super::parse::{integer_type, real_type};
+use super::type_attrs::{integer_type, real_type};
 use super::types::*;
 use crate::error::Result;
 use crate::xml::Element;

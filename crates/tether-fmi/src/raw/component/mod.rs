@@ -60,7 +60,7 @@ pub(crate) struct RawComponent {
     _dir: Arc<FmuDir>,
     /// Held while the component lives when the model declares
     /// `canBeInstantiatedOnlyOncePerProcess` (released after `fmi2FreeInstance`).
-    pub(crate) once: Option<crate::fmu::OnceGuard>,
+    pub(crate) once: Option<crate::shared::OnceGuard>,
 }
 
 // SAFETY: FMI 2.0 lets an instance be used from any thread as long as calls are not

@@ -1,0 +1,63 @@
+//! What sits below the raw layer and is shared upwards: [`FmuShared`], the parts every
+//! instance of an FMU holds on to, and [`OnceGuard`], the process-wide registry of
+//! `canBeInstantiatedOnlyOncePerProcess` instances that a raw component keeps alive.
+//!
+//! Nothing here calls into the FMU, so [`crate::raw`], [`crate::instance`] and
+//! [`crate::fmu`] can all depend on it without a circle.
+
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+use crate::archive::FmuDir;
+use crate::error::{Error, Result};
+use crate::library::Library;
+use crate::model_description::ModelDescription;
+
+/// What every instance of an FMU shares: the files, the description, the code.
+#[derive(Debug)]
+pub(crate) struct FmuShared {
+    pub origin: PathBuf,
+    pub dir: Arc<FmuDir>,
+    pub model_description: ModelDescription,
+    pub library: Arc<Library>,
+}
+
+/// The live instances of models declaring `canBeInstantiatedOnlyOncePerProcess`:
+/// GUID → instance name.
+static ONCE_PER_PROCESS: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
+
+/// Marks the one live instance of a once-per-process model; released on drop.
+#[derive(Debug)]
+pub(crate) struct OnceGuard {
+    guid: String,
+}
+
+impl OnceGuard {
+    pub(crate) fn acquire(guid: &str, model: &str, instance: &str) -> Result<OnceGuard> {
+        let mut live = ONCE_PER_PROCESS
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, existing)) = live.iter().find(|(g, _)| g == guid) {
+            return Err(Error::OnlyOncePerProcess {
+                model: model.to_owned(),
+                instance: instance.to_owned(),
+                existing: existing.clone(),
+            });
+        }
+        live.push((guid.to_owned(), instance.to_owned()));
+        Ok(OnceGuard {
+            guid: guid.to_owned(),
+        })
+    }
+}
+
+impl Drop for OnceGuard {
+    fn drop(&mut self) {
+        let mut live = ONCE_PER_PROCESS
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(i) = live.iter().position(|(g, _)| *g == self.guid) {
+            live.swap_remove(i);
+        }
+    }
+}
