@@ -1,0 +1,72 @@
+//! The faults themselves, struck from inside `fmi2DoStep`.
+
+use std::time::Duration;
+
+/// What goes wrong from `at` on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    None,
+    Segfault,
+    Abort,
+    Exit0,
+    Exit3,
+    EndlessLoop,
+    LogFlood,
+    SlowCalls,
+}
+
+impl Mode {
+    /// The value of the `mode` parameter.
+    pub fn from_index(i: i32) -> Option<Mode> {
+        Some(match i {
+            0 => Mode::None,
+            1 => Mode::Segfault,
+            2 => Mode::Abort,
+            3 => Mode::Exit0,
+            4 => Mode::Exit3,
+            5 => Mode::EndlessLoop,
+            6 => Mode::LogFlood,
+            7 => Mode::SlowCalls,
+            _ => return None,
+        })
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Fault {
+    pub mode: Mode,
+    pub at: f64,
+    pub delay: f64,
+    pub pause: f64,
+    pub flood: u32,
+}
+
+impl Fault {
+    /// Runs at the start of every `fmi2DoStep` from communication point `t`.
+    pub fn strike(&self, t: f64, h: f64) {
+        if self.delay > 0.0 {
+            std::thread::sleep(Duration::from_secs_f64(self.delay));
+        }
+        // The first step whose communication point is `at` (up to rounding) or later.
+        if self.mode == Mode::None || t < self.at - 0.5 * h {
+            return;
+        }
+        match self.mode {
+            Mode::None => {}
+            Mode::Segfault => crate::crash(),
+            Mode::Abort => std::process::abort(),
+            Mode::Exit0 => std::process::exit(0),
+            Mode::Exit3 => std::process::exit(3),
+            Mode::EndlessLoop => loop {
+                std::hint::black_box(t);
+                std::hint::spin_loop();
+            },
+            Mode::LogFlood => {
+                for n in 0..self.flood {
+                    crate::log_warning(n, t);
+                }
+            }
+            Mode::SlowCalls => std::thread::sleep(Duration::from_secs_f64(self.pause)),
+        }
+    }
+}
