@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod compare;
 mod info;
 mod interrupt;
+mod output;
 mod plot;
 mod run;
 mod settings;

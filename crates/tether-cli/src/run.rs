@@ -1,10 +1,9 @@
 //! `tether run SYSTEM.toml`: the coupled co-simulation.
 
-use std::fs::File;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use tether_master::{CsvRecorder, MemoryRecorder, Observer, Simulation, SystemSpec};
 
 use crate::settings::Settings;
@@ -51,8 +50,8 @@ pub fn main(args: Args) -> Result<()> {
     };
     let mut sim = Simulation::new(&spec)?;
     sim.time_phases(args.timing);
-    let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let mut recorder = CsvRecorder::background(file);
+    let file = crate::output::create(&out)?;
+    let mut recorder = CsvRecorder::file(file);
     let steps = sim.total_steps();
     let bar = (std::io::stderr().is_terminal() && steps >= 20_000 && !args.quiet).then(|| {
         let bar = indicatif::ProgressBar::new(steps);

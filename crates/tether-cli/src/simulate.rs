@@ -2,7 +2,6 @@
 //! output to CSV — the same job as `fmpy simulate`, so an FMU can be checked
 //! against fmpy before it is coupled.
 
-use std::fs::File;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
@@ -82,8 +81,8 @@ pub fn main(args: Args) -> Result<()> {
     let out = args
         .out
         .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
-    let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let mut recorder = CsvRecorder::background(file);
+    let file = crate::output::create(&out)?;
+    let mut recorder = CsvRecorder::file(file);
     let cannot_write = || format!("cannot write {}", out.display());
     recorder.start(&columns).with_context(cannot_write)?;
     let mut row = vec![0.0; columns.len()];

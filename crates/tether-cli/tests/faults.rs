@@ -141,3 +141,79 @@ fn without_a_fault_the_results_are_the_oscillators() {
     assert_eq!((csv.rows.len(), csv.trailer), (1001, None));
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
 }
+
+/// The last row's time, if any.
+fn last_time(csv: &Csv) -> f64 {
+    csv.rows.last().map_or(f64::NAN, |r| r[0])
+}
+
+/// A segmentation fault inside `fmi2DoStep` at t = 0.5 kills the process (no
+/// handler can save it in-process), but the header and the rows accepted up to
+/// the last flush (FLUSH_INTERVAL, 0.2 s) are on disk: with each macro step
+/// slowed to several milliseconds the 500 rows up to t = 0.5 take seconds, far
+/// less than a block of rows (~740 for this width), so only the flushes by time
+/// put them there. The bound is loose: rows up to t = 0.3 at least.
+#[test]
+fn a_segfault_keeps_the_rows_up_to_the_flush_interval() {
+    use std::os::unix::process::ExitStatusExt;
+    let s = Scratch::new();
+    let sys = system(s.path(), 1, ", delay = 0.001");
+    let out = s.run(&sys, "out.csv", &[]);
+    assert_eq!(out.status.signal(), Some(11), "SIGSEGV; {}", stderr(&out));
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(csv.trailer, None);
+    let t = last_time(&csv);
+    assert!((0.3..0.5).contains(&t), "last row at t = {t}");
+    assert_eq!(csv.rows.len() as f64 - 1.0, (t * 1000.0).round());
+}
+
+/// A full disk (here: a file size limit, `ulimit -f`, with SIGXFSZ ignored, so
+/// writes fail with EFBIG as they would with ENOSPC, one of them halfway): the
+/// run stops with an error naming the file, which is cut back to its last whole
+/// row and, where the trailer still fits, ends with it.
+#[test]
+fn a_full_disk_leaves_only_whole_rows() {
+    let s = Scratch::new();
+    // The limit applies to every file, so the FMUs are unpacked beforehand.
+    let text = std::fs::read_to_string(system(s.path(), 0, "")).unwrap();
+    let mut unpacked = text.clone();
+    for name in ["oscillator", "faults"] {
+        let fmu = tether_fmu_build::workspace_fmu(name).unwrap();
+        let dir = s.path().join(name);
+        zip::ZipArchive::new(std::fs::File::open(&fmu).unwrap())
+            .unwrap()
+            .extract(&dir)
+            .unwrap();
+        unpacked = unpacked.replace(
+            &format!("{:?}", fmu.display().to_string()),
+            &format!("{:?}", dir.display().to_string()),
+        );
+    }
+    assert_ne!(unpacked, text);
+    let sys = s.path().join("unpacked.toml");
+    std::fs::write(&sys, unpacked).unwrap();
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -f 16 && trap '' XFSZ && exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_tether"))
+        .args(["run", sys.to_str().unwrap(), "--out", "out.csv"])
+        .current_dir(s.path())
+        .env("TMPDIR", s.tmp())
+        .output()
+        .unwrap();
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    let last = text.lines().last().unwrap();
+    assert!(last.starts_with("error: run stopped at t = "), "{last}");
+    assert!(last.contains("cannot write out.csv"), "{last}");
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert!(!csv.rows.is_empty());
+    if let Some(trailer) = &csv.trailer {
+        assert!(
+            trailer.starts_with("# incomplete: cannot write the results: "),
+            "{trailer}"
+        );
+    }
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}

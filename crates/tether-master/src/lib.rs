@@ -45,7 +45,7 @@ mod threads;
 
 pub use error::MasterError;
 pub use method::Method;
-pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
+pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::Simulation;
 pub use spec::{

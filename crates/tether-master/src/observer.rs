@@ -4,6 +4,7 @@ use std::collections::VecDeque;
 use std::io::Write;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::time::{Duration, Instant};
 
 /// The values at one accepted macro point, in column order.
 #[derive(Debug, Clone, Copy)]
@@ -40,8 +41,9 @@ pub trait Observer {
 ///
 /// [`CsvRecorder::new`] formats and writes on the caller's thread;
 /// [`CsvRecorder::background`] hands the rows, unformatted, to a writer thread
-/// in blocks of ~64 KiB (what `tether run` uses when there is a second core).
-/// The file is the same byte for byte.
+/// in blocks of ~64 KiB, and the writer takes the rows of a block not yet full
+/// every [`FLUSH_INTERVAL`] (what `tether run` uses when there is a second
+/// core, through [`CsvRecorder::file`]). The file is the same byte for byte.
 pub struct CsvRecorder<W: Write> {
     mode: Mode<W>,
 }
@@ -66,14 +68,28 @@ impl<W: Write + Send + 'static> CsvRecorder<W> {
     /// the same as [`new`](Self::new). Errors of the writer are returned by the
     /// next [`Observer::sample`] or by [`Observer::finish`]; rows recorded
     /// before a failure are written before the `# incomplete` line.
+    ///
+    /// What reaches `out`, and when: the header before [`Observer::start`]
+    /// returns (so before the first step), then every block of rows as it fills,
+    /// and at least every [`FLUSH_INTERVAL`] the rows accepted so far, each time
+    /// followed by a flush. A process that dies loses at most the rows of the
+    /// last interval.
     pub fn background(out: W) -> Self {
+        Self::background_with(CsvText::new(out))
+    }
+
+    fn background_with(text: CsvText<W>) -> Self {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         if cores < 2 {
-            return Self::new(out);
+            return CsvRecorder {
+                mode: Mode::Direct(text),
+            };
         }
         let shared = Arc::new(Shared {
             state: Mutex::new(Exchange {
                 header: None,
+                header_written: false,
+                filling: Vec::new(),
                 full: VecDeque::with_capacity(BLOCKS),
                 empty: Vec::with_capacity(BLOCKS),
                 width: 1,
@@ -100,13 +116,15 @@ impl<W: Write + Send + 'static> CsvRecorder<W> {
                             .unwrap_or_else(|_| {
                                 Err(std::io::Error::other("the CSV writer thread panicked"))
                             });
+                    if let Err(e) = &result {
+                        text.abandon(e);
+                    }
                     let mut state = lock(&shared);
                     state.stopped = true;
                     state.error = result.err();
-                    shared.wake_master.notify_one();
+                    shared.wake_master.notify_all();
                 }
             });
-        let text = CsvText::new(out);
         let Ok(thread) = spawned else {
             return CsvRecorder {
                 mode: Mode::Direct(text),
@@ -120,7 +138,6 @@ impl<W: Write + Send + 'static> CsvRecorder<W> {
         }
         CsvRecorder {
             mode: Mode::Background(Background {
-                block: Vec::new(),
                 width: 1,
                 shared,
                 thread: Some(thread),
@@ -129,10 +146,35 @@ impl<W: Write + Send + 'static> CsvRecorder<W> {
     }
 }
 
+impl CsvRecorder<std::fs::File> {
+    /// [`background`](Self::background) into a file, which on a write error (a
+    /// full disk) is also cut back to its last whole row and, if there is room,
+    /// ends with `# incomplete: cannot write the results: <error>`.
+    pub fn file(file: std::fs::File) -> Self {
+        let mut text = CsvText::new(file);
+        text.cut = text.out.get_ref().try_clone().ok();
+        Self::background_with(text)
+    }
+}
+
+impl<W: Write> CsvRecorder<W> {
+    /// A handle that can end the recording from elsewhere (an exit hook or a
+    /// signal handler of the program), while the run itself cannot: see
+    /// [`Emergency`]. `None` when the rows are written on the caller's thread.
+    pub fn emergency(&self) -> Option<Emergency> {
+        match &self.mode {
+            Mode::Direct(_) => None,
+            Mode::Background(bg) => Some(Emergency {
+                shared: Arc::clone(&bg.shared),
+            }),
+        }
+    }
+}
+
 impl<W: Write> Observer for CsvRecorder<W> {
     fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
         match &mut self.mode {
-            Mode::Direct(text) => text.header(columns),
+            Mode::Direct(text) => text.header(columns).and_then(|()| text.flush()),
             Mode::Background(bg) => bg.start(columns),
         }
     }
@@ -152,12 +194,18 @@ impl<W: Write> Observer for CsvRecorder<W> {
     }
 }
 
+/// How often, at least, the writer thread of [`CsvRecorder::background`]
+/// hands the rows accepted so far to the operating system (200 ms).
+pub const FLUSH_INTERVAL: Duration = Duration::from_millis(200);
+
 /// The CSV text itself: header, rows, end.
 struct CsvText<W: Write> {
     out: std::io::BufWriter<W>,
     number: zmij::Buffer,
     /// One row, assembled before a single write (reused, grows to the widest row).
     line: Vec<u8>,
+    /// The file again, to cut it back to its last whole row after a write error.
+    cut: Option<std::fs::File>,
 }
 
 impl<W: Write> CsvText<W> {
@@ -166,6 +214,7 @@ impl<W: Write> CsvText<W> {
             out: std::io::BufWriter::with_capacity(1 << 16, out),
             number: zmij::Buffer::new(),
             line: Vec::new(),
+            cut: None,
         }
     }
 
@@ -197,6 +246,10 @@ impl<W: Write> CsvText<W> {
         self.out.write_all(line)
     }
 
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+
     fn end(&mut self, failure: Option<&str>) -> std::io::Result<()> {
         if let Some(reason) = failure {
             let line = reason.replace(['\n', '\r'], " ");
@@ -204,6 +257,48 @@ impl<W: Write> CsvText<W> {
         }
         self.out.flush()
     }
+
+    /// After a write error: drop what is still buffered (it would land after
+    /// anything written here) and, for a file, cut it back to the end of its
+    /// last whole line and try to add the trailer.
+    fn abandon(self, error: &std::io::Error) {
+        let Some(file) = self.cut else {
+            return;
+        };
+        let (_file, _dropped) = self.out.into_parts();
+        let _ = cut_to_last_line(&file, error);
+    }
+}
+
+/// Cuts `file` back to the end of its last `\n` and appends the trailer for
+/// `error`, or nothing if that does not fit either.
+fn cut_to_last_line(mut file: &std::fs::File, error: &std::io::Error) -> std::io::Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut end = file.metadata()?.len();
+    let mut buf = vec![0; 1 << 16];
+    let keep = loop {
+        if end == 0 {
+            break 0;
+        }
+        let start = end.saturating_sub(buf.len() as u64);
+        let n = (end - start) as usize;
+        file.seek(SeekFrom::Start(start))?;
+        file.read_exact(&mut buf[..n])?;
+        if let Some(i) = buf[..n].iter().rposition(|&b| b == b'\n') {
+            break start + i as u64 + 1;
+        }
+        end = start;
+    };
+    file.set_len(keep)?;
+    file.seek(SeekFrom::Start(keep))?;
+    let line = format!(
+        "# incomplete: cannot write the results: {}\n",
+        error.to_string().replace(['\n', '\r'], " ")
+    );
+    if file.write_all(line.as_bytes()).is_err() {
+        file.set_len(keep)?;
+    }
+    file.flush()
 }
 
 /// Blocks of rows in circulation between the master and the writer thread:
@@ -219,6 +314,12 @@ const BLOCK_VALUES: usize = 8192;
 struct Exchange {
     /// Column names, until the writer has taken them.
     header: Option<Vec<String>>,
+    /// The writer has written and flushed the header.
+    header_written: bool,
+    /// The block the master fills, row by row (here, not on the master's
+    /// side, so that the writer can take the rows of a slow run every
+    /// [`FLUSH_INTERVAL`] and an [`Emergency`] can take the last ones).
+    filling: Vec<f64>,
     /// Blocks to write, oldest first (capacity `BLOCKS`, never exceeded).
     full: VecDeque<Vec<f64>>,
     /// Written blocks, for the master to fill again (capacity `BLOCKS`).
@@ -244,39 +345,66 @@ fn lock(shared: &Shared) -> MutexGuard<'_, Exchange> {
     shared.state.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// The writer thread's loop: header, blocks in order, end.
+/// The writer thread's loop: header, blocks in order, end; the rows being
+/// filled whenever they have waited [`FLUSH_INTERVAL`]; a flush whenever it
+/// has caught up.
 fn write_blocks<W: Write>(shared: &Shared, text: &mut CsvText<W>) -> std::io::Result<()> {
     let mut state = lock(shared);
+    let mut flushed = Instant::now();
     loop {
         if let Some(columns) = state.header.take() {
             drop(state);
             text.header(&columns)?;
+            text.flush()?;
+            flushed = Instant::now();
             state = lock(shared);
+            state.header_written = true;
+            shared.wake_master.notify_all();
         } else if let Some(block) = state.full.pop_front() {
             let width = state.width;
             drop(state);
-            for row in block.chunks_exact(width) {
-                text.row(row[0], &row[1..])?;
-            }
+            let written = block
+                .chunks_exact(width)
+                .try_for_each(|row| text.row(row[0], &row[1..]));
             state = lock(shared);
             state.empty.push(block);
-            shared.wake_master.notify_one();
+            shared.wake_master.notify_all();
+            written?;
+            if state.full.is_empty() {
+                drop(state);
+                text.flush()?;
+                flushed = Instant::now();
+                state = lock(shared);
+            }
         } else if let Some(failure) = state.end.take() {
             drop(state);
             return text.end(failure.as_deref());
         } else {
+            let waited = flushed.elapsed();
+            if waited >= FLUSH_INTERVAL && !state.filling.is_empty() {
+                if let Some(mut next) = state.empty.pop() {
+                    // The master's rows so far go out now; it fills `next`.
+                    next.clear();
+                    let rows = std::mem::replace(&mut state.filling, next);
+                    state.full.push_back(rows);
+                    continue;
+                }
+            }
+            let timeout = FLUSH_INTERVAL
+                .checked_sub(waited)
+                .filter(|t| !t.is_zero())
+                .unwrap_or(FLUSH_INTERVAL);
             state = shared
                 .wake_writer
-                .wait(state)
-                .unwrap_or_else(PoisonError::into_inner);
+                .wait_timeout(state, timeout)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
         }
     }
 }
 
 /// The master's side of [`CsvRecorder::background`].
 struct Background {
-    /// Rows not yet handed over, time first in each.
-    block: Vec<f64>,
     /// Numbers per row.
     width: usize,
     shared: Arc<Shared>,
@@ -284,52 +412,71 @@ struct Background {
 }
 
 impl Background {
+    /// Hands over the header and waits until the writer has written it.
     fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
         self.width = columns.len() + 1;
         let capacity = BLOCK_VALUES.max(self.width) / self.width * self.width;
-        self.block = Vec::with_capacity(capacity);
         let mut state = lock(&self.shared);
         if state.stopped {
             return Err(stopped(&state));
         }
         state.width = self.width;
+        state.filling = Vec::with_capacity(capacity);
         state.empty.clear();
         state
             .empty
             .extend((1..BLOCKS).map(|_| Vec::with_capacity(capacity)));
         state.header = Some(columns.to_vec());
+        state.header_written = false;
         self.shared.wake_writer.notify_one();
+        while !state.header_written {
+            if state.stopped {
+                return Err(stopped(&state));
+            }
+            state = self
+                .shared
+                .wake_master
+                .wait(state)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
         Ok(())
     }
 
     #[inline]
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
-        if self.block.len() + self.width > self.block.capacity() {
-            self.hand_over()?;
+        let mut state = lock(&self.shared);
+        if state.filling.len() + self.width > state.filling.capacity() {
+            state = self.hand_over(state)?;
+        } else if state.stopped {
+            return Err(stopped(&state));
         }
-        self.block.push(sample.time);
-        self.block.extend_from_slice(sample.values);
+        state.filling.push(sample.time);
+        state.filling.extend_from_slice(sample.values);
         Ok(())
     }
 
     /// Queue the filled block and take an empty one, waiting for the writer
     /// if all are in use (a slow disk holds the run back, it does not fill
     /// memory).
-    fn hand_over(&mut self) -> std::io::Result<()> {
-        if self.block.capacity() == 0 {
+    #[cold]
+    fn hand_over<'a>(
+        &self,
+        mut state: MutexGuard<'a, Exchange>,
+    ) -> std::io::Result<MutexGuard<'a, Exchange>> {
+        if state.filling.capacity() == 0 {
             return Err(std::io::Error::other("CsvRecorder: a sample before start"));
         }
-        let mut state = lock(&self.shared);
         if state.stopped {
             return Err(stopped(&state));
         }
-        state.full.push_back(std::mem::take(&mut self.block));
+        let rows = std::mem::take(&mut state.filling);
+        state.full.push_back(rows);
         self.shared.wake_writer.notify_one();
         loop {
             if let Some(mut next) = state.empty.pop() {
                 next.clear();
-                self.block = next;
-                return Ok(());
+                state.filling = next;
+                return Ok(state);
             }
             if state.stopped {
                 return Err(stopped(&state));
@@ -349,10 +496,7 @@ impl Background {
         };
         {
             let mut state = lock(&self.shared);
-            if !self.block.is_empty() {
-                state.full.push_back(std::mem::take(&mut self.block));
-            }
-            state.end = Some(failure.map(str::to_string));
+            end_now(&mut state, failure);
             self.shared.wake_writer.notify_one();
         }
         let _ = thread.join();
@@ -366,6 +510,18 @@ impl Background {
     fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()> {
         self.close(failure)
     }
+}
+
+/// Queues the rows being filled and the end (once).
+fn end_now(state: &mut Exchange, failure: Option<&str>) {
+    if state.end.is_some() || state.stopped {
+        return;
+    }
+    if !state.filling.is_empty() {
+        let rows = std::mem::take(&mut state.filling);
+        state.full.push_back(rows);
+    }
+    state.end = Some(failure.map(str::to_string));
 }
 
 /// The writer's error (every time it is asked: the run and its end both
@@ -383,6 +539,53 @@ impl Drop for Background {
         if self.thread.is_some() {
             let _ = self.close(None);
         }
+    }
+}
+
+/// Ends a [`CsvRecorder::background`] recording from outside the run: from a
+/// program's exit hook when an FMU calls `exit()` inside a call, or from a
+/// signal handler for `abort()`. The run itself never returns there, so the
+/// recorder is never finished; this writes every row accepted so far and the
+/// trailer `# incomplete: <reason>`, as [`Observer::finish`] would.
+#[derive(Clone)]
+pub struct Emergency {
+    shared: Arc<Shared>,
+}
+
+impl Emergency {
+    /// Ends the recording with `reason` and waits up to `wait` for the writer
+    /// to have written everything; `true` if it has. Does nothing more if the
+    /// recording has already ended. Never blocks longer than `wait`, even if
+    /// the recorder's lock is held by a thread that will not return.
+    pub fn finish(&self, reason: &str, wait: Duration) -> bool {
+        let deadline = Instant::now() + wait;
+        let mut state = loop {
+            match self.shared.state.try_lock() {
+                Ok(state) => break state,
+                Err(std::sync::TryLockError::Poisoned(p)) => break p.into_inner(),
+                Err(std::sync::TryLockError::WouldBlock) => {
+                    if Instant::now() >= deadline {
+                        return false;
+                    }
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+        };
+        end_now(&mut state, Some(reason));
+        self.shared.wake_writer.notify_one();
+        while !state.stopped {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            state = self
+                .shared
+                .wake_master
+                .wait_timeout(state, left)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+        true
     }
 }
 
@@ -548,6 +751,105 @@ mod tests {
         let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
         assert_eq!(text.lines().count(), 2001);
         assert_eq!(text.lines().last(), Some("1999.0,0.5"));
+    }
+
+    /// Polls `shared` for up to 30 s until `done` holds for its text.
+    fn eventually(shared: &Shared, done: impl Fn(&str) -> bool) -> String {
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
+            if done(&text) || Instant::now() > deadline {
+                return text;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// The header is out when `start` returns; a few rows, far from filling a
+    /// block, reach the writer without `finish` (after about FLUSH_INTERVAL).
+    #[test]
+    fn background_writes_the_header_at_once_and_rows_by_time() {
+        let shared = Shared::default();
+        let mut rec = CsvRecorder::background(shared.clone());
+        rec.start(&["x".into()]).unwrap();
+        assert_eq!(&*shared.0.lock().unwrap(), b"time,x\n");
+        for n in 0..3 {
+            rec.sample(Sample {
+                step: n,
+                time: n as f64,
+                values: &[0.5],
+            })
+            .unwrap();
+        }
+        let text = eventually(&shared, |t| t.lines().count() == 4);
+        assert_eq!(text, "time,x\n0.0,0.5\n1.0,0.5\n2.0,0.5\n");
+        // And again for rows after the first interval.
+        rec.sample(Sample {
+            step: 3,
+            time: 3.0,
+            values: &[0.25],
+        })
+        .unwrap();
+        let text = eventually(&shared, |t| t.lines().count() == 5);
+        assert!(text.ends_with("2.0,0.5\n3.0,0.25\n"), "{text}");
+        rec.finish(None).unwrap();
+    }
+
+    /// An emergency end (an FMU calling exit() inside a call) writes every row
+    /// accepted so far and the trailer, while the recorder is still in use.
+    #[test]
+    fn an_emergency_ends_the_file_with_every_row() {
+        let shared = Shared::default();
+        let mut rec = CsvRecorder::background(shared.clone());
+        let emergency = rec.emergency().expect("a writer thread");
+        rec.start(&["x".into()]).unwrap();
+        for n in 0..1500 {
+            rec.sample(Sample {
+                step: n,
+                time: n as f64,
+                values: &[0.5],
+            })
+            .unwrap();
+        }
+        assert!(emergency.finish("exit(3) in fmi2DoStep", Duration::from_secs(30)));
+        let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
+        assert_eq!(text.lines().count(), 1502);
+        assert!(text.ends_with("1499.0,0.5\n# incomplete: exit(3) in fmi2DoStep\n"));
+        // The run's own finish afterwards changes nothing.
+        let _ = rec.finish(Some("later"));
+        assert!(emergency.finish("again", Duration::from_secs(1)));
+        let again = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
+        assert_eq!(again, text);
+    }
+
+    /// After a failed write the file is cut back to its last whole line and
+    /// gets the trailer.
+    #[test]
+    fn a_failed_file_is_cut_back_to_its_last_whole_row() {
+        let dir = std::env::temp_dir().join(format!("tether-observer-cut-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("cut.csv");
+        let cases = [
+            ("time,x\n0,1\n0.5,2", "time,x\n0,1\n"),
+            ("time,x\n0,1\n", "time,x\n0,1\n"),
+            ("tim", ""),
+        ];
+        for (written, kept) in cases {
+            std::fs::write(&path, written).unwrap();
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(&path)
+                .unwrap();
+            let error = std::io::Error::other("No space left on device");
+            cut_to_last_line(&file, &error).unwrap();
+            let text = std::fs::read_to_string(&path).unwrap();
+            assert_eq!(
+                text,
+                format!("{kept}# incomplete: cannot write the results: No space left on device\n")
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
