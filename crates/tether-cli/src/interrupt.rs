@@ -9,6 +9,13 @@ use tether_master::{Observer, Sample};
 
 static SIGNALLED: AtomicBool = AtomicBool::new(false);
 
+/// A second signal arrived: the process exits at once.
+static FORCED: AtomicBool = AtomicBool::new(false);
+
+/// The trailer after a second signal.
+pub const FORCED_REASON: &str =
+    "interrupted by a second Ctrl-C or termination signal (exited at once)";
+
 /// What the error and the CSV trailer say stopped the run.
 pub const REASON: &str = "Ctrl-C or termination signal";
 
@@ -19,10 +26,17 @@ pub const EXIT_CODE: u8 = 130;
 pub fn install() -> anyhow::Result<()> {
     ctrlc::set_handler(|| {
         if SIGNALLED.swap(true, Ordering::SeqCst) {
+            FORCED.store(true, Ordering::SeqCst);
+            // The exit hook (crate::exit_guard) writes the trailer.
             std::process::exit(i32::from(EXIT_CODE));
         }
     })
     .map_err(|e| anyhow::anyhow!("cannot install the Ctrl-C handler: {e}"))
+}
+
+/// Whether a second signal is ending the process.
+pub fn forced() -> bool {
+    FORCED.load(Ordering::SeqCst)
 }
 
 /// Whether a signal arrived.

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod compare;
+mod exit_guard;
 mod info;
 mod interrupt;
 mod output;

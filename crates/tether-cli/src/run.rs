@@ -52,6 +52,7 @@ pub fn main(args: Args) -> Result<()> {
     sim.time_phases(args.timing);
     let file = crate::output::create(&out)?;
     let mut recorder = CsvRecorder::file(file);
+    let emergency = recorder.emergency();
     let steps = sim.total_steps();
     let bar = (std::io::stderr().is_terminal() && steps >= 20_000 && !args.quiet).then(|| {
         let bar = indicatif::ProgressBar::new(steps);
@@ -74,7 +75,9 @@ pub fn main(args: Args) -> Result<()> {
     if args.plot.is_some() {
         observers.push(&mut memory);
     }
+    let guard = crate::exit_guard::arm(emergency, &out);
     let outcome = sim.run(&mut observers, &mut progress);
+    drop(guard);
     if let Some(bar) = &bar {
         bar.finish_and_clear();
     }

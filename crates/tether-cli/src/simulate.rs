@@ -83,6 +83,7 @@ pub fn main(args: Args) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
     let file = crate::output::create(&out)?;
     let mut recorder = CsvRecorder::file(file);
+    let guard = crate::exit_guard::arm(recorder.emergency(), &out);
     let cannot_write = || format!("cannot write {}", out.display());
     recorder.start(&columns).with_context(cannot_write)?;
     let mut row = vec![0.0; columns.len()];
@@ -134,9 +135,9 @@ pub fn main(args: Args) -> Result<()> {
             .and_then(|()| record(&mut instance, n));
     }
     let failure = outcome.as_ref().err().map(|e| format!("{e:#}"));
-    recorder
-        .finish(failure.as_deref())
-        .with_context(cannot_write)?;
+    let finished = recorder.finish(failure.as_deref());
+    drop(guard);
+    finished.with_context(cannot_write)?;
     outcome.with_context(|| {
         format!(
             "simulation stopped; results so far kept in {}",

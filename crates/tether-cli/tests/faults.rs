@@ -217,3 +217,145 @@ fn a_full_disk_leaves_only_whole_rows() {
     }
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
 }
+
+/// The one-line error of a run that an FMU ended from inside `fmi2DoStep` at
+/// t = 0.5, and its results: every row up to t = 0.5 and the trailer naming the
+/// instance, the call and what it called; the extraction folders are removed.
+fn ended_inside_the_fmu(s: &Scratch, out: &Output, called: &str) {
+    let text = stderr(out);
+    assert!(!text.contains("panicked"), "{text}");
+    let reason = format!("FMU instance 'mass2' called {called} inside fmi2DoStep at t=0.5");
+    let last = text.lines().last().unwrap_or_default();
+    assert_eq!(
+        last,
+        format!("error: run stopped; results so far kept in out.csv (marked incomplete): {reason}")
+    );
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+    assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
+    assert_eq!(last_time(&csv), 0.5);
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}
+
+/// `exit(0)` inside an FMU used to be a silent success with an empty CSV.
+#[test]
+fn exit_0_inside_an_fmu_is_an_error() {
+    let s = Scratch::new();
+    let out = s.run(&system(s.path(), 3, ""), "out.csv", &["--quiet"]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    ended_inside_the_fmu(&s, &out, "exit(0)");
+}
+
+#[test]
+fn exit_3_inside_an_fmu_is_an_error() {
+    let s = Scratch::new();
+    let out = s.run(&system(s.path(), 4, ""), "out.csv", &[]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    ended_inside_the_fmu(&s, &out, "exit(3)");
+}
+
+/// `abort()`: the file is marked, then the process ends by SIGABRT as before.
+#[test]
+fn abort_inside_an_fmu_is_an_error() {
+    use std::os::unix::process::ExitStatusExt;
+    let s = Scratch::new();
+    let out = s.run(&system(s.path(), 2, ""), "out.csv", &[]);
+    assert_eq!(out.status.signal(), Some(6), "{}", stderr(&out));
+    ended_inside_the_fmu(&s, &out, "abort()");
+}
+
+/// `tether simulate` of the faults FMU alone is guarded the same way.
+#[test]
+fn exit_inside_a_simulated_fmu_is_an_error() {
+    let s = Scratch::new();
+    let fmu = tether_fmu_build::workspace_fmu("faults").unwrap();
+    let out = s
+        .command(&[
+            "simulate",
+            fmu.to_str().unwrap(),
+            "--set",
+            "mode=3",
+            "--out",
+            "out.csv",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(
+        csv.trailer.as_deref(),
+        Some("# incomplete: FMU instance 'faults' called exit(0) inside fmi2DoStep at t=0.5")
+    );
+    assert_eq!(last_time(&csv), 0.5);
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}
+
+/// A child process killed (SIGKILL) and reaped when dropped, also when a test fails.
+struct Killed(std::process::Child);
+
+impl Killed {
+    fn kill(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// Extraction folders are private (0700) and locked while in use; those of a
+/// run that died (here: SIGKILL while an FMU sleeps in `fmi2DoStep`) are swept
+/// by the next run, while the folder of a run still going is left alone.
+#[test]
+fn folders_of_killed_runs_are_swept_by_the_next_run() {
+    use std::os::unix::fs::PermissionsExt;
+    let s = Scratch::new();
+    // Mode 7: from t = 0.5 every fmi2DoStep sleeps 1 s: the runs stay alive.
+    let slow = system(s.path(), 7, "");
+    let start = |out: &str| {
+        Killed(
+            s.command(&["run", slow.to_str().unwrap(), "--out", out])
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .unwrap(),
+        )
+    };
+    let wait_for = |count: usize| {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        while s.leftovers().len() < count {
+            assert!(std::time::Instant::now() < deadline, "{:?}", s.leftovers());
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    };
+    let mut killed = start("killed.csv");
+    wait_for(2); // oscillator and faults
+    let folders = s.leftovers();
+    for name in &folders {
+        let mode = std::fs::metadata(s.tmp().join(name))
+            .unwrap()
+            .permissions()
+            .mode();
+        assert_eq!(mode & 0o777, 0o700, "{name}");
+    }
+    killed.kill();
+    assert_eq!(s.leftovers(), folders, "SIGKILL leaves the folders");
+    let mut alive = start("alive.csv");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let swept = |now: &[String]| now.len() == 2 && !now.iter().any(|f| folders.contains(f));
+    while !swept(&s.leftovers()) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "not swept: {:?}",
+            s.leftovers()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    // A third run sweeps nothing of the live one's.
+    let out = s.run(&system(s.path(), 0, ""), "third.csv", &["-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(s.leftovers().len(), 2, "{:?}", s.leftovers());
+    alive.kill();
+}

@@ -42,6 +42,104 @@ impl Default for ExtractLimits {
 pub struct FmuDir {
     root: PathBuf,
     _temp: Option<tempfile::TempDir>,
+    /// The extraction folder itself, opened and locked (`flock`) for as long as
+    /// it is in use, so that a later run can tell a leftover from a folder in use.
+    _lock: Option<fs::File>,
+}
+
+/// Prefix of the extraction folders in `$TMPDIR`.
+const PREFIX: &str = "tether-fmu-";
+
+/// Written into an extraction folder once it is locked: a folder with the marker
+/// and a free lock belongs to a process that is gone. (Its process may also have
+/// died between creating and marking it: such an empty folder is left.)
+const MARKER: &str = ".tether-lock";
+
+/// The extraction folders of this process, for [`remove_extractions_now`].
+static LIVE: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+impl Drop for FmuDir {
+    fn drop(&mut self) {
+        if self._temp.is_some() {
+            let mut live = LIVE
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            live.retain(|p| *p != self.root);
+        }
+    }
+}
+
+/// Removes every extraction folder of this process now, for a program that is
+/// about to end without dropping its FMUs (an FMU called `exit()`, or `abort()`):
+/// the code of a loaded library stays mapped, so this is safe for the process
+/// itself, but nothing may use the FMUs afterwards. Never blocks: if the registry
+/// is busy, nothing is removed (a later run sweeps the folders,
+/// [`sweep_leftovers`]). Returns how many folders were removed.
+pub fn remove_extractions_now() -> usize {
+    let Ok(mut live) = LIVE.try_lock() else {
+        return 0;
+    };
+    live.drain(..)
+        .filter(|dir| fs::remove_dir_all(dir).is_ok())
+        .count()
+}
+
+/// Removes the extraction folders that killed runs left in the temporary
+/// directory: `tether-fmu-*` folders whose lock no process holds. Runs once per
+/// process, before its first extraction; returns how many were removed.
+pub fn sweep_leftovers() -> usize {
+    static SWEPT: std::sync::Once = std::sync::Once::new();
+    let mut removed = 0;
+    SWEPT.call_once(|| removed = sweep(&std::env::temp_dir()));
+    removed
+}
+
+fn sweep(temp: &Path) -> usize {
+    let Ok(entries) = fs::read_dir(temp) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        if !name.to_string_lossy().starts_with(PREFIX) {
+            continue;
+        }
+        let dir = entry.path();
+        // Only real folders, not symbolic links to elsewhere.
+        if !entry.file_type().is_ok_and(|t| t.is_dir()) {
+            continue;
+        }
+        let Ok(folder) = fs::File::open(&dir) else {
+            continue;
+        };
+        if folder.try_lock().is_err() {
+            continue; // in use (or locks unsupported here: leave it)
+        }
+        // Without the marker the folder is being set up by a running process (it
+        // locks before it marks), or it is from a version without locks: left alone.
+        if dir.join(MARKER).exists() && fs::remove_dir_all(&dir).is_ok() {
+            log::info!(target: "tether_fmi::archive", "removed the leftover {}", dir.display());
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// Creates a private (0700) extraction folder, locks it and marks it.
+fn locked_temp_dir() -> io::Result<(tempfile::TempDir, fs::File)> {
+    sweep_leftovers();
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(PREFIX);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(fs::Permissions::from_mode(0o700));
+    }
+    let temp = builder.tempdir()?;
+    let lock = fs::File::open(temp.path())?;
+    lock.lock()?;
+    fs::File::create(temp.path().join(MARKER))?;
+    Ok((temp, lock))
 }
 
 impl FmuDir {
@@ -51,7 +149,11 @@ impl FmuDir {
             path: dir.to_owned(),
             source,
         })?;
-        Ok(FmuDir { root, _temp: None })
+        Ok(FmuDir {
+            root,
+            _temp: None,
+            _lock: None,
+        })
     }
 
     /// The FMU's root directory (the one holding `modelDescription.xml`).
@@ -134,11 +236,16 @@ pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> 
     }
 
     // Pass 2: extract, counting the bytes actually produced.
-    let temp = tempfile::Builder::new()
-        .prefix("tether-fmu-")
-        .tempdir()
-        .map_err(io_err(&std::env::temp_dir()))?;
+    let (temp, lock) = locked_temp_dir().map_err(io_err(&std::env::temp_dir()))?;
     let root = temp.path().canonicalize().map_err(io_err(temp.path()))?;
+    LIVE.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .push(root.clone());
+    let dir = FmuDir {
+        root: root.clone(),
+        _temp: Some(temp),
+        _lock: Some(lock),
+    };
     let mut written_total: u64 = 0;
     for (index, name, relative, is_dir, declared) in plan {
         let target = root.join(&relative);
@@ -201,10 +308,7 @@ pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> 
         written_total += copied;
         out.flush().map_err(io_err(&target))?;
     }
-    Ok(FmuDir {
-        root,
-        _temp: Some(temp),
-    })
+    Ok(dir)
 }
 
 /// Copies at most `max` bytes, returning how many were copied.

@@ -47,6 +47,7 @@
 //! ```
 
 pub mod archive;
+mod current;
 mod error;
 mod fmu;
 mod instance;
@@ -59,7 +60,8 @@ mod state;
 mod uri;
 mod xml;
 
-pub use archive::ExtractLimits;
+pub use archive::{remove_extractions_now, sweep_leftovers, ExtractLimits};
+pub use current::{current_call, CurrentCall};
 pub use error::{Error, Result};
 pub use fmu::{Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};

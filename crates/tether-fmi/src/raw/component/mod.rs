@@ -121,6 +121,7 @@ impl RawComponent {
             });
         }
         log::trace!(target: "tether_fmi::call", "fmi2Instantiate({})", args.instance_name);
+        let _entered = crate::current::Entered::new("fmi2Instantiate", args.instance_name, 0.0);
         // SAFETY: all strings are NUL-terminated and live across the call; `callbacks`
         // and the environment it points to are boxed and kept in the returned component
         // until after fmi2FreeInstance, as FMI 2.0.5 requires.
@@ -185,7 +186,10 @@ impl RawComponent {
         if self.library.is_fatal() {
             return Err(self.dead(function));
         }
-        let status = call(self.library.functions(), self.component);
+        let status = {
+            let _entered = crate::current::Entered::new(function, &self.name, self.time);
+            call(self.library.functions(), self.component)
+        };
         if status == fmi2OK && log::max_level() < log::LevelFilter::Trace {
             return Ok(());
         }
@@ -434,6 +438,7 @@ impl Drop for RawComponent {
             return;
         }
         log::trace!(target: "tether_fmi::call", "fmi2FreeInstance({})", self.name);
+        let _entered = crate::current::Entered::new("fmi2FreeInstance", &self.name, self.time);
         // SAFETY: the component is live and freed exactly once, here; it is dropped
         // only after every state of it was freed (see `instance::Orphans`).
         unsafe { (self.library.functions().fmi2FreeInstance)(self.component) };
