@@ -54,11 +54,13 @@ fn main() -> ExitCode {
         2 => log::LevelFilter::Debug,
         _ => log::LevelFilter::Trace,
     };
-    env_logger::Builder::new()
-        .filter_level(level)
-        .parse_env("TETHER_LOG")
-        .format_timestamp(None)
-        .init();
+    let mut logger = env_logger::Builder::new();
+    logger.filter_level(level);
+    if matches!(&cli.command, Command::Run(args) if args.quiet) {
+        // FMU messages are logged with the target `fmu::<instance>`.
+        logger.filter_module("fmu", log::LevelFilter::Error);
+    }
+    logger.parse_env("TETHER_LOG").format_timestamp(None).init();
     let result = match cli.command {
         Command::Info(args) => info::main(args),
         Command::Simulate(args) => simulate::main(args),

@@ -30,9 +30,9 @@ pub struct Args {
     /// clock reads per macro step.
     #[arg(long)]
     timing: bool,
-    /// Do not print the run summary.
+    /// Do not print the run summary, nor the FMUs' warnings (their errors still).
     #[arg(long, short)]
-    quiet: bool,
+    pub(crate) quiet: bool,
 }
 
 pub fn main(args: Args) -> Result<()> {

@@ -359,3 +359,36 @@ fn folders_of_killed_runs_are_swept_by_the_next_run() {
     assert_eq!(s.leftovers().len(), 2, "{:?}", s.leftovers());
     alive.kill();
 }
+
+/// A log flood (2000 warnings per `fmi2DoStep` from t = 0.5, about three million
+/// in all) used to put hundreds of megabytes on stderr and take a hundred times
+/// longer: now 20 messages a second per instance and category are shown and the
+/// rest counted, without being formatted; `--quiet` silences FMU warnings.
+#[test]
+fn a_log_flood_is_rate_limited() {
+    let s = Scratch::new();
+    let timed = |sys: &Path, extra: &[&str]| {
+        let start = std::time::Instant::now();
+        let out = s.run(sys, "out.csv", extra);
+        assert!(out.status.success(), "{}", stderr(&out));
+        (out, start.elapsed())
+    };
+    let (_, normal) = timed(&system(s.path(), 0, ""), &[]);
+    let flood = system(s.path(), 6, "");
+    let (out, flooded) = timed(&flood, &[]);
+    let text = stderr(&out);
+    assert!(text.len() < 16 << 10, "{} bytes on stderr", text.len());
+    assert!(text.contains("[WARN  fmu::mass2] [logStatusWarning] flood message 0 at t = 0.5"));
+    assert!(
+        text.contains("more messages suppressed (more than 20 in 1 s)"),
+        "{text}"
+    );
+    // Loose (a loaded machine): the flood must not multiply the run time.
+    assert!(
+        flooded < normal * 10 + std::time::Duration::from_secs(10),
+        "{flooded:?} against {normal:?}"
+    );
+    let (out, _) = timed(&flood, &["--quiet"]);
+    assert_eq!(stderr(&out), "", "--quiet");
+    assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);
+}

@@ -13,9 +13,14 @@
 typedef void (*tether_fmi_sink)(const void *env, const char *instance, int status,
                                 const char *category, const char *message);
 
-/* The first field of the Rust `LogEnv` (#[repr(C)]). */
+/* Whether a message would be shown: not below the active level, not rate-limited.
+ * Asked before formatting, so that discarded messages cost no vsnprintf. */
+typedef int (*tether_fmi_wanted)(const void *env, int status, const char *category);
+
+/* The first fields of the Rust `LogEnv` (#[repr(C)]). */
 typedef struct {
     tether_fmi_sink sink;
+    tether_fmi_wanted wanted;
 } tether_fmi_env_header;
 
 void tether_fmi_logger(void *env, const char *instance, int status, const char *category,
@@ -27,6 +32,9 @@ void tether_fmi_logger(void *env, const char *instance, int status, const char *
     char *heap_buffer;
 
     if (header == NULL || header->sink == NULL) {
+        return;
+    }
+    if (header->wanted != NULL && !header->wanted(env, status, category)) {
         return;
     }
     if (message == NULL) {

@@ -6,6 +6,8 @@
 //! is the address of [`sink`]: the C side needs no link-time reference to Rust.
 
 use std::ffi::{c_char, c_int, c_void, CStr};
+use std::sync::{Mutex, PoisonError};
+use std::time::{Duration, Instant};
 
 use crate::raw::{self, fmi2CallbackFunctions, fmi2ComponentEnvironment, Status};
 
@@ -26,13 +28,33 @@ extern "C" {
 }
 
 type Sink = extern "C" fn(*const LogEnv, *const c_char, c_int, *const c_char, *const c_char);
+type Wanted = extern "C" fn(*const LogEnv, c_int, *const c_char) -> c_int;
 
-/// The component environment of one instance: the sink the C shim calls, then the log
-/// target for this instance.
+/// Messages per instance and category shown in one [`WINDOW`]; more are counted
+/// and reported as suppressed when the window ends (or the instance is freed).
+pub const RATE_LIMIT: u32 = 20;
+
+/// The rate limit's window.
+pub const WINDOW: Duration = Duration::from_secs(1);
+
+/// The component environment of one instance: the functions the C shim calls, then
+/// the log target and the rate limit for this instance.
 #[repr(C)]
 pub(crate) struct LogEnv {
     sink: Sink,
+    wanted: Wanted,
     target: String,
+    /// Per category (as the FMU spells it): the current window.
+    windows: Mutex<Vec<(Vec<u8>, Window)>>,
+}
+
+/// One category's rate-limit window.
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    start: Instant,
+    shown: u32,
+    suppressed: u64,
+    level: log::Level,
 }
 
 impl LogEnv {
@@ -41,8 +63,66 @@ impl LogEnv {
     pub(crate) fn new(instance: &str) -> Box<LogEnv> {
         Box::new(LogEnv {
             sink,
+            wanted,
             target: format!("fmu::{instance}"),
+            windows: Mutex::new(Vec::new()),
         })
+    }
+
+    /// Whether a message of `level` in `category` is shown: counts it against the
+    /// window, reporting what the previous window suppressed when a new one starts.
+    fn admit(&self, level: log::Level, category: &[u8]) -> bool {
+        let now = Instant::now();
+        let mut windows = self.windows.lock().unwrap_or_else(PoisonError::into_inner);
+        let i = match windows.iter().position(|(c, _)| c == category) {
+            Some(i) => i,
+            None => {
+                let fresh = Window {
+                    start: now,
+                    shown: 0,
+                    suppressed: 0,
+                    level,
+                };
+                windows.push((category.to_vec(), fresh));
+                windows.len() - 1
+            }
+        };
+        let (name, window) = &mut windows[i];
+        if now.duration_since(window.start) >= WINDOW {
+            let ended = *window;
+            *window = Window {
+                start: now,
+                shown: 0,
+                suppressed: 0,
+                level,
+            };
+            if ended.suppressed > 0 {
+                let name = String::from_utf8_lossy(name).into_owned();
+                drop(windows);
+                self.report(&name, ended);
+                windows = self.windows.lock().unwrap_or_else(PoisonError::into_inner);
+                windows[i].1.shown += 1;
+                return true;
+            }
+        }
+        if window.shown < RATE_LIMIT {
+            window.shown += 1;
+            true
+        } else {
+            window.suppressed += 1;
+            window.level = window.level.min(level);
+            false
+        }
+    }
+
+    fn report(&self, category: &str, window: Window) {
+        log::log!(
+            target: &self.target,
+            window.level,
+            "[{category}] {} more messages suppressed (more than {RATE_LIMIT} in {} s)",
+            window.suppressed,
+            WINDOW.as_secs_f64()
+        );
     }
 
     /// The callback table for `fmi2Instantiate`, pointing at this environment.
@@ -54,6 +134,22 @@ impl LogEnv {
             freeMemory: Some(tether_fmi_free),
             stepFinished: None,
             componentEnvironment: env.cast(),
+        }
+    }
+}
+
+impl Drop for LogEnv {
+    /// Reports what the last windows suppressed (the instance is freed).
+    fn drop(&mut self) {
+        let windows = std::mem::take(
+            self.windows
+                .get_mut()
+                .unwrap_or_else(PoisonError::into_inner),
+        );
+        for (category, window) in windows {
+            if window.suppressed > 0 {
+                self.report(&String::from_utf8_lossy(&category), window);
+            }
         }
     }
 }
@@ -78,6 +174,27 @@ fn text(ptr: *const c_char) -> String {
     // the duration of the callback, during which this borrow ends.
     let c = unsafe { CStr::from_ptr(ptr) };
     c.to_string_lossy().into_owned()
+}
+
+/// Asked by `c/logger.c` before it formats a message: 1 if it is shown.
+extern "C" fn wanted(env: *const LogEnv, status: c_int, category: *const c_char) -> c_int {
+    if env.is_null() {
+        return 0;
+    }
+    // SAFETY: as in `sink`: the environment handed to fmi2Instantiate, alive until
+    // after fmi2FreeInstance.
+    let env = unsafe { &*env };
+    let level = level_for(Status::from(status));
+    if !log::log_enabled!(target: &env.target, level) {
+        return 0;
+    }
+    let category: &[u8] = if category.is_null() {
+        b""
+    } else {
+        // SAFETY: a non-NULL category is a NUL-terminated string valid during the call.
+        unsafe { CStr::from_ptr(category) }.to_bytes()
+    };
+    c_int::from(env.admit(level, category))
 }
 
 /// Receives a formatted message from `c/logger.c`.
@@ -183,6 +300,35 @@ mod tests {
         assert_eq!(message, &expected);
         assert_eq!(records[1].0, log::Level::Warn);
         assert_eq!(records[1].2, "[] 100% sure");
+
+        // A flood: RATE_LIMIT shown, the rest counted and reported once the
+        // instance's environment goes (fmi2FreeInstance).
+        let flood = CString::new("flood").unwrap();
+        for n in 0..1000 {
+            // SAFETY: as above; "%d" matches the int passed.
+            unsafe {
+                logger(
+                    callbacks.componentEnvironment,
+                    std::ptr::null(),
+                    1,
+                    flood.as_ptr(),
+                    c"message %d".as_ptr(),
+                    n as c_int,
+                );
+            }
+        }
+        drop(env);
+        let records = CAPTURE.0.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        let flooded: Vec<_> = records[2..].iter().map(|r| r.2.as_str()).collect();
+        assert_eq!(flooded.len(), RATE_LIMIT as usize + 1, "{flooded:?}");
+        assert_eq!(flooded[0], "[flood] message 0");
+        assert_eq!(
+            flooded.last().unwrap(),
+            &format!(
+                "[flood] {} more messages suppressed (more than {RATE_LIMIT} in 1 s)",
+                1000 - RATE_LIMIT
+            )
+        );
 
         let alloc = callbacks.allocateMemory.expect("allocator is set");
         let free = callbacks.freeMemory.expect("free is set");
