@@ -268,40 +268,43 @@ pub fn main(args: Args) -> Result<()> {
     let devs = deviations(&a, &b, &names, args.rtol, args.atol);
 
     let width = devs.iter().map(|d| d.name.len()).max().unwrap_or(6).max(6);
-    println!(
-        "{:<width$}  {:>10}  {:>12}  {:>10}  {:>10}  ok",
+    crate::stdout(format_args!(
+        "{:<width$}  {:>10}  {:>12}  {:>10}  {:>10}  ok\n",
         "column", "max |a-b|", "at t", "scale", "relative"
-    );
+    ))?;
     for d in &devs {
         let at = if d.max_abs == 0.0 {
             "-".to_string()
         } else {
             d.at_time.to_string()
         };
-        println!(
-            "{:<width$}  {:>10}  {:>12}  {:>10}  {:>10}  {}",
+        crate::stdout(format_args!(
+            "{:<width$}  {:>10}  {:>12}  {:>10}  {:>10}  {}\n",
             d.name,
             sci(d.max_abs),
             at,
             sci(d.scale),
             sci(d.relative),
             if d.excess <= 1.0 { "yes" } else { "NO" }
-        );
+        ))?;
     }
     for t in [&a, &b] {
         if let Some(reason) = &t.incomplete {
-            println!("note: {} is incomplete: {reason}", t.path.display());
+            crate::stdout(format_args!(
+                "note: {} is incomplete: {reason}\n",
+                t.path.display()
+            ))?;
         }
     }
     let worst_relative = devs.iter().map(|d| d.relative).fold(0.0, f64::max);
-    println!(
-        "{} rows, {} columns; largest relative deviation {} (rtol = {}, atol = {})",
+    crate::stdout(format_args!(
+        "{} rows, {} columns; largest relative deviation {} (rtol = {}, atol = {})\n",
         a.times.len(),
         devs.len(),
         sci(worst_relative),
         tol(args.rtol),
         tol(args.atol)
-    );
+    ))?;
     let worst = devs
         .iter()
         .filter(|d| d.excess > 1.0)

@@ -15,7 +15,7 @@ pub struct Args {
 
 pub fn main(args: Args) -> Result<()> {
     let fmu = Fmu::open(&args.fmu)?;
-    print!("{}", describe(fmu.model_description()));
+    crate::stdout(format_args!("{}", describe(fmu.model_description())))?;
     Ok(())
 }
 

@@ -46,6 +46,26 @@ enum Command {
     Study(study::Args),
 }
 
+/// `eprintln!` that never panics: a closed or full stderr (`2>/dev/full`) is no
+/// reason to fail a run, nor to panic.
+#[macro_export]
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+/// Writes to stdout; a broken pipe (`tether info x.fmu | true`) is an error
+/// (exit code 1), not a panic.
+pub fn stdout(text: std::fmt::Arguments<'_>) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    out.write_fmt(text)
+        .and_then(|()| out.flush())
+        .map_err(|e| anyhow::anyhow!("cannot write to stdout: {e}"))
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let level = match cli.verbose {
@@ -74,7 +94,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             let message = format!("{e:#}").replace('\n', " ");
-            eprintln!("error: {message}");
+            say!("error: {message}");
             let interrupted = e.chain().any(|cause| {
                 matches!(
                     cause.downcast_ref::<tether_master::MasterError>(),

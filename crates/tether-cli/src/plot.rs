@@ -45,7 +45,7 @@ pub fn main(args: Args) -> Result<()> {
             .join(", ")
     });
     draw(&tables, &args.columns, &title, &args.out)?;
-    eprintln!("plot: {}", args.out.display());
+    crate::say!("plot: {}", args.out.display());
     Ok(())
 }
 

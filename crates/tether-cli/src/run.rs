@@ -48,6 +48,11 @@ pub fn main(args: Args) -> Result<()> {
                 .unwrap_or_else(|| "results.csv".into()),
         ),
     };
+    crate::output::not_an_input(
+        &out,
+        std::iter::once(args.system.as_path())
+            .chain(spec.instances.iter().map(|i| i.fmu.as_path())),
+    )?;
     let mut sim = Simulation::new(&spec)?;
     sim.time_phases(args.timing);
     let file = crate::output::create(&out)?;
@@ -83,7 +88,7 @@ pub fn main(args: Args) -> Result<()> {
     }
     if !args.quiet {
         let name = spec.name.as_deref().unwrap_or("system");
-        eprintln!(
+        crate::say!(
             "{name}: {} with k = {}, H = {}, t = {} … {}",
             spec.method,
             spec.coupling.order,
@@ -91,7 +96,7 @@ pub fn main(args: Args) -> Result<()> {
             spec.experiment.start,
             sim.time()
         );
-        eprintln!("{}", sim.stats());
+        crate::say!("{}", sim.stats());
     }
     if let Some(path) = &args.plot {
         let name = spec.name.clone().unwrap_or_else(|| "system".into());
@@ -102,13 +107,13 @@ pub fn main(args: Args) -> Result<()> {
         );
         crate::plot::draw(&[table], &args.columns, &title, path)?;
         if !args.quiet {
-            eprintln!("plot: {}", path.display());
+            crate::say!("plot: {}", path.display());
         }
     }
     match outcome {
         Ok(_) => {
             if !args.quiet {
-                eprintln!("results: {}", out.display());
+                crate::say!("results: {}", out.display());
             }
             Ok(())
         }

@@ -80,7 +80,9 @@ pub fn main(args: Args) -> Result<()> {
 
     let out = args
         .out
+        .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
+    crate::output::not_an_input(&out, [args.fmu.as_path()])?;
     let file = crate::output::create(&out)?;
     let mut recorder = CsvRecorder::file(file);
     let guard = crate::exit_guard::arm(recorder.emergency(), &out);
@@ -145,7 +147,7 @@ pub fn main(args: Args) -> Result<()> {
         )
     })?;
     instance.terminate()?;
-    eprintln!(
+    crate::say!(
         "{name}: {steps} steps of {step} from {start} to {stop}; results: {}",
         out.display()
     );

@@ -22,7 +22,7 @@ pub fn main(args: Args) -> Result<()> {
     for path in &args.studies {
         let study = Study::from_file(path)?;
         if study.skip_if_missing && !study.system.exists() {
-            eprintln!(
+            crate::say!(
                 "skipped {}: its system file {} does not exist",
                 path.display(),
                 study.system.display()
@@ -52,9 +52,9 @@ pub fn run_one(study: &Study, out_dir: &Path, quiet: bool) -> Result<()> {
     bar.finish_and_clear();
     let report = report?;
     if !quiet {
-        print!("{}", report.summary);
+        crate::stdout(format_args!("{}", report.summary))?;
         for f in &report.files {
-            eprintln!("wrote {}", f.display());
+            crate::say!("wrote {}", f.display());
         }
     }
     Ok(())

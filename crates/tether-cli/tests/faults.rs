@@ -392,3 +392,133 @@ fn a_log_flood_is_rate_limited() {
     assert_eq!(stderr(&out), "", "--quiet");
     assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);
 }
+
+/// Asserts a failed run: exit code 1, no panic, the last stderr line holding `what`.
+fn refused(out: &Output, what: &str) {
+    let text = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    let last = text.lines().last().unwrap_or_default();
+    assert!(last.starts_with("error: ") && last.contains(what), "{last}");
+}
+
+/// Two runs writing one results file: the second is refused (the first holds
+/// the file's advisory lock) and the first one's rows are untouched. It used to
+/// interleave both runs in one file (and NUL bytes).
+#[test]
+fn two_runs_writing_one_results_file() {
+    let s = Scratch::new();
+    let slow = system(s.path(), 7, "");
+    let first = Killed(
+        s.command(&["run", slow.to_str().unwrap(), "--out", "out.csv"])
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let path = s.path().join("out.csv");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    // Row t = 0.5 is written before mode 7's first 1 s sleep ends.
+    while !std::fs::read_to_string(&path).is_ok_and(|t| t.contains("\n0.5,")) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the first run is not writing"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let before = std::fs::read_to_string(&path).unwrap();
+    let second = s.run(&system(s.path(), 0, ""), "out.csv", &[]);
+    refused(&second, "cannot write out.csv: another run is writing it");
+    let after = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        after.starts_with(&before),
+        "the second run changed the file"
+    );
+    drop(first);
+}
+
+/// An `--out` that is one of the run's inputs is refused before anything is
+/// written: `tether run self.toml --out self.toml` used to replace the system
+/// file with CSV and exit 0.
+#[test]
+fn an_output_that_is_an_input_is_refused() {
+    let s = Scratch::new();
+    let sys = system(s.path(), 0, "");
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let name = sys.file_name().unwrap().to_str().unwrap();
+    for out in [name.to_string(), format!("./tmp/../{name}")] {
+        let run = s.run(&sys, &out, &[]);
+        refused(&run, "it is the run's input");
+        assert_eq!(std::fs::read_to_string(&sys).unwrap(), text);
+    }
+    // An FMU, through a copy the system names, by `run` and by `simulate`.
+    let fmu = s.path().join("faults.fmu");
+    std::fs::copy(tether_fmu_build::workspace_fmu("faults").unwrap(), &fmu).unwrap();
+    let bytes = std::fs::read(&fmu).unwrap();
+    let copy = s.path().join("copy.toml");
+    let faults = tether_fmu_build::workspace_fmu("faults").unwrap();
+    std::fs::write(
+        &copy,
+        text.replace(
+            &format!("{:?}", faults.display().to_string()),
+            "\"faults.fmu\"",
+        ),
+    )
+    .unwrap();
+    refused(
+        &s.run(&copy, "faults.fmu", &[]),
+        "faults.fmu: it is the run's input",
+    );
+    let simulate = s
+        .command(&["simulate", "faults.fmu", "--out", "faults.fmu"])
+        .output()
+        .unwrap();
+    refused(&simulate, "faults.fmu: it is the run's input faults.fmu");
+    assert!(std::fs::read(&fmu).unwrap() == bytes, "the FMU was changed");
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}
+
+/// A closed or full stderr (`2>/dev/full`) and a closed stdout (`| true`) never
+/// make `tether` panic (exit code 101 before): a run still succeeds or fails as
+/// it would, and a command whose output is lost fails with exit code 1.
+#[test]
+fn a_full_stderr_or_a_broken_pipe_is_no_panic() {
+    use std::process::Stdio;
+    let s = Scratch::new();
+    let full = || {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap()
+    };
+    for (mode, code) in [(0, 0), (6, 0), (3, 1)] {
+        let sys = system(s.path(), mode, "");
+        let out = s
+            .command(&["run", sys.to_str().unwrap(), "--out", "out.csv"])
+            .stderr(full())
+            .status()
+            .unwrap();
+        assert_eq!(out.code(), Some(code), "mode {mode}");
+    }
+    let fmu = tether_fmu_build::workspace_fmu("faults").unwrap();
+    let fmu = fmu.to_str().unwrap();
+    let out = s.command(&["info", fmu]).stdout(full()).output().unwrap();
+    refused(&out, "cannot write to stdout");
+    // A pipe whose reader is gone (closed before tether gets to write).
+    let mut child = s
+        .command(&["info", fmu])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let text = stderr(&out);
+    assert!(!text.contains("panicked"), "{text}");
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{text}");
+    if out.status.code() == Some(1) {
+        assert!(
+            text.contains("cannot write to stdout: Broken pipe"),
+            "{text}"
+        );
+    }
+}
