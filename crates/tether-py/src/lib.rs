@@ -48,8 +48,8 @@ fn kind_of(e: &MasterError) -> &'static str {
         MasterError::Fmi(_) | MasterError::MissingCapability { .. } => "fmu",
         MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
+        MasterError::InvalidParameter { .. } => "settings",
         MasterError::SystemFile { .. }
-        | MasterError::InvalidParameter { .. }
         | MasterError::Expression { .. }
         | MasterError::UnknownInstance { .. }
         | MasterError::UnknownMarker { .. }

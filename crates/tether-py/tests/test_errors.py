@@ -64,6 +64,13 @@ def test_unknown_fmu_parameter(tmp_path, tether_bin, oscillator_toml):
     assert str(err.value) == error_line(proc)
 
 
+def test_invalid_step(tether_bin, oscillator_toml):
+    proc = cli(tether_bin, "run", str(oscillator_toml), "--quiet", "--step", "-1")
+    with pytest.raises(tether.SettingsError) as err:
+        tether.run(oscillator_toml, step=-1.0)
+    assert str(err.value) == error_line(proc)
+
+
 def test_bad_overrides():
     with pytest.raises(tether.SettingsError, match="unknown method 'rk4'"):
         tether.run("unused.toml", method="rk4")

@@ -93,13 +93,17 @@ def test_fmpy_write_csv_accepts_the_result(tmp_path, oscillator_toml):
 
 
 def test_fmpy_plot_result_accepts_the_result(tmp_path, oscillator_toml):
+    # fmpy 0.3's plot_result draws with plotly: create_plotly_figure is its
+    # whole reading of the result (writing an image then needs kaleido).
     fmpy_util = pytest.importorskip("fmpy.util")
-    matplotlib = pytest.importorskip("matplotlib")
-    matplotlib.use("Agg")
+    pytest.importorskip("plotly")
     result = tether.run(oscillator_toml, stop=0.05)
-    out = tmp_path / "plot.png"
-    fmpy_util.plot_result(result.to_numpy(), names=["mass1.x", "link.lambda"], filename=str(out))
+    figure = fmpy_util.create_plotly_figure(result.to_numpy(), names=["mass1.x", "link.lambda"])
+    out = tmp_path / "plot.html"
+    figure.write_html(str(out))
     assert out.stat().st_size > 0
+    assert len(figure.data) == 2
+    assert np.array_equal(np.asarray(figure.data[0].y), result["mass1.x"])
 
 
 def test_to_pandas(oscillator_toml):

@@ -75,7 +75,9 @@ class SystemFileError(TetherError):
 
 
 class SettingsError(TetherError, ValueError):
-    """An override (method, parameter target, time span …) is not valid."""
+    """A setting is not valid: an unknown method or a parameter of another
+    method, a malformed ``parameters`` target, or a number out of its range
+    (step, stop time, method parameter …, also when the system file sets it)."""
 
 
 class DivergenceError(TetherError):
