@@ -480,7 +480,8 @@ fn run(
 /// A coupled run advanced step by step from Python.
 #[pyclass(unsendable, name = "Simulation")]
 struct PySimulation {
-    sim: Simulation,
+    /// `None` once closed.
+    sim: Option<Simulation>,
     /// Accepted macro steps so far.
     n: u64,
     start: f64,
@@ -488,6 +489,18 @@ struct PySimulation {
     rows: Rows,
     /// The error that stopped the run, if any: no more steps after it.
     failed: Option<String>,
+    /// The counters at [`close`](Self::close).
+    closed_stats: Option<(RunStats, u64)>,
+}
+
+impl PySimulation {
+    fn sim(&self) -> PyResult<&Simulation> {
+        self.sim.as_ref().ok_or_else(closed)
+    }
+}
+
+fn closed() -> PyErr {
+    failure("other", "the simulation is closed".into(), None)
 }
 
 #[pymethods]
@@ -509,25 +522,40 @@ impl PySimulation {
         };
         rows.push(sim.time(), sim.values());
         Ok(PySimulation {
-            sim,
+            sim: Some(sim),
             n: 0,
             start: spec.experiment.start,
             step: spec.experiment.step,
             rows,
             failed: None,
+            closed_stats: None,
         })
+    }
+
+    /// Free the FMU instances and remove their unpacked folders now (also
+    /// done when the object is collected); the results so far stay.
+    fn close(&mut self) {
+        if let Some(sim) = self.sim.take() {
+            self.closed_stats = Some((sim.stats(), sim.total_steps()));
+        }
+    }
+
+    /// Whether [`close`](Self::close) was called.
+    #[getter]
+    fn closed(&self) -> bool {
+        self.sim.is_none()
     }
 
     /// Column names after `time`.
     #[getter]
-    fn columns(&self) -> Vec<String> {
-        self.sim.columns().to_vec()
+    fn columns(&self) -> PyResult<Vec<String>> {
+        Ok(self.sim()?.columns().to_vec())
     }
 
     /// The current macro time.
     #[getter]
-    fn time(&self) -> f64 {
-        self.sim.time()
+    fn time(&self) -> PyResult<f64> {
+        Ok(self.sim()?.time())
     }
 
     /// Accepted macro steps so far.
@@ -538,30 +566,35 @@ impl PySimulation {
 
     /// Macro steps to the stop time.
     #[getter]
-    fn total_steps(&self) -> u64 {
-        self.sim.total_steps()
+    fn total_steps(&self) -> PyResult<u64> {
+        Ok(self.sim()?.total_steps())
     }
 
     /// The values of the current point, in column order.
     #[getter]
-    fn values(&self) -> Vec<f64> {
-        self.sim.values().to_vec()
+    fn values(&self) -> PyResult<Vec<f64>> {
+        Ok(self.sim()?.values().to_vec())
     }
 
     /// The coupling unknowns of the current point.
     #[getter]
-    fn unknowns(&self) -> Vec<f64> {
-        self.sim.unknowns()
+    fn unknowns(&self) -> PyResult<Vec<f64>> {
+        Ok(self.sim()?.unknowns())
     }
 
     /// Counters so far, as a dict.
     fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let reason = match (&self.failed, self.n >= self.sim.total_steps()) {
+        let (stats, total) = match (&self.sim, &self.closed_stats) {
+            (Some(sim), _) => (sim.stats(), sim.total_steps()),
+            (None, Some((stats, total))) => (stats.clone(), *total),
+            (None, None) => return Err(closed()),
+        };
+        let reason = match (&self.failed, self.n >= total) {
             (Some(e), _) => e.clone(),
             (None, true) => "completed".to_string(),
             (None, false) => "running".to_string(),
         };
-        stats_dict(py, &self.sim.stats(), &reason)
+        stats_dict(py, &stats, &reason)
     }
 
     /// `(columns, data, stats)` of every point so far.
@@ -584,9 +617,12 @@ impl PySimulation {
                 None,
             ));
         }
+        let Some(sim) = self.sim.as_mut() else {
+            return Err(closed());
+        };
         let mut made = 0;
         let mut last = Instant::now();
-        while made < count && self.n < self.sim.total_steps() {
+        while made < count && self.n < sim.total_steps() {
             if last.elapsed() >= SIGNAL_INTERVAL {
                 last = Instant::now();
                 // The run cannot leave the GIL (a `Simulation` stays on its
@@ -595,33 +631,34 @@ impl PySimulation {
                 if let Some(err) = py.check_signals().err() {
                     let reason = interrupt_reason(err, py).unwrap_or_default();
                     let e = MasterError::Interrupted {
-                        time: self.sim.time(),
+                        time: sim.time(),
                         reason,
                     };
                     return Err(master_failure(&e, None));
                 }
             }
-            if let Err(e) = self.sim.step() {
+            if let Err(e) = sim.step() {
                 let text = message(&e);
                 self.failed = Some(text);
                 return Err(master_failure(&e, None));
             }
             self.n += 1;
             made += 1;
-            self.rows.push(self.sim.time(), self.sim.values());
+            self.rows.push(sim.time(), sim.values());
         }
         Ok(made)
     }
 
     /// The number of steps from now to the first grid point at or after `t`.
-    fn steps_to(&self, t: f64) -> u64 {
+    fn steps_to(&self, t: f64) -> PyResult<u64> {
+        let total = self.sim()?.total_steps();
         let target = ((t - self.start) / self.step - 1e-9).ceil();
         let target = if target.is_nan() || target < 0.0 {
             0
         } else {
-            (target as u64).min(self.sim.total_steps())
+            (target as u64).min(total)
         };
-        target.saturating_sub(self.n)
+        Ok(target.saturating_sub(self.n))
     }
 }
 

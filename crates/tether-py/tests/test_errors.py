@@ -132,10 +132,19 @@ def test_ctrl_c_in_run_until(tmp_path, monkeypatch, oscillator_toml):
     finally:
         timer.cancel()
     assert len(err.value.result) == sim.steps + 1 > 1
-    # The FMUs are freed (and their folders removed) with the simulation;
-    # the traceback refers to it too.
-    del sim, err
-    import gc
-
-    gc.collect()
+    assert list(tmp_path.iterdir()) != []  # the unpacked FMUs, until closed
+    sim.close()
     assert list(tmp_path.iterdir()) == []
+    assert sim.closed and len(sim.result()) == len(err.value.result)
+    with pytest.raises(tether.TetherError, match="closed"):
+        sim.step()
+    with pytest.raises(tether.TetherError, match="closed"):
+        sim.outputs
+
+
+def test_simulation_as_context_manager(tmp_path, monkeypatch, oscillator_toml):
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    with tether.Simulation(oscillator_toml, stop=0.01) as sim:
+        sim.run()
+    assert sim.closed and list(tmp_path.iterdir()) == []
+    assert sim.stats["stop_reason"] == "completed"

@@ -430,7 +430,7 @@ class Simulation:
     @property
     def time(self) -> float:
         """The current macro time T_N."""
-        return self._sim.time
+        return self._get("time")
 
     @property
     def steps(self) -> int:
@@ -440,29 +440,29 @@ class Simulation:
     @property
     def total_steps(self) -> int:
         """Macro steps from the start to the stop time."""
-        return self._sim.total_steps
+        return self._get("total_steps")
 
     @property
     def done(self) -> bool:
         """Whether the stop time is reached."""
-        return self._sim.steps >= self._sim.total_steps
+        return self._sim.steps >= self._get("total_steps")
 
     @property
     def outputs(self) -> Dict[str, float]:
         """The values of the current point by column name: outputs,
         multipliers and residuals."""
-        return dict(zip(self._columns, self._sim.values))
+        return dict(zip(self._columns, self._get("values")))
 
     @property
     def values(self) -> np.ndarray:
         """The values of the current point in column order."""
-        return np.array(self._sim.values, dtype=np.float64)
+        return np.array(self._get("values"), dtype=np.float64)
 
     @property
     def unknowns(self) -> np.ndarray:
         """The coupling unknowns u_N (multipliers of constraints and joints,
         coupling variables), in the order of their columns."""
-        return np.array(self._sim.unknowns, dtype=np.float64)
+        return np.array(self._get("unknowns"), dtype=np.float64)
 
     @property
     def stats(self) -> Dict[str, Any]:
@@ -479,6 +479,12 @@ class Simulation:
         except _tether.Failure as f:
             raise _error(f, self.result()) from None
 
+    def _get(self, name: str) -> Any:
+        try:
+            return getattr(self._sim, name)
+        except _tether.Failure as f:
+            raise _error(f) from None
+
     def step(self) -> float:
         """Advance one macro step; returns the new time. Raises
         :class:`TetherError` at the stop time."""
@@ -489,7 +495,11 @@ class Simulation:
     def run_until(self, t: float) -> float:
         """Advance to the first macro point at or after ``t`` (at most to the
         stop time); returns the new time. Ctrl-C raises :class:`Interrupted`."""
-        self._advance(self._sim.steps_to(t))
+        try:
+            count = self._sim.steps_to(t)
+        except _tether.Failure as f:
+            raise _error(f) from None
+        self._advance(count)
         return self.time
 
     def run(self) -> Result:
@@ -497,7 +507,26 @@ class Simulation:
         self.run_until(math.inf)
         return self.result()
 
+    def close(self) -> None:
+        """Free the FMU instances and remove their unpacked folders now (else
+        when the object is collected). The results so far (:meth:`result`,
+        :attr:`stats`) stay; stepping afterwards raises :class:`TetherError`."""
+        self._sim.close()
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._sim.closed
+
+    def __enter__(self) -> "Simulation":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
     def __repr__(self) -> str:
+        if self.closed:
+            return f"<tether.Simulation closed after {self.steps} steps>"
         return f"<tether.Simulation t = {self.time}, step {self.steps} of {self.total_steps}>"
 
 
