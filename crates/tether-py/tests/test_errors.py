@@ -110,7 +110,7 @@ def test_ctrl_c_raises_interrupted_with_the_partial_result(tmp_path, monkeypatch
     timer.start()
     try:
         with pytest.raises(tether.Interrupted) as err:
-            tether.run(oscillator_toml, stop=1e4)
+            tether.run(oscillator_toml, stop=1e3)
     finally:
         timer.cancel()
     assert isinstance(err.value, KeyboardInterrupt)
@@ -123,12 +123,12 @@ def test_ctrl_c_raises_interrupted_with_the_partial_result(tmp_path, monkeypatch
 
 def test_ctrl_c_in_run_until(tmp_path, monkeypatch, oscillator_toml):
     monkeypatch.setenv("TMPDIR", str(tmp_path))
-    sim = tether.Simulation(oscillator_toml, stop=1e4)
+    sim = tether.Simulation(oscillator_toml, stop=1e3)
     timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
     timer.start()
     try:
         with pytest.raises(tether.Interrupted) as err:
-            sim.run_until(1e4)
+            sim.run_until(1e3)
     finally:
         timer.cancel()
     assert len(err.value.result) == sim.steps + 1 > 1
