@@ -421,13 +421,6 @@ fn dump_toml(value: &Bound<'_, PyAny>) -> PyResult<String> {
     toml::to_string(&value).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
-/// Check TOML text as a system description (raises the system-file errors).
-#[pyfunction]
-fn check_system(text: &str) -> PyResult<()> {
-    SystemSpec::from_toml(text).map_err(|e| master_failure(&e, None))?;
-    Ok(())
-}
-
 // ---------------------------------------------------------------------------
 // Whole runs
 
@@ -508,13 +501,11 @@ impl PySimulation {
     #[new]
     #[pyo3(signature = (path=None, text=None, **kwargs))]
     fn new(
-        py: Python<'_>,
         path: Option<PathBuf>,
         text: Option<&str>,
         kwargs: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let spec = load_spec(path, text, kwargs)?;
-        let _ = py;
         let sim = Simulation::new(&spec).map_err(|e| master_failure(&e, None))?;
         let mut rows = Rows {
             columns: sim.columns().to_vec(),
@@ -1004,7 +995,6 @@ fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(info, m)?)?;
     m.add_function(wrap_pyfunction!(load_system, m)?)?;
     m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
-    m.add_function(wrap_pyfunction!(check_system, m)?)?;
     m.add_class::<PySimulation>()?;
     Ok(())
 }
