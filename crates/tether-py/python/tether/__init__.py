@@ -33,6 +33,7 @@ from . import _tether
 
 __all__ = [
     "run",
+    "run_many",
     "simulate",
     "info",
     "Simulation",
@@ -396,6 +397,61 @@ def run(
     except _tether.Failure as f:
         raise _error(f) from None
     return Result(*raw)
+
+
+def _run_raw(source: Dict[str, Any], overrides: Dict[str, Any]) -> Any:
+    """One run in a worker: the raw results, or the failure's arguments
+    (plain tuples, so that any executor can send them back)."""
+    try:
+        return ("ok", _tether.run(**source, **_overrides(**overrides)))
+    except _tether.Failure as f:
+        return ("failed", f.args)
+
+
+def run_many(
+    system: Union[PathLike, System],
+    variants: Sequence[Mapping[str, Any]],
+    *,
+    executor: Any = None,
+    errors: str = "raise",
+) -> List[Union[Result, TetherError]]:
+    """Run ``system`` once per dict of overrides in ``variants`` (the keywords
+    of :func:`run`) and return the results in the same order.
+
+    ``executor`` is anything with ``submit(fn, *args)`` returning futures with
+    ``result()``: a ``concurrent.futures`` executor (``ProcessPoolExecutor``
+    runs them in parallel processes; a thread pool gains little, each run
+    holds a core) or, untested, a ``dask.distributed.Client``. Without one the
+    runs are made here, one after the other. Each run is the same as
+    :func:`run` with those overrides, bit for bit, wherever it is made.
+
+    ``errors="raise"`` raises the first failure (in the order of
+    ``variants``); ``errors="return"`` puts the :class:`TetherError` (with its
+    partial ``result``) into the list instead, as a stability map needs.
+    """
+    if errors not in ("raise", "return"):
+        raise ValueError("errors must be 'raise' or 'return'")
+    if isinstance(system, System):
+        source: Dict[str, Any] = {"text": system.to_toml()}
+    else:
+        # Workers may run elsewhere in the file system: an absolute path.
+        source = {"path": os.path.abspath(os.fspath(system))}
+    if executor is None:
+        raws = [_run_raw(source, dict(v)) for v in variants]
+    else:
+        futures = [executor.submit(_run_raw, source, dict(v)) for v in variants]
+        raws = [f.result() for f in futures]
+    out: List[Union[Result, TetherError]] = []
+    for status, payload in raws:
+        if status == "ok":
+            out.append(Result(*payload))
+            continue
+        kind, message, partial = payload
+        err = _KINDS.get(kind, TetherError)(message, Result(*partial) if partial else None)
+        if errors == "raise":
+            raise err
+        out.append(err)
+    return out
 
 
 class Simulation:
