@@ -118,6 +118,13 @@ impl Simulation {
         &self.columns
     }
 
+    /// The recorded values of the current point (the last accepted one), in
+    /// the order of [`Simulation::columns`]: what observers receive as
+    /// [`Sample::values`].
+    pub fn values(&self) -> &[f64] {
+        &self.row
+    }
+
     /// The current macro time T_N = T_0 + N·H.
     pub fn time(&self) -> f64 {
         self.time_at(self.n)

@@ -1,0 +1,630 @@
+"""Tether from Python: couple FMI 2.0 co-simulation FMUs through algebraic
+constraints with the predictor/corrector methods of Schweizer & Lu (2015).
+
+The coupled master, the FMU import and the numerics are Tether's Rust library;
+this package calls it in-process (no `tether` binary, no CSV in between).
+
+    >>> import tether
+    >>> result = tether.run("examples/oscillator.toml", step=1e-3)
+    >>> result["mass1.x"]            # NumPy float64 array, one value per macro point
+    >>> result.to_numpy()            # structured array like fmpy's simulate_fmu result
+
+Entry points:
+
+- :func:`run` a system file or :class:`System` to its stop time,
+- :class:`Simulation` to advance it step by step and read outputs between steps,
+- :func:`simulate` one FMU on its own and :func:`info` for its model description,
+- :class:`System` to build (or load and change) a system in code.
+
+Errors are :class:`TetherError` subclasses with the one-line messages of the
+``tether`` command; a run that stops early carries its partial
+:class:`Result` in ``err.result``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _tether
+
+__all__ = [
+    "run",
+    "run_many",
+    "simulate",
+    "info",
+    "Simulation",
+    "System",
+    "Result",
+    "TetherError",
+    "FmuError",
+    "SystemFileError",
+    "SettingsError",
+    "DivergenceError",
+    "Interrupted",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+ParameterValue = Union[bool, int, float, str]
+
+
+# ---------------------------------------------------------------------------
+# Errors
+
+
+class TetherError(Exception):
+    """Any failure of Tether. ``str(err)`` is the one-line message the
+    ``tether`` command prints; ``err.result`` is the partial :class:`Result`
+    of a run that stopped early (every accepted step), else ``None``."""
+
+    result: Optional["Result"]
+
+    def __init__(self, message: str, result: Optional["Result"] = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+
+class FmuError(TetherError):
+    """An FMU cannot be loaded, lacks a needed capability, or an FMI call failed."""
+
+
+class SystemFileError(TetherError):
+    """The system (file or :class:`System`) is malformed or does not fit its FMUs."""
+
+
+class SettingsError(TetherError, ValueError):
+    """A setting is not valid: an unknown method or a parameter of another
+    method, a malformed ``parameters`` target, or a number out of its range
+    (step, stop time, method parameter …, also when the system file sets it)."""
+
+
+class DivergenceError(TetherError):
+    """The coupling diverged (a value became non-finite or exploded) or the
+    interface Jacobian became singular."""
+
+
+class Interrupted(TetherError, KeyboardInterrupt):
+    """The run was stopped by Ctrl-C (or another signal handler that raised).
+    Also a :class:`KeyboardInterrupt`; ``err.result`` holds the steps so far."""
+
+
+_KINDS = {
+    "fmu": FmuError,
+    "system": SystemFileError,
+    "settings": SettingsError,
+    "divergence": DivergenceError,
+    "interrupted": Interrupted,
+}
+
+
+def _error(failure: BaseException, partial: Optional["Result"] = None) -> TetherError:
+    kind, message, raw = failure.args
+    if raw is not None:
+        partial = Result(*raw)
+    return _KINDS.get(kind, TetherError)(message, partial)
+
+
+# ---------------------------------------------------------------------------
+# Results
+
+
+class Result:
+    """The results of a run: one row per accepted macro point.
+
+    ``columns`` are the names after ``time``, as in the CSV of ``tether run``:
+    every Real output as ``<instance>.<variable>``, then the multipliers
+    (``<constraint>.lambda``), then the residuals (``<constraint>.g``).
+
+    ``result[name]`` is a NumPy float64 array of one column (``"time"`` too),
+    :meth:`to_numpy` the whole table as a structured array whose fields are
+    ``time`` and the columns (the shape of fmpy's ``simulate_fmu`` result),
+    ``complete`` whether the run reached its stop time, ``stats`` the run's
+    counters (see docs/python.md).
+    """
+
+    def __init__(self, columns: Sequence[str], data: bytes, stats: Dict[str, Any]) -> None:
+        self.columns: List[str] = list(columns)
+        self.stats: Dict[str, Any] = stats
+        self._dtype = np.dtype([("time", "f8")] + [(c, "f8") for c in self.columns])
+        # A view of the bytes the master produced: no copy.
+        self._table = np.frombuffer(data, dtype=self._dtype)
+        self._index = {name: i for i, name in enumerate(self.columns)}
+
+    @property
+    def complete(self) -> bool:
+        """Whether the run reached its stop time."""
+        return self.stats.get("stop_reason") == "completed"
+
+    @property
+    def time(self) -> np.ndarray:
+        """The macro times T_n."""
+        return np.array(self._table["time"])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name != "time" and name not in self._index:
+            raise KeyError(f"no column '{name}'; columns are time, {', '.join(self.columns)}")
+        return np.array(self._table[name])
+
+    def __contains__(self, name: object) -> bool:
+        return name == "time" or name in self._index
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(["time"] + self.columns)
+
+    def __len__(self) -> int:
+        """The number of rows (macro points, the start included)."""
+        return len(self._table)
+
+    def to_numpy(self) -> np.ndarray:
+        """A structured array (a copy) with fields ``time`` and the columns,
+        as fmpy's ``simulate_fmu`` returns; fmpy's ``write_csv`` and
+        ``plot_result`` accept it."""
+        return self._table.copy()
+
+    def to_pandas(self) -> "Any":
+        """A pandas DataFrame with a ``time`` column and the columns (needs pandas)."""
+        try:
+            import pandas as pd
+        except ImportError as e:  # pragma: no cover - depends on the environment
+            raise ImportError("Result.to_pandas() needs pandas: pip install pandas") from e
+        return pd.DataFrame(self.to_numpy())
+
+    def __repr__(self) -> str:
+        end = self._table["time"][-1] if len(self._table) else float("nan")
+        state = "complete" if self.complete else f"incomplete: {self.stats.get('stop_reason')}"
+        return f"<tether.Result {len(self)} rows × {len(self.columns) + 1} columns, t ≤ {end} ({state})>"
+
+
+# ---------------------------------------------------------------------------
+# Systems
+
+
+def _source(system: Union[PathLike, "System"]) -> Dict[str, Any]:
+    if isinstance(system, System):
+        return {"text": system.to_toml()}
+    if isinstance(system, (str, os.PathLike)):
+        return {"path": os.fspath(system)}
+    raise TypeError(f"system must be a path or a tether.System, not {type(system).__name__}")
+
+
+def _overrides(**given: Any) -> Dict[str, Any]:
+    return {k: v for k, v in given.items() if v is not None}
+
+
+class System:
+    """A system built in code: FMU instances, constraints, joints, coupling
+    variables, the time grid and the method; the same content as a system file
+    (docs/system-file.md). Every method returns the system, so calls chain::
+
+        sys = (tether.System("two masses")
+               .experiment(stop=1.0, step=1e-3)
+               .method("baumgarte", beta=2e-3, gamma=1e-6)
+               .add_instance("mass1", "oscillator.fmu", {"m": 1.0, "v0": 100.0})
+               .add_instance("mass2", "oscillator.fmu", {"m": 2.0, "v0": 100.0})
+               .add_constraint("link", position="mass2.x - mass1.x",
+                               velocity="mass2.v - mass1.v",
+                               acceleration="mass2.a - mass1.a",
+                               drives="mass1.F - mass2.F"))
+        tether.run(sys)
+
+    Relative FMU paths are made absolute when added (against the current
+    directory) or loaded (against the system file's folder).
+    """
+
+    def __init__(self, name: Optional[str] = None) -> None:
+        self._data: Dict[str, Any] = {
+            "name": name,
+            "experiment": None,
+            "method": None,
+            "coupling": {},
+            "instance": [],
+            "constraint": [],
+            "joint": [],
+            "coupling_variable": [],
+        }
+
+    @classmethod
+    def from_file(cls, path: PathLike) -> "System":
+        """Load a system file (raises :class:`SystemFileError` as ``tether run`` would)."""
+        try:
+            data = _tether.load_system(os.fspath(path))
+        except _tether.Failure as f:
+            raise _error(f) from None
+        system = cls(data.get("name"))
+        for key in ("experiment", "method", "coupling"):
+            if key in data:
+                system._data[key] = data[key]
+        for key in ("instance", "constraint", "joint", "coupling_variable"):
+            system._data[key] = list(data.get(key, []))
+        for inst in system._data["instance"]:
+            inst["fmu"] = os.path.abspath(inst["fmu"])
+        return system
+
+    @property
+    def name(self) -> Optional[str]:
+        return self._data["name"]
+
+    @property
+    def instances(self) -> List[Dict[str, Any]]:
+        """The instances as dicts (``name``, ``fmu``, ``parameters``); changeable."""
+        return self._data["instance"]
+
+    def experiment(
+        self, stop: float, step: float, start: float = 0.0, tolerance: Optional[float] = None
+    ) -> "System":
+        """The time grid ``T_n = start + n·step`` up to ``stop``."""
+        self._data["experiment"] = _overrides(start=float(start), stop=float(stop), step=float(step), tolerance=tolerance)
+        return self
+
+    def method(self, kind: str, **parameters: float) -> "System":
+        """The coupling method: ``"baumgarte"`` (beta, gamma), ``"weighted"``
+        (a, b) or ``"explicit"`` (mu)."""
+        self._data["method"] = {"kind": kind, **{k: float(v) for k, v in parameters.items()}}
+        return self
+
+    def coupling(self, **settings: Any) -> "System":
+        """Settings of every method: ``order`` (0, 1, 2), ``epsilon``,
+        ``max_condition``, ``divergence_factor``, ``parallel`` ("auto", "on", "off")."""
+        self._data["coupling"].update(settings)
+        return self
+
+    def add_instance(
+        self, name: str, fmu: PathLike, parameters: Optional[Mapping[str, ParameterValue]] = None
+    ) -> "System":
+        """An FMU instance named ``name`` (the column prefix) with start values."""
+        inst: Dict[str, Any] = {"name": name, "fmu": os.path.abspath(os.fspath(fmu))}
+        if parameters:
+            inst["parameters"] = dict(parameters)
+        self._data["instance"].append(inst)
+        return self
+
+    def add_constraint(
+        self,
+        name: str,
+        position: str,
+        drives: str,
+        velocity: Optional[str] = None,
+        acceleration: Optional[str] = None,
+        initial: Union[float, str, None] = None,
+    ) -> "System":
+        """A scalar constraint g = 0 (linear expressions of outputs on position,
+        velocity, acceleration level); its multiplier λ drives the inputs of
+        ``drives``; ``initial`` is a number or ``"consistent"`` (default)."""
+        self._data["constraint"].append(
+            _overrides(
+                name=name,
+                position=position,
+                velocity=velocity,
+                acceleration=acceleration,
+                drives=drives,
+                initial=initial,
+            )
+        )
+        return self
+
+    def add_joint(self, name: str, kind: str, i: str, j: str, **geometry: Any) -> "System":
+        """A joint between markers ``i`` and ``j`` (``"instance.marker"``) of
+        ``kind`` (revolute, universal, …); ``geometry``: plane, axis_i, ref_i,
+        axis_j, ref_j, offset_i, offset_j, multipliers, initial (docs/joints.md)."""
+        self._data["joint"].append(_overrides(name=name, kind=kind, i=i, j=j, **geometry))
+        return self
+
+    def add_coupling_variable(
+        self, name: str, drives: str, value: str, initial: Union[float, str, None] = None
+    ) -> "System":
+        """An input that must equal an expression of outputs at every macro point."""
+        self._data["coupling_variable"].append(
+            _overrides(name=name, drives=drives, value=value, initial=initial)
+        )
+        return self
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The system as a dict shaped like the system file."""
+        out: Dict[str, Any] = {}
+        for key, value in self._data.items():
+            if value is None or value == [] or value == {}:
+                continue
+            out[key] = value
+        return out
+
+    def to_toml(self) -> str:
+        """The system file text (TOML)."""
+        if self._data["experiment"] is None:
+            raise SystemFileError("system: no experiment; call System.experiment(stop=…, step=…)")
+        return _tether.dump_toml(self.to_dict())
+
+    def save(self, path: PathLike) -> None:
+        """Write the system file."""
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(self.to_toml())
+
+    def __repr__(self) -> str:
+        names = ", ".join(i["name"] for i in self.instances)
+        return f"<tether.System {self.name or ''!s} instances: {names}>"
+
+
+# ---------------------------------------------------------------------------
+# Runs
+
+
+def run(
+    system: Union[PathLike, System],
+    *,
+    stop: Optional[float] = None,
+    step: Optional[float] = None,
+    method: Optional[str] = None,
+    beta: Optional[float] = None,
+    gamma: Optional[float] = None,
+    a: Optional[float] = None,
+    b: Optional[float] = None,
+    mu: Optional[float] = None,
+    order: Optional[int] = None,
+    epsilon: Optional[float] = None,
+    parallel: Union[str, bool, None] = None,
+    divergence_factor: Optional[float] = None,
+    parameters: Optional[Mapping[str, ParameterValue]] = None,
+) -> Result:
+    """Run a coupled system to its stop time, like ``tether run``.
+
+    ``system`` is a system-file path or a :class:`System`. The keyword
+    arguments override the system's settings as the CLI flags do:
+
+    - ``stop``, ``step``: stop time and macro-step size H,
+    - ``method``: ``"baumgarte"``, ``"weighted"`` or ``"explicit"``, with
+      ``beta``/``gamma`` (baumgarte), ``a``/``b`` (weighted), ``mu`` (explicit),
+    - ``order``: degree k of the coupling polynomials (0, 1, 2),
+    - ``epsilon``: finite-difference increment of the interface Jacobian,
+    - ``parallel``: perturbed runs on other threads, ``"auto"``, ``"on"``,
+      ``"off"`` (or True/False),
+    - ``parameters``: FMU start values, ``{"mass1.m": 2.0}`` (``--set``).
+
+    The results are the same, bit for bit, as the CSV of ``tether run``. The
+    GIL is released while the master runs; Ctrl-C stops the run after the
+    current macro step and raises :class:`Interrupted` with the partial
+    result. A run that diverges raises :class:`DivergenceError` with the
+    partial result in ``err.result``.
+    """
+    kw = _overrides(
+        stop=stop, step=step, method=method, beta=beta, gamma=gamma, a=a, b=b, mu=mu,
+        order=order, epsilon=epsilon, parallel=parallel,
+        divergence_factor=divergence_factor, parameters=parameters,
+    )
+    try:
+        raw = _tether.run(**_source(system), **kw)
+    except _tether.Failure as f:
+        raise _error(f) from None
+    return Result(*raw)
+
+
+def _run_raw(source: Dict[str, Any], overrides: Dict[str, Any]) -> Any:
+    """One run in a worker: the raw results, or the failure's arguments
+    (plain tuples, so that any executor can send them back)."""
+    try:
+        return ("ok", _tether.run(**source, **_overrides(**overrides)))
+    except _tether.Failure as f:
+        return ("failed", f.args)
+
+
+def run_many(
+    system: Union[PathLike, System],
+    variants: Sequence[Mapping[str, Any]],
+    *,
+    executor: Any = None,
+    errors: str = "raise",
+) -> List[Union[Result, TetherError]]:
+    """Run ``system`` once per dict of overrides in ``variants`` (the keywords
+    of :func:`run`) and return the results in the same order.
+
+    ``executor`` is anything with ``submit(fn, *args)`` returning futures with
+    ``result()``: a ``concurrent.futures`` executor (``ProcessPoolExecutor``
+    runs them in parallel processes; a thread pool gains little, each run
+    holds a core) or, untested, a ``dask.distributed.Client``. Without one the
+    runs are made here, one after the other. Each run is the same as
+    :func:`run` with those overrides, bit for bit, wherever it is made.
+
+    ``errors="raise"`` raises the first failure (in the order of
+    ``variants``); ``errors="return"`` puts the :class:`TetherError` (with its
+    partial ``result``) into the list instead, as a stability map needs.
+    """
+    if errors not in ("raise", "return"):
+        raise ValueError("errors must be 'raise' or 'return'")
+    if isinstance(system, System):
+        source: Dict[str, Any] = {"text": system.to_toml()}
+    else:
+        # Workers may run elsewhere in the file system: an absolute path.
+        source = {"path": os.path.abspath(os.fspath(system))}
+    if executor is None:
+        raws = [_run_raw(source, dict(v)) for v in variants]
+    else:
+        futures = [executor.submit(_run_raw, source, dict(v)) for v in variants]
+        raws = [f.result() for f in futures]
+    out: List[Union[Result, TetherError]] = []
+    for status, payload in raws:
+        if status == "ok":
+            out.append(Result(*payload))
+            continue
+        kind, message, partial = payload
+        err = _KINDS.get(kind, TetherError)(message, Result(*partial) if partial else None)
+        if errors == "raise":
+            raise err
+        out.append(err)
+    return out
+
+
+class Simulation:
+    """A coupled run advanced step by step; outputs can be read between steps::
+
+        sim = tether.Simulation("examples/oscillator.toml")
+        while sim.time < 0.5:
+            sim.step()
+        print(sim.outputs["mass1.x"], sim.unknowns)
+        sim.run_until(1.0)
+        result = sim.result()
+
+    Takes the same arguments as :func:`run`. The run is instantiated (FMUs
+    loaded, initialised, consistent multipliers solved) on construction.
+    The steps are the same as those of :func:`run`: ``sim.result()`` after
+    the last step equals ``tether.run(...)`` bit for bit.
+    """
+
+    def __init__(self, system: Union[PathLike, System], **overrides: Any) -> None:
+        kw = _overrides(**overrides)
+        try:
+            self._sim = _tether.Simulation(**_source(system), **kw)
+        except _tether.Failure as f:
+            raise _error(f) from None
+        self._columns: List[str] = self._sim.columns
+
+    @property
+    def columns(self) -> List[str]:
+        """Column names after ``time`` (as in :class:`Result`)."""
+        return list(self._columns)
+
+    @property
+    def time(self) -> float:
+        """The current macro time T_N."""
+        return self._get("time")
+
+    @property
+    def steps(self) -> int:
+        """Macro steps made so far."""
+        return self._sim.steps
+
+    @property
+    def total_steps(self) -> int:
+        """Macro steps from the start to the stop time."""
+        return self._get("total_steps")
+
+    @property
+    def done(self) -> bool:
+        """Whether the stop time is reached."""
+        return self._sim.steps >= self._get("total_steps")
+
+    @property
+    def outputs(self) -> Dict[str, float]:
+        """The values of the current point by column name: outputs,
+        multipliers and residuals."""
+        return dict(zip(self._columns, self._get("values")))
+
+    @property
+    def values(self) -> np.ndarray:
+        """The values of the current point in column order."""
+        return np.array(self._get("values"), dtype=np.float64)
+
+    @property
+    def unknowns(self) -> np.ndarray:
+        """The coupling unknowns u_N (multipliers of constraints and joints,
+        coupling variables), in the order of their columns."""
+        return np.array(self._get("unknowns"), dtype=np.float64)
+
+    @property
+    def stats(self) -> Dict[str, Any]:
+        """The counters so far (the schema of :attr:`Result.stats`)."""
+        return self._sim.stats()
+
+    def result(self) -> Result:
+        """Every point so far as a :class:`Result`."""
+        return Result(*self._sim.result())
+
+    def _advance(self, count: int) -> int:
+        try:
+            return self._sim.advance(count)
+        except _tether.Failure as f:
+            raise _error(f, self.result()) from None
+
+    def _get(self, name: str) -> Any:
+        try:
+            return getattr(self._sim, name)
+        except _tether.Failure as f:
+            raise _error(f) from None
+
+    def step(self) -> float:
+        """Advance one macro step; returns the new time. Raises
+        :class:`TetherError` at the stop time."""
+        if self._advance(1) == 0:
+            raise TetherError(f"the simulation is at its stop time t = {self.time}")
+        return self.time
+
+    def run_until(self, t: float) -> float:
+        """Advance to the first macro point at or after ``t`` (at most to the
+        stop time); returns the new time. Ctrl-C raises :class:`Interrupted`."""
+        try:
+            count = self._sim.steps_to(t)
+        except _tether.Failure as f:
+            raise _error(f) from None
+        self._advance(count)
+        return self.time
+
+    def run(self) -> Result:
+        """Advance to the stop time and return every point as a :class:`Result`."""
+        self.run_until(math.inf)
+        return self.result()
+
+    def close(self) -> None:
+        """Free the FMU instances and remove their unpacked folders now (else
+        when the object is collected). The results so far (:meth:`result`,
+        :attr:`stats`) stay; stepping afterwards raises :class:`TetherError`."""
+        self._sim.close()
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._sim.closed
+
+    def __enter__(self) -> "Simulation":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        if self.closed:
+            return f"<tether.Simulation closed after {self.steps} steps>"
+        return f"<tether.Simulation t = {self.time}, step {self.steps} of {self.total_steps}>"
+
+
+# ---------------------------------------------------------------------------
+# One FMU
+
+
+def simulate(
+    fmu: PathLike,
+    *,
+    start: Optional[float] = None,
+    stop: Optional[float] = None,
+    step: Optional[float] = None,
+    tolerance: Optional[float] = None,
+    parameters: Optional[Mapping[str, ParameterValue]] = None,
+) -> Result:
+    """Run one FMU at a fixed communication step, like ``tether simulate`` or
+    fmpy's ``simulate_fmu(..., fmi_type="CoSimulation")``: every non-String
+    output at every step. ``start``, ``stop``, ``step`` and ``tolerance``
+    default to the FMU's DefaultExperiment (else 0, start + 1,
+    (stop − start)/500); ``parameters`` are start values by variable name."""
+    try:
+        raw = _tether.simulate(
+            os.fspath(fmu),
+            start=start,
+            stop=stop,
+            step=step,
+            tolerance=tolerance,
+            parameters=dict(parameters) if parameters else None,
+        )
+    except _tether.Failure as f:
+        raise _error(f) from None
+    return Result(*raw)
+
+
+def info(fmu: PathLike) -> Dict[str, Any]:
+    """An FMU's model description as a dict with fmpy's attribute names:
+    ``modelName``, ``guid``, ``fmiVersion``, ``coSimulation`` (the
+    capability flags), ``defaultExperiment`` and ``modelVariables`` (dicts
+    with ``name``, ``valueReference``, ``causality``, ``variability``,
+    ``initial``, ``type``, ``start``, ``unit``, ``description``)."""
+    try:
+        return _tether.info(os.fspath(fmu))
+    except _tether.Failure as f:
+        raise _error(f) from None

@@ -1,0 +1,1000 @@
+//! `tether._tether`: the Rust half of the `tether` Python package.
+//!
+//! The public API is Python (`python/tether/__init__.py`); this module gives it
+//! the raw pieces: a whole run with the GIL released, a step-wise simulation,
+//! one FMU on its own, an FMU's model description, and system files read into
+//! and written from plain dicts. Results go to Python as one `bytes` object
+//! per run: the rows `time, values…` as native-endian `f64`, which NumPy views
+//! without copying (`numpy.frombuffer`).
+//!
+//! Every failure is raised as `_tether.Failure(kind, message, partial)`, which
+//! the Python half turns into the documented exception classes; `partial` is
+//! the part of the results recorded before the failure, or `None`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+use tether_fmi::{BaseType, Causality, Fmu, Initial, Variability, VariableKind};
+use tether_master::{
+    apply_start_value, MasterError, MethodChange, Observer, OverrideError, Overrides, RunStats,
+    Sample, Simulation, StartValue, SystemSpec,
+};
+
+create_exception!(
+    _tether,
+    Failure,
+    PyException,
+    "Internal: (kind, message, partial) of a failure, mapped to tether's exception classes."
+);
+
+/// What the CLI says when Ctrl-C stops a run; the same here.
+const INTERRUPT_REASON: &str = "Ctrl-C or termination signal";
+
+/// How often a run that has released the GIL takes it back to look for
+/// Ctrl-C (Python's signal handlers run only with the GIL held).
+const SIGNAL_INTERVAL: Duration = Duration::from_millis(50);
+
+// ---------------------------------------------------------------------------
+// Errors
+
+/// The class of a failure, as the Python half names it.
+fn kind_of(e: &MasterError) -> &'static str {
+    match e {
+        MasterError::Fmi(_) | MasterError::MissingCapability { .. } => "fmu",
+        MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
+        MasterError::Interrupted { .. } => "interrupted",
+        MasterError::InvalidParameter { .. } => "settings",
+        MasterError::SystemFile { .. }
+        | MasterError::Expression { .. }
+        | MasterError::UnknownInstance { .. }
+        | MasterError::UnknownMarker { .. }
+        | MasterError::IncompleteMarker { .. }
+        | MasterError::MissingPort { .. }
+        | MasterError::Joint { .. }
+        | MasterError::WrongVariable { .. }
+        | MasterError::MissingLevel { .. }
+        | MasterError::StartValue { .. } => "system",
+        _ => "other",
+    }
+}
+
+/// The one-line message of an error and its causes, as the CLI prints it
+/// (`outer: cause: cause`).
+fn message(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(cause) = source {
+        text.push_str(": ");
+        text.push_str(&cause.to_string());
+        source = cause.source();
+    }
+    text.replace('\n', " ")
+}
+
+fn failure(kind: &str, message: String, partial: Option<Py<PyAny>>) -> PyErr {
+    Failure::new_err((kind.to_string(), message, partial))
+}
+
+fn master_failure(e: &MasterError, partial: Option<Py<PyAny>>) -> PyErr {
+    failure(kind_of(e), message(e), partial)
+}
+
+fn override_failure(e: &OverrideError) -> PyErr {
+    failure("settings", e.to_string(), None)
+}
+
+// ---------------------------------------------------------------------------
+// Results
+
+/// The rows of a run as native-endian f64 bytes: `time, values…` per row.
+#[derive(Default)]
+struct Rows {
+    columns: Vec<String>,
+    bytes: Vec<u8>,
+}
+
+impl Rows {
+    fn push(&mut self, time: f64, values: &[f64]) {
+        self.bytes.extend_from_slice(&time.to_ne_bytes());
+        for v in values {
+            self.bytes.extend_from_slice(&v.to_ne_bytes());
+        }
+    }
+
+    /// `(columns, data, stats)` for the Python `Result`.
+    fn into_py(self, py: Python<'_>, stats: Py<PyAny>) -> PyResult<Py<PyAny>> {
+        let data = PyBytes::new(py, &self.bytes);
+        let tuple = (self.columns, data, stats).into_pyobject(py)?;
+        Ok(tuple.into_any().unbind())
+    }
+}
+
+impl Observer for Rows {
+    fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
+        self.columns = columns.to_vec();
+        Ok(())
+    }
+
+    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
+        self.push(sample.time, sample.values);
+        Ok(())
+    }
+
+    fn finish(&mut self, _failure: Option<&str>) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Stops a run when Python has a pending signal: every [`SIGNAL_INTERVAL`]
+/// it takes the GIL and runs the signal handlers; an exception from one
+/// (`KeyboardInterrupt` for Ctrl-C) stops the run.
+struct Signals {
+    last: Instant,
+}
+
+impl Observer for Signals {
+    fn start(&mut self, _columns: &[String]) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn sample(&mut self, _sample: Sample<'_>) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn finish(&mut self, _failure: Option<&str>) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn interrupt(&mut self) -> Option<String> {
+        if self.last.elapsed() < SIGNAL_INTERVAL {
+            return None;
+        }
+        self.last = Instant::now();
+        Python::attach(|py| interrupt_reason(py.check_signals().err()?, py))
+    }
+}
+
+/// The reason a pending exception from a signal handler gives: the CLI's
+/// words for `KeyboardInterrupt`, else the exception itself.
+fn interrupt_reason(err: PyErr, py: Python<'_>) -> Option<String> {
+    if err.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py) {
+        Some(INTERRUPT_REASON.to_string())
+    } else {
+        Some(err.to_string())
+    }
+}
+
+fn stats_dict<'py>(
+    py: Python<'py>,
+    stats: &RunStats,
+    stop_reason: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("macro_steps", stats.macro_steps)?;
+    d.set_item("jacobian_solves", stats.jacobian_solves)?;
+    d.set_item("wall_time", stats.wall.as_secs_f64())?;
+    d.set_item("stop_reason", stop_reason)?;
+    let instances = PyDict::new(py);
+    for c in &stats.instances {
+        let i = PyDict::new(py);
+        i.set_item("do_step", c.do_steps)?;
+        i.set_item("get_fmu_state", c.state_gets)?;
+        i.set_item("set_fmu_state", c.state_sets)?;
+        i.set_item("set_real", c.set_reals)?;
+        i.set_item("get_real", c.get_reals)?;
+        i.set_item("set_real_input_derivatives", c.set_input_derivatives)?;
+        i.set_item("get_real_output_derivatives", c.get_output_derivatives)?;
+        instances.set_item(&c.name, i)?;
+    }
+    d.set_item("instances", instances)?;
+    let t = &stats.times;
+    let times = PyDict::new(py);
+    times.set_item("measured", t.measured)?;
+    times.set_item("setup", t.setup.as_secs_f64())?;
+    times.set_item("predictor", t.predictor.as_secs_f64())?;
+    times.set_item("jacobian", t.jacobian.as_secs_f64())?;
+    times.set_item("solve", t.solve.as_secs_f64())?;
+    times.set_item("corrector", t.corrector.as_secs_f64())?;
+    times.set_item("recording", t.recording.as_secs_f64())?;
+    d.set_item("times", times)?;
+    let p = &stats.parallel;
+    let parallel = PyDict::new(py);
+    parallel.set_item("workers", p.workers)?;
+    parallel.set_item("handoff", p.handoff.as_secs_f64())?;
+    parallel.set_item("sequential", p.sequential.as_secs_f64())?;
+    parallel.set_item("parallel", p.parallel.as_secs_f64())?;
+    d.set_item("parallel", parallel)?;
+    d.set_item("summary", stats.to_string())?;
+    Ok(d)
+}
+
+// ---------------------------------------------------------------------------
+// Systems and overrides
+
+/// A start value from a Python bool, int, float or str.
+fn start_value(value: &Bound<'_, PyAny>) -> PyResult<StartValue> {
+    if value.is_instance_of::<PyBool>() {
+        Ok(StartValue::Boolean(value.extract()?))
+    } else if value.is_instance_of::<PyInt>() {
+        Ok(StartValue::Integer(value.extract()?))
+    } else if value.is_instance_of::<PyFloat>() {
+        Ok(StartValue::Real(value.extract()?))
+    } else if value.is_instance_of::<PyString>() {
+        Ok(StartValue::String(value.extract()?))
+    } else if let Ok(real) = value.extract::<f64>() {
+        // NumPy scalars and other numbers.
+        Ok(StartValue::Real(real))
+    } else {
+        Err(PyTypeError::new_err(format!(
+            "a parameter value must be a bool, int, float or str, not {}",
+            value.get_type().name()?
+        )))
+    }
+}
+
+/// The run overrides from the keyword arguments of `tether.run`.
+fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
+    let mut o = Overrides::default();
+    let Some(kwargs) = kwargs else {
+        return Ok(o);
+    };
+    let real = |v: &Bound<'_, PyAny>| -> PyResult<Option<f64>> {
+        if v.is_none() {
+            Ok(None)
+        } else {
+            v.extract::<f64>().map(Some)
+        }
+    };
+    let mut method = MethodChange::default();
+    for (key, value) in kwargs.iter() {
+        let key: String = key.extract()?;
+        match key.as_str() {
+            "stop" => o.stop = real(&value)?,
+            "step" => o.step = real(&value)?,
+            "epsilon" => o.epsilon = real(&value)?,
+            "divergence_factor" => o.divergence_factor = real(&value)?,
+            "beta" => method.beta = real(&value)?,
+            "gamma" => method.gamma = real(&value)?,
+            "a" => method.a = real(&value)?,
+            "b" => method.b = real(&value)?,
+            "mu" => method.mu = real(&value)?,
+            "order" => {
+                if !value.is_none() {
+                    o.order = Some(value.extract()?);
+                }
+            }
+            "method" => {
+                if !value.is_none() {
+                    let name: String = value.extract()?;
+                    method.kind = Some(name.parse().map_err(|e| override_failure(&e))?);
+                }
+            }
+            "parallel" => {
+                if value.is_instance_of::<PyBool>() {
+                    let on: bool = value.extract()?;
+                    o.parallel = Some(if on {
+                        tether_master::Parallel::On
+                    } else {
+                        tether_master::Parallel::Off
+                    });
+                } else if !value.is_none() {
+                    let name: String = value.extract()?;
+                    o.parallel = Some(name.parse().map_err(|e: String| {
+                        failure("settings", format!("parallel: {e}"), None)
+                    })?);
+                }
+            }
+            "parameters" => {
+                if value.is_none() {
+                    continue;
+                }
+                let params = value.cast::<PyDict>().map_err(|_| {
+                    PyTypeError::new_err(
+                        "parameters must be a dict {\"instance.parameter\": value}",
+                    )
+                })?;
+                for (target, v) in params.iter() {
+                    let target: String = target.extract()?;
+                    // Checked like `--set` (instance.parameter, both non-empty).
+                    o.set(&format!("{target}=x"))
+                        .map_err(|e| override_failure(&e))?;
+                    o.parameters.insert(target, start_value(&v)?);
+                }
+            }
+            other => {
+                return Err(PyTypeError::new_err(format!(
+                "unexpected override '{other}'; expected stop, step, method, beta, gamma, a, b, \
+                     mu, order, epsilon, parallel, divergence_factor or parameters"
+            )))
+            }
+        }
+    }
+    o.method = method;
+    Ok(o)
+}
+
+/// The system from a file path or TOML text, with the overrides applied.
+fn load_spec(
+    path: Option<PathBuf>,
+    text: Option<&str>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<SystemSpec> {
+    // The overrides first: a bad keyword is reported as such.
+    let overrides = overrides(kwargs)?;
+    let mut spec = match (path, text) {
+        (Some(path), _) => SystemSpec::from_file(&path),
+        (None, Some(text)) => SystemSpec::from_toml(text),
+        (None, None) => return Err(PyValueError::new_err("no system given")),
+    }
+    .map_err(|e| master_failure(&e, None))?;
+    overrides
+        .apply(&mut spec)
+        .map_err(|e| override_failure(&e))?;
+    Ok(spec)
+}
+
+/// A TOML value as a Python object (tables as dicts).
+fn toml_to_py<'py>(py: Python<'py>, value: &toml::Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        toml::Value::String(s) => s.into_pyobject(py)?.into_any(),
+        toml::Value::Integer(i) => i.into_pyobject(py)?.into_any(),
+        toml::Value::Float(f) => f.into_pyobject(py)?.into_any(),
+        toml::Value::Boolean(b) => b.into_pyobject(py)?.to_owned().into_any(),
+        toml::Value::Datetime(d) => d.to_string().into_pyobject(py)?.into_any(),
+        toml::Value::Array(a) => {
+            let items = a
+                .iter()
+                .map(|v| toml_to_py(py, v))
+                .collect::<PyResult<Vec<_>>>()?;
+            PyList::new(py, items)?.into_any()
+        }
+        toml::Value::Table(t) => {
+            let d = PyDict::new(py);
+            for (k, v) in t {
+                d.set_item(k, toml_to_py(py, v)?)?;
+            }
+            d.into_any()
+        }
+    })
+}
+
+/// A Python object (dicts, lists, tuples, str, bool, int, float; `None`
+/// entries of dicts are left out) as a TOML value.
+fn py_to_toml(value: &Bound<'_, PyAny>) -> PyResult<toml::Value> {
+    Ok(if value.is_instance_of::<PyBool>() {
+        toml::Value::Boolean(value.extract()?)
+    } else if value.is_instance_of::<PyInt>() {
+        toml::Value::Integer(value.extract()?)
+    } else if value.is_instance_of::<PyString>() {
+        toml::Value::String(value.extract()?)
+    } else if let Ok(d) = value.cast::<PyDict>() {
+        let mut t = toml::Table::new();
+        for (k, v) in d.iter() {
+            if !v.is_none() {
+                t.insert(k.extract()?, py_to_toml(&v)?);
+            }
+        }
+        toml::Value::Table(t)
+    } else if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+        toml::Value::Array(
+            value
+                .try_iter()?
+                .map(|v| py_to_toml(&v?))
+                .collect::<PyResult<_>>()?,
+        )
+    } else if let Ok(path) = value.extract::<PathBuf>() {
+        toml::Value::String(path.to_string_lossy().into_owned())
+    } else if let Ok(f) = value.extract::<f64>() {
+        toml::Value::Float(f)
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "cannot write a {} into a system file",
+            value.get_type().name()?
+        )));
+    })
+}
+
+/// Read a system file into a dict shaped like the file (FMU paths resolved
+/// against the file's folder), raising the errors of `tether run`.
+#[pyfunction]
+fn load_system<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
+    let spec = SystemSpec::from_file(&path).map_err(|e| master_failure(&e, None))?;
+    let value = toml::Value::try_from(&spec).map_err(|e| {
+        failure(
+            "system",
+            format!("system file {}: {e}", path.display()),
+            None,
+        )
+    })?;
+    toml_to_py(py, &value)
+}
+
+/// A dict shaped like a system file as TOML text.
+#[pyfunction]
+fn dump_toml(value: &Bound<'_, PyAny>) -> PyResult<String> {
+    let value = py_to_toml(value)?;
+    toml::to_string(&value).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+// ---------------------------------------------------------------------------
+// Whole runs
+
+/// Run a system to its stop time with the GIL released; returns
+/// `(columns, data, stats)`.
+#[pyfunction]
+#[pyo3(signature = (path=None, text=None, **kwargs))]
+fn run(
+    py: Python<'_>,
+    path: Option<PathBuf>,
+    text: Option<&str>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Py<PyAny>> {
+    let spec = load_spec(path, text, kwargs)?;
+    let outcome = py.detach(move || -> Result<_, MasterError> {
+        let mut sim = Simulation::new(&spec)?;
+        let mut rows = Rows::default();
+        let width = sim.columns().len() + 1;
+        let points = usize::try_from(sim.total_steps()).unwrap_or(usize::MAX);
+        // Reserve the whole result up front (at most 1 GiB; beyond it grows).
+        rows.bytes.reserve(
+            (points.saturating_add(1))
+                .saturating_mul(width * 8)
+                .min(1 << 30),
+        );
+        let mut signals = Signals {
+            last: Instant::now(),
+        };
+        let result = sim.run(&mut [&mut rows, &mut signals], &mut |_, _| {});
+        Ok((rows, result.map(|_| ()), sim.stats()))
+    });
+    match outcome {
+        // The run could not start: no results.
+        Err(e) => Err(master_failure(&e, None)),
+        Ok((rows, Ok(()), stats)) => {
+            let stats = stats_dict(py, &stats, "completed")?.into_any().unbind();
+            rows.into_py(py, stats)
+        }
+        Ok((rows, Err(e), stats)) => {
+            let stats = stats_dict(py, &stats, &message(&e))?.into_any().unbind();
+            let partial = rows.into_py(py, stats)?;
+            Err(master_failure(&e, Some(partial)))
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Step-wise
+
+/// A coupled run advanced step by step from Python.
+#[pyclass(unsendable, name = "Simulation")]
+struct PySimulation {
+    /// `None` once closed.
+    sim: Option<Simulation>,
+    /// Accepted macro steps so far.
+    n: u64,
+    start: f64,
+    step: f64,
+    rows: Rows,
+    /// The error that stopped the run, if any: no more steps after it.
+    failed: Option<String>,
+    /// The counters at [`close`](Self::close).
+    closed_stats: Option<(RunStats, u64)>,
+}
+
+impl PySimulation {
+    fn sim(&self) -> PyResult<&Simulation> {
+        self.sim.as_ref().ok_or_else(closed)
+    }
+}
+
+fn closed() -> PyErr {
+    failure("other", "the simulation is closed".into(), None)
+}
+
+#[pymethods]
+impl PySimulation {
+    #[new]
+    #[pyo3(signature = (path=None, text=None, **kwargs))]
+    fn new(
+        path: Option<PathBuf>,
+        text: Option<&str>,
+        kwargs: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let spec = load_spec(path, text, kwargs)?;
+        let sim = Simulation::new(&spec).map_err(|e| master_failure(&e, None))?;
+        let mut rows = Rows {
+            columns: sim.columns().to_vec(),
+            bytes: Vec::new(),
+        };
+        rows.push(sim.time(), sim.values());
+        Ok(PySimulation {
+            sim: Some(sim),
+            n: 0,
+            start: spec.experiment.start,
+            step: spec.experiment.step,
+            rows,
+            failed: None,
+            closed_stats: None,
+        })
+    }
+
+    /// Free the FMU instances and remove their unpacked folders now (also
+    /// done when the object is collected); the results so far stay.
+    fn close(&mut self) {
+        if let Some(sim) = self.sim.take() {
+            self.closed_stats = Some((sim.stats(), sim.total_steps()));
+        }
+    }
+
+    /// Whether [`close`](Self::close) was called.
+    #[getter]
+    fn closed(&self) -> bool {
+        self.sim.is_none()
+    }
+
+    /// Column names after `time`.
+    #[getter]
+    fn columns(&self) -> PyResult<Vec<String>> {
+        Ok(self.sim()?.columns().to_vec())
+    }
+
+    /// The current macro time.
+    #[getter]
+    fn time(&self) -> PyResult<f64> {
+        Ok(self.sim()?.time())
+    }
+
+    /// Accepted macro steps so far.
+    #[getter]
+    fn steps(&self) -> u64 {
+        self.n
+    }
+
+    /// Macro steps to the stop time.
+    #[getter]
+    fn total_steps(&self) -> PyResult<u64> {
+        Ok(self.sim()?.total_steps())
+    }
+
+    /// The values of the current point, in column order.
+    #[getter]
+    fn values(&self) -> PyResult<Vec<f64>> {
+        Ok(self.sim()?.values().to_vec())
+    }
+
+    /// The coupling unknowns of the current point.
+    #[getter]
+    fn unknowns(&self) -> PyResult<Vec<f64>> {
+        Ok(self.sim()?.unknowns())
+    }
+
+    /// Counters so far, as a dict.
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (stats, total) = match (&self.sim, &self.closed_stats) {
+            (Some(sim), _) => (sim.stats(), sim.total_steps()),
+            (None, Some((stats, total))) => (stats.clone(), *total),
+            (None, None) => return Err(closed()),
+        };
+        let reason = match (&self.failed, self.n >= total) {
+            (Some(e), _) => e.clone(),
+            (None, true) => "completed".to_string(),
+            (None, false) => "running".to_string(),
+        };
+        stats_dict(py, &stats, &reason)
+    }
+
+    /// `(columns, data, stats)` of every point so far.
+    fn result(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+        let stats = self.stats(py)?.into_any().unbind();
+        let rows = Rows {
+            columns: self.rows.columns.clone(),
+            bytes: self.rows.bytes.clone(),
+        };
+        rows.into_py(py, stats)
+    }
+
+    /// Advance up to `count` macro steps, stopping at the stop time and on
+    /// Ctrl-C; returns the number of steps made.
+    fn advance(&mut self, py: Python<'_>, count: u64) -> PyResult<u64> {
+        if let Some(e) = &self.failed {
+            return Err(failure(
+                "other",
+                format!("the simulation stopped earlier: {e}"),
+                None,
+            ));
+        }
+        let Some(sim) = self.sim.as_mut() else {
+            return Err(closed());
+        };
+        let mut made = 0;
+        let mut last = Instant::now();
+        while made < count && self.n < sim.total_steps() {
+            if last.elapsed() >= SIGNAL_INTERVAL {
+                last = Instant::now();
+                // The run cannot leave the GIL (a `Simulation` stays on its
+                // thread), so it lets other Python threads in now and then.
+                py.detach(|| ());
+                if let Some(err) = py.check_signals().err() {
+                    let reason = interrupt_reason(err, py).unwrap_or_default();
+                    let e = MasterError::Interrupted {
+                        time: sim.time(),
+                        reason,
+                    };
+                    return Err(master_failure(&e, None));
+                }
+            }
+            if let Err(e) = sim.step() {
+                let text = message(&e);
+                self.failed = Some(text);
+                return Err(master_failure(&e, None));
+            }
+            self.n += 1;
+            made += 1;
+            self.rows.push(sim.time(), sim.values());
+        }
+        Ok(made)
+    }
+
+    /// The number of steps from now to the first grid point at or after `t`.
+    fn steps_to(&self, t: f64) -> PyResult<u64> {
+        let total = self.sim()?.total_steps();
+        let target = ((t - self.start) / self.step - 1e-9).ceil();
+        let target = if target.is_nan() || target < 0.0 {
+            0
+        } else {
+            (target as u64).min(total)
+        };
+        Ok(target.saturating_sub(self.n))
+    }
+}
+
+// ---------------------------------------------------------------------------
+// One FMU
+
+/// A model description as a dict, with fmpy's attribute names.
+#[pyfunction]
+fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
+    let opened = Fmu::open(&fmu).map_err(|e| failure("fmu", message(&e), None))?;
+    let md = opened.model_description();
+    let d = PyDict::new(py);
+    d.set_item("fmiVersion", &md.fmi_version)?;
+    d.set_item("modelName", &md.model_name)?;
+    d.set_item("guid", &md.guid)?;
+    d.set_item("description", &md.description)?;
+    d.set_item("author", &md.author)?;
+    d.set_item("version", &md.version)?;
+    d.set_item("copyright", &md.copyright)?;
+    d.set_item("license", &md.license)?;
+    d.set_item("generationTool", &md.generation_tool)?;
+    d.set_item("generationDateAndTime", &md.generation_date_and_time)?;
+    let cs = &md.co_simulation;
+    let c = PyDict::new(py);
+    c.set_item("modelIdentifier", &cs.model_identifier)?;
+    c.set_item("needsExecutionTool", cs.needs_execution_tool)?;
+    c.set_item(
+        "canHandleVariableCommunicationStepSize",
+        cs.can_handle_variable_communication_step_size,
+    )?;
+    c.set_item("canInterpolateInputs", cs.can_interpolate_inputs)?;
+    c.set_item("maxOutputDerivativeOrder", cs.max_output_derivative_order)?;
+    c.set_item("canRunAsynchronuously", cs.can_run_asynchronuously)?;
+    c.set_item(
+        "canBeInstantiatedOnlyOncePerProcess",
+        cs.can_be_instantiated_only_once_per_process,
+    )?;
+    c.set_item(
+        "canNotUseMemoryManagementFunctions",
+        cs.can_not_use_memory_management_functions,
+    )?;
+    c.set_item("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state)?;
+    c.set_item("canSerializeFMUstate", cs.can_serialize_fmu_state)?;
+    c.set_item(
+        "providesDirectionalDerivative",
+        cs.provides_directional_derivative,
+    )?;
+    d.set_item("coSimulation", c)?;
+    d.set_item("modelExchange", &md.model_exchange)?;
+    match &md.default_experiment {
+        Some(de) => {
+            let e = PyDict::new(py);
+            e.set_item("startTime", de.start_time)?;
+            e.set_item("stopTime", de.stop_time)?;
+            e.set_item("stepSize", de.step_size)?;
+            e.set_item("tolerance", de.tolerance)?;
+            d.set_item("defaultExperiment", e)?;
+        }
+        None => d.set_item("defaultExperiment", py.None())?,
+    }
+    let variables = PyList::empty(py);
+    for v in &md.model_variables {
+        let x = PyDict::new(py);
+        x.set_item("name", &v.name)?;
+        x.set_item("valueReference", v.value_reference)?;
+        x.set_item("description", &v.description)?;
+        x.set_item(
+            "causality",
+            match v.causality {
+                Causality::Parameter => "parameter",
+                Causality::CalculatedParameter => "calculatedParameter",
+                Causality::Input => "input",
+                Causality::Output => "output",
+                Causality::Local => "local",
+                Causality::Independent => "independent",
+            },
+        )?;
+        x.set_item(
+            "variability",
+            match v.variability {
+                Variability::Constant => "constant",
+                Variability::Fixed => "fixed",
+                Variability::Tunable => "tunable",
+                Variability::Discrete => "discrete",
+                Variability::Continuous => "continuous",
+            },
+        )?;
+        x.set_item(
+            "initial",
+            v.initial.map(|i| match i {
+                Initial::Exact => "exact",
+                Initial::Approx => "approx",
+                Initial::Calculated => "calculated",
+            }),
+        )?;
+        match &v.kind {
+            VariableKind::Real(r) => {
+                x.set_item("type", "Real")?;
+                x.set_item("start", r.start)?;
+                x.set_item("unit", &r.attributes.unit)?;
+            }
+            VariableKind::Integer(i) => {
+                x.set_item("type", "Integer")?;
+                x.set_item("start", i.start)?;
+                x.set_item("unit", py.None())?;
+            }
+            VariableKind::Enumeration(i) => {
+                x.set_item("type", "Enumeration")?;
+                x.set_item("start", i.start)?;
+                x.set_item("unit", py.None())?;
+            }
+            VariableKind::Boolean(b) => {
+                x.set_item("type", "Boolean")?;
+                x.set_item("start", b.start)?;
+                x.set_item("unit", py.None())?;
+            }
+            VariableKind::String(s) => {
+                x.set_item("type", "String")?;
+                x.set_item("start", &s.start)?;
+                x.set_item("unit", py.None())?;
+            }
+        }
+        variables.append(x)?;
+    }
+    d.set_item("modelVariables", variables)?;
+    Ok(d)
+}
+
+/// One FMU at a fixed communication step, like `tether simulate`: every
+/// non-String output at every step. Returns `(columns, data, stats)`.
+#[pyfunction]
+#[pyo3(signature = (fmu, start=None, stop=None, step=None, tolerance=None, parameters=None))]
+fn simulate(
+    py: Python<'_>,
+    fmu: PathBuf,
+    start: Option<f64>,
+    stop: Option<f64>,
+    step: Option<f64>,
+    tolerance: Option<f64>,
+    parameters: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Py<PyAny>> {
+    let mut values = BTreeMap::new();
+    if let Some(parameters) = parameters {
+        for (name, value) in parameters.iter() {
+            values.insert(name.extract::<String>()?, start_value(&value)?);
+        }
+    }
+    let outcome = py.detach(move || simulate_one(&fmu, start, stop, step, tolerance, &values));
+    match outcome {
+        Err((e, None)) => Err(e.into_err(None)),
+        Err((e, Some((rows, steps)))) => {
+            let stats = simulate_stats(py, steps, &e.message)?;
+            let partial = rows.into_py(py, stats)?;
+            Err(e.into_err(Some(partial)))
+        }
+        Ok((rows, steps)) => {
+            let stats = simulate_stats(py, steps, "completed")?;
+            rows.into_py(py, stats)
+        }
+    }
+}
+
+fn simulate_stats(py: Python<'_>, steps: u64, reason: &str) -> PyResult<Py<PyAny>> {
+    let d = PyDict::new(py);
+    d.set_item("macro_steps", steps)?;
+    d.set_item("stop_reason", reason)?;
+    Ok(d.into_any().unbind())
+}
+
+/// A failure of [`simulate_one`], made into a Python error with the GIL.
+struct SimulateError {
+    kind: &'static str,
+    message: String,
+}
+
+impl SimulateError {
+    fn into_err(self, partial: Option<Py<PyAny>>) -> PyErr {
+        failure(self.kind, self.message, partial)
+    }
+}
+
+impl From<tether_fmi::Error> for SimulateError {
+    fn from(e: tether_fmi::Error) -> Self {
+        SimulateError {
+            kind: "fmu",
+            message: message(&e),
+        }
+    }
+}
+
+impl From<MasterError> for SimulateError {
+    fn from(e: MasterError) -> Self {
+        SimulateError {
+            kind: kind_of(&e),
+            message: message(&e),
+        }
+    }
+}
+
+type Simulated = (Rows, u64);
+
+/// The loop of `tether simulate` (crates/tether-cli/src/simulate.rs),
+/// recording into memory; the error carries the rows so far once the
+/// recording started.
+fn simulate_one(
+    path: &Path,
+    start: Option<f64>,
+    stop: Option<f64>,
+    step: Option<f64>,
+    tolerance: Option<f64>,
+    parameters: &BTreeMap<String, StartValue>,
+) -> Result<Simulated, (SimulateError, Option<Simulated>)> {
+    let early = |e: SimulateError| (e, None);
+    let fmu = Fmu::open(path).map_err(|e| early(e.into()))?;
+    let md = fmu.model_description().clone();
+    let de = md.default_experiment.unwrap_or_default();
+    let start = start.or(de.start_time).unwrap_or(0.0);
+    let stop = stop.or(de.stop_time).unwrap_or(start + 1.0);
+    let step = step.or(de.step_size).unwrap_or((stop - start) / 500.0);
+    let tolerance = tolerance.or(de.tolerance);
+    let invalid = |message: String| {
+        early(SimulateError {
+            kind: "settings",
+            message,
+        })
+    };
+    if !(start.is_finite() && stop.is_finite() && stop > start) {
+        return Err(invalid(format!(
+            "invalid time span: start {start}, stop {stop} (stop must be after start)"
+        )));
+    }
+    if !(step.is_finite() && step > 0.0) {
+        return Err(invalid(format!(
+            "invalid step {step}: expected a finite step > 0"
+        )));
+    }
+    let steps = ((stop - start) / step).round().max(1.0) as u64;
+    let outputs: Vec<_> = md
+        .model_variables
+        .iter()
+        .filter(|v| v.causality == Causality::Output && v.base_type() != BaseType::String)
+        .collect();
+    let slots = |kinds: &[BaseType]| -> Vec<(usize, u32)> {
+        outputs
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| kinds.contains(&v.base_type()))
+            .map(|(i, v)| (i, v.value_reference))
+            .collect()
+    };
+    let real = slots(&[BaseType::Real]);
+    let int = slots(&[BaseType::Integer, BaseType::Enumeration]);
+    let boolean = slots(&[BaseType::Boolean]);
+    let real_vrs: Vec<u32> = real.iter().map(|x| x.1).collect();
+    let int_vrs: Vec<u32> = int.iter().map(|x| x.1).collect();
+    let bool_vrs: Vec<u32> = boolean.iter().map(|x| x.1).collect();
+
+    let name = md.co_simulation.model_identifier.clone();
+    let mut instance = fmu
+        .instantiate(&name, Default::default())
+        .map_err(|e| early(e.into()))?;
+    for (var, value) in parameters {
+        apply_start_value(&mut instance, &md, var, value).map_err(|e| early(e.into()))?;
+    }
+    let init = (|| -> Result<(), tether_fmi::Error> {
+        instance.setup_experiment(tolerance, start, Some(stop))?;
+        instance.enter_initialization_mode()?;
+        instance.exit_initialization_mode()
+    })();
+    init.map_err(|e| early(e.into()))?;
+
+    let mut rows = Rows {
+        columns: outputs.iter().map(|v| v.name.clone()).collect(),
+        bytes: Vec::with_capacity(
+            usize::try_from(steps + 1)
+                .unwrap_or(usize::MAX)
+                .saturating_mul((outputs.len() + 1) * 8)
+                .min(1 << 30),
+        ),
+    };
+    let mut row = vec![0.0; outputs.len()];
+    let mut real_buf = vec![0.0; real.len()];
+    let mut int_buf = vec![0; int.len()];
+    let mut bool_buf = vec![false; boolean.len()];
+    let mut record = |instance: &mut tether_fmi::Instance,
+                      rows: &mut Rows,
+                      n: u64|
+     -> Result<(), tether_fmi::Error> {
+        instance.get_real(&real_vrs, &mut real_buf)?;
+        instance.get_integer(&int_vrs, &mut int_buf)?;
+        instance.get_boolean(&bool_vrs, &mut bool_buf)?;
+        for (k, &(slot, _)) in real.iter().enumerate() {
+            row[slot] = real_buf[k];
+        }
+        for (k, &(slot, _)) in int.iter().enumerate() {
+            row[slot] = f64::from(int_buf[k]);
+        }
+        for (k, &(slot, _)) in boolean.iter().enumerate() {
+            row[slot] = if bool_buf[k] { 1.0 } else { 0.0 };
+        }
+        rows.push(start + n as f64 * step, &row);
+        Ok(())
+    };
+    let mut signals = Signals {
+        last: Instant::now(),
+    };
+    let mut outcome: Result<(), SimulateError> =
+        record(&mut instance, &mut rows, 0).map_err(Into::into);
+    let mut made = 0;
+    for n in 1..=steps {
+        if outcome.is_err() {
+            break;
+        }
+        if let Some(reason) = signals.interrupt() {
+            outcome = Err(MasterError::Interrupted {
+                time: start + (n - 1) as f64 * step,
+                reason,
+            }
+            .into());
+            break;
+        }
+        outcome = instance
+            .do_step(start + (n - 1) as f64 * step, step, true)
+            .and_then(|()| record(&mut instance, &mut rows, n))
+            .map_err(Into::into);
+        if outcome.is_ok() {
+            made = n;
+        }
+    }
+    if let Err(e) = outcome {
+        return Err((e, Some((rows, made))));
+    }
+    instance.terminate().map_err(|e| (e.into(), None))?;
+    Ok((rows, made))
+}
+
+/// The module `tether._tether`.
+#[pymodule]
+fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("Failure", m.py().get_type::<Failure>())?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(info, m)?)?;
+    m.add_function(wrap_pyfunction!(load_system, m)?)?;
+    m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
+    m.add_class::<PySimulation>()?;
+    Ok(())
+}

@@ -1,0 +1,71 @@
+"""Shared fixtures: the repository, its FMUs (``cargo xtask fmus``) and the
+``tether`` binary (``cargo build --release -p tether-cli``, or $TETHER_BIN)."""
+
+import csv
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def _need(path: Path, how: str) -> Path:
+    if not path.exists():
+        pytest.fail(f"{path} is missing: {how}")
+    return path
+
+
+@pytest.fixture(scope="session")
+def root() -> Path:
+    return ROOT
+
+
+@pytest.fixture(scope="session")
+def oscillator_fmu() -> Path:
+    return _need(ROOT / "target" / "fmus" / "oscillator.fmu", "run `cargo xtask fmus`")
+
+
+@pytest.fixture(scope="session")
+def oscillator_toml(oscillator_fmu) -> Path:
+    return ROOT / "examples" / "oscillator.toml"
+
+
+@pytest.fixture(scope="session")
+def tether_bin() -> Path:
+    given = os.environ.get("TETHER_BIN")
+    path = Path(given) if given else ROOT / "target" / "release" / "tether"
+    return _need(path, "run `cargo build --release -p tether-cli` or set TETHER_BIN")
+
+
+def read_csv(path: Path):
+    """(columns, rows as float64 array, trailer comment or None) of a tether CSV."""
+    lines = path.read_text().splitlines()
+    trailer = None
+    if lines and lines[-1].startswith("#"):
+        trailer = lines.pop()
+    table = list(csv.reader(lines))
+    header = table[0]
+    rows = np.array([[float(x) for x in row] for row in table[1:]], dtype=np.float64)
+    return header, rows.reshape(len(table) - 1, len(header)), trailer
+
+
+def cli(tether_bin: Path, *args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [str(tether_bin), *args], capture_output=True, text=True, cwd=cwd, check=False
+    )
+
+
+def error_line(proc: subprocess.CompletedProcess) -> str:
+    """The CLI's one-line error without its `error: ` prefix."""
+    lines = [l for l in proc.stderr.splitlines() if l.startswith("error: ")]
+    assert lines, proc.stderr
+    return lines[-1][len("error: ") :]
+
+
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    b = np.ascontiguousarray(b, dtype=np.float64)
+    return a.shape == b.shape and bool(np.array_equal(a.view(np.uint64), b.view(np.uint64)))

@@ -1,0 +1,156 @@
+"""tether.run against the CLI's CSV, bit for bit, and the Result API."""
+
+import numpy as np
+import pytest
+
+import tether
+from conftest import cli, read_csv, same_bits
+
+VARIANTS = [
+    {},
+    {"method": "weighted", "a": 1e-3, "b": 1e-7},
+    {"method": "explicit", "mu": 5e-3, "step": 2e-3},
+    {"beta": 5e-3, "gamma": 2e-6, "order": 2, "epsilon": 1e-6, "parameters": {"mass2.m": 3.0, "mass1.d": 0}},
+    {"stop": 0.25, "order": 1, "parallel": "off", "parameters": {"mass1.m": 2}},
+]
+
+
+def flags(overrides):
+    out = []
+    for key, value in overrides.items():
+        if key == "parameters":
+            for target, v in value.items():
+                out += ["--set", f"{target}={v}"]
+        else:
+            out += [f"--{key}", str(value)]
+    return out
+
+
+@pytest.mark.parametrize("overrides", VARIANTS, ids=lambda o: ",".join(o) or "file")
+def test_run_equals_cli_csv_bit_for_bit(tmp_path, tether_bin, oscillator_toml, overrides):
+    csv = tmp_path / "cli.csv"
+    proc = cli(tether_bin, "run", str(oscillator_toml), "--out", str(csv), "--quiet", *flags(overrides))
+    assert proc.returncode == 0, proc.stderr
+    header, rows, trailer = read_csv(csv)
+    assert trailer is None
+
+    result = tether.run(oscillator_toml, **overrides)
+    assert result.complete
+    assert ["time"] + result.columns == header
+    assert same_bits(result.time, rows[:, 0])
+    for i, name in enumerate(header):
+        assert same_bits(result[name], rows[:, i]), name
+    table = result.to_numpy()
+    assert list(table.dtype.names) == header
+    assert same_bits(table.view(np.float64).reshape(len(table), -1), rows)
+
+
+def test_double_pendulum_equals_cli(tmp_path, tether_bin, root, oscillator_fmu):
+    system = root / "examples" / "double_pendulum.toml"
+    csv = tmp_path / "cli.csv"
+    proc = cli(tether_bin, "run", str(system), "--out", str(csv), "--quiet", "--stop", "0.2")
+    assert proc.returncode == 0, proc.stderr
+    header, rows, _ = read_csv(csv)
+    result = tether.run(system, stop=0.2)
+    assert ["time"] + result.columns == header
+    assert same_bits(result.to_numpy().view(np.float64).reshape(len(result), -1), rows)
+
+
+def test_result_api(oscillator_toml):
+    result = tether.run(oscillator_toml, stop=0.1)
+    assert len(result) == 101
+    assert "mass1.x" in result and "time" in result and "nope" not in result
+    assert list(result) == ["time"] + result.columns
+    x = result["mass1.x"]
+    assert x.dtype == np.float64 and x.shape == (101,) and x.flags.writeable
+    with pytest.raises(KeyError, match="no column 'nope'"):
+        result["nope"]
+    stats = result.stats
+    assert stats["macro_steps"] == 100
+    assert stats["stop_reason"] == "completed"
+    assert stats["jacobian_solves"] > 0
+    assert stats["wall_time"] > 0
+    assert set(stats["instances"]) == {"mass1", "mass2"}
+    assert stats["instances"]["mass1"]["do_step"] > 100
+    assert set(stats["instances"]["mass1"]) == {
+        "do_step", "get_fmu_state", "set_fmu_state", "set_real", "get_real",
+        "set_real_input_derivatives", "get_real_output_derivatives",
+    }
+    assert set(stats["times"]) >= {"setup", "predictor", "jacobian", "solve", "corrector", "recording"}
+    assert "macro steps: 100" in stats["summary"]
+
+
+def test_fmpy_write_csv_accepts_the_result(tmp_path, oscillator_toml):
+    fmpy_util = pytest.importorskip("fmpy.util")
+    result = tether.run(oscillator_toml, stop=0.05)
+    out = tmp_path / "fmpy.csv"
+    fmpy_util.write_csv(str(out), result.to_numpy())
+    lines = out.read_text().splitlines()
+    assert lines[0].replace('"', "").split(",") == ["time"] + result.columns
+    assert len(lines) == 1 + len(result)
+    first = [float(v) for v in lines[2].split(",")]
+    assert np.allclose(first, result.to_numpy()[1].tolist(), rtol=1e-15, atol=0)
+
+
+def test_fmpy_plot_result_accepts_the_result(tmp_path, oscillator_toml):
+    # fmpy 0.3's plot_result draws with plotly: create_plotly_figure is its
+    # whole reading of the result (writing an image then needs kaleido).
+    fmpy_util = pytest.importorskip("fmpy.util")
+    pytest.importorskip("plotly")
+    result = tether.run(oscillator_toml, stop=0.05)
+    figure = fmpy_util.create_plotly_figure(result.to_numpy(), names=["mass1.x", "link.lambda"])
+    out = tmp_path / "plot.html"
+    figure.write_html(str(out))
+    assert out.stat().st_size > 0
+    assert len(figure.data) == 2
+    assert np.array_equal(np.asarray(figure.data[0].y), result["mass1.x"])
+
+
+def test_to_pandas(oscillator_toml):
+    pd = pytest.importorskip("pandas")
+    frame = tether.run(oscillator_toml, stop=0.01).to_pandas()
+    assert isinstance(frame, pd.DataFrame)
+    assert list(frame.columns)[:2] == ["time", "mass1.x"]
+
+
+def test_system_from_file_runs_the_same(oscillator_toml):
+    system = tether.System.from_file(oscillator_toml)
+    assert [i["name"] for i in system.instances] == ["mass1", "mass2"]
+    text = system.to_toml()
+    assert "[[constraint]]" in text and "kind = \"baumgarte\"" in text
+    a = tether.run(oscillator_toml, stop=0.2)
+    b = tether.run(system, stop=0.2)
+    assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))
+
+
+def test_system_built_in_code_runs_like_the_file(tmp_path, oscillator_toml, oscillator_fmu):
+    system = (
+        tether.System("two-mass oscillator")
+        .experiment(stop=0.2, step=1e-3)
+        .method("baumgarte", beta=2e-3, gamma=1e-6)
+        .coupling(order=0, epsilon=1e-5)
+        .add_instance("mass1", oscillator_fmu, {"m": 1.0, "c": 1000.0, "d": 10.0, "x0": 0.0, "v0": 100.0})
+        .add_instance("mass2", oscillator_fmu, {"m": 2.0, "c": 1000.0, "d": 10.0, "x0": 0.0, "v0": 100.0})
+        .add_constraint(
+            "link",
+            position="mass2.x - mass1.x",
+            velocity="mass2.v - mass1.v",
+            acceleration="mass2.a - mass1.a",
+            drives="mass1.F - mass2.F",
+            initial="consistent",
+        )
+    )
+    a = tether.run(oscillator_toml, stop=0.2)
+    b = tether.run(system)
+    assert a.columns == b.columns
+    assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))
+    # The text is a system file the CLI reads too.
+    path = tmp_path / "built.toml"
+    system.save(path)
+    c = tether.run(path)
+    assert same_bits(a.to_numpy().view(np.float64), c.to_numpy().view(np.float64))
+
+
+def test_system_without_experiment_is_an_error():
+    with pytest.raises(tether.SystemFileError, match="no experiment"):
+        tether.System().to_toml()
