@@ -93,7 +93,7 @@ pub fn main(args: Args) -> Result<()> {
     let mut real_buf = vec![0.0; real.len()];
     let mut int_buf = vec![0; int.len()];
     let mut bool_buf = vec![false; boolean.len()];
-    let mut record = |instance: &mut tether_fmi::Instance, n: u64| -> Result<()> {
+    let mut record = |instance: &mut tether_fmi::Instance, n: u64, time: f64| -> Result<()> {
         instance.get_real(&real_vrs, &mut real_buf)?;
         instance.get_integer(&int_vrs, &mut int_buf)?;
         instance.get_boolean(&bool_vrs, &mut bool_buf)?;
@@ -109,14 +109,16 @@ pub fn main(args: Args) -> Result<()> {
         recorder
             .sample(Sample {
                 step: n,
-                time: start + n as f64 * step,
+                time,
                 values: &row,
             })
             .with_context(cannot_write)?;
         Ok(())
     };
     // Every failure after the header, the FMU's or ours, ends the CSV with its trailer.
-    let mut outcome = record(&mut instance, 0);
+    let mut outcome = record(&mut instance, 0, start);
+    // Set when the FMU asks to end the simulation: the time it reached.
+    let mut terminated_at = None;
     for n in 1..=steps {
         if outcome.is_err() {
             break;
@@ -129,10 +131,25 @@ pub fn main(args: Args) -> Result<()> {
             .into());
             break;
         }
-        outcome = instance
-            .do_step(start + (n - 1) as f64 * step, step, true)
-            .map_err(anyhow::Error::from)
-            .and_then(|()| record(&mut instance, n));
+        let time = start + n as f64 * step;
+        outcome = match instance.do_step(start + (n - 1) as f64 * step, step, true) {
+            Ok(()) => record(&mut instance, n, time),
+            // fmi2Discard with fmi2Terminated: the FMU ends the simulation; the
+            // point it reached is the last row (as fmpy records it).
+            Err(e @ tether_fmi::Error::Discard { .. }) => match instance.terminated() {
+                Ok(true) => {
+                    let at = instance.last_successful_time().unwrap_or(time);
+                    terminated_at = Some(at);
+                    let recorded = record(&mut instance, n, at);
+                    if recorded.is_ok() {
+                        break;
+                    }
+                    recorded
+                }
+                _ => Err(e.into()),
+            },
+            Err(e) => Err(e.into()),
+        };
     }
     let failure = outcome.as_ref().err().map(|e| format!("{e:#}"));
     recorder
@@ -145,10 +162,17 @@ pub fn main(args: Args) -> Result<()> {
         )
     })?;
     instance.terminate()?;
-    eprintln!(
-        "{name}: {steps} steps of {step} from {start} to {stop}; results: {}",
-        out.display()
-    );
+    match terminated_at {
+        None => eprintln!(
+            "{name}: {steps} steps of {step} from {start} to {stop}; results: {}",
+            out.display()
+        ),
+        Some(at) => eprintln!(
+            "{name}: steps of {step} from {start}; the FMU requested the end of the simulation \
+             at t = {at} (fmi2Discard, fmi2Terminated), before the stop time {stop}; results: {}",
+            out.display()
+        ),
+    }
     Ok(())
 }
 

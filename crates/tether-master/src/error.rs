@@ -167,6 +167,17 @@ pub enum MasterError {
         /// Why, e.g. `SIGINT`.
         reason: String,
     },
+    /// An instance asked to end the simulation: `fmi2DoStep` returned
+    /// fmi2Discard and `fmi2GetBooleanStatus(fmi2Terminated)` is true.
+    /// [`crate::Simulation::run`] ends normally on it (docs/fmi-import.md).
+    #[error("instance '{instance}' requested the end of the simulation at t = {time} (fmi2DoStep returned fmi2Discard with fmi2Terminated = true)")]
+    TerminationRequested {
+        /// Instance name.
+        instance: String,
+        /// The instance's `fmi2LastSuccessfulTime` (the step's end if it
+        /// does not say).
+        time: f64,
+    },
     /// An FMI call or FMU load failed.
     #[error(transparent)]
     Fmi(#[from] tether_fmi::Error),

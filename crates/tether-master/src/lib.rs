@@ -53,5 +53,5 @@ pub use spec::{
     InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
-pub use stats::{InstanceCounters, PhaseTimes, RunStats};
+pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination};
 pub use threads::{Parallel, ParallelInfo};

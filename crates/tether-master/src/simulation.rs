@@ -11,7 +11,7 @@ use crate::observer::{Observer, Sample};
 use crate::predictor_corrector::PredictorCorrector;
 use crate::rows::RowLevel;
 use crate::spec::SystemSpec;
-use crate::stats::{Lap, RunStats};
+use crate::stats::{Lap, RunStats, Termination};
 use crate::system::{MacroStep, StepAt, System};
 use crate::threads;
 use crate::{Experiment, MasterError, Method};
@@ -181,7 +181,10 @@ impl Simulation {
     }
 
     /// Run to the stop time, feeding every accepted point to the observers.
-    /// On failure the observers are finished with the error message (results
+    /// An instance's request to end the simulation (fmi2Discard with
+    /// `fmi2Terminated`) ends the run normally at the last accepted point,
+    /// noted in [`RunStats::termination`]. On a normal end every instance is
+    /// terminated (`fmi2Terminate`). On failure the observers are finished with the error message (results
     /// up to the last accepted step are kept) and the error is returned.
     pub fn run(
         &mut self,
@@ -200,11 +203,23 @@ impl Simulation {
                     let time = self.time();
                     return Err(MasterError::Interrupted { time, reason });
                 }
-                self.step()?;
+                match self.step() {
+                    Ok(()) => {}
+                    Err(MasterError::TerminationRequested { instance, time }) => {
+                        self.stats.termination = Some(Termination {
+                            instance,
+                            requested_at: time,
+                            ended_at: self.time(),
+                        });
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                }
                 self.notify(observers)?;
                 progress(self.n, self.steps);
             }
-            Ok(())
+            // A normal end: fmi2Terminate before the instances are freed.
+            self.system.terminate()
         })();
         let message = outcome.as_ref().err().map(|e: &MasterError| e.to_string());
         // Every observer is finished, even after another one failed; the

@@ -299,9 +299,39 @@ impl Slave {
     }
 
     /// One `fmi2DoStep` from `t` over `h`.
+    /// fmi2Discard with `fmi2Terminated` true is
+    /// [`MasterError::TerminationRequested`].
     pub(crate) fn do_step(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
         self.counters.do_steps += 1;
-        self.instance.do_step(t, h, true)?;
+        match self.instance.do_step(t, h, true) {
+            Ok(()) => Ok(()),
+            Err(e) => Err(self.step_failure(e, t + h)),
+        }
+    }
+
+    /// The error of a failed `fmi2DoStep` to `end`: a request to end the
+    /// simulation (fmi2Discard with `fmi2Terminated`), else the FMI error.
+    #[cold]
+    #[inline(never)]
+    fn step_failure(&mut self, e: tether_fmi::Error, end: f64) -> MasterError {
+        if matches!(e, tether_fmi::Error::Discard { .. })
+            && matches!(self.instance.terminated(), Ok(true))
+        {
+            let time = self.instance.last_successful_time().unwrap_or(end);
+            return MasterError::TerminationRequested {
+                instance: self.name.clone(),
+                time,
+            };
+        }
+        e.into()
+    }
+
+    /// `fmi2Terminate`, at a normal end of the run (not after a fatal error:
+    /// tether-fmi then calls nothing).
+    pub(crate) fn terminate(&mut self) -> Result<(), MasterError> {
+        if !self.instance.is_fatal() {
+            self.instance.terminate()?;
+        }
         Ok(())
     }
 

@@ -98,6 +98,14 @@ impl System {
         Ok(())
     }
 
+    /// `fmi2Terminate` every instance, at a normal end of the run.
+    pub fn terminate(&mut self) -> Result<(), MasterError> {
+        for slave in &mut self.slaves {
+            slave.terminate()?;
+        }
+        Ok(())
+    }
+
     /// Read the coupled outputs (into `outputs`) and the recorded outputs of
     /// every instance at an accepted point.
     pub fn read_accepted(&mut self) -> Result<(), MasterError> {
