@@ -49,6 +49,9 @@ pub fn main(args: Args) -> Result<()> {
                 .unwrap_or_else(|| "results.csv".into()),
         ),
     };
+    if let Some(warning) = spec.grid_warning() {
+        eprintln!("warning: {warning}");
+    }
     let mut sim = Simulation::new(&spec)?;
     sim.time_phases(args.timing);
     let file = File::create(&out).with_context(|| format!("cannot create {}", out.display()))?;
@@ -76,6 +79,9 @@ pub fn main(args: Args) -> Result<()> {
         observers.push(&mut memory);
     }
     let outcome = sim.run(&mut observers, &mut progress);
+    // The last recorded row's time: after a failure the failing step's own
+    // time may be one step later.
+    let last = sim.last_recorded_time().unwrap_or(spec.experiment.start);
     if let Some(bar) = &bar {
         bar.finish_and_clear();
     }
@@ -83,11 +89,7 @@ pub fn main(args: Args) -> Result<()> {
         let name = spec.name.as_deref().unwrap_or("system");
         eprintln!(
             "{name}: {} with k = {}, H = {}, t = {} … {}",
-            spec.method,
-            spec.coupling.order,
-            spec.experiment.step,
-            spec.experiment.start,
-            sim.time()
+            spec.method, spec.coupling.order, spec.experiment.step, spec.experiment.start, last
         );
         eprintln!("{}", sim.stats());
     }
@@ -119,8 +121,7 @@ pub fn main(args: Args) -> Result<()> {
             )))
         }
         Err(e) => Err(anyhow::Error::new(e).context(format!(
-            "run stopped; results up to t = {} kept in {} (marked incomplete)",
-            sim.time(),
+            "run stopped; results up to t = {last} kept in {} (marked incomplete)",
             out.display()
         ))),
     }

@@ -50,6 +50,13 @@ pub fn main(args: Args) -> Result<()> {
         bail!("invalid --step {step}: expected a finite step > 0");
     }
     let steps = ((stop - start) / step).round().max(1.0) as u64;
+    let end = start + steps as f64 * step;
+    if (end - stop).abs() > 1e-9 * step {
+        eprintln!(
+            "warning: stop = {stop} is not on the communication grid start + n·step (start = {start}, \
+             step = {step}): the simulation ends at t = {end}"
+        );
+    }
 
     let outputs: Vec<_> = md
         .model_variables
@@ -97,6 +104,21 @@ pub fn main(args: Args) -> Result<()> {
         instance.get_real(&real_vrs, &mut real_buf)?;
         instance.get_integer(&int_vrs, &mut int_buf)?;
         instance.get_boolean(&bool_vrs, &mut bool_buf)?;
+        // A non-finite output is the FMU's error, named before it is recorded.
+        if let Some(k) = real_buf.iter().position(|v| !v.is_finite()) {
+            return Err(MasterError::NonFiniteOutput {
+                instance: name.clone(),
+                variable: columns[real[k].0].clone(),
+                value: real_buf[k],
+                call: if n == 0 {
+                    "after initialization"
+                } else {
+                    "after fmi2DoStep"
+                },
+                time,
+            }
+            .into());
+        }
         for (k, &(slot, _)) in real.iter().enumerate() {
             row[slot] = real_buf[k];
         }

@@ -178,6 +178,31 @@ pub enum MasterError {
         /// does not say).
         time: f64,
     },
+    /// `fmi2SetFMUstate` does not restore an instance exactly (the rollback
+    /// self-check, `[coupling] check_rollback`).
+    #[error("rollback self-check failed for instance '{instance}': {reason}; the predictor/corrector method repeats every macro step from a saved state and needs an exact rollback: use --method explicit (no rollback), or check_rollback = \"off\" to run anyway")]
+    RollbackCheck {
+        /// Instance name.
+        instance: String,
+        /// The first coupled output that differs.
+        variable: String,
+        /// What differed, naming the variable, the values and the time.
+        reason: String,
+    },
+    /// An instance's output is NaN or infinite right after one of its calls.
+    #[error("instance '{instance}': output '{variable}' = {value} {call} at t = {time} (the FMU computed a non-finite value)")]
+    NonFiniteOutput {
+        /// Instance name.
+        instance: String,
+        /// The output (`der(x, 1)` for an output derivative).
+        variable: String,
+        /// NaN, inf or -inf.
+        value: f64,
+        /// After which call: `after the predictor's fmi2DoStep` …
+        call: &'static str,
+        /// The instance's time when the value was read.
+        time: f64,
+    },
     /// An FMI call or FMU load failed.
     #[error(transparent)]
     Fmi(#[from] tether_fmi::Error),

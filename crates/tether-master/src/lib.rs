@@ -49,8 +49,8 @@ pub use observer::{CsvRecorder, MemoryRecorder, Observer, Sample};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::Simulation;
 pub use spec::{
-    ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment, InitialMultiplier,
-    InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
+    CheckRollback, ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment,
+    InitialMultiplier, InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
 pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination};

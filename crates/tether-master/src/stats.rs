@@ -65,6 +65,12 @@ pub struct RunStats {
     /// Set when an instance asked to end the simulation before the stop time
     /// (fmi2Discard with `fmi2Terminated`): the run ended normally there.
     pub termination: Option<Termination>,
+    /// Per constraint and joint condition (its `.g` column): the largest
+    /// |g| (position-level residual) over the recorded points.
+    pub residuals: Vec<(String, f64)>,
+    /// The threshold above which the summary warns about a residual
+    /// (`[coupling] residual_warning`).
+    pub residual_warning: f64,
 }
 
 /// An instance's request to end the simulation, and where the run ended.
@@ -104,6 +110,26 @@ impl fmt::Display for RunStats {
                 c.set_input_derivatives,
                 c.get_output_derivatives
             )?;
+        }
+        if !self.residuals.is_empty() {
+            write!(f, "  max |g|:")?;
+            for (name, max) in &self.residuals {
+                write!(f, "  {name} {max:.2e}")?;
+            }
+            writeln!(f)?;
+            for (name, max) in self
+                .residuals
+                .iter()
+                .filter(|(_, m)| m.is_nan() || *m > self.residual_warning)
+            {
+                writeln!(
+                    f,
+                    "  warning: max |{name}| = {max:.2e} exceeds residual_warning = {:e}: the \
+                     constraint is not held to that accuracy (a smaller step, another index or \
+                     method, or a larger residual_warning)",
+                    self.residual_warning
+                )?;
+            }
         }
         if let Some(end) = &self.termination {
             writeln!(

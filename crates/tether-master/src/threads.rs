@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::polynomial::Taylor;
 use crate::runs::{PerturbedRuns, Sequential};
-use crate::slave::Slave;
+use crate::slave::{Run, Slave};
 use crate::spec::InstanceSpec;
 use crate::stats::{InstanceCounters, RunStats};
 use crate::MasterError;
@@ -265,7 +265,7 @@ impl Threads {
                 let clock = Instant::now();
                 slave.do_step(t, h)?;
                 self.step_cost[s] = self.step_cost[s].min(clock.elapsed());
-                slave.read_coupled(&mut outputs[g][s])?;
+                slave.read_coupled(&mut outputs[g][s], Run::Perturbed)?;
             }
         }
         self.trial[0] = self.trial[0].min(phase.elapsed());

@@ -7,6 +7,8 @@
 //!   copy of the states, which every step advances and no restore touches;
 //! - `rollback = 2`: a step repeated after a rollback does not give the same
 //!   result — every step adds `1e-9 · (number of steps so far)` to the position;
+//! - `rollback_after`: the rollback quirk starts with the first step from this
+//!   time on (default 0: from the start);
 //! - `nan_after`: from this time on the output `x` is NaN;
 //! - `huge_after`: from this time on the output `x` is 1e300;
 //! - `stop_after`: the first step that reaches this time asks the master to end
@@ -32,6 +34,7 @@ pub struct Quirks {
     x0: f64,
     v0: f64,
     rollback: i32,
+    rollback_after: f64,
     nan_after: f64,
     huge_after: f64,
     stop_after: f64,
@@ -69,12 +72,10 @@ impl Quirks {
         }
     }
 
-    /// The states the outputs come from: the model's own under `rollback = 1`.
+    /// The states the outputs come from: the model's own once `rollback = 1`
+    /// has started.
     fn states(&self, x: &[f64]) -> [f64; 2] {
-        match self.own.get() {
-            Some(own) if self.rollback == 1 => own,
-            _ => [x[0], x[1]],
-        }
+        self.own.get().unwrap_or([x[0], x[1]])
     }
 }
 
@@ -89,6 +90,9 @@ impl Model for Quirks {
             Real::new("d", 10.0).min(0.0).unit("N.s/m").description("Damping coefficient"),
             Real::new("x0", 0.0).unit("m").description("Initial position"),
             Real::new("v0", 100.0).unit("m/s").description("Initial velocity"),
+            Real::new("rollback_after", 0.0)
+                .unit("s")
+                .description("The rollback quirk starts with the first step from this time on"),
             Real::new("nan_after", 1e9)
                 .unit("s")
                 .description("From this time on the output x is NaN"),
@@ -135,6 +139,7 @@ impl Model for Quirks {
             x0: p.real("x0")?,
             v0: p.real("v0")?,
             rollback: p.integer("rollback")?,
+            rollback_after: p.real("rollback_after")?,
             nan_after: p.real("nan_after")?,
             huge_after: p.real("huge_after")?,
             stop_after: p.real("stop_after")?,
@@ -164,15 +169,16 @@ impl Model for Quirks {
         y.copy_from_slice(&[shown, vel, self.acceleration(pos, vel, u[0])]);
     }
 
-    fn exact_step(&self, _t: f64, h: f64, x: &mut [f64], u: &[InputJet]) -> bool {
+    fn exact_step(&self, t: f64, h: f64, x: &mut [f64], u: &[InputJet]) -> bool {
         let mut s = self.states(x);
         self.rk4(h, &mut s, u[0]);
-        if self.rollback == 2 {
+        let quirky = t >= self.rollback_after;
+        if self.rollback == 2 && quirky {
             let n = self.steps.get() + 1;
             self.steps.set(n);
             s[0] += 1e-9 * n as f64;
         }
-        if self.rollback == 1 {
+        if self.rollback == 1 && quirky {
             self.own.set(Some(s));
         }
         x.copy_from_slice(&s);
