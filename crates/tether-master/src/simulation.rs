@@ -215,8 +215,9 @@ impl Simulation {
     /// An instance's request to end the simulation (fmi2Discard with
     /// `fmi2Terminated`) ends the run normally at the last accepted point,
     /// noted in [`RunStats::termination`]. On a normal end every instance is
-    /// terminated (`fmi2Terminate`). On failure the observers are finished with the error message (results
-    /// up to the last accepted step are kept) and the error is returned.
+    /// terminated (`fmi2Terminate`). On failure the observers are finished
+    /// with the error message (results up to the last accepted step are kept)
+    /// and the error is returned.
     pub fn run(
         &mut self,
         observers: &mut [&mut dyn Observer],

@@ -529,6 +529,29 @@ impl SystemSpec {
 mod tests {
     use super::*;
 
+    #[test]
+    fn a_stop_time_off_the_grid_is_named_with_the_actual_end() {
+        let spec = |stop: f64, step: f64| {
+            SystemSpec::from_toml(
+                &OSC.replace("stop = 1.0", &format!("stop = {stop:?}"))
+                    .replace("step = 1e-3", &format!("step = {step:?}")),
+            )
+            .unwrap()
+        };
+        assert_eq!(spec(1.0, 1e-3).grid_warning(), None);
+        assert_eq!(
+            spec(0.1, 1e-3).grid_warning(),
+            None,
+            "within rounding of the grid"
+        );
+        let off = spec(1e-4, 1e-3);
+        assert_eq!(off.end_time(), 1e-3);
+        assert_eq!(
+            off.grid_warning().as_deref(),
+            Some("stop = 0.0001 is not on the macro grid start + n·step (start = 0, step = 0.001): the run ends at t = 0.001")
+        );
+    }
+
     const OSC: &str = r#"
         [experiment]
         stop = 1.0
