@@ -280,4 +280,8 @@ impl MacroStep for PredictorCorrector {
     fn report(&self, stats: &mut RunStats) {
         self.runs.report(stats);
     }
+
+    fn terminate(&mut self) -> Result<(), MasterError> {
+        self.runs.terminate()
+    }
 }

@@ -251,7 +251,8 @@ impl Simulation {
                 progress(self.n, self.steps);
             }
             // A normal end: fmi2Terminate before the instances are freed.
-            self.system.terminate()
+            self.system.terminate()?;
+            self.method.terminate()
         })();
         let message = outcome.as_ref().err().map(|e: &MasterError| e.to_string());
         // Every observer is finished, even after another one failed; the

@@ -167,6 +167,12 @@ pub(crate) trait MacroStep: Send {
     /// Add what the method's helpers did (FMI calls made on worker threads,
     /// the parallel decision) to `stats`.
     fn report(&self, _stats: &mut RunStats) {}
+
+    /// `fmi2Terminate` the instances the method's helpers made (the copies
+    /// of parallel perturbed runs), at a normal end of the run.
+    fn terminate(&mut self) -> Result<(), MasterError> {
+        Ok(())
+    }
 }
 
 /// Group unknowns so that no two in a group drive the same instance: one

@@ -232,6 +232,17 @@ impl PerturbedRuns for Threads {
         Ok(())
     }
 
+    fn terminate(&mut self) -> Result<(), MasterError> {
+        for lane in &self.lanes {
+            // The worker is idle between jobs: its copies are ours to call.
+            let mut job = lane.wait();
+            for extra in job.extras.iter_mut().flatten() {
+                extra.terminate()?;
+            }
+        }
+        Ok(())
+    }
+
     fn report(&self, stats: &mut RunStats) {
         stats.parallel = self.info;
         for (s, counters) in stats.instances.iter_mut().enumerate() {
