@@ -53,6 +53,9 @@ pub fn main(args: Args) -> Result<()> {
         std::iter::once(args.system.as_path())
             .chain(spec.instances.iter().map(|i| i.fmu.as_path())),
     )?;
+    if let Some(warning) = spec.grid_warning() {
+        crate::say!("warning: {warning}");
+    }
     let mut sim = Simulation::new(&spec)?;
     sim.time_phases(args.timing);
     let file = crate::output::create(&out)?;
@@ -83,6 +86,9 @@ pub fn main(args: Args) -> Result<()> {
     let guard = crate::exit_guard::arm(emergency, &out);
     let outcome = sim.run(&mut observers, &mut progress);
     drop(guard);
+    // The last recorded row's time: after a failure the failing step's own
+    // time may be one step later.
+    let last = sim.last_recorded_time().unwrap_or(spec.experiment.start);
     if let Some(bar) = &bar {
         bar.finish_and_clear();
     }
@@ -94,7 +100,7 @@ pub fn main(args: Args) -> Result<()> {
             spec.coupling.order,
             spec.experiment.step,
             spec.experiment.start,
-            sim.time()
+            last
         );
         crate::say!("{}", sim.stats());
     }
@@ -126,8 +132,7 @@ pub fn main(args: Args) -> Result<()> {
             )))
         }
         Err(e) => Err(anyhow::Error::new(e).context(format!(
-            "run stopped; results up to t = {} kept in {} (marked incomplete)",
-            sim.time(),
+            "run stopped; results up to t = {last} kept in {} (marked incomplete)",
             out.display()
         ))),
     }

@@ -49,6 +49,13 @@ pub fn main(args: Args) -> Result<()> {
         bail!("invalid --step {step}: expected a finite step > 0");
     }
     let steps = ((stop - start) / step).round().max(1.0) as u64;
+    let end = start + steps as f64 * step;
+    if (end - stop).abs() > 1e-9 * step {
+        crate::say!(
+            "warning: stop = {stop} is not on the communication grid start + n·step (start = {start}, \
+             step = {step}): the simulation ends at t = {end}"
+        );
+    }
 
     let outputs: Vec<_> = md
         .model_variables
@@ -95,10 +102,25 @@ pub fn main(args: Args) -> Result<()> {
     let mut real_buf = vec![0.0; real.len()];
     let mut int_buf = vec![0; int.len()];
     let mut bool_buf = vec![false; boolean.len()];
-    let mut record = |instance: &mut tether_fmi::Instance, n: u64| -> Result<()> {
+    let mut record = |instance: &mut tether_fmi::Instance, n: u64, time: f64| -> Result<()> {
         instance.get_real(&real_vrs, &mut real_buf)?;
         instance.get_integer(&int_vrs, &mut int_buf)?;
         instance.get_boolean(&bool_vrs, &mut bool_buf)?;
+        // A non-finite output is the FMU's error, named before it is recorded.
+        if let Some(k) = real_buf.iter().position(|v| !v.is_finite()) {
+            return Err(MasterError::NonFiniteOutput {
+                instance: name.clone(),
+                variable: columns[real[k].0].clone(),
+                value: real_buf[k],
+                call: if n == 0 {
+                    "after initialization"
+                } else {
+                    "after fmi2DoStep"
+                },
+                time,
+            }
+            .into());
+        }
         for (k, &(slot, _)) in real.iter().enumerate() {
             row[slot] = real_buf[k];
         }
@@ -111,14 +133,16 @@ pub fn main(args: Args) -> Result<()> {
         recorder
             .sample(Sample {
                 step: n,
-                time: start + n as f64 * step,
+                time,
                 values: &row,
             })
             .with_context(cannot_write)?;
         Ok(())
     };
     // Every failure after the header, the FMU's or ours, ends the CSV with its trailer.
-    let mut outcome = record(&mut instance, 0);
+    let mut outcome = record(&mut instance, 0, start);
+    // Set when the FMU asks to end the simulation: the time it reached.
+    let mut terminated_at = None;
     for n in 1..=steps {
         if outcome.is_err() {
             break;
@@ -131,10 +155,25 @@ pub fn main(args: Args) -> Result<()> {
             .into());
             break;
         }
-        outcome = instance
-            .do_step(start + (n - 1) as f64 * step, step, true)
-            .map_err(anyhow::Error::from)
-            .and_then(|()| record(&mut instance, n));
+        let time = start + n as f64 * step;
+        outcome = match instance.do_step(start + (n - 1) as f64 * step, step, true) {
+            Ok(()) => record(&mut instance, n, time),
+            // fmi2Discard with fmi2Terminated: the FMU ends the simulation; the
+            // point it reached is the last row (as fmpy records it).
+            Err(e @ tether_fmi::Error::Discard { .. }) => match instance.terminated() {
+                Ok(true) => {
+                    let at = instance.last_successful_time().unwrap_or(time);
+                    terminated_at = Some(at);
+                    let recorded = record(&mut instance, n, at);
+                    if recorded.is_ok() {
+                        break;
+                    }
+                    recorded
+                }
+                _ => Err(e.into()),
+            },
+            Err(e) => Err(e.into()),
+        };
     }
     let failure = outcome.as_ref().err().map(|e| format!("{e:#}"));
     let finished = recorder.finish(failure.as_deref());
@@ -147,10 +186,17 @@ pub fn main(args: Args) -> Result<()> {
         )
     })?;
     instance.terminate()?;
-    crate::say!(
-        "{name}: {steps} steps of {step} from {start} to {stop}; results: {}",
-        out.display()
-    );
+    match terminated_at {
+        None => crate::say!(
+            "{name}: {steps} steps of {step} from {start} to {stop}; results: {}",
+            out.display()
+        ),
+        Some(at) => crate::say!(
+            "{name}: steps of {step} from {start}; the FMU requested the end of the simulation \
+             at t = {at} (fmi2Discard, fmi2Terminated), before the stop time {stop}; results: {}",
+            out.display()
+        ),
+    }
     Ok(())
 }
 

@@ -78,6 +78,10 @@ pub struct Instance<M: Model> {
     /// (get/set Real, input derivatives, doStep, get/set FMU state) allocate
     /// nothing.
     pub(crate) scratch: Scratch,
+    /// The model asked to end the simulation ([`Model::terminate`]): answered by
+    /// `fmi2GetBooleanStatus(fmi2Terminated)`. Not part of the FMU state: the
+    /// request is final.
+    pub terminated: bool,
 }
 
 /// Per-instance work buffers (see [`Instance::scratch`]), borrowed next to the
@@ -102,6 +106,7 @@ impl<M: Model> Instance<M> {
             data: initial_snapshot::<M>(),
             model: None,
             scratch: Scratch::default(),
+            terminated: false,
         }
     }
 
@@ -257,6 +262,7 @@ impl<M: Model> Instance<M> {
     pub fn reset(&mut self) -> Outcome {
         self.data = initial_snapshot::<M>();
         self.model = None;
+        self.terminated = false;
         Ok(())
     }
 
@@ -361,6 +367,12 @@ impl<M: Model> Instance<M> {
         }
         d.time = new_time;
         self.log_event(|| format!("step {t} -> {new_time} ({how})"));
+        if model.terminate(new_time, &self.data.states) {
+            self.terminated = true;
+            return Err(Failure::discard(format!(
+                "the model requests the end of the simulation at t = {new_time}"
+            )));
+        }
         Ok(())
     }
 

@@ -53,4 +53,14 @@ pub trait Model: Sized + 'static {
     fn max_step(&self) -> Option<f64> {
         None
     }
+
+    /// Whether the model asks the master to end the simulation after a step that
+    /// reached `t` with states `x`. When it does, the step is kept (time and
+    /// states are those at `t`), `fmi2DoStep` returns fmi2Discard and
+    /// `fmi2GetBooleanStatus(fmi2Terminated)` is true from then on, as the
+    /// Reference FMU `Stair` does; `fmi2GetRealStatus(fmi2LastSuccessfulTime)`
+    /// is `t`. The default never asks.
+    fn terminate(&self, _t: f64, _x: &[f64]) -> bool {
+        false
+    }
 }

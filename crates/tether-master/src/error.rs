@@ -167,6 +167,42 @@ pub enum MasterError {
         /// Why, e.g. `SIGINT`.
         reason: String,
     },
+    /// An instance asked to end the simulation: `fmi2DoStep` returned
+    /// fmi2Discard and `fmi2GetBooleanStatus(fmi2Terminated)` is true.
+    /// [`crate::Simulation::run`] ends normally on it (docs/fmi-import.md).
+    #[error("instance '{instance}' requested the end of the simulation at t = {time} (fmi2DoStep returned fmi2Discard with fmi2Terminated = true)")]
+    TerminationRequested {
+        /// Instance name.
+        instance: String,
+        /// The instance's `fmi2LastSuccessfulTime` (the step's end if it
+        /// does not say).
+        time: f64,
+    },
+    /// `fmi2SetFMUstate` does not restore an instance exactly (the rollback
+    /// self-check, `[coupling] check_rollback`).
+    #[error("rollback self-check failed for instance '{instance}': {reason}; the predictor/corrector method repeats every macro step from a saved state and needs an exact rollback: use --method explicit (no rollback), or check_rollback = \"off\" to run anyway")]
+    RollbackCheck {
+        /// Instance name.
+        instance: String,
+        /// The first coupled output that differs.
+        variable: String,
+        /// What differed, naming the variable, the values and the time.
+        reason: String,
+    },
+    /// An instance's output is NaN or infinite right after one of its calls.
+    #[error("instance '{instance}': output '{variable}' = {value} {call} at t = {time} (the FMU computed a non-finite value)")]
+    NonFiniteOutput {
+        /// Instance name.
+        instance: String,
+        /// The output (`der(x, 1)` for an output derivative).
+        variable: String,
+        /// NaN, inf or -inf.
+        value: f64,
+        /// After which call: `after the predictor's fmi2DoStep` …
+        call: &'static str,
+        /// The instance's time when the value was read.
+        time: f64,
+    },
     /// An FMI call or FMU load failed.
     #[error(transparent)]
     Fmi(#[from] tether_fmi::Error),

@@ -5,6 +5,7 @@
 
 use crate::feedthrough::Feedthrough;
 use crate::rows::RowLevel;
+use crate::slave::Run;
 use crate::stats::{Lap, RunStats};
 use crate::system::{MacroStep, StepAt, System};
 use crate::MasterError;
@@ -43,7 +44,7 @@ impl MacroStep for Explicit {
         let level = RowLevel::Stabilised(self.mu);
         self.feedthrough
             .update_all(system, level, at.t_next, stats)?;
-        system.read_accepted()?;
+        system.read_accepted(Run::Explicit)?;
         lap.split_into(&mut stats.times.solve);
         Ok(())
     }

@@ -7,6 +7,7 @@
 
 use crate::polynomial::Taylor;
 use crate::rows::{Column, RowLevel, View};
+use crate::slave::Run;
 use crate::solve::Solver;
 use crate::spec::InitialMultiplier;
 use crate::stats::RunStats;
@@ -117,7 +118,7 @@ impl Feedthrough {
     ) -> Result<(), MasterError> {
         self.hold_inputs(system)?;
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.outputs) {
-            slave.read_coupled(out)?;
+            slave.read_coupled(out, Run::Feedthrough)?;
         }
         for (u, h) in self.u.iter_mut().zip(&system.history) {
             *u = h[0];
@@ -144,7 +145,7 @@ impl Feedthrough {
             for (s, slave) in system.slaves.iter_mut().enumerate() {
                 if self.touched[s] {
                     slave.apply_inputs(&self.bumped)?;
-                    slave.read_coupled(&mut self.perturbed[s])?;
+                    slave.read_coupled(&mut self.perturbed[s], Run::Feedthrough)?;
                 }
             }
             for m in members() {

@@ -49,9 +49,9 @@ pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLU
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::Simulation;
 pub use spec::{
-    ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment, InitialMultiplier,
-    InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
+    CheckRollback, ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment,
+    InitialMultiplier, InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
-pub use stats::{InstanceCounters, PhaseTimes, RunStats};
+pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination};
 pub use threads::{Parallel, ParallelInfo};

@@ -6,6 +6,7 @@
 use crate::polynomial::{extrapolation, interpolation, Taylor};
 use crate::rows::{Column, RowLevel, View};
 use crate::runs::PerturbedRuns;
+use crate::slave::Run;
 use crate::solve::{Jacobians, Solver};
 use crate::stats::{Lap, RunStats};
 use crate::system::{MacroStep, StepAt, System};
@@ -113,7 +114,7 @@ impl PredictorCorrector {
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
             slave.apply_inputs(&self.polys)?;
             slave.do_step(at.t, at.h)?;
-            slave.read_coupled(out)?;
+            slave.read_coupled(out, Run::Predictor)?;
         }
         let view = View::at(&self.predicted, &self.u_pred);
         let nu = system.coupling.len();
@@ -249,7 +250,7 @@ impl PredictorCorrector {
         for (history, &u) in system.history.iter_mut().zip(&self.corrected) {
             *history = [u, history[0], history[1]];
         }
-        system.read_accepted()
+        system.read_accepted(Run::Corrector)
     }
 }
 
@@ -278,5 +279,9 @@ impl MacroStep for PredictorCorrector {
 
     fn report(&self, stats: &mut RunStats) {
         self.runs.report(stats);
+    }
+
+    fn terminate(&mut self) -> Result<(), MasterError> {
+        self.runs.terminate()
     }
 }

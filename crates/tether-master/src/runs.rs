@@ -25,6 +25,12 @@ pub(crate) trait PerturbedRuns: Send {
     /// Add the strategy's FMI calls made outside `slaves` and its decisions
     /// to `stats`.
     fn report(&self, _stats: &mut RunStats) {}
+
+    /// `fmi2Terminate` the instances the strategy made itself (the copies on
+    /// worker threads), at a normal end of the run.
+    fn terminate(&mut self) -> Result<(), MasterError> {
+        Ok(())
+    }
 }
 
 /// Every run on the calling thread, group after group.

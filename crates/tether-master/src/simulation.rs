@@ -10,8 +10,9 @@ use crate::feedthrough::Feedthrough;
 use crate::observer::{Observer, Sample};
 use crate::predictor_corrector::PredictorCorrector;
 use crate::rows::RowLevel;
-use crate::spec::SystemSpec;
-use crate::stats::{Lap, RunStats};
+use crate::slave::Run;
+use crate::spec::{CheckRollback, SystemSpec};
+use crate::stats::{Lap, RunStats, Termination};
 use crate::system::{MacroStep, StepAt, System};
 use crate::threads;
 use crate::{Experiment, MasterError, Method};
@@ -30,12 +31,20 @@ pub struct Simulation {
     row: Vec<f64>,
     /// Per column, the magnitude beyond which the run has diverged.
     limits: Vec<f64>,
+    /// Per residual column, the largest |g| over the points so far.
+    max_residuals: Vec<f64>,
+    /// The first residual column's index in `row`.
+    first_residual: usize,
+    /// Time of the last point handed to the observers.
+    last_recorded: Option<f64>,
     stats: RunStats,
     /// Whether the phases of each macro step are timed (off by default).
     time_phases: bool,
     /// The clock reading that ended the last macro step's phases, for the
     /// recording phase that follows it in [`Simulation::run`].
     step_end: Option<Instant>,
+    /// `[coupling] residual_warning`, for the summary.
+    residual_warning: f64,
 }
 
 impl Simulation {
@@ -77,13 +86,17 @@ impl Simulation {
         };
         let mut stats = RunStats::default();
         Feedthrough::new(&system).initial(&mut system, initial_level, exp.start, &mut stats)?;
-        system.read_accepted()?;
+        system.read_accepted(Run::Initial)?;
+        if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
+            system.check_rollback(exp.start, exp.step)?;
+        }
         let mut columns = Vec::new();
         for slave in &system.slaves {
             columns.extend(slave.recorded_names().iter().cloned());
         }
         let unknowns = &system.coupling.unknowns;
         columns.extend(unknowns.iter().map(|u| u.name.clone()));
+        let first_residual = columns.len();
         columns.extend(unknowns.iter().filter_map(|u| u.residual.clone()));
         let mut sim = Simulation {
             experiment: exp,
@@ -93,8 +106,12 @@ impl Simulation {
             steps,
             row: vec![0.0; columns.len()],
             limits: vec![f64::INFINITY; columns.len()],
+            max_residuals: vec![0.0; columns.len() - first_residual],
+            first_residual,
+            last_recorded: None,
             columns,
             stats,
+            residual_warning: settings.residual_warning,
             time_phases: false,
             step_end: None,
         };
@@ -134,6 +151,14 @@ impl Simulation {
         self.experiment.start + n as f64 * self.experiment.step
     }
 
+    /// The time of the last point handed to the observers by
+    /// [`run`](Self::run) (the last row of the results), if any. After a
+    /// failure it is the time up to which results are kept; the failing
+    /// step's time may be later.
+    pub fn last_recorded_time(&self) -> Option<f64> {
+        self.last_recorded
+    }
+
     /// Number of macro steps the experiment asks for.
     pub fn total_steps(&self) -> u64 {
         self.steps
@@ -159,6 +184,12 @@ impl Simulation {
     pub fn stats(&self) -> RunStats {
         let mut stats = self.stats.clone();
         stats.times.measured = self.time_phases;
+        stats.residuals = self.columns[self.first_residual..]
+            .iter()
+            .cloned()
+            .zip(self.max_residuals.iter().copied())
+            .collect();
+        stats.residual_warning = self.residual_warning;
         stats.instances = self
             .system
             .slaves
@@ -188,8 +219,12 @@ impl Simulation {
     }
 
     /// Run to the stop time, feeding every accepted point to the observers.
-    /// On failure the observers are finished with the error message (results
-    /// up to the last accepted step are kept) and the error is returned.
+    /// An instance's request to end the simulation (fmi2Discard with
+    /// `fmi2Terminated`) ends the run normally at the last accepted point,
+    /// noted in [`RunStats::termination`]. On a normal end every instance is
+    /// terminated (`fmi2Terminate`). On failure the observers are finished
+    /// with the error message (results up to the last accepted step are kept)
+    /// and the error is returned.
     pub fn run(
         &mut self,
         observers: &mut [&mut dyn Observer],
@@ -207,11 +242,24 @@ impl Simulation {
                     let time = self.time();
                     return Err(MasterError::Interrupted { time, reason });
                 }
-                self.step()?;
+                match self.step() {
+                    Ok(()) => {}
+                    Err(MasterError::TerminationRequested { instance, time }) => {
+                        self.stats.termination = Some(Termination {
+                            instance,
+                            requested_at: time,
+                            ended_at: self.time(),
+                        });
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                }
                 self.notify(observers)?;
                 progress(self.n, self.steps);
             }
-            Ok(())
+            // A normal end: fmi2Terminate before the instances are freed.
+            self.system.terminate()?;
+            self.method.terminate()
         })();
         let message = outcome.as_ref().err().map(|e: &MasterError| e.to_string());
         // Every observer is finished, even after another one failed; the
@@ -247,6 +295,7 @@ impl Simulation {
         for o in observers.iter_mut() {
             o.sample(sample)?;
         }
+        self.last_recorded = Some(sample.time);
         if let Some(clock) = clock {
             self.stats.times.recording += clock.elapsed();
         }
@@ -264,8 +313,10 @@ impl Simulation {
             self.row[i] = h[0];
             i += 1;
         }
-        for residual in self.system.coupling.residuals(&self.system.outputs) {
+        let residuals = self.system.coupling.residuals(&self.system.outputs);
+        for (residual, max) in residuals.zip(&mut self.max_residuals) {
             self.row[i] = residual;
+            *max = max.max(residual.abs());
             i += 1;
         }
     }

@@ -24,6 +24,42 @@ pub(crate) struct CoupledOutput {
     pub order: u32,
 }
 
+/// Which call's results an instance's outputs are read after, for the message
+/// naming a non-finite output.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Run {
+    /// Inputs set, no step: direct feedthrough (initial multipliers, the
+    /// explicit method's update).
+    Feedthrough,
+    /// The predictor's `fmi2DoStep`.
+    Predictor,
+    /// A perturbed run's `fmi2DoStep`.
+    Perturbed,
+    /// The corrector's `fmi2DoStep` (the accepted point).
+    Corrector,
+    /// The explicit method's `fmi2DoStep` (the accepted point).
+    Explicit,
+    /// `fmi2GetFMUstate` / `fmi2SetFMUstate` (the rollback checks).
+    Rollback,
+    /// Initialization (the point T_0).
+    Initial,
+}
+
+impl Run {
+    /// The call, for messages: `after the predictor's fmi2DoStep`.
+    pub(crate) fn describe(self) -> &'static str {
+        match self {
+            Run::Feedthrough => "after fmi2SetReal of the coupled inputs (direct feedthrough)",
+            Run::Predictor => "after the predictor's fmi2DoStep",
+            Run::Perturbed => "after a perturbed run's fmi2DoStep",
+            Run::Corrector => "after the corrector's fmi2DoStep",
+            Run::Explicit => "after fmi2DoStep",
+            Run::Rollback => "after fmi2GetFMUstate/fmi2SetFMUstate",
+            Run::Initial => "after initialization",
+        }
+    }
+}
+
 /// An FMU instance inside a coupled system.
 pub struct Slave {
     pub(crate) name: String,
@@ -52,6 +88,13 @@ pub struct Slave {
     pub(crate) can_interpolate_inputs: bool,
     pub(crate) max_output_derivative_order: u32,
     pub(crate) can_get_and_set_state: bool,
+    /// `check_rollback = "every_step"`: read the coupled outputs back after
+    /// each restore and compare them with those at the save.
+    pub(crate) verify_restore: bool,
+    /// Coupled outputs at the last save (with `verify_restore`).
+    at_save: Vec<f64>,
+    /// Coupled outputs read back after a restore (with `verify_restore`).
+    readback: Vec<f64>,
 }
 
 impl Slave {
@@ -164,6 +207,9 @@ impl Slave {
             can_interpolate_inputs,
             max_output_derivative_order,
             can_get_and_set_state,
+            verify_restore: false,
+            at_save: Vec::new(),
+            readback: Vec::new(),
         };
         for (name, value) in &spec.parameters {
             crate::start::apply_start_value(
@@ -225,6 +271,8 @@ impl Slave {
             }
         }
         self.value_buf = vec![0.0; self.value_vrs.len()];
+        self.at_save = vec![0.0; self.coupled_outputs.len()];
+        self.readback = vec![0.0; self.coupled_outputs.len()];
     }
 
     /// Number of coupled outputs (the length [`read_coupled`](Self::read_coupled) fills).
@@ -258,10 +306,18 @@ impl Slave {
             None => self.state = Some(self.instance.get_fmu_state()?),
         }
         self.counters.state_gets += 1;
+        if self.verify_restore {
+            let mut at_save = std::mem::take(&mut self.at_save);
+            let read = self.read_coupled(&mut at_save, Run::Rollback);
+            self.at_save = at_save;
+            read?;
+        }
         Ok(())
     }
 
-    /// Roll back to the saved state (`fmi2SetFMUstate`).
+    /// Roll back to the saved state (`fmi2SetFMUstate`); with
+    /// `verify_restore`, read the coupled outputs back and require those of
+    /// the save.
     pub(crate) fn restore_state(&mut self) -> Result<(), MasterError> {
         let state = self
             .state
@@ -269,7 +325,99 @@ impl Slave {
             .expect("restore_state is only called after save_state");
         self.instance.set_fmu_state(state)?;
         self.counters.state_sets += 1;
+        if self.verify_restore {
+            let mut readback = std::mem::take(&mut self.readback);
+            let read = self.read_coupled(&mut readback, Run::Rollback);
+            let compared = read.and_then(|()| {
+                let time = self.instance.time();
+                self.compare_restored(&self.at_save, &readback, time)
+            });
+            self.readback = readback;
+            compared?;
+        }
         Ok(())
+    }
+
+    /// The rollback self-check (`check_rollback`, docs/reliability.md): save,
+    /// step over [t, t + h] with `polys`, read the coupled outputs, restore and
+    /// require the outputs of the save, repeat the step and require
+    /// bit-identical outputs, restore again. The instance is left as it was
+    /// (the state is the saved one); the calls are not counted.
+    pub(crate) fn check_rollback(
+        &mut self,
+        polys: &[Taylor],
+        t: f64,
+        h: f64,
+    ) -> Result<(), MasterError> {
+        let counters = self.counters.clone();
+        let n = self.coupled_len();
+        let (mut at_save, mut first, mut back, mut second) =
+            (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let state = self.instance.get_fmu_state()?;
+        self.read_coupled(&mut at_save, Run::Rollback)?;
+        self.apply_inputs(polys)?;
+        self.do_step(t, h)?;
+        self.read_coupled(&mut first, Run::Rollback)?;
+        self.instance.set_fmu_state(&state)?;
+        self.read_coupled(&mut back, Run::Rollback)?;
+        self.compare_restored(&at_save, &back, t)?;
+        self.apply_inputs(polys)?;
+        self.do_step(t, h)?;
+        self.read_coupled(&mut second, Run::Rollback)?;
+        if let Some(i) = first_difference(&first, &second) {
+            let variable = self.coupled_name(i);
+            return Err(MasterError::RollbackCheck {
+                instance: self.name.clone(),
+                reason: format!(
+                    "the step from t = {t} to {} repeated after fmi2SetFMUstate with the same \
+                     inputs gives output '{variable}' = {}, not {} as the first time (not \
+                     bit-identical)",
+                    t + h,
+                    second[i],
+                    first[i]
+                ),
+                variable,
+            });
+        }
+        self.instance.set_fmu_state(&state)?;
+        self.counters = counters;
+        Ok(())
+    }
+
+    /// An error naming the first coupled output whose value read back after a
+    /// restore (`back`) differs from the one at the save (`saved`).
+    fn compare_restored(&self, saved: &[f64], back: &[f64], time: f64) -> Result<(), MasterError> {
+        match first_difference(saved, back) {
+            None => Ok(()),
+            Some(i) => {
+                let variable = self.coupled_name(i);
+                Err(MasterError::RollbackCheck {
+                    instance: self.name.clone(),
+                    reason: format!(
+                        "after fmi2SetFMUstate back to t = {time}, output '{variable}' reads {}, \
+                         not {} as at fmi2GetFMUstate (the state was not restored)",
+                        back[i], saved[i]
+                    ),
+                    variable,
+                })
+            }
+        }
+    }
+
+    /// The name of coupled output `slot`: the variable, or `der(x, order)`.
+    pub(crate) fn coupled_name(&self, slot: usize) -> String {
+        let output = self.coupled_outputs[slot];
+        let md = self.fmu.model_description();
+        let name = md
+            .model_variables
+            .iter()
+            .filter(|v| v.value_reference == output.vr && v.base_type() == BaseType::Real)
+            .max_by_key(|v| v.causality == Causality::Output)
+            .map_or_else(|| format!("#{}", output.vr), |v| v.name.clone());
+        match output.order {
+            0 => name,
+            order => format!("der({name}, {order})"),
+        }
     }
 
     /// Set the coupled inputs from the unknowns' polynomials, and their
@@ -299,14 +447,46 @@ impl Slave {
     }
 
     /// One `fmi2DoStep` from `t` over `h`.
+    /// fmi2Discard with `fmi2Terminated` true is
+    /// [`MasterError::TerminationRequested`].
     pub(crate) fn do_step(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
         self.counters.do_steps += 1;
-        self.instance.do_step(t, h, true)?;
+        match self.instance.do_step(t, h, true) {
+            Ok(()) => Ok(()),
+            Err(e) => Err(self.step_failure(e, t + h)),
+        }
+    }
+
+    /// The error of a failed `fmi2DoStep` to `end`: a request to end the
+    /// simulation (fmi2Discard with `fmi2Terminated`), else the FMI error.
+    #[cold]
+    #[inline(never)]
+    fn step_failure(&mut self, e: tether_fmi::Error, end: f64) -> MasterError {
+        if matches!(e, tether_fmi::Error::Discard { .. })
+            && matches!(self.instance.terminated(), Ok(true))
+        {
+            let time = self.instance.last_successful_time().unwrap_or(end);
+            return MasterError::TerminationRequested {
+                instance: self.name.clone(),
+                time,
+            };
+        }
+        e.into()
+    }
+
+    /// `fmi2Terminate`, at a normal end of the run (not after a fatal error:
+    /// tether-fmi then calls nothing).
+    pub(crate) fn terminate(&mut self) -> Result<(), MasterError> {
+        if !self.instance.is_fatal() {
+            self.instance.terminate()?;
+        }
         Ok(())
     }
 
     /// Read the coupled outputs into `out` (as long as [`coupled_len`](Self::coupled_len)).
-    pub(crate) fn read_coupled(&mut self, out: &mut [f64]) -> Result<(), MasterError> {
+    /// Every value must be finite: otherwise the error names this instance,
+    /// the output, the call `run` and the time.
+    pub(crate) fn read_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
         if !self.value_vrs.is_empty() {
             self.instance
                 .get_real(&self.value_vrs, &mut self.value_buf)?;
@@ -322,7 +502,23 @@ impl Slave {
             self.counters.get_output_derivatives += 1;
             out[slot] = value[0];
         }
-        Ok(())
+        match out.iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(slot) => Err(self.non_finite(self.coupled_name(slot), out[slot], run)),
+        }
+    }
+
+    /// The error for output `variable` = `value` (not finite) read after `run`.
+    #[cold]
+    #[inline(never)]
+    fn non_finite(&self, variable: String, value: f64, run: Run) -> MasterError {
+        MasterError::NonFiniteOutput {
+            instance: self.name.clone(),
+            variable,
+            value,
+            call: run.describe(),
+            time: self.instance.time(),
+        }
     }
 
     /// A perturbed or corrector run: roll back to the saved state, set the
@@ -339,19 +535,28 @@ impl Slave {
         self.apply_inputs(polys)?;
         self.do_step(t, h)?;
         match out {
-            Some(out) => self.read_coupled(out),
+            Some(out) => self.read_coupled(out, Run::Perturbed),
             None => Ok(()),
         }
     }
 
     /// Read every Real output into `recorded_values`.
-    pub(crate) fn read_recorded(&mut self) -> Result<(), MasterError> {
+    /// Every value must be finite, as in [`read_coupled`](Self::read_coupled).
+    pub(crate) fn read_recorded(&mut self, run: Run) -> Result<(), MasterError> {
         if !self.recorded_vrs.is_empty() {
             self.instance
                 .get_real(&self.recorded_vrs, &mut self.recorded_values)?;
             self.counters.get_reals += 1;
         }
-        Ok(())
+        match self.recorded_values.iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(i) => {
+                let column = &self.recorded_names[i];
+                // `<instance>.<variable>`: the instance's name is the prefix.
+                let variable = column[column.find('.').map_or(0, |d| d + 1)..].to_string();
+                Err(self.non_finite(variable, self.recorded_values[i], run))
+            }
+        }
     }
 
     /// Column names of the recorded outputs.
@@ -368,6 +573,13 @@ impl Slave {
     pub fn counters(&self) -> &InstanceCounters {
         &self.counters
     }
+}
+
+/// The first index where `a` and `b` differ bit for bit.
+fn first_difference(a: &[f64], b: &[f64]) -> Option<usize> {
+    a.iter()
+        .zip(b)
+        .position(|(x, y)| x.to_bits() != y.to_bits())
 }
 
 /// The inputs' values (`values`) and derivatives (`derivatives`: the first

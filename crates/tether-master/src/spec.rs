@@ -73,6 +73,31 @@ pub struct CouplingSettings {
     pub divergence_factor: f64,
     /// Perturbed runs on other threads: auto, on or off (docs/algorithm.md).
     pub parallel: Parallel,
+    /// When the rollback of the instances the method rolls back is checked
+    /// (docs/reliability.md): at setup (the default), also after every
+    /// restore, or never.
+    pub check_rollback: CheckRollback,
+    /// The run summary warns when the largest |g| of a constraint or joint
+    /// condition over the run exceeds this (in the condition's units).
+    pub residual_warning: f64,
+}
+
+/// When the master checks that `fmi2SetFMUstate` restores an instance
+/// exactly (`[coupling] check_rollback`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CheckRollback {
+    /// Once, before the first macro step: save, step, restore, compare the
+    /// outputs with those at the save, repeat the step and require
+    /// bit-identical outputs, restore.
+    #[default]
+    Setup,
+    /// At setup, and after every restore of a macro step the coupled outputs
+    /// are read back and compared with those at the save (one more
+    /// `fmi2GetReal` per save and per restore).
+    EveryStep,
+    /// Never.
+    Off,
 }
 
 impl Default for CouplingSettings {
@@ -83,6 +108,8 @@ impl Default for CouplingSettings {
             max_condition: 1e12,
             divergence_factor: 1e6,
             parallel: Parallel::Auto,
+            check_rollback: CheckRollback::Setup,
+            residual_warning: 1e-3,
         }
     }
 }
@@ -384,6 +411,13 @@ impl SystemSpec {
                 "a finite number > 1",
             ));
         }
+        if !c.residual_warning.is_finite() || c.residual_warning <= 0.0 {
+            return Err(param(
+                "residual_warning",
+                c.residual_warning,
+                "a finite number > 0",
+            ));
+        }
         if self.instances.is_empty() {
             return Err(MasterError::SystemFile {
                 path: PathBuf::from("<system>"),
@@ -464,6 +498,26 @@ impl SystemSpec {
     }
 
     /// Number of macro steps: the stop time rounded to the grid `start + n·step`.
+    /// The time the run ends at: `start + macro_steps()·step`, which differs
+    /// from `stop` when `stop` is not on the macro grid.
+    pub fn end_time(&self) -> f64 {
+        let e = &self.experiment;
+        e.start + self.macro_steps() as f64 * e.step
+    }
+
+    /// A warning when `stop` is not on the macro grid (beyond a relative 1e-9
+    /// of a step): the run ends at the nearest grid point instead.
+    pub fn grid_warning(&self) -> Option<String> {
+        let e = &self.experiment;
+        let end = self.end_time();
+        ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
+            format!(
+                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {end}",
+                e.stop, e.start, e.step
+            )
+        })
+    }
+
     pub fn macro_steps(&self) -> u64 {
         let e = &self.experiment;
         let n = ((e.stop - e.start) / e.step).round();
@@ -474,6 +528,29 @@ impl SystemSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_stop_time_off_the_grid_is_named_with_the_actual_end() {
+        let spec = |stop: f64, step: f64| {
+            SystemSpec::from_toml(
+                &OSC.replace("stop = 1.0", &format!("stop = {stop:?}"))
+                    .replace("step = 1e-3", &format!("step = {step:?}")),
+            )
+            .unwrap()
+        };
+        assert_eq!(spec(1.0, 1e-3).grid_warning(), None);
+        assert_eq!(
+            spec(0.1, 1e-3).grid_warning(),
+            None,
+            "within rounding of the grid"
+        );
+        let off = spec(1e-4, 1e-3);
+        assert_eq!(off.end_time(), 1e-3);
+        assert_eq!(
+            off.grid_warning().as_deref(),
+            Some("stop = 0.0001 is not on the macro grid start + n·step (start = 0, step = 0.001): the run ends at t = 0.001")
+        );
+    }
 
     const OSC: &str = r#"
         [experiment]

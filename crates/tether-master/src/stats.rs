@@ -62,6 +62,28 @@ pub struct RunStats {
     pub wall: Duration,
     /// Parallel perturbed runs: workers used and the measurements behind it.
     pub parallel: crate::ParallelInfo,
+    /// Set when an instance asked to end the simulation before the stop time
+    /// (fmi2Discard with `fmi2Terminated`): the run ended normally there.
+    pub termination: Option<Termination>,
+    /// Per constraint and joint condition (its `.g` column): the largest
+    /// |g| (position-level residual) over the recorded points.
+    pub residuals: Vec<(String, f64)>,
+    /// The threshold above which the summary warns about a residual
+    /// (`[coupling] residual_warning`).
+    pub residual_warning: f64,
+}
+
+/// An instance's request to end the simulation, and where the run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Termination {
+    /// The instance that asked.
+    pub instance: String,
+    /// The time it reported (`fmi2LastSuccessfulTime`).
+    pub requested_at: f64,
+    /// The last accepted macro point, the last recorded row: the coupled step
+    /// to the requested time cannot be completed (the instance cannot be
+    /// rolled back and re-run after it terminated).
+    pub ended_at: f64,
 }
 
 impl fmt::Display for RunStats {
@@ -87,6 +109,34 @@ impl fmt::Display for RunStats {
                 c.get_reals,
                 c.set_input_derivatives,
                 c.get_output_derivatives
+            )?;
+        }
+        if !self.residuals.is_empty() {
+            write!(f, "  max |g|:")?;
+            for (name, max) in &self.residuals {
+                write!(f, "  {name} {max:.2e}")?;
+            }
+            writeln!(f)?;
+            for (name, max) in self
+                .residuals
+                .iter()
+                .filter(|(_, m)| m.is_nan() || *m > self.residual_warning)
+            {
+                writeln!(
+                    f,
+                    "  warning: max |{name}| = {max:.2e} exceeds residual_warning = {:e}: the \
+                     constraint is not held to that accuracy (a smaller step, another index or \
+                     method, or a larger residual_warning)",
+                    self.residual_warning
+                )?;
+            }
+        }
+        if let Some(end) = &self.termination {
+            writeln!(
+                f,
+                "  note: instance '{}' requested the end of the simulation at t = {} \
+                 (fmi2Discard, fmi2Terminated); the run ended normally at t = {}, the last accepted point",
+                end.instance, end.requested_at, end.ended_at
             )?;
         }
         let p = &self.parallel;

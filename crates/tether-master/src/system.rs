@@ -4,8 +4,8 @@
 
 use crate::coupling::Coupling;
 use crate::polynomial::Taylor;
-use crate::slave::Slave;
-use crate::spec::{InitialMultiplier, SystemSpec};
+use crate::slave::{Run, Slave};
+use crate::spec::{CheckRollback, InitialMultiplier, SystemSpec};
 use crate::stats::{Lap, RunStats};
 use crate::{MasterError, Method};
 
@@ -61,8 +61,10 @@ impl System {
             })
             .collect();
         let exp = spec.experiment;
+        let every_step = spec.coupling.check_rollback == CheckRollback::EveryStep;
         for slave in &mut slaves {
             slave.initialize(exp.start, stop, exp.tolerance)?;
+            slave.verify_restore = every_step && method.needs_rollback() && slave.is_coupled();
         }
         let history = coupling
             .unknowns
@@ -98,12 +100,39 @@ impl System {
         Ok(())
     }
 
+    /// The rollback self-check of every instance the method rolls back (those
+    /// an unknown drives), from the current state with the unknowns u_N held
+    /// constant over [t, t + h]; each is left in its current state.
+    pub fn check_rollback(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
+        let polys: Vec<Taylor> = self
+            .history
+            .iter()
+            .map(|u| Taylor {
+                value: u[0],
+                ..Taylor::default()
+            })
+            .collect();
+        for slave in self.slaves.iter_mut().filter(|s| s.is_coupled()) {
+            slave.check_rollback(&polys, t, h)?;
+        }
+        Ok(())
+    }
+
+    /// `fmi2Terminate` every instance, at a normal end of the run.
+    pub fn terminate(&mut self) -> Result<(), MasterError> {
+        for slave in &mut self.slaves {
+            slave.terminate()?;
+        }
+        Ok(())
+    }
+
     /// Read the coupled outputs (into `outputs`) and the recorded outputs of
     /// every instance at an accepted point.
-    pub fn read_accepted(&mut self) -> Result<(), MasterError> {
+    /// `run` names the call they come after, for a non-finite value.
+    pub fn read_accepted(&mut self, run: Run) -> Result<(), MasterError> {
         for (slave, out) in self.slaves.iter_mut().zip(&mut self.outputs) {
-            slave.read_coupled(out)?;
-            slave.read_recorded()?;
+            slave.read_coupled(out, run)?;
+            slave.read_recorded(run)?;
         }
         Ok(())
     }
@@ -138,6 +167,12 @@ pub(crate) trait MacroStep: Send {
     /// Add what the method's helpers did (FMI calls made on worker threads,
     /// the parallel decision) to `stats`.
     fn report(&self, _stats: &mut RunStats) {}
+
+    /// `fmi2Terminate` the instances the method's helpers made (the copies
+    /// of parallel perturbed runs), at a normal end of the run.
+    fn terminate(&mut self) -> Result<(), MasterError> {
+        Ok(())
+    }
 }
 
 /// Group unknowns so that no two in a group drive the same instance: one

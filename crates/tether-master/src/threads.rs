@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::polynomial::Taylor;
 use crate::runs::{PerturbedRuns, Sequential};
-use crate::slave::Slave;
+use crate::slave::{Run, Slave};
 use crate::spec::InstanceSpec;
 use crate::stats::{InstanceCounters, RunStats};
 use crate::MasterError;
@@ -232,6 +232,17 @@ impl PerturbedRuns for Threads {
         Ok(())
     }
 
+    fn terminate(&mut self) -> Result<(), MasterError> {
+        for lane in &self.lanes {
+            // The worker is idle between jobs: its copies are ours to call.
+            let mut job = lane.wait();
+            for extra in job.extras.iter_mut().flatten() {
+                extra.terminate()?;
+            }
+        }
+        Ok(())
+    }
+
     fn report(&self, stats: &mut RunStats) {
         stats.parallel = self.info;
         for (s, counters) in stats.instances.iter_mut().enumerate() {
@@ -265,7 +276,7 @@ impl Threads {
                 let clock = Instant::now();
                 slave.do_step(t, h)?;
                 self.step_cost[s] = self.step_cost[s].min(clock.elapsed());
-                slave.read_coupled(&mut outputs[g][s])?;
+                slave.read_coupled(&mut outputs[g][s], Run::Perturbed)?;
             }
         }
         self.trial[0] = self.trial[0].min(phase.elapsed());

@@ -285,11 +285,11 @@ pub unsafe fn get_boolean_status<M: Model>(
     kind: c_int,
     value: *mut Fmi2Boolean,
 ) -> Fmi2Status {
-    // The FMU never asks the master to terminate the simulation.
+    // True once the model asked to end the simulation (Model::terminate).
     // SAFETY: this function's contract (module docs).
     unsafe {
-        status_query::<M, Fmi2Boolean>(c, Call::GetBooleanStatus, kind, value, |_| {
-            Some((STATUS_KIND_TERMINATED, 0))
+        status_query::<M, Fmi2Boolean>(c, Call::GetBooleanStatus, kind, value, |i| {
+            Some((STATUS_KIND_TERMINATED, Fmi2Boolean::from(i.terminated)))
         })
     }
 }
