@@ -758,7 +758,7 @@ fn bench_parallel() {
         );
         println!(
             "  speed-up off/on {:.2}x   off/auto {:.2}x   auto: {} worker(s), hand-off {:.1} µs, \
-             predicted runs {:.1} µs sequential / {:.1} µs parallel, trial steps {:.1} µs / {:.1} µs",
+             predicted runs {:.1} µs sequential / {:.1} µs parallel, trial run phases {:.1} µs / {:.1} µs",
             off / on,
             off / auto,
             info.workers,

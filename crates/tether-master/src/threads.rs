@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::polynomial::Taylor;
 use crate::runs::{PerturbedRuns, Sequential};
-use crate::slave::{Run, Slave};
+use crate::slave::Slave;
 use crate::spec::InstanceSpec;
 use crate::stats::{InstanceCounters, RunStats};
 use crate::MasterError;
@@ -142,7 +142,7 @@ pub(crate) fn strategy(
         outputs,
         bytes: vec![Vec::new(); slaves.len()],
         steps: 0,
-        step_cost: vec![Duration::MAX; slaves.len()],
+        run_cost: vec![Duration::MAX; slaves.len()],
         trial: [Duration::MAX; 2],
         active: false,
         info: ParallelInfo::default(),
@@ -186,8 +186,8 @@ struct Threads {
     bytes: Vec<Vec<u8>>,
     /// "auto": macro steps run so far.
     steps: u32,
-    /// "auto": shortest measured `fmi2DoStep` per instance.
-    step_cost: Vec<Duration>,
+    /// "auto": shortest measured perturbed run per instance.
+    run_cost: Vec<Duration>,
     /// "auto": shortest run phase of the sequential and the parallel steps.
     trial: [Duration; 2],
     /// Whether the runs use the workers.
@@ -257,8 +257,8 @@ impl PerturbedRuns for Threads {
 }
 
 impl Threads {
-    /// "auto", first steps: every run on the main thread, each `fmi2DoStep`
-    /// and the whole phase timed.
+    /// "auto", first steps: every run on the main thread, each run and the
+    /// whole phase timed.
     fn run_timed(
         &mut self,
         slaves: &mut [Slave],
@@ -270,13 +270,9 @@ impl Threads {
         let phase = Instant::now();
         for (g, members) in self.sequential.group_slaves.iter().enumerate() {
             for &s in members {
-                let slave = &mut slaves[s];
-                slave.restore_state()?;
-                slave.apply_inputs(&polys[g])?;
                 let clock = Instant::now();
-                slave.do_step(t, h)?;
-                self.step_cost[s] = self.step_cost[s].min(clock.elapsed());
-                slave.read_coupled(&mut outputs[g][s], Run::Perturbed)?;
+                slaves[s].rerun(&polys[g], t, h, Some(&mut outputs[g][s]))?;
+                self.run_cost[s] = self.run_cost[s].min(clock.elapsed());
             }
         }
         self.trial[0] = self.trial[0].min(phase.elapsed());
@@ -437,7 +433,7 @@ impl Threads {
     /// whether the trial starts.
     fn decide(&mut self, slaves: &mut [Slave]) -> Result<bool, MasterError> {
         let n = slaves.len();
-        let cost = self.step_cost.clone();
+        let cost = self.run_cost.clone();
         self.info.trial_sequential = self.trial[0];
         let hopeless = |info: &ParallelInfo, runs: &[Vec<(usize, usize)>]| {
             info.parallel >= info.sequential || runs.iter().all(Vec::is_empty)
