@@ -8,6 +8,7 @@ mod compare;
 mod exit_guard;
 mod info;
 mod interrupt;
+mod isolation;
 mod output;
 mod plot;
 mod run;
@@ -66,7 +67,21 @@ pub fn stdout(text: std::fmt::Arguments<'_>) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot write to stdout: {e}"))
 }
 
+/// The hidden first argument that makes `tether` the host process of an
+/// isolated FMU instance (docs/reliability.md).
+const FMI_HOST: &str = "__fmi-host";
+
 fn main() -> ExitCode {
+    if std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
+        return tether_fmi_host::serve_stdin();
+    }
+    // Isolated instances run in `tether __fmi-host`: one file to install.
+    if let Ok(exe) = std::env::current_exe() {
+        tether_fmi::remote::set_host(tether_fmi::remote::HostCommand {
+            program: exe,
+            args: vec![FMI_HOST.into()],
+        });
+    }
     let cli = Cli::parse();
     let level = match cli.verbose {
         0 => log::LevelFilter::Warn,

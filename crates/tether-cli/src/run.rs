@@ -30,6 +30,15 @@ pub struct Args {
     /// clock reads per macro step.
     #[arg(long)]
     timing: bool,
+    /// Run every FMU instance in a host process of its own (`isolation =
+    /// "process"`): a crash, exit or hang of an FMU becomes an error of the run.
+    #[arg(long)]
+    isolate: bool,
+    /// The longest an FMI call may take, in seconds, for every instance without
+    /// its own `call_timeout`: an isolated instance is killed, an in-process
+    /// one ends the run.
+    #[arg(long, value_name = "SECONDS")]
+    call_timeout: Option<f64>,
     /// Do not print the run summary, nor the FMUs' warnings (their errors still).
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -39,6 +48,7 @@ pub fn main(args: Args) -> Result<()> {
     crate::interrupt::install()?;
     let mut spec = SystemSpec::from_file(&args.system)?;
     crate::settings::apply(&args.settings.overrides()?, &mut spec)?;
+    crate::isolation::apply(args.isolate, args.call_timeout, &mut spec)?;
     let out = match &args.out {
         Some(p) => p.clone(),
         None => PathBuf::from(

@@ -311,6 +311,52 @@ pub enum Error {
         got: usize,
     },
 
+    /// An error of an isolated instance's host process that crossed as a message.
+    #[error("{message}")]
+    Host {
+        /// The instance name.
+        instance: String,
+        /// The error, as the host reported it.
+        message: String,
+    },
+
+    /// The host process of an isolated instance could not be started.
+    #[error("cannot start the host process of instance '{instance}': {reason}")]
+    HostStart {
+        /// The instance name.
+        instance: String,
+        /// Why.
+        reason: String,
+    },
+
+    /// The host process of an isolated instance ended (crashed, exited, was
+    /// killed) during a call.
+    #[error("instance '{instance}': its host process {how} during {function} at t={time}")]
+    HostEnded {
+        /// The instance name.
+        instance: String,
+        /// The FMI function in progress.
+        function: &'static str,
+        /// The instance's communication time when the call was made.
+        time: f64,
+        /// What happened: `was killed by signal 11 (SIGSEGV)`, `exited with code 3`.
+        how: String,
+    },
+
+    /// A call of an isolated instance exceeded the call time-out; its host
+    /// process was killed.
+    #[error("instance '{instance}': {function} at t={time} did not return within the call time-out of {seconds} s; its host process was killed")]
+    CallTimeout {
+        /// The instance name.
+        instance: String,
+        /// The FMI function in progress.
+        function: &'static str,
+        /// The instance's communication time when the call was made.
+        time: f64,
+        /// The time-out.
+        seconds: f64,
+    },
+
     /// An argument cannot be passed to (or a result cannot be taken from) the C API,
     /// e.g. a string with an interior NUL byte or a non-UTF-8 string from the FMU.
     #[error("{function} on instance '{instance}': {message}")]
@@ -336,7 +382,9 @@ impl Error {
             | Error::FmuDead { function, .. }
             | Error::ForeignState { function, .. }
             | Error::LengthMismatch { function, .. }
-            | Error::InvalidArgument { function, .. } => Some(function),
+            | Error::InvalidArgument { function, .. }
+            | Error::HostEnded { function, .. }
+            | Error::CallTimeout { function, .. } => Some(function),
             _ => None,
         }
     }

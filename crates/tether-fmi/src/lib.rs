@@ -55,6 +55,7 @@ mod library;
 mod logger;
 pub mod model_description;
 pub mod raw;
+pub mod remote;
 mod shared;
 mod state;
 mod uri;

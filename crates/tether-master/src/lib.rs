@@ -19,6 +19,7 @@
 //!
 //! The algorithm as implemented is described in `docs/algorithm.md`.
 
+mod backend;
 mod coupling;
 mod error;
 mod explicit;
@@ -52,6 +53,6 @@ pub use spec::{
     CheckRollback, ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment,
     InitialMultiplier, InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
 };
-pub use start::apply_start_value;
+pub use start::{apply_start_value, Settable};
 pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination};
 pub use threads::{Parallel, ParallelInfo};

@@ -2,7 +2,10 @@
 //! polynomials, coupled outputs read after each run, a saved state to roll back
 //! to, and the outputs recorded at accepted steps.
 
-use tether_fmi::{BaseType, Causality, Fmu, FmuState, Instance};
+use tether_fmi::{BaseType, Causality, Fmu};
+
+use crate::backend::{Backend, Slot};
+use crate::spec::Isolation;
 
 use crate::polynomial::Taylor;
 use crate::spec::InstanceSpec;
@@ -64,9 +67,11 @@ impl Run {
 pub struct Slave {
     pub(crate) name: String,
     pub(crate) model_name: String,
-    pub(crate) instance: Instance,
+    /// The FMU instance, in this process or in a host process.
+    pub(crate) backend: Backend,
     pub(crate) fmu: Fmu,
-    state: Option<FmuState>,
+    /// Whether [`Slot::Saved`] holds a state.
+    saved: bool,
     pub(crate) inputs: Vec<CoupledInput>,
     input_vrs: Vec<u32>,
     input_values: Vec<f64>,
@@ -147,19 +152,19 @@ impl Slave {
     /// Serialise the state saved by [`save_state`](Self::save_state) into `out`
     /// (its capacity is reused).
     pub(crate) fn serialize_saved(&mut self, out: &mut Vec<u8>) -> Result<(), MasterError> {
-        let state = self
-            .state
-            .as_ref()
-            .expect("serialize_saved is only called after save_state");
-        self.instance.serialize_fmu_state_into(state, out)?;
+        assert!(
+            self.saved,
+            "serialize_saved is only called after save_state"
+        );
+        self.backend.serialize(Slot::Saved, out)?;
         Ok(())
     }
 
     /// Set the state from bytes of [`serialize_saved`](Self::serialize_saved)
     /// (of another instance of the same FMU) and keep it as the saved state.
     pub(crate) fn load_serialized(&mut self, bytes: &[u8]) -> Result<(), MasterError> {
-        // The previous state is freed (fmi2FreeFMUstate) when replaced.
-        self.state = Some(self.instance.deserialize_fmu_state(bytes)?);
+        self.backend.deserialize(Slot::Saved, bytes)?;
+        self.saved = true;
         Ok(())
     }
 
@@ -178,13 +183,15 @@ impl Slave {
                 recorded_vrs.push(v.value_reference);
             }
         }
-        let instance = fmu.instantiate(name, Default::default())?;
+        let timeout = spec.call_timeout.map(std::time::Duration::from_secs_f64);
+        let isolated = spec.isolation == Isolation::Process;
+        let backend = Backend::new(&fmu, name, isolated, timeout)?;
         let mut slave = Slave {
             name: name.to_string(),
             model_name,
-            instance,
+            backend,
             fmu,
-            state: None,
+            saved: false,
             inputs: Vec::new(),
             input_vrs: Vec::new(),
             input_values: Vec::new(),
@@ -213,7 +220,7 @@ impl Slave {
         };
         for (name, value) in &spec.parameters {
             crate::start::apply_start_value(
-                &mut slave.instance,
+                &mut slave.backend,
                 slave.fmu.model_description(),
                 name,
                 value,
@@ -292,19 +299,17 @@ impl Slave {
         stop: f64,
         tolerance: Option<f64>,
     ) -> Result<(), MasterError> {
-        self.instance
+        self.backend
             .setup_experiment(tolerance, start, Some(stop))?;
-        self.instance.enter_initialization_mode()?;
-        self.instance.exit_initialization_mode()?;
+        self.backend.enter_initialization_mode()?;
+        self.backend.exit_initialization_mode()?;
         Ok(())
     }
 
     /// Save the current state (`fmi2GetFMUstate`, reusing the previous handle).
     pub(crate) fn save_state(&mut self) -> Result<(), MasterError> {
-        match &mut self.state {
-            Some(s) => self.instance.update_fmu_state(s)?,
-            None => self.state = Some(self.instance.get_fmu_state()?),
-        }
+        self.backend.save(Slot::Saved)?;
+        self.saved = true;
         self.counters.state_gets += 1;
         if self.verify_restore {
             let mut at_save = std::mem::take(&mut self.at_save);
@@ -319,17 +324,14 @@ impl Slave {
     /// `verify_restore`, read the coupled outputs back and require those of
     /// the save.
     pub(crate) fn restore_state(&mut self) -> Result<(), MasterError> {
-        let state = self
-            .state
-            .as_ref()
-            .expect("restore_state is only called after save_state");
-        self.instance.set_fmu_state(state)?;
+        assert!(self.saved, "restore_state is only called after save_state");
+        self.backend.restore(Slot::Saved)?;
         self.counters.state_sets += 1;
         if self.verify_restore {
             let mut readback = std::mem::take(&mut self.readback);
             let read = self.read_coupled(&mut readback, Run::Rollback);
             let compared = read.and_then(|()| {
-                let time = self.instance.time();
+                let time = self.backend.time();
                 self.compare_restored(&self.at_save, &readback, time)
             });
             self.readback = readback;
@@ -353,12 +355,12 @@ impl Slave {
         let n = self.coupled_len();
         let (mut at_save, mut first, mut back, mut second) =
             (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        let state = self.instance.get_fmu_state()?;
+        self.backend.save(Slot::Check)?;
         self.read_coupled(&mut at_save, Run::Rollback)?;
         self.apply_inputs(polys)?;
         self.do_step(t, h)?;
         self.read_coupled(&mut first, Run::Rollback)?;
-        self.instance.set_fmu_state(&state)?;
+        self.backend.restore(Slot::Check)?;
         self.read_coupled(&mut back, Run::Rollback)?;
         self.compare_restored(&at_save, &back, t)?;
         self.apply_inputs(polys)?;
@@ -379,7 +381,8 @@ impl Slave {
                 variable,
             });
         }
-        self.instance.set_fmu_state(&state)?;
+        self.backend.restore(Slot::Check)?;
+        self.backend.free(Slot::Check)?;
         self.counters = counters;
         Ok(())
     }
@@ -432,11 +435,10 @@ impl Slave {
             &mut self.input_values,
             &mut self.input_d_values,
         );
-        self.instance
-            .set_real(&self.input_vrs, &self.input_values)?;
+        self.backend.set_real(&self.input_vrs, &self.input_values)?;
         self.counters.set_reals += 1;
         if !self.input_d_vrs.is_empty() {
-            self.instance.set_real_input_derivatives(
+            self.backend.set_real_input_derivatives(
                 &self.input_d_vrs,
                 &self.input_d_orders,
                 &self.input_d_values,
@@ -451,7 +453,7 @@ impl Slave {
     /// [`MasterError::TerminationRequested`].
     pub(crate) fn do_step(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
         self.counters.do_steps += 1;
-        match self.instance.do_step(t, h, true) {
+        match self.backend.do_step(t, h) {
             Ok(()) => Ok(()),
             Err(e) => Err(self.step_failure(e, t + h)),
         }
@@ -463,9 +465,9 @@ impl Slave {
     #[inline(never)]
     fn step_failure(&mut self, e: tether_fmi::Error, end: f64) -> MasterError {
         if matches!(e, tether_fmi::Error::Discard { .. })
-            && matches!(self.instance.terminated(), Ok(true))
+            && matches!(self.backend.terminated(), Ok(true))
         {
-            let time = self.instance.last_successful_time().unwrap_or(end);
+            let time = self.backend.last_successful_time().unwrap_or(end);
             return MasterError::TerminationRequested {
                 instance: self.name.clone(),
                 time,
@@ -477,8 +479,8 @@ impl Slave {
     /// `fmi2Terminate`, at a normal end of the run (not after a fatal error:
     /// tether-fmi then calls nothing).
     pub(crate) fn terminate(&mut self) -> Result<(), MasterError> {
-        if !self.instance.is_fatal() {
-            self.instance.terminate()?;
+        if !self.backend.is_fatal() {
+            self.backend.terminate()?;
         }
         Ok(())
     }
@@ -488,7 +490,7 @@ impl Slave {
     /// the output, the call `run` and the time.
     pub(crate) fn read_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
         if !self.value_vrs.is_empty() {
-            self.instance
+            self.backend
                 .get_real(&self.value_vrs, &mut self.value_buf)?;
             self.counters.get_reals += 1;
             for (&value, &slot) in self.value_buf.iter().zip(&self.value_slots) {
@@ -497,7 +499,7 @@ impl Slave {
         }
         for &(vr, order, slot) in &self.derivative_reads {
             let mut value = [0.0];
-            self.instance
+            self.backend
                 .get_real_output_derivatives(&[vr], &[order], &mut value)?;
             self.counters.get_output_derivatives += 1;
             out[slot] = value[0];
@@ -517,7 +519,7 @@ impl Slave {
             variable,
             value,
             call: run.describe(),
-            time: self.instance.time(),
+            time: self.backend.time(),
         }
     }
 
@@ -544,7 +546,7 @@ impl Slave {
     /// Every value must be finite, as in [`read_coupled`](Self::read_coupled).
     pub(crate) fn read_recorded(&mut self, run: Run) -> Result<(), MasterError> {
         if !self.recorded_vrs.is_empty() {
-            self.instance
+            self.backend
                 .get_real(&self.recorded_vrs, &mut self.recorded_values)?;
             self.counters.get_reals += 1;
         }

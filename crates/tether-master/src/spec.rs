@@ -125,6 +125,27 @@ pub struct InstanceSpec {
     /// Start values of parameters (or of any settable variable) by name.
     #[serde(default)]
     pub parameters: BTreeMap<String, StartValue>,
+    /// Where the FMU runs: in the master's process (default) or in a host
+    /// process of its own (docs/reliability.md).
+    #[serde(default)]
+    pub isolation: Isolation,
+    /// The longest an FMI call of this instance may take, in seconds: an
+    /// isolated instance is then killed; an in-process one is reported (and
+    /// the `tether` CLI ends the run).
+    #[serde(default)]
+    pub call_timeout: Option<f64>,
+}
+
+/// Where an instance's FMU runs (`isolation` of an instance).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Isolation {
+    /// In the master's process: the fastest; a crash of the FMU is the master's.
+    #[default]
+    None,
+    /// In a host process of its own: a crash, exit or hang of the FMU becomes
+    /// an error of the run.
+    Process,
 }
 
 /// A start value as written in TOML.
@@ -417,6 +438,15 @@ impl SystemSpec {
                 c.residual_warning,
                 "a finite number > 0",
             ));
+        }
+        for i in &self.instances {
+            if let Some(t) = i.call_timeout.filter(|t| !t.is_finite() || *t <= 0.0) {
+                return Err(param(
+                    &format!("{}.call_timeout", i.name),
+                    t,
+                    "a finite time in seconds > 0",
+                ));
+            }
         }
         if self.instances.is_empty() {
             return Err(MasterError::SystemFile {

@@ -1,15 +1,50 @@
 //! Applying start values (parameters, input starts) to an instance by name.
 
-use tether_fmi::{BaseType, Causality, Instance, ModelDescription, Variability, VariableKind};
+use tether_fmi::{
+    BaseType, Causality, Instance, ModelDescription, ValueReference, Variability, VariableKind,
+};
 
 use crate::names::describe;
 use crate::spec::StartValue;
 use crate::MasterError;
 
+/// What start values are applied to: an [`Instance`], or an instance of a
+/// system in this process or in a host process of its own.
+pub trait Settable {
+    /// The instance name.
+    fn name(&self) -> &str;
+    /// `fmi2SetReal`.
+    fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> tether_fmi::Result<()>;
+    /// `fmi2SetInteger`.
+    fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> tether_fmi::Result<()>;
+    /// `fmi2SetBoolean`.
+    fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> tether_fmi::Result<()>;
+    /// `fmi2SetString`.
+    fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> tether_fmi::Result<()>;
+}
+
+impl Settable for Instance {
+    fn name(&self) -> &str {
+        Instance::name(self)
+    }
+    fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> tether_fmi::Result<()> {
+        Instance::set_real(self, vrs, values)
+    }
+    fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> tether_fmi::Result<()> {
+        Instance::set_integer(self, vrs, values)
+    }
+    fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> tether_fmi::Result<()> {
+        Instance::set_boolean(self, vrs, values)
+    }
+    fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> tether_fmi::Result<()> {
+        Instance::set_string(self, vrs, values)
+    }
+}
+
 /// Set `name = value` on `instance` before initialization. Refuses outputs,
 /// locals, constants and type mismatches with a message naming the variable.
 pub fn apply_start_value(
-    instance: &mut Instance,
+    instance: &mut impl Settable,
     md: &ModelDescription,
     name: &str,
     value: &StartValue,

@@ -1,0 +1,306 @@
+//! The host process of an out-of-process FMU instance: reads requests of
+//! [`tether_fmi::remote::protocol`] from its standard input (a Unix socket the
+//! master made), makes the FMI calls on one instance and answers each. The
+//! `tether-fmi-host` executable is this and nothing else; the `tether` binary
+//! runs it too, as `tether __fmi-host`, so the CLI needs no second file.
+//!
+//! The host ends when the master closes the socket, also while the FMU is
+//! stuck inside a call (a thread watches for the hang-up), so a master that
+//! dies leaves no host behind.
+
+use std::io::{BufReader, Write};
+use std::os::fd::{AsFd, AsRawFd};
+use std::os::unix::net::UnixStream;
+use std::process::ExitCode;
+
+use tether_fmi::remote::protocol::{self, op, In, Out};
+use tether_fmi::{Error, Fmu, FmuState, Instance, InstanceOptions, StatusKind};
+
+/// Serves the master on standard input; the exit code is 0 when the master
+/// closed the connection, 2 when standard input is no socket or a message
+/// could not be read.
+pub fn serve_stdin() -> ExitCode {
+    let stream = std::io::stdin()
+        .as_fd()
+        .try_clone_to_owned()
+        .map(UnixStream::from);
+    let stream = match stream {
+        Ok(s) if s.peer_addr().is_ok() => s,
+        _ => {
+            let _ = writeln!(
+                std::io::stderr(),
+                "error: tether-fmi-host runs an FMU for Tether, which starts it with a socket as standard input; it is not meant to be started by hand"
+            );
+            return ExitCode::from(2);
+        }
+    };
+    watch_hangup(&stream);
+    match serve(stream) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let _ = writeln!(std::io::stderr(), "error: tether-fmi-host: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// Ends the process when the master hangs up, even while the FMU is busy.
+fn watch_hangup(stream: &UnixStream) {
+    let fd = stream.as_raw_fd();
+    std::thread::spawn(move || loop {
+        let mut poll = libc::pollfd {
+            fd,
+            events: libc::POLLRDHUP,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd; `fd` stays open for the life of the
+        // process (the serving loop owns it and ends the process on return).
+        let n = unsafe { libc::poll(&mut poll, 1, -1) };
+        if n > 0 && poll.revents & (libc::POLLRDHUP | libc::POLLHUP | libc::POLLERR) != 0 {
+            // SAFETY: _exit ends the process at once; the master is gone and
+            // nothing of ours needs flushing.
+            unsafe { libc::_exit(0) };
+        }
+    });
+}
+
+/// The instance being served and what its calls need.
+#[derive(Default)]
+struct Host {
+    fmu: Option<Fmu>,
+    instance: Option<Instance>,
+    states: Vec<Option<FmuState>>,
+    vrs: Vec<u32>,
+    ints: Vec<i32>,
+    reals: Vec<f64>,
+    bools: Vec<bool>,
+    bytes: Vec<u8>,
+}
+
+/// Answers requests until the master closes the connection.
+fn serve(stream: UnixStream) -> std::io::Result<()> {
+    let mut writer = stream.try_clone()?;
+    let mut reader = BufReader::with_capacity(1 << 16, stream);
+    let mut request = Vec::new();
+    let mut out = Out::default();
+    let mut host = Host::default();
+    while protocol::receive(&mut reader, &mut request)? {
+        let mut input = In::new(&request);
+        let code = input.u8()?;
+        out.start(protocol::OK);
+        if let Err(e) = host.handle(code, &mut input, &mut out)? {
+            out.start(protocol::ERR).error(&e);
+        }
+        out.send(&mut writer)?;
+        if code == op::FREE_INSTANCE {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// The instance, or the error for a call before `INSTANTIATE`.
+fn live(instance: &mut Option<Instance>) -> Result<&mut Instance, Error> {
+    instance.as_mut().ok_or_else(|| Error::Host {
+        instance: String::new(),
+        message: "the host has no instance yet".into(),
+    })
+}
+
+impl Host {
+    /// One request: `Ok(Err(e))` is an FMI error for the master, `Err` a
+    /// message that does not parse.
+    fn handle(
+        &mut self,
+        code: u8,
+        input: &mut In<'_>,
+        out: &mut Out,
+    ) -> std::io::Result<Result<(), Error>> {
+        Ok(match code {
+            op::PING => Ok(()),
+            op::HELLO => {
+                let _version = input.u32()?;
+                let max = level(input.u8()?);
+                let fmu = level(input.u8()?);
+                init_logger(max, fmu);
+                out.u32(protocol::VERSION);
+                Ok(())
+            }
+            op::INSTANTIATE => {
+                let dir = input.str()?;
+                let name = input.str()?;
+                let options = InstanceOptions {
+                    logging_on: input.bool()?,
+                    visible: input.bool()?,
+                };
+                Fmu::open(dir)
+                    .and_then(|fmu| {
+                        let instance = fmu.instantiate(name, options)?;
+                        self.fmu = Some(fmu);
+                        Ok(instance)
+                    })
+                    .map(|instance| self.instance = Some(instance))
+            }
+            op::FREE_INSTANCE => {
+                self.states.clear();
+                self.instance = None;
+                self.fmu = None;
+                Ok(())
+            }
+            _ => self.call(code, input, out)?,
+        })
+    }
+
+    /// A call on the instance.
+    fn call(
+        &mut self,
+        code: u8,
+        input: &mut In<'_>,
+        out: &mut Out,
+    ) -> std::io::Result<Result<(), Error>> {
+        let i = match live(&mut self.instance) {
+            Ok(i) => i,
+            Err(e) => return Ok(Err(e)),
+        };
+        Ok(match code {
+            op::SETUP_EXPERIMENT => {
+                let tolerance = input.bool()?.then_some(input.f64()?);
+                let start = input.f64()?;
+                let has_stop = input.bool()?;
+                let stop = input.f64()?;
+                i.setup_experiment(tolerance, start, has_stop.then_some(stop))
+            }
+            op::ENTER_INITIALIZATION_MODE => i.enter_initialization_mode(),
+            op::EXIT_INITIALIZATION_MODE => i.exit_initialization_mode(),
+            op::TERMINATE => i.terminate(),
+            op::RESET => i.reset(),
+            op::SET_REAL => {
+                input.u32s(&mut self.vrs)?;
+                input.f64s(&mut self.reals)?;
+                i.set_real(&self.vrs, &self.reals)
+            }
+            op::GET_REAL => {
+                input.u32s(&mut self.vrs)?;
+                self.reals.clear();
+                self.reals.resize(self.vrs.len(), 0.0);
+                i.get_real(&self.vrs, &mut self.reals).map(|()| {
+                    out.f64s(&self.reals);
+                })
+            }
+            op::SET_INTEGER => {
+                input.u32s(&mut self.vrs)?;
+                input.i32s(&mut self.ints)?;
+                i.set_integer(&self.vrs, &self.ints)
+            }
+            op::SET_BOOLEAN => {
+                input.u32s(&mut self.vrs)?;
+                input.bools(&mut self.bools)?;
+                i.set_boolean(&self.vrs, &self.bools)
+            }
+            op::SET_STRING => {
+                input.u32s(&mut self.vrs)?;
+                let n = input.u32()?;
+                let mut strings = Vec::new();
+                for _ in 0..n {
+                    strings.push(input.str()?);
+                }
+                i.set_string(&self.vrs, &strings)
+            }
+            op::SET_REAL_INPUT_DERIVATIVES => {
+                input.u32s(&mut self.vrs)?;
+                input.i32s(&mut self.ints)?;
+                input.f64s(&mut self.reals)?;
+                i.set_real_input_derivatives(&self.vrs, &self.ints, &self.reals)
+            }
+            op::GET_REAL_OUTPUT_DERIVATIVES => {
+                input.u32s(&mut self.vrs)?;
+                input.i32s(&mut self.ints)?;
+                self.reals.clear();
+                self.reals.resize(self.vrs.len(), 0.0);
+                i.get_real_output_derivatives(&self.vrs, &self.ints, &mut self.reals)
+                    .map(|()| {
+                        out.f64s(&self.reals);
+                    })
+            }
+            op::DO_STEP => {
+                let t = input.f64()?;
+                let h = input.f64()?;
+                let no_prior = input.bool()?;
+                i.do_step(t, h, no_prior)
+            }
+            op::GET_BOOLEAN_STATUS => i.get_boolean_status(StatusKind::Terminated).map(|b| {
+                out.bool(b);
+            }),
+            op::GET_REAL_STATUS => i.get_real_status(StatusKind::LastSuccessfulTime).map(|t| {
+                out.f64(t);
+            }),
+            op::SAVE_STATE => {
+                let slot = slot(&mut self.states, input.u32()?);
+                match slot {
+                    Some(state) => i.update_fmu_state(state),
+                    None => i.get_fmu_state().map(|s| *slot = Some(s)),
+                }
+            }
+            op::RESTORE_STATE => match &self.states[..].get(input.u32()? as usize) {
+                Some(Some(state)) => i.set_fmu_state(state),
+                _ => Err(no_state(i)),
+            },
+            op::FREE_STATE => {
+                *slot(&mut self.states, input.u32()?) = None;
+                Ok(())
+            }
+            op::SERIALIZE_STATE => match self.states.get(input.u32()? as usize) {
+                Some(Some(state)) => i
+                    .serialize_fmu_state_into(state, &mut self.bytes)
+                    .map(|()| {
+                        out.bytes(&self.bytes);
+                    }),
+                _ => Err(no_state(i)),
+            },
+            op::DESERIALIZE_STATE => {
+                let index = input.u32()?;
+                let bytes = input.bytes()?;
+                i.deserialize_fmu_state(bytes)
+                    .map(|s| *slot(&mut self.states, index) = Some(s))
+            }
+            _ => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    format!("unknown request {code}"),
+                ))
+            }
+        })
+    }
+}
+
+/// State slot `index`, made if new.
+fn slot(states: &mut Vec<Option<FmuState>>, index: u32) -> &mut Option<FmuState> {
+    let index = index as usize;
+    if states.len() <= index {
+        states.resize_with(index + 1, || None);
+    }
+    &mut states[index]
+}
+
+fn no_state(i: &Instance) -> Error {
+    Error::Host {
+        instance: i.name().to_string(),
+        message: format!("instance '{}': no saved FMU state in that slot", i.name()),
+    }
+}
+
+/// A log level sent as `log::LevelFilter as u8`.
+fn level(code: u8) -> log::LevelFilter {
+    log::LevelFilter::iter()
+        .find(|l| *l as u8 == code)
+        .unwrap_or(log::LevelFilter::Warn)
+}
+
+/// Logs like the `tether` binary: FMU messages at the master's level for them.
+fn init_logger(max: log::LevelFilter, fmu: log::LevelFilter) {
+    let _ = env_logger::Builder::new()
+        .filter_level(max)
+        .filter_module("fmu", fmu)
+        .format_timestamp(None)
+        .try_init();
+}

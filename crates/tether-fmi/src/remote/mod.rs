@@ -1,0 +1,541 @@
+//! Out-of-process instances: [`RemoteInstance`] runs an FMU instance in a host
+//! process of its own (`tether-fmi-host`), so that a crash, `exit()`, `abort()`
+//! or endless loop inside the FMU ends that process, not the caller's; every
+//! FMI call crosses a Unix socket pair ([`protocol`]), FMU states included:
+//! they live in the host, named by slots, and cross as bytes only through
+//! [`RemoteInstance::serialize_state`].
+//!
+//! The host executable is found by [`host_command`] (docs/reliability.md).
+
+pub mod protocol;
+
+use std::ffi::OsString;
+use std::io::{self, BufReader};
+use std::os::fd::OwnedFd;
+use std::os::unix::net::UnixStream;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use crate::error::{Error, Result};
+use crate::fmu::{Fmu, InstanceOptions};
+use crate::model_description::{ModelDescription, ValueReference};
+use protocol::{op, In, Out};
+
+/// The environment variable naming the host executable; it overrides every
+/// other way of finding it.
+pub const HOST_ENV: &str = "TETHER_FMI_HOST";
+
+/// The host executable's file name.
+pub const HOST_NAME: &str = "tether-fmi-host";
+
+/// How to start a host process: the program and its first arguments.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HostCommand {
+    /// The executable.
+    pub program: PathBuf,
+    /// Arguments before any the library adds (none today).
+    pub args: Vec<OsString>,
+}
+
+static CONFIGURED: Mutex<Option<HostCommand>> = Mutex::new(None);
+
+/// Sets the host a program provides itself (the `tether` binary is its own
+/// host: `tether __fmi-host`); [`HOST_ENV`] still takes precedence.
+pub fn set_host(command: HostCommand) {
+    *CONFIGURED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(command);
+}
+
+/// The host to start, searched in this order: the [`HOST_ENV`] variable; the
+/// one set by [`set_host`]; `tether-fmi-host` next to the current executable
+/// or in its parent directory (test binaries of cargo live in `deps/`); the
+/// `PATH`.
+pub fn host_command() -> std::result::Result<HostCommand, String> {
+    let plain = |program: PathBuf| HostCommand {
+        program,
+        args: Vec::new(),
+    };
+    if let Some(path) = std::env::var_os(HOST_ENV).filter(|p| !p.is_empty()) {
+        return Ok(plain(PathBuf::from(path)));
+    }
+    if let Some(command) = CONFIGURED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .clone()
+    {
+        return Ok(command);
+    }
+    let exe = std::env::current_exe().ok();
+    let beside = exe.iter().flat_map(|exe| exe.ancestors().skip(1).take(2));
+    let on_path = std::env::var_os("PATH")
+        .map(|p| std::env::split_paths(&p).collect::<Vec<_>>())
+        .unwrap_or_default();
+    beside
+        .map(Path::to_path_buf)
+        .chain(on_path)
+        .map(|dir| dir.join(HOST_NAME))
+        .find(|p| p.is_file())
+        .map(plain)
+        .ok_or_else(|| {
+            format!(
+                "no {HOST_NAME} executable next to this program nor on the PATH; set {HOST_ENV} to its path"
+            )
+        })
+}
+
+/// An FMU instance running in a host process of its own.
+#[derive(Debug)]
+pub struct RemoteInstance {
+    child: Child,
+    reader: BufReader<UnixStream>,
+    writer: UnixStream,
+    out: Out,
+    reply: Vec<u8>,
+    name: Arc<str>,
+    fmu: Fmu,
+    time: f64,
+    fatal: bool,
+    /// How the host process ended, once it did.
+    ended: Option<String>,
+    timeout: Option<Duration>,
+}
+
+/// `exited with code 3`, `was killed by signal 11 (SIGSEGV)`.
+pub fn describe_exit(status: ExitStatus) -> String {
+    match (status.code(), status.signal()) {
+        (Some(code), _) => format!("exited with code {code}"),
+        (None, Some(signal)) => {
+            let name = match signal {
+                1 => " (SIGHUP)",
+                2 => " (SIGINT)",
+                4 => " (SIGILL)",
+                6 => " (SIGABRT)",
+                7 => " (SIGBUS)",
+                8 => " (SIGFPE)",
+                9 => " (SIGKILL)",
+                11 => " (SIGSEGV)",
+                13 => " (SIGPIPE)",
+                15 => " (SIGTERM)",
+                _ => "",
+            };
+            format!("was killed by signal {signal}{name}")
+        }
+        _ => format!("ended ({status})"),
+    }
+}
+
+impl RemoteInstance {
+    /// Starts a host process and instantiates `fmu` in it as `name`: the host
+    /// opens the FMU's unpacked directory in place (no second extraction).
+    /// Each call waits at most `timeout` for its reply; after that the host is
+    /// killed and the call fails with [`Error::CallTimeout`].
+    pub fn new(
+        fmu: &Fmu,
+        name: &str,
+        options: InstanceOptions,
+        timeout: Option<Duration>,
+    ) -> Result<RemoteInstance> {
+        let start_error = |reason: String| Error::HostStart {
+            instance: name.to_string(),
+            reason,
+        };
+        let command = host_command().map_err(start_error)?;
+        let (ours, theirs) = UnixStream::pair().map_err(|e| start_error(e.to_string()))?;
+        // The socket is the host's standard input; its own process group keeps
+        // a terminal's Ctrl-C away from it (the master decides what to stop).
+        let child = Command::new(&command.program)
+            .args(&command.args)
+            .stdin(Stdio::from(OwnedFd::from(theirs)))
+            .process_group(0)
+            .spawn()
+            .map_err(|e| start_error(format!("{}: {e}", command.program.display())))?;
+        ours.set_read_timeout(timeout)
+            .map_err(|e| start_error(e.to_string()))?;
+        let writer = ours.try_clone().map_err(|e| start_error(e.to_string()))?;
+        let mut remote = RemoteInstance {
+            child,
+            reader: BufReader::with_capacity(1 << 16, ours),
+            writer,
+            out: Out::default(),
+            reply: Vec::new(),
+            name: Arc::from(name),
+            fmu: fmu.clone(),
+            time: 0.0,
+            fatal: false,
+            ended: None,
+            timeout,
+        };
+        // The host logs FMU messages itself, at the level they are wanted here.
+        let target = format!("fmu::{name}");
+        let fmu_level = [
+            log::Level::Trace,
+            log::Level::Debug,
+            log::Level::Info,
+            log::Level::Warn,
+            log::Level::Error,
+        ]
+        .into_iter()
+        .find(|l| log::log_enabled!(target: &target, *l))
+        .map_or(0, |l| l as u8);
+        remote
+            .out
+            .start(op::HELLO)
+            .u32(protocol::VERSION)
+            .u8(log::max_level() as u8)
+            .u8(fmu_level);
+        remote.call("fmi2Instantiate")?;
+        let version = In::new(&remote.reply[1..])
+            .u32()
+            .map_err(|e| remote.protocol_error(e))?;
+        if version != protocol::VERSION {
+            return Err(start_error(format!(
+                "{} speaks protocol version {version}, this library {}; use the host of the same Tether version",
+                command.program.display(),
+                protocol::VERSION
+            )));
+        }
+        let dir = fmu.directory().to_str().ok_or_else(|| {
+            start_error(format!(
+                "the FMU directory {} is not UTF-8",
+                fmu.directory().display()
+            ))
+        })?;
+        remote
+            .out
+            .start(op::INSTANTIATE)
+            .str(dir)
+            .str(name)
+            .bool(options.logging_on)
+            .bool(options.visible);
+        remote.call("fmi2Instantiate")?;
+        Ok(remote)
+    }
+
+    /// Sends the request in `self.out`, waits for the reply in `self.reply`.
+    fn call(&mut self, function: &'static str) -> Result<()> {
+        if let Some(how) = &self.ended {
+            return Err(Error::HostEnded {
+                instance: self.name.to_string(),
+                function,
+                time: self.time,
+                how: how.clone(),
+            });
+        }
+        let received = match self.out.send(&mut self.writer) {
+            Ok(()) => protocol::receive(&mut self.reader, &mut self.reply),
+            Err(e) => Err(e),
+        };
+        match received {
+            Ok(true) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
+                ) =>
+            {
+                return Err(self.timed_out(function))
+            }
+            Ok(false) | Err(_) => return Err(self.host_ended(function)),
+        }
+        match self.reply.first() {
+            Some(&protocol::OK) => Ok(()),
+            Some(&protocol::ERR) => {
+                let error = In::new(&self.reply[1..])
+                    .error(&self.name)
+                    .map_err(|e| self.protocol_error(e))?;
+                if matches!(error, Error::Fatal { .. }) {
+                    self.fatal = true;
+                }
+                Err(error)
+            }
+            _ => Err(self.protocol_error(io::ErrorKind::InvalidData.into())),
+        }
+    }
+
+    /// The host did not answer in time: kill it.
+    #[cold]
+    fn timed_out(&mut self, function: &'static str) -> Error {
+        let _ = self.child.kill();
+        let status = self.child.wait();
+        self.ended = Some(match status {
+            Ok(status) => format!("{} after the call time-out", describe_exit(status)),
+            Err(e) => format!("could not be waited for ({e})"),
+        });
+        Error::CallTimeout {
+            instance: self.name.to_string(),
+            function,
+            time: self.time,
+            seconds: self.timeout.map_or(0.0, |t| t.as_secs_f64()),
+        }
+    }
+
+    /// The connection broke: the host ended; say how.
+    #[cold]
+    fn host_ended(&mut self, function: &'static str) -> Error {
+        let how = match self.child.wait() {
+            Ok(status) => describe_exit(status),
+            Err(e) => format!("could not be waited for ({e})"),
+        };
+        self.ended = Some(how.clone());
+        Error::HostEnded {
+            instance: self.name.to_string(),
+            function,
+            time: self.time,
+            how,
+        }
+    }
+
+    #[cold]
+    fn protocol_error(&mut self, e: io::Error) -> Error {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let how = format!("sent a malformed reply ({e}) and was stopped");
+        self.ended = Some(how.clone());
+        Error::Host {
+            instance: self.name.to_string(),
+            message: format!("instance '{}': its host process {how}", self.name),
+        }
+    }
+
+    /// The results of the last reply after the status byte.
+    fn results(&self) -> In<'_> {
+        In::new(&self.reply[1..])
+    }
+
+    /// Reals of the last reply into `out`.
+    fn read_reals(&mut self, out: &mut [f64]) -> Result<()> {
+        let read = In::new(&self.reply[1..]).f64s_into(out);
+        read.map_err(|e| self.protocol_error(e))
+    }
+
+    /// The instance name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The FMU's model description.
+    pub fn model_description(&self) -> &ModelDescription {
+        self.fmu.model_description()
+    }
+
+    /// The communication time as tracked here.
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// Whether the FMU returned `fmi2Fatal`.
+    pub fn is_fatal(&self) -> bool {
+        self.fatal
+    }
+
+    /// The host's process id.
+    pub fn host_pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// A request without an FMI call and its reply: the transport's round trip.
+    pub fn ping(&mut self) -> Result<()> {
+        self.out.start(op::PING);
+        self.call("an FMI function")
+    }
+
+    /// `fmi2SetupExperiment`.
+    pub fn setup_experiment(
+        &mut self,
+        tolerance: Option<f64>,
+        start: f64,
+        stop: Option<f64>,
+    ) -> Result<()> {
+        self.out
+            .start(op::SETUP_EXPERIMENT)
+            .bool(tolerance.is_some())
+            .f64(tolerance.unwrap_or(0.0))
+            .f64(start)
+            .bool(stop.is_some())
+            .f64(stop.unwrap_or(0.0));
+        self.call("fmi2SetupExperiment")?;
+        self.time = start;
+        Ok(())
+    }
+
+    /// `fmi2EnterInitializationMode`.
+    pub fn enter_initialization_mode(&mut self) -> Result<()> {
+        self.out.start(op::ENTER_INITIALIZATION_MODE);
+        self.call("fmi2EnterInitializationMode")
+    }
+
+    /// `fmi2ExitInitializationMode`.
+    pub fn exit_initialization_mode(&mut self) -> Result<()> {
+        self.out.start(op::EXIT_INITIALIZATION_MODE);
+        self.call("fmi2ExitInitializationMode")
+    }
+
+    /// `fmi2Terminate`.
+    pub fn terminate(&mut self) -> Result<()> {
+        self.out.start(op::TERMINATE);
+        self.call("fmi2Terminate")
+    }
+
+    /// `fmi2Reset`.
+    pub fn reset(&mut self) -> Result<()> {
+        self.out.start(op::RESET);
+        self.call("fmi2Reset")
+    }
+
+    /// `fmi2SetReal`.
+    pub fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
+        self.out.start(op::SET_REAL).u32s(vrs).f64s(values);
+        self.call("fmi2SetReal")
+    }
+
+    /// `fmi2GetReal` into `out`.
+    pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
+        self.out.start(op::GET_REAL).u32s(vrs);
+        self.call("fmi2GetReal")?;
+        self.read_reals(out)
+    }
+
+    /// `fmi2SetInteger`.
+    pub fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
+        self.out.start(op::SET_INTEGER).u32s(vrs).i32s(values);
+        self.call("fmi2SetInteger")
+    }
+
+    /// `fmi2SetBoolean`.
+    pub fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
+        self.out.start(op::SET_BOOLEAN).u32s(vrs).bools(values);
+        self.call("fmi2SetBoolean")
+    }
+
+    /// `fmi2SetString`.
+    pub fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
+        let out = self
+            .out
+            .start(op::SET_STRING)
+            .u32s(vrs)
+            .u32(values.len() as u32);
+        for v in values {
+            out.str(v);
+        }
+        self.call("fmi2SetString")
+    }
+
+    /// `fmi2SetRealInputDerivatives`.
+    pub fn set_real_input_derivatives(
+        &mut self,
+        vrs: &[ValueReference],
+        orders: &[i32],
+        values: &[f64],
+    ) -> Result<()> {
+        self.out
+            .start(op::SET_REAL_INPUT_DERIVATIVES)
+            .u32s(vrs)
+            .i32s(orders)
+            .f64s(values);
+        self.call("fmi2SetRealInputDerivatives")
+    }
+
+    /// `fmi2GetRealOutputDerivatives` into `out`.
+    pub fn get_real_output_derivatives(
+        &mut self,
+        vrs: &[ValueReference],
+        orders: &[i32],
+        out: &mut [f64],
+    ) -> Result<()> {
+        self.out
+            .start(op::GET_REAL_OUTPUT_DERIVATIVES)
+            .u32s(vrs)
+            .i32s(orders);
+        self.call("fmi2GetRealOutputDerivatives")?;
+        self.read_reals(out)
+    }
+
+    /// `fmi2DoStep`; on success the tracked time becomes `t + h`.
+    pub fn do_step(&mut self, t: f64, h: f64, no_set_fmu_state_prior: bool) -> Result<()> {
+        self.time = t;
+        self.out
+            .start(op::DO_STEP)
+            .f64(t)
+            .f64(h)
+            .bool(no_set_fmu_state_prior);
+        self.call("fmi2DoStep")?;
+        self.time = t + h;
+        Ok(())
+    }
+
+    /// `fmi2GetBooleanStatus(fmi2Terminated)`.
+    pub fn terminated(&mut self) -> Result<bool> {
+        self.out.start(op::GET_BOOLEAN_STATUS);
+        self.call("fmi2GetBooleanStatus")?;
+        let value = self.results().bool();
+        value.map_err(|e| self.protocol_error(e))
+    }
+
+    /// `fmi2GetRealStatus(fmi2LastSuccessfulTime)`.
+    pub fn last_successful_time(&mut self) -> Result<f64> {
+        self.out.start(op::GET_REAL_STATUS);
+        self.call("fmi2GetRealStatus")?;
+        let value = self.results().f64();
+        value.map_err(|e| self.protocol_error(e))
+    }
+
+    /// `fmi2GetFMUstate` into the host's state `slot` (reusing the state there).
+    pub fn save_state(&mut self, slot: u32) -> Result<()> {
+        self.out.start(op::SAVE_STATE).u32(slot);
+        self.call("fmi2GetFMUstate")
+    }
+
+    /// `fmi2SetFMUstate` from the host's state `slot`.
+    pub fn restore_state(&mut self, slot: u32) -> Result<()> {
+        self.out.start(op::RESTORE_STATE).u32(slot);
+        self.call("fmi2SetFMUstate")
+    }
+
+    /// `fmi2FreeFMUstate` of the host's state `slot`, if there is one.
+    pub fn free_state(&mut self, slot: u32) -> Result<()> {
+        self.out.start(op::FREE_STATE).u32(slot);
+        self.call("fmi2FreeFMUstate")
+    }
+
+    /// `fmi2SerializeFMUstate` of the host's state `slot` into `out`.
+    pub fn serialize_state(&mut self, slot: u32, out: &mut Vec<u8>) -> Result<()> {
+        self.out.start(op::SERIALIZE_STATE).u32(slot);
+        self.call("fmi2SerializeFMUstate")?;
+        let bytes = self.results().bytes().map(<[u8]>::to_vec);
+        let bytes = bytes.map_err(|e| self.protocol_error(e))?;
+        out.clear();
+        out.extend_from_slice(&bytes);
+        Ok(())
+    }
+
+    /// `fmi2DeSerializeFMUstate` of `bytes` into the host's state `slot`.
+    pub fn deserialize_state(&mut self, slot: u32, bytes: &[u8]) -> Result<()> {
+        self.out.start(op::DESERIALIZE_STATE).u32(slot).bytes(bytes);
+        self.call("fmi2DeSerializeFMUstate")
+    }
+}
+
+impl Drop for RemoteInstance {
+    fn drop(&mut self) {
+        if self.ended.is_none() {
+            // fmi2FreeInstance in the host, then it ends on the closed socket;
+            // a host that does not answer within the time-out (or 10 s) is killed.
+            let _ = self
+                .reader
+                .get_ref()
+                .set_read_timeout(Some(self.timeout.unwrap_or(Duration::from_secs(10))));
+            self.out.start(op::FREE_INSTANCE);
+            if self.call("fmi2FreeInstance").is_err() && self.ended.is_none() {
+                let _ = self.child.kill();
+            }
+        }
+        let _ = self.reader.get_ref().shutdown(std::net::Shutdown::Both);
+        if self.ended.is_none() {
+            let _ = self.child.wait();
+        }
+    }
+}

@@ -1,0 +1,461 @@
+//! The messages between the master and an FMU host process
+//! (`tether-fmi-host`): one request, one reply, each a frame of a 4-byte
+//! little-endian length and the payload. A request is an operation code and
+//! its arguments; a reply is `OK` and the results, or `ERR` and an error.
+//! Numbers are little-endian, slices are a 4-byte count and the elements,
+//! strings and byte strings a 4-byte length and the bytes.
+
+use std::io::{self, Read, Write};
+
+use crate::error::Error;
+
+/// Changes whenever a message changes: master and host must agree.
+pub const VERSION: u32 = 1;
+
+/// Operation codes of the requests.
+#[allow(missing_docs)]
+pub mod op {
+    pub const HELLO: u8 = 1;
+    pub const INSTANTIATE: u8 = 2;
+    pub const SETUP_EXPERIMENT: u8 = 3;
+    pub const ENTER_INITIALIZATION_MODE: u8 = 4;
+    pub const EXIT_INITIALIZATION_MODE: u8 = 5;
+    pub const TERMINATE: u8 = 6;
+    pub const RESET: u8 = 7;
+    pub const SET_REAL: u8 = 8;
+    pub const GET_REAL: u8 = 9;
+    pub const SET_INTEGER: u8 = 10;
+    pub const SET_BOOLEAN: u8 = 11;
+    pub const SET_STRING: u8 = 12;
+    pub const SET_REAL_INPUT_DERIVATIVES: u8 = 13;
+    pub const GET_REAL_OUTPUT_DERIVATIVES: u8 = 14;
+    pub const DO_STEP: u8 = 15;
+    pub const GET_BOOLEAN_STATUS: u8 = 16;
+    pub const GET_REAL_STATUS: u8 = 17;
+    pub const SAVE_STATE: u8 = 18;
+    pub const RESTORE_STATE: u8 = 19;
+    pub const FREE_STATE: u8 = 20;
+    pub const SERIALIZE_STATE: u8 = 21;
+    pub const DESERIALIZE_STATE: u8 = 22;
+    pub const FREE_INSTANCE: u8 = 23;
+    /// Answered by `exit` without a reply (for tests of the transport's cost).
+    pub const PING: u8 = 24;
+}
+
+/// First byte of a reply.
+pub const OK: u8 = 0;
+/// First byte of a failed reply; an encoded error follows.
+pub const ERR: u8 = 1;
+
+/// The largest frame accepted (a serialised FMU state can be large).
+const MAX_FRAME: usize = 1 << 30;
+
+/// Every FMI function name the protocol may report, so that errors crossing
+/// the process boundary keep their `&'static str`.
+const FUNCTIONS: &[&str] = &[
+    "fmi2Instantiate",
+    "fmi2SetupExperiment",
+    "fmi2EnterInitializationMode",
+    "fmi2ExitInitializationMode",
+    "fmi2Terminate",
+    "fmi2Reset",
+    "fmi2SetReal",
+    "fmi2GetReal",
+    "fmi2SetInteger",
+    "fmi2GetInteger",
+    "fmi2SetBoolean",
+    "fmi2GetBoolean",
+    "fmi2SetString",
+    "fmi2GetString",
+    "fmi2SetRealInputDerivatives",
+    "fmi2GetRealOutputDerivatives",
+    "fmi2DoStep",
+    "fmi2CancelStep",
+    "fmi2GetStatus",
+    "fmi2GetRealStatus",
+    "fmi2GetIntegerStatus",
+    "fmi2GetBooleanStatus",
+    "fmi2GetStringStatus",
+    "fmi2GetFMUstate",
+    "fmi2SetFMUstate",
+    "fmi2FreeFMUstate",
+    "fmi2SerializedFMUstateSize",
+    "fmi2SerializeFMUstate",
+    "fmi2DeSerializeFMUstate",
+    "fmi2GetDirectionalDerivative",
+    "fmi2SetDebugLogging",
+    "fmi2FreeInstance",
+];
+
+/// The static name of FMI function `name` ("an FMI function" if unknown).
+pub fn function_name(name: &str) -> &'static str {
+    FUNCTIONS
+        .iter()
+        .find(|f| **f == name)
+        .copied()
+        .unwrap_or("an FMI function")
+}
+
+/// A message being built; `start` leaves room for the frame's length.
+#[derive(Debug, Default)]
+pub struct Out(pub Vec<u8>);
+
+impl Out {
+    /// Begin a new frame whose first byte is `tag` (an operation or OK/ERR).
+    pub fn start(&mut self, tag: u8) -> &mut Out {
+        self.0.clear();
+        self.0.extend_from_slice(&[0; 4]);
+        self.0.push(tag);
+        self
+    }
+    /// A byte.
+    pub fn u8(&mut self, v: u8) -> &mut Out {
+        self.0.push(v);
+        self
+    }
+    /// A boolean (one byte).
+    pub fn bool(&mut self, v: bool) -> &mut Out {
+        self.u8(u8::from(v))
+    }
+    /// A 32-bit unsigned integer.
+    pub fn u32(&mut self, v: u32) -> &mut Out {
+        self.0.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+    /// A 32-bit signed integer.
+    pub fn i32(&mut self, v: i32) -> &mut Out {
+        self.0.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+    /// A 64-bit float, bit for bit.
+    pub fn f64(&mut self, v: f64) -> &mut Out {
+        self.0.extend_from_slice(&v.to_bits().to_le_bytes());
+        self
+    }
+    /// A length as 4 bytes.
+    fn len(&mut self, n: usize) -> &mut Out {
+        self.u32(u32::try_from(n).expect("a message part below 4 GiB"))
+    }
+    /// Bytes.
+    pub fn bytes(&mut self, v: &[u8]) -> &mut Out {
+        self.len(v.len());
+        self.0.extend_from_slice(v);
+        self
+    }
+    /// A string.
+    pub fn str(&mut self, v: &str) -> &mut Out {
+        self.bytes(v.as_bytes())
+    }
+    /// Value references.
+    pub fn u32s(&mut self, v: &[u32]) -> &mut Out {
+        self.len(v.len());
+        v.iter().for_each(|x| {
+            self.u32(*x);
+        });
+        self
+    }
+    /// Integers.
+    pub fn i32s(&mut self, v: &[i32]) -> &mut Out {
+        self.len(v.len());
+        v.iter().for_each(|x| {
+            self.i32(*x);
+        });
+        self
+    }
+    /// Reals.
+    pub fn f64s(&mut self, v: &[f64]) -> &mut Out {
+        self.len(v.len());
+        v.iter().for_each(|x| {
+            self.f64(*x);
+        });
+        self
+    }
+    /// Booleans.
+    pub fn bools(&mut self, v: &[bool]) -> &mut Out {
+        self.len(v.len());
+        v.iter().for_each(|x| {
+            self.bool(*x);
+        });
+        self
+    }
+    /// An error of a call (status errors keep their kind, others their message).
+    pub fn error(&mut self, e: &Error) -> &mut Out {
+        let (kind, function, instance, time, code) = match e {
+            Error::Discard {
+                function,
+                instance,
+                time,
+            } => (0, *function, instance.as_str(), *time, 0),
+            Error::Failed {
+                function,
+                instance,
+                time,
+            } => (1, *function, instance.as_str(), *time, 0),
+            Error::Fatal {
+                function,
+                instance,
+                time,
+            } => (2, *function, instance.as_str(), *time, 0),
+            Error::Pending {
+                function,
+                instance,
+                time,
+            } => (3, *function, instance.as_str(), *time, 0),
+            Error::FmuDead {
+                function,
+                instance,
+                time,
+            } => (4, *function, instance.as_str(), *time, 0),
+            Error::UnknownStatus {
+                function,
+                instance,
+                time,
+                code,
+            } => (5, *function, instance.as_str(), *time, *code),
+            other => {
+                return self.u8(6).str(&crate::error::one_line(&other.to_string()));
+            }
+        };
+        self.u8(kind)
+            .str(function)
+            .str(instance)
+            .f64(time)
+            .i32(code)
+    }
+    /// Writes the frame (its length first) to `to`.
+    pub fn send(&mut self, to: &mut impl Write) -> io::Result<()> {
+        let n = u32::try_from(self.0.len() - 4).expect("a frame below 4 GiB");
+        self.0[..4].copy_from_slice(&n.to_le_bytes());
+        to.write_all(&self.0)
+    }
+}
+
+/// Reads one frame from `from` into `buf` (its capacity is reused); `Ok(false)`
+/// at the end of the stream before a frame began.
+pub fn receive(from: &mut impl Read, buf: &mut Vec<u8>) -> io::Result<bool> {
+    let mut len = [0u8; 4];
+    let mut got = 0;
+    while got < 4 {
+        match from.read(&mut len[got..]) {
+            Ok(0) if got == 0 => return Ok(false),
+            Ok(0) => return Err(io::ErrorKind::UnexpectedEof.into()),
+            Ok(n) => got += n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    let n = u32::from_le_bytes(len) as usize;
+    if n == 0 || n > MAX_FRAME {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("a frame of {n} bytes"),
+        ));
+    }
+    buf.clear();
+    buf.resize(n, 0);
+    from.read_exact(buf)?;
+    Ok(true)
+}
+
+/// Reads the parts of a received frame in order.
+#[derive(Debug)]
+pub struct In<'a> {
+    data: &'a [u8],
+}
+
+/// A message that does not parse.
+fn malformed() -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidData, "a malformed message")
+}
+
+impl<'a> In<'a> {
+    /// The parts of `data`.
+    pub fn new(data: &'a [u8]) -> In<'a> {
+        In { data }
+    }
+    fn take(&mut self, n: usize) -> io::Result<&'a [u8]> {
+        if self.data.len() < n {
+            return Err(malformed());
+        }
+        let (head, rest) = self.data.split_at(n);
+        self.data = rest;
+        Ok(head)
+    }
+    /// A byte.
+    pub fn u8(&mut self) -> io::Result<u8> {
+        Ok(self.take(1)?[0])
+    }
+    /// A boolean.
+    pub fn bool(&mut self) -> io::Result<bool> {
+        Ok(self.u8()? != 0)
+    }
+    /// A 32-bit unsigned integer.
+    pub fn u32(&mut self) -> io::Result<u32> {
+        Ok(u32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+    /// A 32-bit signed integer.
+    pub fn i32(&mut self) -> io::Result<i32> {
+        Ok(i32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+    /// A 64-bit float.
+    pub fn f64(&mut self) -> io::Result<f64> {
+        Ok(f64::from_bits(u64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        )))
+    }
+    fn len(&mut self, size: usize) -> io::Result<usize> {
+        let n = self.u32()? as usize;
+        if n.saturating_mul(size) > self.data.len() {
+            return Err(malformed());
+        }
+        Ok(n)
+    }
+    /// Bytes.
+    pub fn bytes(&mut self) -> io::Result<&'a [u8]> {
+        let n = self.len(1)?;
+        self.take(n)
+    }
+    /// A string.
+    pub fn str(&mut self) -> io::Result<&'a str> {
+        std::str::from_utf8(self.bytes()?).map_err(|_| malformed())
+    }
+    /// Value references.
+    pub fn u32s(&mut self, out: &mut Vec<u32>) -> io::Result<()> {
+        let n = self.len(4)?;
+        out.clear();
+        for _ in 0..n {
+            out.push(self.u32()?);
+        }
+        Ok(())
+    }
+    /// Integers.
+    pub fn i32s(&mut self, out: &mut Vec<i32>) -> io::Result<()> {
+        let n = self.len(4)?;
+        out.clear();
+        for _ in 0..n {
+            out.push(self.i32()?);
+        }
+        Ok(())
+    }
+    /// Reals into `out`, which must have the sent length.
+    pub fn f64s_into(&mut self, out: &mut [f64]) -> io::Result<()> {
+        if self.len(8)? != out.len() {
+            return Err(malformed());
+        }
+        for x in out {
+            *x = self.f64()?;
+        }
+        Ok(())
+    }
+    /// Reals.
+    pub fn f64s(&mut self, out: &mut Vec<f64>) -> io::Result<()> {
+        let n = self.len(8)?;
+        out.clear();
+        for _ in 0..n {
+            out.push(self.f64()?);
+        }
+        Ok(())
+    }
+    /// Booleans.
+    pub fn bools(&mut self, out: &mut Vec<bool>) -> io::Result<()> {
+        let n = self.len(1)?;
+        out.clear();
+        for _ in 0..n {
+            out.push(self.bool()?);
+        }
+        Ok(())
+    }
+    /// An error written by [`Out::error`]; `instance` names the instance for
+    /// errors that crossed as messages.
+    pub fn error(&mut self, instance: &str) -> io::Result<Error> {
+        let kind = self.u8()?;
+        if kind == 6 {
+            return Ok(Error::Host {
+                instance: instance.to_string(),
+                message: self.str()?.to_string(),
+            });
+        }
+        let function = function_name(self.str()?);
+        let instance = self.str()?.to_string();
+        let time = self.f64()?;
+        let code = self.i32()?;
+        Ok(match kind {
+            0 => Error::Discard {
+                function,
+                instance,
+                time,
+            },
+            1 => Error::Failed {
+                function,
+                instance,
+                time,
+            },
+            2 => Error::Fatal {
+                function,
+                instance,
+                time,
+            },
+            3 => Error::Pending {
+                function,
+                instance,
+                time,
+            },
+            4 => Error::FmuDead {
+                function,
+                instance,
+                time,
+            },
+            _ => Error::UnknownStatus {
+                function,
+                instance,
+                time,
+                code,
+            },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_and_errors_cross_unchanged() {
+        let mut out = Out::default();
+        out.start(op::SET_REAL)
+            .u32s(&[1, 2])
+            .f64s(&[0.1, f64::NAN])
+            .str("mass2")
+            .error(&Error::Discard {
+                function: "fmi2DoStep",
+                instance: "mass2".into(),
+                time: 0.5,
+            });
+        let mut wire = Vec::new();
+        out.send(&mut wire).unwrap();
+        let mut buf = Vec::new();
+        assert!(receive(&mut wire.as_slice(), &mut buf).unwrap());
+        let mut input = In::new(&buf);
+        assert_eq!(input.u8().unwrap(), op::SET_REAL);
+        let (mut vrs, mut values) = (Vec::new(), Vec::new());
+        input.u32s(&mut vrs).unwrap();
+        input.f64s(&mut values).unwrap();
+        assert_eq!(vrs, [1, 2]);
+        assert_eq!(values[0].to_bits(), 0.1f64.to_bits());
+        assert!(values[1].is_nan());
+        assert_eq!(input.str().unwrap(), "mass2");
+        let e = input.error("mass2").unwrap();
+        assert_eq!(
+            e.to_string(),
+            "fmi2DoStep returned fmi2Discard on instance 'mass2' at t=0.5"
+        );
+        assert!(input.u8().is_err(), "nothing left");
+        // A truncated frame is an error, not a panic.
+        assert!(receive(&mut &wire[..wire.len() - 1], &mut buf).is_err());
+        assert!(!receive(&mut &wire[..0], &mut buf).unwrap());
+    }
+}
