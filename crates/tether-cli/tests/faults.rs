@@ -522,3 +522,168 @@ fn a_full_stderr_or_a_broken_pipe_is_no_panic() {
         );
     }
 }
+
+/// Whether a process (a host of an isolated instance, left behind) still runs
+/// with this scratch's `TMPDIR` in its environment.
+fn processes_left(s: &Scratch) -> Vec<String> {
+    let needle = format!("TMPDIR={}", s.tmp().display());
+    let mut left = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let environ = std::fs::read(entry.path().join("environ")).unwrap_or_default();
+        if environ.split(|b| *b == 0).any(|v| v == needle.as_bytes()) {
+            let cmdline = std::fs::read(entry.path().join("cmdline")).unwrap_or_default();
+            left.push(String::from_utf8_lossy(&cmdline).replace('\0', " "));
+        }
+    }
+    left
+}
+
+/// An isolated run (`--isolate`) of the faults FMU in `mode` ends with the error
+/// `instance 'mass2': <reason>`: exit code 1, every row up to t = 0.5 with the
+/// trailer, no folder and no host process left. `keys` go into mass 2's table.
+fn isolated_fault(mode: i32, extra: &str, keys: &str, flags: &[&str], reason: &str) {
+    let s = Scratch::new();
+    let mut args = vec!["--isolate", "--quiet"];
+    args.extend_from_slice(flags);
+    let sys = system(s.path(), mode, extra);
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let mass2 = "name = \"mass2\"\n";
+    assert!(text.contains(mass2));
+    std::fs::write(&sys, text.replace(mass2, &format!("{mass2}{keys}"))).unwrap();
+    let out = s.run(&sys, "out.csv", &args);
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    let reason = format!("instance 'mass2': {reason}");
+    assert_eq!(
+        text.lines().last().unwrap_or_default(),
+        format!("error: run stopped; results up to t = 0.5 kept in out.csv (marked incomplete): {reason}")
+    );
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+    assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
+    assert_eq!(last_time(&csv), 0.5);
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
+}
+
+#[test]
+fn isolated_segfault_is_an_error() {
+    isolated_fault(
+        1,
+        "",
+        "",
+        &[],
+        "its host process was killed by signal 11 (SIGSEGV) during fmi2DoStep at t=0.5",
+    );
+}
+
+#[test]
+fn isolated_abort_is_an_error() {
+    isolated_fault(
+        2,
+        "",
+        "",
+        &[],
+        "its host process was killed by signal 6 (SIGABRT) during fmi2DoStep at t=0.5",
+    );
+}
+
+#[test]
+fn isolated_exit_0_is_an_error() {
+    isolated_fault(
+        3,
+        "",
+        "",
+        &[],
+        "its host process exited with code 0 during fmi2DoStep at t=0.5",
+    );
+}
+
+#[test]
+fn isolated_exit_3_is_an_error() {
+    isolated_fault(
+        4,
+        "",
+        "",
+        &[],
+        "its host process exited with code 3 during fmi2DoStep at t=0.5",
+    );
+}
+
+/// An endless loop in `fmi2DoStep` with `--call-timeout`: the host is killed.
+#[test]
+fn isolated_endless_loop_is_ended_by_the_call_timeout() {
+    isolated_fault(
+        5,
+        "",
+        "",
+        &["--call-timeout", "0.5"],
+        "fmi2DoStep at t=0.5 did not return within the call time-out of 0.5 s; its host process was killed",
+    );
+}
+
+/// Slow calls (2 s each from t = 0.5) against the instance's own `call_timeout`
+/// in the system file, which `--call-timeout` does not override.
+#[test]
+fn isolated_slow_call_exceeds_the_instances_call_timeout() {
+    isolated_fault(
+        7,
+        ", pause = 2.0",
+        "call_timeout = 0.25\n",
+        &["--call-timeout", "100"],
+        "fmi2DoStep at t=0.5 did not return within the call time-out of 0.25 s; its host process was killed",
+    );
+}
+
+/// A log flood from an isolated instance is rate-limited by its host as
+/// in-process, and `--quiet` silences it.
+#[test]
+fn isolated_log_flood_is_rate_limited() {
+    let s = Scratch::new();
+    let flood = system(s.path(), 6, "");
+    let out = s.run(&flood, "out.csv", &["--isolate"]);
+    let text = stderr(&out);
+    assert!(out.status.success(), "{text}");
+    assert!(text.len() < 16 << 10, "{} bytes on stderr", text.len());
+    assert!(text.contains("[WARN  fmu::mass2] [logStatusWarning] flood message 0 at t = 0.5"));
+    assert!(text.contains("more messages suppressed (more than 20 in 1 s)"));
+    let out = s.run(&flood, "out.csv", &["--isolate", "--quiet"]);
+    assert_eq!(stderr(&out), "", "--quiet");
+    assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);
+    assert!(s.leftovers().is_empty() && processes_left(&s).is_empty());
+}
+
+/// Isolated instances give the in-process results bit for bit: every FMI call
+/// crosses with its numbers unchanged, FMU states included (the oscillator
+/// with k = 1 and parallel perturbed runs moves states between host processes
+/// as serialised bytes).
+#[test]
+fn isolated_runs_equal_in_process_runs_bit_for_bit() {
+    let s = Scratch::new();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    for (example, flags) in [
+        ("oscillator", &[][..]),
+        ("oscillator", &["--order", "1", "--parallel", "on"][..]),
+        ("double_pendulum", &[][..]),
+        ("3d_revolute", &[][..]),
+    ] {
+        let system = root.join("examples").join(format!("{example}.toml"));
+        let results = |isolate: bool| {
+            let mut args = vec!["--quiet"];
+            args.extend_from_slice(flags);
+            if isolate {
+                args.push("--isolate");
+            }
+            let out = s.run(&system, "out.csv", &args);
+            assert!(out.status.success(), "{example}: {}", stderr(&out));
+            std::fs::read(s.path().join("out.csv")).unwrap()
+        };
+        let (in_process, isolated) = (results(false), results(true));
+        assert!(in_process.len() > 1000, "{example}");
+        assert!(
+            in_process == isolated,
+            "{example} {flags:?} differs when isolated"
+        );
+    }
+    assert!(s.leftovers().is_empty() && processes_left(&s).is_empty());
+}
