@@ -1,62 +1,78 @@
 //! The host process of an out-of-process FMU instance: reads requests of
-//! [`tether_fmi::remote::protocol`] from its standard input (a Unix socket the
-//! master made), makes the FMI calls on one instance and answers each. The
-//! `tether-fmi-host` executable is this and nothing else; the `tether` binary
-//! runs it too, as `tether __fmi-host`, so the CLI needs no second file.
+//! [`tether_fmi::remote::protocol`] from its standard input, makes the FMI
+//! calls on one instance and writes each reply to its standard output (both
+//! pipes from the master; what the FMU itself prints to standard output goes
+//! to standard error instead). The `tether-fmi-host` executable is this and
+//! nothing else; the `tether` binary runs it too, as `tether __fmi-host`, so
+//! the CLI needs no second file.
 //!
-//! The host ends when the master closes the socket, also while the FMU is
-//! stuck inside a call (a thread watches for the hang-up), so a master that
+//! The host ends when the master closes the request pipe, also while the FMU
+//! is stuck inside a call (a thread watches for the hang-up), so a master that
 //! dies leaves no host behind.
 
+use std::fs::File;
 use std::io::{BufReader, Write};
-use std::os::fd::{AsFd, AsRawFd};
-use std::os::unix::net::UnixStream;
+use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd};
 use std::process::ExitCode;
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
 use tether_fmi::{Error, Fmu, FmuState, Instance, InstanceOptions, StatusKind};
 
-/// Serves the master on standard input; the exit code is 0 when the master
-/// closed the connection, 2 when standard input is no socket or a message
-/// could not be read.
+/// Serves the master on standard input and output; the exit code is 0 when
+/// the master closed the connection, 2 when standard input and output are not
+/// pipes or a message could not be read.
 pub fn serve_stdin() -> ExitCode {
-    let stream = std::io::stdin()
-        .as_fd()
-        .try_clone_to_owned()
-        .map(UnixStream::from);
-    let stream = match stream {
-        Ok(s) if s.peer_addr().is_ok() => s,
-        _ => {
-            let _ = writeln!(
-                std::io::stderr(),
-                "error: tether-fmi-host runs an FMU for Tether, which starts it with a socket as standard input; it is not meant to be started by hand"
-            );
-            return ExitCode::from(2);
-        }
+    let fail = |message: &str| {
+        let _ = writeln!(std::io::stderr(), "error: tether-fmi-host: {message}");
+        ExitCode::from(2)
     };
-    watch_hangup(&stream);
-    match serve(stream) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            let _ = writeln!(std::io::stderr(), "error: tether-fmi-host: {e}");
-            ExitCode::from(2)
+    if !is_pipe(0) || !is_pipe(1) {
+        return fail("it runs an FMU for Tether, which starts it with pipes as standard input and output; it is not meant to be started by hand");
+    }
+    let requests = match std::io::stdin().as_fd().try_clone_to_owned() {
+        Ok(fd) => File::from(fd),
+        Err(e) => return fail(&e.to_string()),
+    };
+    // SAFETY: dup and dup2 on the standard descriptors: the replies keep the
+    // pipe to the master on a descriptor of their own, and descriptor 1 then
+    // refers to standard error, so the FMU's printf cannot break a reply.
+    let replies = unsafe {
+        let fd = libc::dup(1);
+        if fd < 0 || libc::dup2(2, 1) < 0 {
+            return fail(&std::io::Error::last_os_error().to_string());
         }
+        File::from(OwnedFd::from_raw_fd(fd))
+    };
+    watch_hangup(&requests);
+    match serve(requests, replies) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => fail(&e.to_string()),
     }
 }
 
-/// Ends the process when the master hangs up, even while the FMU is busy.
-fn watch_hangup(stream: &UnixStream) {
-    let fd = stream.as_raw_fd();
+/// Whether descriptor `fd` is a pipe.
+fn is_pipe(fd: i32) -> bool {
+    // SAFETY: fstat writes into the zeroed stat value and reads nothing else.
+    unsafe {
+        let mut stat: libc::stat = std::mem::zeroed();
+        libc::fstat(fd, &mut stat) == 0 && stat.st_mode & libc::S_IFMT == libc::S_IFIFO
+    }
+}
+
+/// Ends the process when the master closes the request pipe, even while the
+/// FMU is busy.
+fn watch_hangup(requests: &File) {
+    let fd = requests.as_raw_fd();
     std::thread::spawn(move || loop {
         let mut poll = libc::pollfd {
             fd,
-            events: libc::POLLRDHUP,
+            events: 0,
             revents: 0,
         };
         // SAFETY: one valid pollfd; `fd` stays open for the life of the
         // process (the serving loop owns it and ends the process on return).
         let n = unsafe { libc::poll(&mut poll, 1, -1) };
-        if n > 0 && poll.revents & (libc::POLLRDHUP | libc::POLLHUP | libc::POLLERR) != 0 {
+        if n > 0 && poll.revents & (libc::POLLHUP | libc::POLLERR) != 0 {
             // SAFETY: _exit ends the process at once; the master is gone and
             // nothing of ours needs flushing.
             unsafe { libc::_exit(0) };
@@ -78,9 +94,8 @@ struct Host {
 }
 
 /// Answers requests until the master closes the connection.
-fn serve(stream: UnixStream) -> std::io::Result<()> {
-    let mut writer = stream.try_clone()?;
-    let mut reader = BufReader::with_capacity(1 << 16, stream);
+fn serve(requests: File, mut writer: File) -> std::io::Result<()> {
+    let mut reader = BufReader::with_capacity(1 << 16, requests);
     let mut request = Vec::new();
     let mut out = Out::default();
     let mut host = Host::default();

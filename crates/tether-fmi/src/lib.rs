@@ -62,7 +62,7 @@ mod uri;
 mod xml;
 
 pub use archive::{remove_extractions_now, sweep_leftovers, ExtractLimits};
-pub use current::{current_call, CurrentCall};
+pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, Result};
 pub use fmu::{Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};

@@ -1,7 +1,7 @@
 //! Out-of-process instances: [`RemoteInstance`] runs an FMU instance in a host
 //! process of its own (`tether-fmi-host`), so that a crash, `exit()`, `abort()`
 //! or endless loop inside the FMU ends that process, not the caller's; every
-//! FMI call crosses a Unix socket pair ([`protocol`]), FMU states included:
+//! FMI call crosses a pair of pipes ([`protocol`]), FMU states included:
 //! they live in the host, named by slots, and cross as bytes only through
 //! [`RemoteInstance::serialize_state`].
 //!
@@ -11,12 +11,11 @@ pub mod protocol;
 
 use std::ffi::OsString;
 use std::io::{self, BufReader};
-use std::os::fd::OwnedFd;
-use std::os::unix::net::UnixStream;
+use std::os::fd::AsRawFd;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
+use std::sync::Mutex;
 use std::time::Duration;
 
 use crate::error::{Error, Result};
@@ -91,11 +90,12 @@ pub fn host_command() -> std::result::Result<HostCommand, String> {
 #[derive(Debug)]
 pub struct RemoteInstance {
     child: Child,
-    reader: BufReader<UnixStream>,
-    writer: UnixStream,
+    reader: BufReader<ChildStdout>,
+    /// `None` once closed (the host then ends).
+    writer: Option<ChildStdin>,
     out: Out,
     reply: Vec<u8>,
-    name: Arc<str>,
+    name: crate::current::Name,
     fmu: Fmu,
     time: f64,
     fatal: bool,
@@ -144,25 +144,27 @@ impl RemoteInstance {
             reason,
         };
         let command = host_command().map_err(start_error)?;
-        let (ours, theirs) = UnixStream::pair().map_err(|e| start_error(e.to_string()))?;
-        // The socket is the host's standard input; its own process group keeps
-        // a terminal's Ctrl-C away from it (the master decides what to stop).
-        let child = Command::new(&command.program)
+        // Requests go to the host's standard input, replies come from its
+        // standard output (the host moves what the FMU prints to stderr); its
+        // own process group keeps a terminal's Ctrl-C away from it (the master
+        // decides what to stop).
+        let mut child = Command::new(&command.program)
             .args(&command.args)
-            .stdin(Stdio::from(OwnedFd::from(theirs)))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
             .process_group(0)
             .spawn()
             .map_err(|e| start_error(format!("{}: {e}", command.program.display())))?;
-        ours.set_read_timeout(timeout)
-            .map_err(|e| start_error(e.to_string()))?;
-        let writer = ours.try_clone().map_err(|e| start_error(e.to_string()))?;
+        let (Some(writer), Some(reader)) = (child.stdin.take(), child.stdout.take()) else {
+            unreachable!("both are piped")
+        };
         let mut remote = RemoteInstance {
             child,
-            reader: BufReader::with_capacity(1 << 16, ours),
-            writer,
+            reader: BufReader::with_capacity(1 << 16, reader),
+            writer: Some(writer),
             out: Out::default(),
             reply: Vec::new(),
-            name: Arc::from(name),
+            name: crate::current::Name::new(name),
             fmu: fmu.clone(),
             time: 0.0,
             fatal: false,
@@ -225,10 +227,15 @@ impl RemoteInstance {
                 how: how.clone(),
             });
         }
-        let received = match self.out.send(&mut self.writer) {
-            Ok(()) => protocol::receive(&mut self.reader, &mut self.reply),
-            Err(e) => Err(e),
+        let entered = crate::current::Entered::new(function, &self.name, self.time);
+        let received = match &mut self.writer {
+            Some(writer) => self.out.send(writer).and_then(|()| {
+                wait_readable(&self.reader, self.timeout)?;
+                protocol::receive(&mut self.reader, &mut self.reply)
+            }),
+            None => Err(io::ErrorKind::BrokenPipe.into()),
         };
+        drop(entered);
         match received {
             Ok(true) => {}
             Err(e)
@@ -245,7 +252,7 @@ impl RemoteInstance {
             Some(&protocol::OK) => Ok(()),
             Some(&protocol::ERR) => {
                 let error = In::new(&self.reply[1..])
-                    .error(&self.name)
+                    .error(self.name.as_str())
                     .map_err(|e| self.protocol_error(e))?;
                 if matches!(error, Error::Fatal { .. }) {
                     self.fatal = true;
@@ -314,7 +321,7 @@ impl RemoteInstance {
 
     /// The instance name.
     pub fn name(&self) -> &str {
-        &self.name
+        self.name.as_str()
     }
 
     /// The FMU's model description.
@@ -519,21 +526,50 @@ impl RemoteInstance {
     }
 }
 
+/// Waits until the reply pipe has data (or was closed) for at most `timeout`
+/// (`TimedOut` after it); without a time-out the read itself waits.
+fn wait_readable(reader: &BufReader<ChildStdout>, timeout: Option<Duration>) -> io::Result<()> {
+    let Some(timeout) = timeout else {
+        return Ok(());
+    };
+    if !reader.buffer().is_empty() {
+        return Ok(());
+    }
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        let mut poll = libc::pollfd {
+            fd: reader.get_ref().as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        let ms = libc::c_int::try_from(left.as_millis().max(1)).unwrap_or(libc::c_int::MAX);
+        // SAFETY: one valid pollfd on a descriptor the reader owns, alive here.
+        let n = unsafe { libc::poll(&mut poll, 1, ms) };
+        if n > 0 {
+            return Ok(()); // data, or the host closed its end (the read says which)
+        }
+        if n < 0 && io::Error::last_os_error().kind() != io::ErrorKind::Interrupted {
+            return Err(io::Error::last_os_error());
+        }
+        if n == 0 && std::time::Instant::now() >= deadline {
+            return Err(io::ErrorKind::TimedOut.into());
+        }
+    }
+}
+
 impl Drop for RemoteInstance {
     fn drop(&mut self) {
         if self.ended.is_none() {
             // fmi2FreeInstance in the host, then it ends on the closed socket;
             // a host that does not answer within the time-out (or 10 s) is killed.
-            let _ = self
-                .reader
-                .get_ref()
-                .set_read_timeout(Some(self.timeout.unwrap_or(Duration::from_secs(10))));
+            self.timeout = Some(self.timeout.unwrap_or(Duration::from_secs(10)));
             self.out.start(op::FREE_INSTANCE);
             if self.call("fmi2FreeInstance").is_err() && self.ended.is_none() {
                 let _ = self.child.kill();
             }
         }
-        let _ = self.reader.get_ref().shutdown(std::net::Shutdown::Both);
+        self.writer = None;
         if self.ended.is_none() {
             let _ = self.child.wait();
         }

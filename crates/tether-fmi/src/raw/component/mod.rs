@@ -49,7 +49,7 @@ impl RawState {
 pub(crate) struct RawComponent {
     component: fmi2Component,
     id: u64,
-    name: Arc<str>,
+    name: crate::current::Name,
     /// The communication time reported in errors; maintained by the safe layer.
     pub(crate) time: f64,
     bool_scratch: Vec<fmi2Boolean>,
@@ -121,7 +121,8 @@ impl RawComponent {
             });
         }
         log::trace!(target: "tether_fmi::call", "fmi2Instantiate({})", args.instance_name);
-        let _entered = crate::current::Entered::new("fmi2Instantiate", args.instance_name, 0.0);
+        let name = crate::current::Name::new(args.instance_name);
+        let entered = crate::current::Entered::new("fmi2Instantiate", &name, 0.0);
         // SAFETY: all strings are NUL-terminated and live across the call; `callbacks`
         // and the environment it points to are boxed and kept in the returned component
         // until after fmi2FreeInstance, as FMI 2.0.5 requires.
@@ -136,6 +137,7 @@ impl RawComponent {
                 boolean(args.logging_on),
             )
         };
+        drop(entered);
         if component.is_null() {
             return Err(Error::InstantiationFailed {
                 model: args.model.to_owned(),
@@ -145,7 +147,7 @@ impl RawComponent {
         Ok(RawComponent {
             component,
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
-            name: Arc::from(args.instance_name),
+            name,
             time: 0.0,
             bool_scratch: Vec::new(),
             _callbacks: callbacks,
@@ -158,7 +160,7 @@ impl RawComponent {
 
     /// The instance name.
     pub(crate) fn name(&self) -> &str {
-        &self.name
+        self.name.as_str()
     }
 
     /// Whether this FMU has returned fmi2Fatal.
@@ -169,7 +171,7 @@ impl RawComponent {
     fn site(&self, function: &'static str) -> CallSite<'_> {
         CallSite {
             function,
-            instance: &self.name,
+            instance: self.name.as_str(),
             time: self.time,
         }
     }

@@ -100,7 +100,7 @@ impl RawComponent {
         Ok(RawState {
             ptr,
             owner: self.id,
-            owner_name: Arc::clone(&self.name),
+            owner_name: Arc::clone(self.name.shared()),
         })
     }
 }
