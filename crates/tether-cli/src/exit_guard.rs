@@ -150,6 +150,20 @@ extern "C" fn on_abort(_signal: c_int) {
     }
 }
 
+/// Ends the run at once from another thread (the watchdog): the results file
+/// gets every accepted row and `reason` as its trailer, the extraction folders
+/// are removed, the error line says so; exit code 1.
+pub fn stop_now(reason: &str) -> ! {
+    match take_armed(true) {
+        Some(armed) => end(armed, reason),
+        None => crate::say!("error: {reason}"),
+    }
+    let _ = std::io::stdout().flush();
+    // SAFETY: _exit ends the process at once, without the exit hooks (the run
+    // is already ended here) and without waiting for the stuck call.
+    unsafe { libc::_exit(1) }
+}
+
 /// Who did it: the FMI call this thread is inside, if any.
 fn blame(what: &str) -> String {
     match tether_fmi::current_call() {

@@ -30,8 +30,30 @@ pub fn install() -> anyhow::Result<()> {
             // The exit hook (crate::exit_guard) writes the trailer.
             std::process::exit(i32::from(EXIT_CODE));
         }
+        say_what_keeps_the_run();
     })
     .map_err(|e| anyhow::anyhow!("cannot install the Ctrl-C handler: {e}"))
+}
+
+/// The run stops after the current macro step; a call that is still running a
+/// moment later (an FMU stuck in `fmi2DoStep`) is named, so the user knows what
+/// the run waits for and that a second Ctrl-C ends it at once.
+fn say_what_keeps_the_run() {
+    let before = tether_fmi::calls_in_progress();
+    if before.is_empty() {
+        return;
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    for c in tether_fmi::calls_in_progress() {
+        if before.iter().any(|b| b.key == c.key) {
+            crate::say!(
+                "waiting for {} of instance '{}' at t={} to return; Ctrl-C again stops at once (the results so far are kept)",
+                c.call.function,
+                c.call.instance,
+                c.call.time
+            );
+        }
+    }
 }
 
 /// Whether a second signal is ending the process.

@@ -16,6 +16,7 @@ mod settings;
 mod simulate;
 mod study;
 mod sweep;
+mod watchdog;
 
 /// Tether couples FMI 2.0 co-simulation FMUs through algebraic constraints
 /// (rigid joints) with the predictor/corrector methods of Schweizer & Lu (2015).

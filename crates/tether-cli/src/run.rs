@@ -94,7 +94,9 @@ pub fn main(args: Args) -> Result<()> {
         observers.push(&mut memory);
     }
     let guard = crate::exit_guard::arm(emergency, &out);
+    let watchdog = crate::watchdog::start(&spec);
     let outcome = sim.run(&mut observers, &mut progress);
+    drop(watchdog);
     drop(guard);
     // The last recorded row's time: after a failure the failing step's own
     // time may be one step later.
