@@ -687,3 +687,95 @@ fn isolated_runs_equal_in_process_runs_bit_for_bit() {
     }
     assert!(s.leftovers().is_empty() && processes_left(&s).is_empty());
 }
+
+/// In-process, an endless loop cannot be stopped: with `--call-timeout` the
+/// watchdog ends the run, keeping every accepted row with the trailer naming
+/// the instance, the call and the time, and removing the folders.
+#[test]
+fn in_process_endless_loop_is_ended_by_the_watchdog() {
+    let s = Scratch::new();
+    let out = s.run(
+        &system(s.path(), 5, ""),
+        "out.csv",
+        &["--call-timeout", "0.5"],
+    );
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    let reason = "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.5 s (the FMU runs in-process and cannot be stopped: the run ends)";
+    assert_eq!(
+        text.lines().last().unwrap_or_default(),
+        format!("error: run stopped; results so far kept in out.csv (marked incomplete): {reason}")
+    );
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+    assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}
+
+/// Ctrl-C during an endless loop, in-process and isolated: the first one names
+/// the call the run waits for, the second ends the run at once with exit code
+/// 130, the trailer and no folder (nor host process) left.
+#[test]
+fn ctrl_c_during_a_stuck_call_names_it_and_the_second_ends_the_run() {
+    use std::io::BufRead;
+    for isolate in [false, true] {
+        let s = Scratch::new();
+        let sys = system(s.path(), 5, "");
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "out.csv"];
+        if isolate {
+            args.push("--isolate");
+        }
+        let mut child = s
+            .command(&args)
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let stderr = child.stderr.take().unwrap();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stderr).lines() {
+                let _ = tx.send(line.unwrap_or_default());
+            }
+        });
+        // Rows up to t = 0.5 reach the disk within the flush interval.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+        while !std::fs::read_to_string(s.path().join("out.csv"))
+            .unwrap_or_default()
+            .lines()
+            .any(|l| l.starts_with("0.5,"))
+        {
+            assert!(std::time::Instant::now() < deadline, "no rows");
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let pid = child.id() as i32;
+        // SAFETY: a signal to the child this test started and has not reaped.
+        unsafe { libc::kill(pid, libc::SIGINT) };
+        let waiting = rx
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("a line after the first Ctrl-C");
+        assert_eq!(
+            waiting,
+            "waiting for fmi2DoStep of instance 'mass2' at t=0.5 to return; Ctrl-C again stops at once (the results so far are kept)"
+        );
+        // SAFETY: as above.
+        unsafe { libc::kill(pid, libc::SIGINT) };
+        let status = child.wait().unwrap();
+        assert_eq!(status.code(), Some(130), "isolate = {isolate}");
+        let csv = read_csv(&s.path().join("out.csv"));
+        assert_eq!(
+            csv.trailer.as_deref(),
+            Some("# incomplete: interrupted by a second Ctrl-C or termination signal (exited at once)")
+        );
+        assert_eq!(csv.rows.len(), 501);
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while !processes_left(&s).is_empty() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "{:?}",
+                processes_left(&s)
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+}
