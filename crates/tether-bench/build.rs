@@ -4,9 +4,11 @@
 fn main() {
     println!("cargo:rerun-if-changed=c/floor.c");
     println!("cargo:rerun-if-changed=c/probe.c");
+    println!("cargo:rerun-if-changed=c/transport.c");
     cc::Build::new()
         .file("c/floor.c")
         .file("c/probe.c")
+        .file("c/transport.c")
         .opt_level(2)
         .warnings(true)
         .compile("tether_floor");

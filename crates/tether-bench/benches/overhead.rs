@@ -14,7 +14,11 @@
 //!   against the sequential path, on a 3D joint with an expensive FMU step and
 //!   on the cheap oscillator pair.
 //!
-//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel ...]`;
+//! * `isolation`: FMU instances in host processes (`isolation = "process"`):
+//!   the transports a host could use (round trips between two processes), the
+//!   cost of one FMI call, and the macro step against in-process instances.
+//!
+//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|isolation ...]`;
 //! `TETHER_BENCH_REPS` repetitions (default 10, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
@@ -27,6 +31,7 @@ use tether_bench::{
     floor, fmpy_loop, fmpy_reference, host_probe, workspace_root, Case, StateError,
 };
 use tether_fmi::Fmu;
+use tether_master::spec::Isolation;
 use tether_master::{
     CsvRecorder, InstanceCounters, Method, Observer, Parallel, Sample, Simulation, SystemSpec,
 };
@@ -619,7 +624,13 @@ fn bench_precision() {
     }
 }
 
-fn main() {
+/// The hidden argument that makes this executable the FMU host of `isolation`.
+const FMI_HOST: &str = "__fmi-host";
+
+fn main() -> std::process::ExitCode {
+    if std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
+        return tether_fmi_host::serve_stdin();
+    }
     let wanted: Vec<String> = std::env::args()
         .skip(1)
         .filter(|a| !a.starts_with("--"))
@@ -647,6 +658,133 @@ fn main() {
     }
     if run("parallel") {
         bench_parallel();
+    }
+    if run("isolation") {
+        bench_isolation();
+    }
+    std::process::ExitCode::SUCCESS
+}
+
+/// Transports, one FMI call, and the macro step of the oscillator pair and the
+/// double pendulum with every instance in a host process against in-process;
+/// alternated repetitions, medians and their ratios from the same run.
+fn bench_isolation() {
+    use tether_bench::{transport_round_trip, Transport};
+    use tether_fmi::remote::{set_host, HostCommand, RemoteInstance};
+    println!("\n== isolation: FMU instances in host processes ==");
+    // This executable is the host (as `tether` is for the CLI).
+    set_host(HostCommand {
+        program: std::env::current_exe().expect("the bench executable"),
+        args: vec![FMI_HOST.into()],
+    });
+    let reps = reps();
+    let transports = [
+        ("pipes", Transport::Pipes),
+        ("socket pair", Transport::SocketPair),
+        ("shared memory + futex", Transport::SharedMemoryFutex),
+        ("shared memory, spinning", Transport::SharedMemorySpin),
+    ];
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); transports.len()];
+    for _ in 0..reps {
+        for (i, (_, t)) in transports.iter().enumerate() {
+            times[i].push(transport_round_trip(*t, 20_000, 64).expect("transport") * 1e-6);
+        }
+    }
+    println!("round trip of 64 bytes between two processes (20 000 each, {reps} repetitions):");
+    for ((name, _), t) in transports.iter().zip(&times) {
+        println!("  {name:<24} {}", us2(t));
+    }
+    // One FMI call: fmi2GetReal of x and v of the oscillator.
+    let fmu = Fmu::open(tether_fmu_build::workspace_fmu("oscillator").expect("oscillator"))
+        .expect("open the oscillator");
+    let mut local = fmu.instantiate("m", Default::default()).expect("instance");
+    let mut remote = RemoteInstance::new(&fmu, "m", Default::default(), None).expect("host");
+    local.setup_experiment(None, 0.0, None).expect("setup");
+    local.enter_initialization_mode().expect("initialization");
+    local.exit_initialization_mode().expect("initialization");
+    remote.setup_experiment(None, 0.0, None).expect("setup");
+    remote.enter_initialization_mode().expect("initialization");
+    remote.exit_initialization_mode().expect("initialization");
+    let vrs = [0, 1];
+    let mut out = [0.0; 2];
+    let n = 20_000;
+    let (mut in_process, mut isolated, mut ping) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let clock = Instant::now();
+        for _ in 0..n {
+            local.get_real(&vrs, &mut out).expect("fmi2GetReal");
+        }
+        in_process.push(clock.elapsed().as_secs_f64() / n as f64);
+        let clock = Instant::now();
+        for _ in 0..n {
+            remote.get_real(&vrs, &mut out).expect("fmi2GetReal");
+        }
+        isolated.push(clock.elapsed().as_secs_f64() / n as f64);
+        let clock = Instant::now();
+        for _ in 0..n {
+            remote.ping().expect("ping");
+        }
+        ping.push(clock.elapsed().as_secs_f64() / n as f64);
+    }
+    println!("one FMI call (fmi2GetReal of 2 values):");
+    println!(
+        "  in-process {}   isolated {}   (an empty request: {})",
+        us2(&in_process),
+        us2(&isolated),
+        us2(&ping)
+    );
+    drop((local, remote));
+    let root = workspace_root();
+    let pendulum = SystemSpec::from_file(&root.join("examples/double_pendulum.toml"))
+        .expect("examples/double_pendulum.toml");
+    tether_fmu_build::workspace_fmu("link").expect("package the link FMU");
+    let mut oscillator = Case::example(false, 0).spec();
+    oscillator.experiment.stop = 1.0;
+    for (name, spec) in [
+        ("oscillator pair, Dop853, H = 1e-3", oscillator),
+        ("double pendulum (examples/double_pendulum.toml)", pendulum),
+    ] {
+        let steps = spec.macro_steps() as f64;
+        let mut times: [Vec<f64>; 2] = Default::default();
+        let mut calls = 0;
+        for _ in 0..reps {
+            for (i, isolation) in [Isolation::None, Isolation::Process]
+                .into_iter()
+                .enumerate()
+            {
+                let mut spec = spec.clone();
+                for instance in &mut spec.instances {
+                    instance.isolation = isolation;
+                }
+                let mut sim = Simulation::new(&spec).expect("simulation");
+                let clock = Instant::now();
+                let stats = sim.run(&mut [], &mut |_, _| {}).expect("run");
+                times[i].push(clock.elapsed().as_secs_f64() / steps);
+                calls = stats
+                    .instances
+                    .iter()
+                    .map(|c| {
+                        c.do_steps
+                            + c.state_gets
+                            + c.state_sets
+                            + c.set_reals
+                            + c.get_reals
+                            + c.set_input_derivatives
+                            + c.get_output_derivatives
+                    })
+                    .sum::<u64>()
+                    / stats.macro_steps;
+            }
+        }
+        let [a, b] = times.clone().map(median);
+        println!("{name} ({calls} FMI calls per macro step)");
+        println!(
+            "  per macro step: in-process {}   isolated {}   ratio {:.1}x, {:.2} µs more per FMI call",
+            us2(&times[0]),
+            us2(&times[1]),
+            b / a,
+            (b - a) * 1e6 / calls as f64
+        );
     }
 }
 

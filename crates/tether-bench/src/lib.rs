@@ -106,6 +106,7 @@ pub struct FloorResult {
 }
 
 extern "C" {
+    fn tether_transport_roundtrip(kind: c_int, n: c_long, size: c_long) -> f64;
     fn tether_probe_independent(n: c_long) -> f64;
     fn tether_probe_dependent(n: c_long) -> f64;
     fn tether_floor_run(
@@ -130,6 +131,33 @@ pub fn host_probe() -> HostProbe {
     HostProbe {
         independent,
         dependent,
+    }
+}
+
+/// A transport between two processes (c/transport.c).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transport {
+    /// Two pipes, one each way.
+    Pipes,
+    /// A Unix stream socket pair (what isolated instances use).
+    SocketPair,
+    /// Shared memory with a futex wait/wake handshake.
+    SharedMemoryFutex,
+    /// Shared memory, both sides spinning (two busy cores: a reference only).
+    SharedMemorySpin,
+}
+
+/// Microseconds per round trip of `size` bytes each way between this process
+/// and a forked child over `transport`, averaged over `n` round trips.
+pub fn transport_round_trip(transport: Transport, n: u32, size: usize) -> Result<f64, String> {
+    let kind = transport as c_int;
+    // SAFETY: the C function takes plain numbers; it forks a child that makes
+    // only system calls and `_exit`s, and waits for it.
+    let us = unsafe { tether_transport_roundtrip(kind, c_long::from(n), size as c_long) };
+    if us < 0.0 {
+        Err(format!("{transport:?}: the round trip failed"))
+    } else {
+        Ok(us)
     }
 }
 
