@@ -779,3 +779,64 @@ fn ctrl_c_during_a_stuck_call_names_it_and_the_second_ends_the_run() {
         }
     }
 }
+
+/// A host killed from outside (SIGKILL, as the OOM killer does) while its FMU
+/// sleeps in `fmi2DoStep` is an error of the run naming the instance and the
+/// signal, with every row kept. The FMUs' code runs in the hosts only.
+#[test]
+fn an_isolated_host_killed_from_outside_is_an_error() {
+    let s = Scratch::new();
+    let sys = system(s.path(), 7, ", pause = 30.0");
+    let mut child = s
+        .command(&[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "out.csv",
+            "--isolate",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // From t = 0.5 mass 2's first fmi2DoStep sleeps 30 s; its host was started
+    // second (the hosts' pids grow with the instances' order).
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !std::fs::read_to_string(s.path().join("out.csv"))
+        .unwrap_or_default()
+        .lines()
+        .any(|l| l.starts_with("0.5,"))
+    {
+        assert!(std::time::Instant::now() < deadline, "no rows");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    let mut hosts: Vec<i32> = std::fs::read_dir("/proc")
+        .unwrap()
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.parse().ok())
+        .filter(|pid: &i32| {
+            let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+            let environ = std::fs::read(format!("/proc/{pid}/environ")).unwrap_or_default();
+            let needle = format!("TMPDIR={}", s.tmp().display());
+            String::from_utf8_lossy(&cmdline).contains("__fmi-host")
+                && environ.split(|b| *b == 0).any(|v| v == needle.as_bytes())
+        })
+        .collect();
+    hosts.sort();
+    assert_eq!(hosts.len(), 2, "two hosts");
+    // The FMUs' libraries are loaded in the hosts only, never in the master.
+    let maps = |pid: i32| std::fs::read_to_string(format!("/proc/{pid}/maps")).unwrap();
+    assert!(!maps(child.id() as i32).contains("/binaries/linux64/"));
+    assert!(maps(hosts[1]).contains("/binaries/linux64/faults.so"));
+    // SAFETY: a signal to a host process of the run this test started.
+    unsafe { libc::kill(hosts[1], libc::SIGKILL) };
+    let out = child.wait_with_output().unwrap();
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    let reason = "instance 'mass2': its host process was killed by signal 9 (SIGKILL) during fmi2DoStep at t=0.5";
+    assert!(text.trim_end().ends_with(reason), "{text}");
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+    assert_eq!(csv.rows.len(), 501);
+    assert!(s.leftovers().is_empty() && processes_left(&s).is_empty());
+}

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use crate::archive::{self, ExtractLimits, FmuDir};
 use crate::error::{Error, Result};
 use crate::instance::Instance;
-use crate::library::{binary_path, Library};
+use crate::library::binary_path;
 use crate::model_description::{self, ModelDescription};
 use crate::raw::component::{InstantiateArgs, RawComponent};
 use crate::shared::{FmuShared, OnceGuard};
@@ -60,6 +60,17 @@ impl Fmu {
     /// `binaries/linux64/<modelIdentifier>.so` exists, loads, exports every FMI 2.0
     /// co-simulation function and reports version "2.0" and platform "default".
     pub fn open_with(path: impl AsRef<Path>, options: &OpenOptions) -> Result<Fmu> {
+        let fmu = Fmu::open_unloaded(path, options)?;
+        fmu.shared.library()?;
+        Ok(fmu)
+    }
+
+    /// Opens an FMU as [`open_with`](Self::open_with) does, without loading its
+    /// library: that happens with the first [`instantiate`](Self::instantiate)
+    /// in this process, if any. For instances in host processes
+    /// ([`RemoteInstance`](crate::remote::RemoteInstance)), whose library then
+    /// never runs in this process (the host checks and loads it).
+    pub fn open_unloaded(path: impl AsRef<Path>, options: &OpenOptions) -> Result<Fmu> {
         let origin = path.as_ref().to_owned();
         let metadata = std::fs::metadata(&origin).map_err(|source| Error::Io {
             path: origin.clone(),
@@ -102,13 +113,13 @@ impl Fmu {
                 origin.display()
             );
         }
-        let library = Library::load(&so)?;
         Ok(Fmu {
             shared: Arc::new(FmuShared {
                 origin,
                 dir: Arc::new(dir),
                 model_description,
-                library: Arc::new(library),
+                so,
+                library: Default::default(),
             }),
         })
     }
@@ -128,9 +139,9 @@ impl Fmu {
         self.shared.dir.root()
     }
 
-    /// The loaded shared library's path.
+    /// The shared library's path.
     pub fn library_path(&self) -> &Path {
-        self.shared.library.path()
+        &self.shared.so
     }
 
     /// The `fmuResourceLocation` passed to `fmi2Instantiate`: a percent-encoded
@@ -154,7 +165,7 @@ impl Fmu {
             None
         };
         let mut raw = RawComponent::fmi2Instantiate(
-            Arc::clone(&self.shared.library),
+            self.shared.library()?,
             Arc::clone(&self.shared.dir),
             &InstantiateArgs {
                 model: &md.model_name,

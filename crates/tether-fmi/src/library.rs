@@ -105,11 +105,6 @@ impl Library {
         &self.functions
     }
 
-    /// The library's path.
-    pub(crate) fn path(&self) -> &Path {
-        &self.path
-    }
-
     /// Records that a call returned fmi2Fatal.
     pub(crate) fn mark_fatal(&self) {
         self.fatal.store(true, Ordering::SeqCst);

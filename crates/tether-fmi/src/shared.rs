@@ -19,7 +19,27 @@ pub(crate) struct FmuShared {
     pub origin: PathBuf,
     pub dir: Arc<FmuDir>,
     pub model_description: ModelDescription,
-    pub library: Arc<Library>,
+    /// `binaries/linux64/<modelIdentifier>.so`.
+    pub so: PathBuf,
+    /// The loaded library; `None` until the first instance in this process
+    /// when opened with [`Fmu::open_unloaded`](crate::Fmu::open_unloaded).
+    pub library: Mutex<Option<Arc<Library>>>,
+}
+
+impl FmuShared {
+    /// The library, loaded now if it was not yet.
+    pub(crate) fn library(&self) -> Result<Arc<Library>> {
+        let mut library = self
+            .library
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(library) = &*library {
+            return Ok(Arc::clone(library));
+        }
+        let loaded = Arc::new(Library::load(&self.so)?);
+        *library = Some(Arc::clone(&loaded));
+        Ok(loaded)
+    }
 }
 
 /// The live instances of models declaring `canBeInstantiatedOnlyOncePerProcess`:

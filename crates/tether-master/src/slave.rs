@@ -113,7 +113,11 @@ impl Slave {
         let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
             Some((_, fmu)) => fmu.clone(),
             None => {
-                let fmu = Fmu::open(&spec.fmu)?;
+                // An isolated instance's library is loaded by its host only.
+                let fmu = match spec.isolation {
+                    Isolation::Process => Fmu::open_unloaded(&spec.fmu, &Default::default())?,
+                    Isolation::None => Fmu::open(&spec.fmu)?,
+                };
                 opened.push((spec.fmu.clone(), fmu.clone()));
                 fmu
             }
