@@ -787,7 +787,7 @@ fn ctrl_c_during_a_stuck_call_names_it_and_the_second_ends_the_run() {
 fn an_isolated_host_killed_from_outside_is_an_error() {
     let s = Scratch::new();
     let sys = system(s.path(), 7, ", pause = 30.0");
-    let mut child = s
+    let child = s
         .command(&[
             "run",
             sys.to_str().unwrap(),
