@@ -523,19 +523,44 @@ fn a_full_stderr_or_a_broken_pipe_is_no_panic() {
     }
 }
 
-/// Whether a process (a host of an isolated instance, left behind) still runs
-/// with this scratch's `TMPDIR` in its environment.
-fn processes_left(s: &Scratch) -> Vec<String> {
+/// The processes (pid, command line) with this scratch's `TMPDIR` in their
+/// environment: the runs' and their hosts'.
+fn processes(s: &Scratch) -> Vec<(i32, String)> {
     let needle = format!("TMPDIR={}", s.tmp().display());
-    let mut left = Vec::new();
+    let mut found = Vec::new();
     for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Some(pid) = entry.file_name().to_str().and_then(|p| p.parse().ok()) else {
+            continue;
+        };
         let environ = std::fs::read(entry.path().join("environ")).unwrap_or_default();
         if environ.split(|b| *b == 0).any(|v| v == needle.as_bytes()) {
             let cmdline = std::fs::read(entry.path().join("cmdline")).unwrap_or_default();
-            left.push(String::from_utf8_lossy(&cmdline).replace('\0', " "));
+            found.push((pid, String::from_utf8_lossy(&cmdline).replace('\0', " ")));
         }
     }
-    left
+    found
+}
+
+/// The processes still running (a host of an isolated instance left behind).
+fn processes_left(s: &Scratch) -> Vec<String> {
+    processes(s)
+        .into_iter()
+        .map(|(_, cmdline)| cmdline)
+        .collect()
+}
+
+/// Waits until the row at t = 0.5 is on disk (rows reach it within the flush
+/// interval, also while the run is stuck in the step after it).
+fn wait_for_the_row_at_0_5(s: &Scratch) {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !std::fs::read_to_string(s.path().join("out.csv"))
+        .unwrap_or_default()
+        .lines()
+        .any(|l| l.starts_with("0.5,"))
+    {
+        assert!(std::time::Instant::now() < deadline, "no rows");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
 }
 
 /// An isolated run (`--isolate`) of the faults FMU in `mode` ends with the error
@@ -737,16 +762,7 @@ fn ctrl_c_during_a_stuck_call_names_it_and_the_second_ends_the_run() {
                 let _ = tx.send(line.unwrap_or_default());
             }
         });
-        // Rows up to t = 0.5 reach the disk within the flush interval.
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
-        while !std::fs::read_to_string(s.path().join("out.csv"))
-            .unwrap_or_default()
-            .lines()
-            .any(|l| l.starts_with("0.5,"))
-        {
-            assert!(std::time::Instant::now() < deadline, "no rows");
-            std::thread::sleep(std::time::Duration::from_millis(50));
-        }
+        wait_for_the_row_at_0_5(&s);
         let pid = child.id() as i32;
         // SAFETY: a signal to the child this test started and has not reaped.
         unsafe { libc::kill(pid, libc::SIGINT) };
@@ -800,27 +816,12 @@ fn an_isolated_host_killed_from_outside_is_an_error() {
         .unwrap();
     // From t = 0.5 mass 2's first fmi2DoStep sleeps 30 s; its host was started
     // second (the hosts' pids grow with the instances' order).
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
-    while !std::fs::read_to_string(s.path().join("out.csv"))
-        .unwrap_or_default()
-        .lines()
-        .any(|l| l.starts_with("0.5,"))
-    {
-        assert!(std::time::Instant::now() < deadline, "no rows");
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
+    wait_for_the_row_at_0_5(&s);
     std::thread::sleep(std::time::Duration::from_millis(200));
-    let mut hosts: Vec<i32> = std::fs::read_dir("/proc")
-        .unwrap()
-        .flatten()
-        .filter_map(|e| e.file_name().to_str()?.parse().ok())
-        .filter(|pid: &i32| {
-            let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
-            let environ = std::fs::read(format!("/proc/{pid}/environ")).unwrap_or_default();
-            let needle = format!("TMPDIR={}", s.tmp().display());
-            String::from_utf8_lossy(&cmdline).contains("__fmi-host")
-                && environ.split(|b| *b == 0).any(|v| v == needle.as_bytes())
-        })
+    let mut hosts: Vec<i32> = processes(&s)
+        .into_iter()
+        .filter(|(_, cmdline)| cmdline.contains("__fmi-host"))
+        .map(|(pid, _)| pid)
         .collect();
     hosts.sort();
     assert_eq!(hosts.len(), 2, "two hosts");
