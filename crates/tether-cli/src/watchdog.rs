@@ -33,12 +33,26 @@ impl Drop for Watchdog {
     }
 }
 
-/// The in-process time-out of each instance (`None`: isolated or none).
-fn limits(spec: &SystemSpec) -> HashMap<String, Option<f64>> {
+/// What bounds each instance's calls.
+#[derive(Clone, Copy)]
+enum Limit {
+    /// Nothing: long calls are reported.
+    None,
+    /// The watchdog ends the run after this many seconds (in-process).
+    Watchdog(f64),
+    /// The library kills the host (isolated, with a time-out).
+    Library,
+}
+
+fn limits(spec: &SystemSpec) -> HashMap<String, Limit> {
     spec.instances
         .iter()
         .map(|i| {
-            let limit = i.call_timeout.filter(|_| i.isolation == Isolation::None);
+            let limit = match (i.call_timeout, i.isolation) {
+                (None, _) => Limit::None,
+                (Some(t), Isolation::None) => Limit::Watchdog(t),
+                (Some(_), Isolation::Process) => Limit::Library,
+            };
             (i.name.clone(), limit)
         })
         .collect()
@@ -56,7 +70,7 @@ pub fn start(spec: &SystemSpec) -> Watchdog {
     Watchdog { stop }
 }
 
-fn watch(limits: &HashMap<String, Option<f64>>, stop: &AtomicBool) {
+fn watch(limits: &HashMap<String, Limit>, stop: &AtomicBool) {
     // When each call in progress was first seen, and whether it was reported.
     let mut seen: HashMap<(usize, u64), (Instant, bool)> = HashMap::new();
     while !stop.load(Ordering::SeqCst) {
@@ -70,8 +84,8 @@ fn watch(limits: &HashMap<String, Option<f64>>, stop: &AtomicBool) {
             // Copies on worker threads are named `<instance>#<n>`.
             let instance = c.call.instance.split('#').next().unwrap_or_default();
             let call = &c.call;
-            match limits.get(instance).copied().flatten() {
-                Some(limit) if running.as_secs_f64() >= limit => {
+            match limits.get(instance).copied().unwrap_or(Limit::None) {
+                Limit::Watchdog(limit) if running.as_secs_f64() >= limit => {
                     if stop.load(Ordering::SeqCst) {
                         return;
                     }
@@ -80,7 +94,7 @@ fn watch(limits: &HashMap<String, Option<f64>>, stop: &AtomicBool) {
                         call.instance, call.function, call.time
                     ));
                 }
-                _ if running >= REPORT_AFTER && !*reported => {
+                Limit::None if running >= REPORT_AFTER && !*reported => {
                     *reported = true;
                     crate::say!(
                         "warning: instance '{}' has been inside {} at t={} for {} s (Ctrl-C stops the run; --call-timeout ends such calls)",
