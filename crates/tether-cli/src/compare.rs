@@ -30,13 +30,14 @@ pub struct Args {
     /// Second result file.
     b: PathBuf,
     /// Relative tolerance: a column passes when max |a − b| ≤ atol + rtol · scale.
-    #[arg(long, default_value_t = 1e-9)]
+    #[arg(long, default_value_t = 1e-9, allow_hyphen_values = true)]
     rtol: f64,
     /// Absolute tolerance (see --rtol).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     atol: f64,
     /// Compare only these columns (default: all; then both files must have the
-    /// same columns). Repeatable and space-separated: --columns link.lambda link.g
+    /// same columns): names separated by commas or spaces (commas inside
+    /// brackets belong to the name: body.R[1,2]).
     #[arg(long, num_args = 1.., value_name = "NAME")]
     columns: Vec<String>,
 }
@@ -263,7 +264,7 @@ pub fn main(args: Args) -> Result<()> {
     }
     let a = read_table(&args.a)?;
     let b = read_table(&args.b)?;
-    let names = columns_to_compare(&a, &b, &args.columns)?;
+    let names = columns_to_compare(&a, &b, &crate::columns::split(&args.columns))?;
     check_times(&a, &b)?;
     let devs = deviations(&a, &b, &names, args.rtol, args.atol);
 

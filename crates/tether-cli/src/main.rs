@@ -4,12 +4,14 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod columns;
 mod compare;
 mod exit_guard;
 mod info;
 mod interrupt;
 mod output;
 mod plot;
+mod progress;
 mod run;
 mod settings;
 mod simulate;

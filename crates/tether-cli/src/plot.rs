@@ -12,9 +12,10 @@ pub struct Args {
     /// several files are drawn over each other.
     #[arg(required = true)]
     results: Vec<PathBuf>,
-    /// Columns to plot, one panel each, comma separated (default: all, or the
-    /// multipliers and residuals when there are more than eight).
-    #[arg(long, value_delimiter = ',')]
+    /// Columns to plot, one panel each: names separated by commas or spaces
+    /// (commas inside brackets belong to the name: body.R[1,2]) (default:
+    /// all, or the multipliers and residuals when there are more than eight).
+    #[arg(long, num_args = 1.., value_name = "NAME")]
     columns: Vec<String>,
     /// Output file: .svg or .png.
     #[arg(long, short)]
@@ -44,7 +45,12 @@ pub fn main(args: Args) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     });
-    draw(&tables, &args.columns, &title, &args.out)?;
+    draw(
+        &tables,
+        &crate::columns::split(&args.columns),
+        &title,
+        &args.out,
+    )?;
     crate::say!("plot: {}", args.out.display());
     Ok(())
 }

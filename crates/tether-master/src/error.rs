@@ -15,6 +15,9 @@ pub enum MasterError {
         /// What is wrong, on one line.
         reason: String,
     },
+    /// `[output]` (or `--output-variables`) selects something that is not there.
+    #[error("{0}")]
+    InvalidOutput(String),
     /// A number outside its allowed range (method parameter, step, stop time …).
     #[error("invalid {name} = {value}: expected {expected}")]
     InvalidParameter {

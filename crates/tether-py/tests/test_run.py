@@ -74,6 +74,7 @@ def test_result_api(oscillator_toml):
     assert stats["instances"]["mass1"]["do_step"] > 100
     assert set(stats["instances"]["mass1"]) == {
         "do_step", "get_fmu_state", "set_fmu_state", "set_real", "get_real",
+        "get_integer", "get_boolean",
         "set_real_input_derivatives", "get_real_output_derivatives",
     }
     assert set(stats["times"]) >= {"setup", "predictor", "jacobian", "solve", "corrector", "recording"}
