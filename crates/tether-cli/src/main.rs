@@ -26,6 +26,19 @@ struct Cli {
     /// Log FMU messages and Tether's own (repeat for more: -v info, -vv debug).
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
     verbose: u8,
+    /// Switch the FMUs' debug logging on (loggingOn, fmi2SetDebugLogging) and
+    /// show their messages, prefixed with the instance: every category, or
+    /// those given (--fmu-log=logEvents,logStatusError). -v does the same
+    /// for every category.
+    #[arg(
+        long,
+        global = true,
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "",
+        value_name = "CATEGORIES"
+    )]
+    fmu_log: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -78,9 +91,23 @@ fn main() -> ExitCode {
     };
     let mut logger = env_logger::Builder::new();
     logger.filter_level(level);
-    if matches!(&cli.command, Command::Run(args) if args.quiet) {
-        // FMU messages are logged with the target `fmu::<instance>`.
+    if cli.fmu_log.is_some() {
+        // FMU messages are logged with the target `fmu::<instance>`; those
+        // of status fmi2OK at the level info.
+        logger.filter_module("fmu", log::LevelFilter::Trace);
+    } else if matches!(&cli.command, Command::Run(args) if args.quiet) {
         logger.filter_module("fmu", log::LevelFilter::Error);
+    }
+    if cli.fmu_log.is_some() || cli.verbose > 0 {
+        let categories = cli.fmu_log.as_deref().unwrap_or("");
+        tether_fmi::set_debug_logging(Some(
+            categories
+                .split(',')
+                .map(str::trim)
+                .filter(|c| !c.is_empty())
+                .map(str::to_string)
+                .collect(),
+        ));
     }
     logger.parse_env("TETHER_LOG").format_timestamp(None).init();
     let result = match cli.command {
