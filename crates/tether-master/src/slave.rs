@@ -114,7 +114,10 @@ impl Slave {
         let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
             Some((_, fmu)) => fmu.clone(),
             None => {
-                let fmu = Fmu::open(&spec.fmu)?;
+                let fmu = Fmu::open(&spec.fmu).map_err(|error| MasterError::InstanceFmu {
+                    instance: spec.name.clone(),
+                    error,
+                })?;
                 opened.push((spec.fmu.clone(), fmu.clone()));
                 fmu
             }

@@ -45,7 +45,9 @@ const SIGNAL_INTERVAL: Duration = Duration::from_millis(50);
 /// The class of a failure, as the Python half names it.
 fn kind_of(e: &MasterError) -> &'static str {
     match e {
-        MasterError::Fmi(_) | MasterError::MissingCapability { .. } => "fmu",
+        MasterError::Fmi(_)
+        | MasterError::InstanceFmu { .. }
+        | MasterError::MissingCapability { .. } => "fmu",
         MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
         MasterError::InvalidParameter { .. } => "settings",
@@ -58,7 +60,9 @@ fn kind_of(e: &MasterError) -> &'static str {
         | MasterError::Joint { .. }
         | MasterError::WrongVariable { .. }
         | MasterError::MissingLevel { .. }
-        | MasterError::StartValue { .. } => "system",
+        | MasterError::StartValue { .. }
+        | MasterError::DrivesCancel { .. }
+        | MasterError::InvalidOutput(_) => "system",
         _ => "other",
     }
 }
