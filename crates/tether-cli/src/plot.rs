@@ -48,6 +48,7 @@ pub fn main(args: Args) -> Result<()> {
     draw(
         &tables,
         &crate::columns::split(&args.columns),
+        &[],
         &title,
         &args.out,
     )?;
@@ -55,8 +56,15 @@ pub fn main(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Plot `columns` (or the default choice) of every table into `out`.
-pub fn draw(tables: &[Table], columns: &[String], title: &str, out: &Path) -> Result<()> {
+/// Plot `columns` (or the default choice) of every table into `out`, with
+/// the `units` of columns where known.
+pub fn draw(
+    tables: &[Table],
+    columns: &[String],
+    units: &[(String, String)],
+    title: &str,
+    out: &Path,
+) -> Result<()> {
     let Some(first) = tables.first() else {
         bail!("nothing to plot");
     };
@@ -77,6 +85,7 @@ pub fn draw(tables: &[Table], columns: &[String], title: &str, out: &Path) -> Re
         title: title.to_string(),
         columns,
         runs: tables.iter().map(|t| (t.source.clone(), t)).collect(),
+        units: units.to_vec(),
     };
     save(out, &figure)?;
     Ok(())

@@ -135,7 +135,7 @@ pub fn main(args: Args) -> Result<()> {
             "{name}: {}, k = {}, H = {}",
             spec.method, spec.coupling.order, spec.experiment.step
         );
-        crate::plot::draw(&[table], &plot_columns, &title, path)?;
+        crate::plot::draw(&[table], &plot_columns, &sim.units(), &title, path)?;
         if !args.quiet {
             crate::say!("plot: {}", path.display());
         }

@@ -356,3 +356,48 @@ fn the_json_summary_says_how_the_run_went() {
     let end = json["end_time"].as_f64().unwrap();
     assert!((0.49..0.5).contains(&end), "{end}");
 }
+
+/// `run --plot` labels the axes with the units the FMUs declare; ticks at
+/// zero read `0`, not a rounding error such as `-5.6e-17`.
+#[test]
+fn plot_axes_carry_units_and_clean_zero_ticks() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    success(&tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--plot",
+            "p.svg",
+            "--columns",
+            "mass1.x,mass1.v",
+            "link.lambda",
+        ],
+        dir.path(),
+    ));
+    let svg = std::fs::read_to_string(dir.path().join("p.svg")).unwrap();
+    // The texts of the SVG's <text> elements.
+    let texts: Vec<&str> = svg
+        .split("<text")
+        .skip(1)
+        .filter_map(|s| s.split_once('>'))
+        .filter_map(|(_, rest)| rest.split('<').next())
+        .map(str::trim)
+        .collect();
+    for label in ["mass1.x [m]", "mass1.v [m/s]", "link.lambda", "time [s]"] {
+        assert!(texts.contains(&label), "{label}: {texts:?}");
+    }
+    // Every tick label is a plain number, none a tiny multiple of the span.
+    let ticks: Vec<&str> = texts
+        .iter()
+        .copied()
+        .filter(|s| s.parse::<f64>().is_ok())
+        .collect();
+    assert!(ticks.contains(&"0"), "{ticks:?}");
+    for t in &ticks {
+        let v: f64 = t.parse().unwrap();
+        assert!(v == 0.0 || v.abs() > 1e-6, "tick {t}");
+    }
+}

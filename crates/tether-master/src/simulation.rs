@@ -182,6 +182,30 @@ impl Simulation {
         }
     }
 
+    /// The units the FMUs declare for the recorded outputs among
+    /// [`columns`](Self::columns): `(column, unit)` pairs.
+    pub fn units(&self) -> Vec<(String, String)> {
+        let mut units = Vec::new();
+        for slave in &self.system.slaves {
+            let md = slave.fmu.model_description();
+            for column in slave.recorded_names() {
+                if !self.columns.contains(column) {
+                    continue;
+                }
+                let variable = &column[slave.name.len() + 1..];
+                let unit = md
+                    .variable(variable)
+                    .ok()
+                    .and_then(|v| v.real())
+                    .and_then(|r| r.attributes.unit.clone());
+                if let Some(unit) = unit {
+                    units.push((column.clone(), unit));
+                }
+            }
+        }
+        units
+    }
+
     /// The current macro time T_N = T_0 + N·H.
     pub fn time(&self) -> f64 {
         self.time_at(self.n)
