@@ -2,32 +2,11 @@
 //! logging on and show them prefixed with the instance; a failed call reports
 //! the FMU's last messages with it.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn tether(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tether"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run tether")
-}
+use std::path::Path;
 
-fn oscillator() -> PathBuf {
-    tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// The last line of stderr, which must be the one-line error (exit code 1).
-fn error_line(out: &Output) -> String {
-    let text = stderr(out);
-    assert_eq!(out.status.code(), Some(1), "expected exit 1: {text}");
-    assert!(!text.contains("panicked"), "{text}");
-    text.lines().last().unwrap_or_default().to_string()
-}
+use common::{error_line, oscillator, stderr, tether};
 
 /// `tether simulate` of the oscillator over three steps, with `flags`.
 fn simulate(dir: &Path, flags: &[&str]) -> String {

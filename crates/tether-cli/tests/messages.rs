@@ -1,21 +1,12 @@
 //! The exact words of `tether run` for mistakes in a system file, and its
 //! progress report on a non-terminal.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn tether(args: &[&str], dir: &Path, env: &[(&str, &str)]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tether"))
-        .args(args)
-        .envs(env.iter().copied())
-        .current_dir(dir)
-        .output()
-        .expect("run tether")
-}
-
-fn oscillator() -> PathBuf {
-    tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU")
-}
+use common::{oscillator, tether_env as tether};
 
 /// Stderr must be exactly one error line; exit code 1.
 fn only_error(out: &Output) -> String {

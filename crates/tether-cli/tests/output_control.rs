@@ -2,38 +2,11 @@
 //! column patterns), Integer and Boolean outputs, the JSON run summary, and
 //! the checks of the command line made before a run starts.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn tether(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tether"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run tether")
-}
-
-fn oscillator() -> PathBuf {
-    tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn success(out: &Output) -> String {
-    let text = stderr(out);
-    assert!(out.status.success(), "expected success: {text}");
-    text
-}
-
-/// The last line of stderr, which must be the one-line error (exit code 1).
-fn error_line(out: &Output) -> String {
-    let text = stderr(out);
-    assert_eq!(out.status.code(), Some(1), "expected exit 1: {text}");
-    assert!(!text.contains("panicked"), "{text}");
-    text.lines().last().unwrap_or_default().to_string()
-}
+use common::{error_line, oscillator, success, tether};
 
 /// The paper's oscillator pair with `mass1` from `fmu1` (parameters
 /// `extra` added), `[output]` text `output`, stop 1, H = 1e-3.
