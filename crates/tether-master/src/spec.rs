@@ -48,6 +48,12 @@ pub struct SystemSpec {
     pub source: Option<PathBuf>,
 }
 
+/// `x` without the last digits of rounding (`0.8999999999999999` is `0.9`),
+/// for messages: twelve significant digits.
+pub(crate) fn tidy(x: f64) -> f64 {
+    format!("{x:.11e}").parse().unwrap_or(x)
+}
+
 /// `[output]`: which points and which columns reach the observers (the
 /// results file). The run itself, its divergence checks and the summary's
 /// max |g| still see every macro point and every column.
@@ -612,8 +618,8 @@ impl SystemSpec {
         let end = self.end_time();
         ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
             format!(
-                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {end}",
-                e.stop, e.start, e.step
+                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {}",
+                e.stop, e.start, e.step, tidy(end)
             )
         })
     }
@@ -698,7 +704,11 @@ mod tests {
         assert_eq!(off.end_time(), 1e-3);
         assert_eq!(
             off.grid_warning().as_deref(),
-            Some("stop = 0.0001 is not on the macro grid start + n·step (start = 0, step = 0.001): the run ends at t = 0.001")
+            Some("stop = 0.0001 is not on the macro grid start + n·step (start = 0, step = 0.001): the run ends at t = 0.001"),
+        );
+        assert_eq!(
+            spec(1.0, 0.3).grid_warning().as_deref(),
+            Some("stop = 1 is not on the macro grid start + n·step (start = 0, step = 0.3): the run ends at t = 0.9")
         );
     }
 
