@@ -239,10 +239,9 @@ fn an_entry_inflating_past_its_declared_size_is_refused() {
     assert_one_line_naming(&err, &[&shown(&path), "resources/zeros.bin", "declared"]);
 }
 
-#[test]
-fn a_binary_that_is_not_a_shared_library_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("notelf.fmu");
+/// `dir/notelf.fmu`, whose "shared library" is a shell script.
+fn not_elf_fmu(dir: &Path) -> PathBuf {
+    let path = dir.join("notelf.fmu");
     write_zip(
         &path,
         &[
@@ -250,7 +249,13 @@ fn a_binary_that_is_not_a_shared_library_is_refused() {
             Entry::File("binaries/linux64/stub.so", b"#!/bin/sh\necho not ELF\n"),
         ],
     );
-    let err = open_err(&path);
+    path
+}
+
+#[test]
+fn a_binary_that_is_not_a_shared_library_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let err = open_err(&not_elf_fmu(dir.path()));
     match &err {
         Error::LibraryLoad { path: so, .. } => {
             assert!(so.ends_with("binaries/linux64/stub.so"), "{}", so.display())
@@ -258,6 +263,33 @@ fn a_binary_that_is_not_a_shared_library_is_refused() {
         other => panic!("{other:?}"),
     }
     assert_one_line_naming(&err, &["cannot load FMU library", "stub.so"]);
+}
+
+/// The loader's own reason is in the message (libloading's error text alone
+/// is "dlopen failed"); an FMU that needs the Python runtime (pythonfmu) gets
+/// the hint to preload libpython.
+#[test]
+fn a_library_that_cannot_load_says_why_and_a_python_fmu_gets_a_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    let err = open_err(&not_elf_fmu(dir.path())).to_string();
+    assert!(
+        err.ends_with("stub.so: file too short"),
+        "the loader's reason: {err}"
+    );
+    let (root, _log) = stub_fmu_dir_with(dir.path(), &["-DSTUB_NEEDS_PYTHON".into()]);
+    let err = open_err(&root);
+    let so = root.join("binaries/linux64/stub.so");
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "cannot load FMU library '{so}': dlopen failed: {so}: undefined symbol: _Py_NoneStruct \
+             (the FMU needs the Python runtime, as FMUs exported by pythonfmu do: preload \
+             libpython, e.g. LD_PRELOAD=$(python3 -c \"import sysconfig, os; \
+             print(os.path.join(sysconfig.get_config_var('LIBDIR'), \
+             sysconfig.get_config_var('LDLIBRARY')))\"))",
+            so = so.display()
+        )
+    );
 }
 
 #[test]

@@ -89,8 +89,14 @@ pub fn faulty_fmu(dir: &Path, name: &str, caps: Capabilities) -> PathBuf {
 /// A copy of the workspace oscillator FMU at `<dir>/<name>.fmu` whose
 /// `modelDescription.xml` went through `edit` (which must change it).
 pub fn edited_oscillator(dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> PathBuf {
+    edited_fmu(&oscillator_fmu(), dir, name, edit)
+}
+
+/// A copy of the FMU `source` at `<dir>/<name>.fmu` whose
+/// `modelDescription.xml` went through `edit` (which must change it).
+pub fn edited_fmu(source: &Path, dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> PathBuf {
     let root = dir.join(format!("{name}-unpacked"));
-    unzip(&oscillator_fmu(), &root);
+    unzip(source, &root);
     let xml_path = root.join("modelDescription.xml");
     let xml = std::fs::read_to_string(&xml_path).expect("read modelDescription.xml");
     let edited = edit(&xml);

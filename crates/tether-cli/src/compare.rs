@@ -2,8 +2,11 @@
 //! result files, e.g. a `tether run` and the fmpy reference of the same system
 //! (docs/validation.md).
 //!
-//! Columns are matched by name; both files must have the same times. For each
-//! column c the measure is
+//! Columns are matched by name. When the files have different times (fmpy's
+//! default output interval differs from the step, a run used
+//! `--output-interval`), the second file is interpolated linearly onto the
+//! first one's times, which must lie within its own, and the output says so.
+//! For each column c the measure is
 //!
 //! ```text
 //! dev_c   = max over rows |a − b|
@@ -30,13 +33,14 @@ pub struct Args {
     /// Second result file.
     b: PathBuf,
     /// Relative tolerance: a column passes when max |a − b| ≤ atol + rtol · scale.
-    #[arg(long, default_value_t = 1e-9)]
+    #[arg(long, default_value_t = 1e-9, allow_hyphen_values = true)]
     rtol: f64,
     /// Absolute tolerance (see --rtol).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     atol: f64,
     /// Compare only these columns (default: all; then both files must have the
-    /// same columns). Repeatable and space-separated: --columns link.lambda link.g
+    /// same columns): names separated by commas or spaces (commas inside
+    /// brackets belong to the name: body.R[1,2]).
     #[arg(long, num_args = 1.., value_name = "NAME")]
     columns: Vec<String>,
 }
@@ -164,23 +168,11 @@ fn columns_to_compare(a: &Table, b: &Table, wanted: &[String]) -> Result<Vec<Str
     Ok(a.names.clone())
 }
 
-fn check_times(a: &Table, b: &Table) -> Result<()> {
-    let note = |t: &Table| match &t.incomplete {
-        Some(r) => format!(" (incomplete: {r})"),
-        None => String::new(),
-    };
+/// Whether `b` has `a`'s times (within 1e-9 of `a`'s smallest time increment).
+fn same_grid(a: &Table, b: &Table) -> bool {
     if a.times.len() != b.times.len() {
-        bail!(
-            "the files have different numbers of rows: {} has {}{}, {} has {}{}",
-            a.path.display(),
-            a.times.len(),
-            note(a),
-            b.path.display(),
-            b.times.len(),
-            note(b)
-        );
+        return false;
     }
-    // Same grid point: within 1e-9 of the smallest time increment.
     let spacing = a
         .times
         .windows(2)
@@ -192,18 +184,69 @@ fn check_times(a: &Table, b: &Table) -> Result<()> {
     } else {
         1e-9 * a.times[0].abs().max(1.0)
     };
-    for (i, (ta, tb)) in a.times.iter().zip(&b.times).enumerate() {
-        let same = (ta - tb).abs() <= tolerance;
-        if !same {
-            bail!(
-                "the times differ at row {}: {} has t = {ta}, {} has t = {tb}",
-                i + 1,
-                a.path.display(),
-                b.path.display()
-            );
-        }
+    a.times
+        .iter()
+        .zip(&b.times)
+        .all(|(ta, tb)| (ta - tb).abs() <= tolerance)
+}
+
+/// `b` linearly interpolated onto `a`'s times (between the two rows of `b`
+/// around each time; at a repeated time of `b`, an event, its later row).
+/// `a`'s times must lie within `b`'s, and `b`'s must not decrease.
+fn interpolated(a: &Table, b: &Table) -> Result<Table> {
+    let note = |t: &Table| match &t.incomplete {
+        Some(r) => format!(" ({} is incomplete: {r})", t.path.display()),
+        None => String::new(),
+    };
+    if let Some(i) = b.times.windows(2).position(|w| w[1] < w[0]) {
+        bail!(
+            "{}: the times decrease at row {} (t = {} after {}): cannot interpolate",
+            b.path.display(),
+            i + 2,
+            b.times[i + 1],
+            b.times[i]
+        );
     }
-    Ok(())
+    let (first, last) = (b.times[0], b.times[b.times.len() - 1]);
+    let slack = 1e-9 * (last - first).abs().max(f64::MIN_POSITIVE);
+    let (a_first, a_last) = (a.times[0], a.times[a.times.len() - 1]);
+    if a_first < first - slack || a_last > last + slack {
+        bail!(
+            "the time grids differ and {} (t = {a_first} … {a_last}) is not within the times of \
+             {} (t = {first} … {last}): cannot interpolate{}{}",
+            a.path.display(),
+            b.path.display(),
+            note(a),
+            note(b)
+        );
+    }
+    let mut rows = Vec::with_capacity(a.times.len());
+    let mut k = 0;
+    for &t in &a.times {
+        // The last row of b at or before t (its later row at a repeated time).
+        while k + 1 < b.times.len() && b.times[k + 1] <= t {
+            k += 1;
+        }
+        let row = if k + 1 == b.times.len() || b.times[k] >= t {
+            b.rows[k].clone()
+        } else {
+            let (t0, t1) = (b.times[k], b.times[k + 1]);
+            let w = (t - t0) / (t1 - t0);
+            b.rows[k]
+                .iter()
+                .zip(&b.rows[k + 1])
+                .map(|(v0, v1)| if w == 0.0 { *v0 } else { v0 + w * (v1 - v0) })
+                .collect()
+        };
+        rows.push(row);
+    }
+    Ok(Table {
+        path: b.path.clone(),
+        names: b.names.clone(),
+        times: a.times.clone(),
+        rows,
+        incomplete: b.incomplete.clone(),
+    })
 }
 
 fn deviations(a: &Table, b: &Table, names: &[String], rtol: f64, atol: f64) -> Vec<Deviation> {
@@ -263,8 +306,23 @@ pub fn main(args: Args) -> Result<()> {
     }
     let a = read_table(&args.a)?;
     let b = read_table(&args.b)?;
-    let names = columns_to_compare(&a, &b, &args.columns)?;
-    check_times(&a, &b)?;
+    let names = columns_to_compare(&a, &b, &crate::columns::split(&args.columns))?;
+    let b = if same_grid(&a, &b) {
+        b
+    } else {
+        let on_a = interpolated(&a, &b)?;
+        crate::stdout(format_args!(
+            "note: the time grids differ ({} has {} rows, {} has {}): {} is interpolated \
+             linearly onto the times of {}\n",
+            a.path.display(),
+            a.times.len(),
+            b.path.display(),
+            b.times.len(),
+            b.path.display(),
+            a.path.display()
+        ))?;
+        on_a
+    };
     let devs = deviations(&a, &b, &names, args.rtol, args.atol);
 
     let width = devs.iter().map(|d| d.name.len()).max().unwrap_or(6).max(6);

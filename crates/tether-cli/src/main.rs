@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod columns;
 mod compare;
 mod exit_guard;
 mod info;
@@ -11,6 +12,7 @@ mod interrupt;
 mod isolation;
 mod output;
 mod plot;
+mod progress;
 mod run;
 mod settings;
 mod simulate;
@@ -26,6 +28,19 @@ struct Cli {
     /// Log FMU messages and Tether's own (repeat for more: -v info, -vv debug).
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
     verbose: u8,
+    /// Switch the FMUs' debug logging on (loggingOn, fmi2SetDebugLogging) and
+    /// show their messages, prefixed with the instance: every category, or
+    /// those given (--fmu-log=logEvents,logStatusError). -v does the same
+    /// for every category.
+    #[arg(
+        long,
+        global = true,
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "",
+        value_name = "CATEGORIES"
+    )]
+    fmu_log: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -71,6 +86,23 @@ pub fn stdout(text: std::fmt::Arguments<'_>) -> anyhow::Result<()> {
 /// The hidden first argument that makes `tether` the host process of an
 /// isolated FMU instance (docs/reliability.md).
 const FMI_HOST: &str = "__fmi-host";
+/// The error and its causes on one line, `context: error: cause`; a cause
+/// whose text the line already holds (errors that print their source
+/// themselves) is not repeated.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line.replace('\n', " ")
+}
 
 fn main() -> ExitCode {
     if std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
@@ -92,9 +124,23 @@ fn main() -> ExitCode {
     };
     let mut logger = env_logger::Builder::new();
     logger.filter_level(level);
-    if matches!(&cli.command, Command::Run(args) if args.quiet) {
-        // FMU messages are logged with the target `fmu::<instance>`.
+    if cli.fmu_log.is_some() {
+        // FMU messages are logged with the target `fmu::<instance>`; those
+        // of status fmi2OK at the level info.
+        logger.filter_module("fmu", log::LevelFilter::Trace);
+    } else if matches!(&cli.command, Command::Run(args) if args.quiet) {
         logger.filter_module("fmu", log::LevelFilter::Error);
+    }
+    if cli.fmu_log.is_some() || cli.verbose > 0 {
+        let categories = cli.fmu_log.as_deref().unwrap_or("");
+        tether_fmi::set_debug_logging(Some(
+            categories
+                .split(',')
+                .map(str::trim)
+                .filter(|c| !c.is_empty())
+                .map(str::to_string)
+                .collect(),
+        ));
     }
     logger.parse_env("TETHER_LOG").format_timestamp(None).init();
     let result = match cli.command {
@@ -109,7 +155,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let message = format!("{e:#}").replace('\n', " ");
+            let message = one_line(&e);
             say!("error: {message}");
             let interrupted = e.chain().any(|cause| {
                 matches!(

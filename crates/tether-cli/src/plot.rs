@@ -12,9 +12,10 @@ pub struct Args {
     /// several files are drawn over each other.
     #[arg(required = true)]
     results: Vec<PathBuf>,
-    /// Columns to plot, one panel each, comma separated (default: all, or the
-    /// multipliers and residuals when there are more than eight).
-    #[arg(long, value_delimiter = ',')]
+    /// Columns to plot, one panel each: names separated by commas or spaces
+    /// (commas inside brackets belong to the name: body.R[1,2]) (default:
+    /// all, or the multipliers and residuals when there are more than eight).
+    #[arg(long, num_args = 1.., value_name = "NAME")]
     columns: Vec<String>,
     /// Output file: .svg or .png.
     #[arg(long, short)]
@@ -44,13 +45,26 @@ pub fn main(args: Args) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     });
-    draw(&tables, &args.columns, &title, &args.out)?;
+    draw(
+        &tables,
+        &crate::columns::split(&args.columns),
+        &[],
+        &title,
+        &args.out,
+    )?;
     crate::say!("plot: {}", args.out.display());
     Ok(())
 }
 
-/// Plot `columns` (or the default choice) of every table into `out`.
-pub fn draw(tables: &[Table], columns: &[String], title: &str, out: &Path) -> Result<()> {
+/// Plot `columns` (or the default choice) of every table into `out`, with
+/// the `units` of columns where known.
+pub fn draw(
+    tables: &[Table],
+    columns: &[String],
+    units: &[(String, String)],
+    title: &str,
+    out: &Path,
+) -> Result<()> {
     let Some(first) = tables.first() else {
         bail!("nothing to plot");
     };
@@ -71,6 +85,7 @@ pub fn draw(tables: &[Table], columns: &[String], title: &str, out: &Path) -> Re
         title: title.to_string(),
         columns,
         runs: tables.iter().map(|t| (t.source.clone(), t)).collect(),
+        units: units.to_vec(),
     };
     save(out, &figure)?;
     Ok(())

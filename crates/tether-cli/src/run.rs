@@ -1,9 +1,8 @@
 //! `tether run SYSTEM.toml`: the coupled co-simulation.
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use tether_master::{CsvRecorder, MemoryRecorder, Observer, Simulation, SystemSpec};
 
 use crate::settings::Settings;
@@ -21,10 +20,23 @@ pub struct Args {
     /// Also plot the results over time into this file (.svg or .png).
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// Columns to plot, comma separated (default: all, or the multipliers and
-    /// residuals when there are more than eight).
-    #[arg(long, value_delimiter = ',', requires = "plot")]
+    /// Columns to plot: names separated by commas or spaces (commas inside
+    /// brackets belong to the name: body.R[1,2]) (default: all, or the
+    /// multipliers and residuals when there are more than eight).
+    #[arg(long, num_args = 1.., value_name = "NAME", requires = "plot")]
     columns: Vec<String>,
+    /// Record on a coarser grid: every DT (a whole multiple of the step H),
+    /// and the last point (overrides [output] interval).
+    #[arg(long, value_name = "DT", allow_hyphen_values = true)]
+    output_interval: Option<f64>,
+    /// Record only the columns matching PATTERN: `*` matches any characters,
+    /// everything else is literal (repeatable; overrides [output] variables).
+    #[arg(long, value_name = "PATTERN")]
+    output_variables: Vec<String>,
+    /// Write the run summary as JSON to FILE (docs/run-summary.md), also when
+    /// the run fails.
+    #[arg(long, value_name = "FILE")]
+    summary_json: Option<PathBuf>,
     /// Time the phases of every macro step (predictor, Jacobian, solve,
     /// corrector, recording) and print them in the run summary. Costs five
     /// clock reads per macro step.
@@ -49,6 +61,12 @@ pub fn main(args: Args) -> Result<()> {
     let mut spec = SystemSpec::from_file(&args.system)?;
     crate::settings::apply(&args.settings.overrides()?, &mut spec)?;
     crate::isolation::apply(args.isolate, args.call_timeout, &mut spec)?;
+    if let Some(dt) = args.output_interval {
+        spec.output.interval = Some(dt);
+    }
+    if !args.output_variables.is_empty() {
+        spec.output.variables = args.output_variables.clone();
+    }
     let out = match &args.out {
         Some(p) => p.clone(),
         None => PathBuf::from(
@@ -58,35 +76,38 @@ pub fn main(args: Args) -> Result<()> {
                 .unwrap_or_else(|| "results.csv".into()),
         ),
     };
-    crate::output::not_an_input(
-        &out,
-        std::iter::once(args.system.as_path())
-            .chain(spec.instances.iter().map(|i| i.fmu.as_path())),
-    )?;
+    let inputs = || {
+        std::iter::once(args.system.as_path()).chain(spec.instances.iter().map(|i| i.fmu.as_path()))
+    };
+    crate::output::not_an_input(&out, inputs())?;
+    if let Some(summary) = &args.summary_json {
+        crate::output::not_an_input(summary, inputs())?;
+    }
+    spec.validate()?;
     if let Some(warning) = spec.grid_warning() {
         crate::say!("warning: {warning}");
     }
     let mut sim = Simulation::new(&spec)?;
     sim.time_phases(args.timing);
+    // The plot's columns are checked now, not after the run.
+    let plot_columns = crate::columns::split(&args.columns);
+    for name in &plot_columns {
+        if !sim.columns().contains(name) {
+            anyhow::bail!(
+                "--columns {name}: the run records no column '{name}'{}",
+                crate::columns::hint(name, sim.columns())
+            );
+        }
+    }
     let file = crate::output::create(&out)?;
     let mut recorder = CsvRecorder::file(file);
     let emergency = recorder.emergency();
-    let steps = sim.total_steps();
-    let bar = (std::io::stderr().is_terminal() && steps >= 20_000 && !args.quiet).then(|| {
-        let bar = indicatif::ProgressBar::new(steps);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} steps  {eta} left")
-                .expect("valid template"),
-        );
-        bar
-    });
-    let mut progress = |n: u64, _total: u64| {
-        if let Some(bar) = &bar {
-            if n.is_multiple_of(256) {
-                bar.set_position(n);
-            }
-        }
-    };
+    let mut progress = crate::progress::Progress::new(
+        spec.experiment.start,
+        spec.experiment.step,
+        sim.total_steps(),
+        !args.quiet,
+    );
     let mut memory = MemoryRecorder::default();
     let mut watch = crate::interrupt::Watch;
     let mut observers: Vec<&mut dyn Observer> = vec![&mut recorder, &mut watch];
@@ -95,14 +116,17 @@ pub fn main(args: Args) -> Result<()> {
     }
     let guard = crate::exit_guard::arm(emergency, &out);
     let watchdog = crate::watchdog::start(&spec);
-    let outcome = sim.run(&mut observers, &mut progress);
+    let outcome = sim.run(&mut observers, &mut |n, _| progress.update(n));
     drop(watchdog);
     drop(guard);
     // The last recorded row's time: after a failure the failing step's own
     // time may be one step later.
     let last = sim.last_recorded_time().unwrap_or(spec.experiment.start);
-    if let Some(bar) = &bar {
-        bar.finish_and_clear();
+    progress.finish();
+    let stats = sim.stats();
+    if let Some(path) = &args.summary_json {
+        std::fs::write(path, stats.to_json() + "\n")
+            .with_context(|| format!("cannot write the run summary {}", path.display()))?;
     }
     if !args.quiet {
         let name = spec.name.as_deref().unwrap_or("system");
@@ -114,7 +138,7 @@ pub fn main(args: Args) -> Result<()> {
             spec.experiment.start,
             last
         );
-        crate::say!("{}", sim.stats());
+        crate::say!("{stats}");
     }
     if let Some(path) = &args.plot {
         let name = spec.name.clone().unwrap_or_else(|| "system".into());
@@ -123,7 +147,7 @@ pub fn main(args: Args) -> Result<()> {
             "{name}: {}, k = {}, H = {}",
             spec.method, spec.coupling.order, spec.experiment.step
         );
-        crate::plot::draw(&[table], &args.columns, &title, path)?;
+        crate::plot::draw(&[table], &plot_columns, &sim.units(), &title, path)?;
         if !args.quiet {
             crate::say!("plot: {}", path.display());
         }
@@ -132,6 +156,9 @@ pub fn main(args: Args) -> Result<()> {
         Ok(_) => {
             if !args.quiet {
                 crate::say!("results: {}", out.display());
+                if let Some(path) = &args.summary_json {
+                    crate::say!("summary: {}", path.display());
+                }
             }
             Ok(())
         }

@@ -8,34 +8,34 @@ use tether_master::{MethodChange, OverrideError, Overrides, SystemSpec};
 #[derive(clap::Args, Debug, Clone)]
 pub struct Settings {
     /// Stop time (overrides [experiment] stop).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     stop: Option<f64>,
     /// Macro-step size H (overrides [experiment] step).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     step: Option<f64>,
     /// Coupling method (overrides [method] kind).
     #[arg(long, value_parser = ["baumgarte", "weighted", "explicit"])]
     method: Option<String>,
     /// Baumgarte velocity weight β (method baumgarte).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     beta: Option<f64>,
     /// Baumgarte acceleration weight γ (method baumgarte).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     gamma: Option<f64>,
     /// Velocity-level weight a (method weighted).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     a: Option<f64>,
     /// Acceleration-level weight b (method weighted).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     b: Option<f64>,
     /// Stabilisation constant μ_B (method explicit).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     mu: Option<f64>,
     /// Degree k of the coupling polynomials: 0, 1 or 2.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     order: Option<usize>,
     /// Finite-difference increment ε for the interface Jacobian.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     epsilon: Option<f64>,
     /// Perturbed runs on other threads: auto (only when it pays), on or off
     /// (overrides [coupling] parallel).

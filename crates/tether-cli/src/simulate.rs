@@ -14,16 +14,16 @@ pub struct Args {
     /// The `.fmu` file or unpacked FMU directory.
     fmu: PathBuf,
     /// Start time (default: DefaultExperiment startTime, else 0).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     start: Option<f64>,
     /// Stop time (default: DefaultExperiment stopTime, else 1).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     stop: Option<f64>,
     /// Communication step (default: DefaultExperiment stepSize, else (stop − start)/500).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     step: Option<f64>,
     /// Tolerance for fmi2SetupExperiment (default: DefaultExperiment tolerance, if any).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     tolerance: Option<f64>,
     /// Start value of a parameter or input, repeatable: --set m=2 --set exact=true.
     #[arg(long = "set", value_name = "NAME=VALUE")]

@@ -56,8 +56,9 @@ struct ConvergenceArgs {
     /// (closed form), or a results CSV file.
     #[arg(long, default_value = "finest")]
     reference: String,
-    /// Columns whose error is measured, comma separated.
-    #[arg(long, value_delimiter = ',', required = true)]
+    /// Columns whose error is measured: names separated by commas or spaces
+    /// (commas inside brackets belong to the name: body.R[1,2]).
+    #[arg(long, num_args = 1.., value_name = "NAME", required = true)]
     columns: Vec<String>,
 }
 
@@ -94,7 +95,7 @@ pub fn main(args: Args) -> Result<()> {
             let kind = Kind::Convergence(Convergence {
                 steps: c.steps,
                 reference,
-                columns: c.columns,
+                columns: crate::columns::split(&c.columns),
             });
             (c.common, kind, "convergence")
         }

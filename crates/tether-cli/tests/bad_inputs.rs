@@ -84,7 +84,7 @@ fn run_err(system: &Path) -> (MasterError, MemoryRecorder) {
 
 fn fmi(err: &MasterError) -> &Error {
     match err {
-        MasterError::Fmi(e) => e,
+        MasterError::Fmi(e) | MasterError::InstanceFmu { error: e, .. } => e,
         other => panic!("expected an FMI error, got {other:?}"),
     }
 }

@@ -141,16 +141,43 @@ fn mismatched_columns_are_one_clear_error_unless_selected() {
     );
 }
 
+/// Files on different time grids: the second is interpolated linearly onto
+/// the first one's times, and the output says so; a first file that reaches
+/// beyond the second (a run that stopped early) cannot be compared.
 #[test]
-fn mismatched_times_and_row_counts_are_clear_errors() {
+fn different_time_grids_are_interpolated_onto_the_first() {
     let dir = tempfile::tempdir().unwrap();
+    // Linear in t: the interpolation is exact (to rounding).
+    let linear = |step: f64, n: usize| -> Vec<[f64; 5]> {
+        (0..=n)
+            .map(|i| {
+                let t = i as f64 * step;
+                [t, 2.0 * t + 1.0, 0.5, -3.0 * t, 1e-9 * t]
+            })
+            .collect()
+    };
+    let a = write(dir.path(), "a.csv", HEADER, &linear(0.1, 10), "");
+    let fine = write(dir.path(), "fine.csv", HEADER, &linear(0.03125, 32), "");
+    let out = compare(&a, &fine, &["--rtol", "1e-12"]);
+    let text = stdout(&out);
+    assert!(out.status.success(), "{text}{}", stderr(&out));
+    assert!(
+        text.starts_with(&format!(
+            "note: the time grids differ ({a} has 11 rows, {b} has 33): {b} is interpolated \
+             linearly onto the times of {a}\n",
+            a = a.display(),
+            b = fine.display()
+        )),
+        "{text}"
+    );
+    // Times a grid spacing's billionth apart are the same point: no note.
+    let mut close = rows();
+    close[7][0] += 1e-12;
     let a = write(dir.path(), "a.csv", HEADER, &rows(), "");
-    let mut late = rows();
-    late[4][0] += 1e-6;
-    let b = write(dir.path(), "b.csv", HEADER, &late, "");
-    let err = one_error_line(&compare(&a, &b, &[]));
-    assert!(err.contains("times differ at row 5"), "{err}");
-    // Stopped early: the row counts differ and the reason is shown.
+    let c = write(dir.path(), "c.csv", HEADER, &close, "");
+    let out = compare(&a, &c, &[]);
+    assert!(out.status.success() && !stdout(&out).contains("note:"));
+    // Stopped early: beyond its times, with the reason.
     let short = write(
         dir.path(),
         "short.csv",
@@ -159,15 +186,15 @@ fn mismatched_times_and_row_counts_are_clear_errors() {
         "# incomplete: coupling diverged at t = 0.5\n",
     );
     let err = one_error_line(&compare(&a, &short, &[]));
-    assert!(
-        err.contains("different numbers of rows") && err.contains("coupling diverged"),
-        "{err}"
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "error: the time grids differ and {a} (t = 0 … 1) is not within the times of {s} \
+             (t = 0 … 0.5): cannot interpolate ({s} is incomplete: coupling diverged at t = 0.5)",
+            a = a.display(),
+            s = short.display()
+        )
     );
-    // Times a grid spacing's billionth apart are the same point.
-    let mut close = rows();
-    close[7][0] += 1e-12;
-    let c = write(dir.path(), "c.csv", HEADER, &close, "");
-    assert!(compare(&a, &c, &[]).status.success());
 }
 
 #[test]

@@ -202,6 +202,22 @@ impl Host {
                     out.f64s(&self.reals);
                 })
             }
+            op::GET_INTEGER => {
+                input.u32s(&mut self.vrs)?;
+                self.ints.clear();
+                self.ints.resize(self.vrs.len(), 0);
+                i.get_integer(&self.vrs, &mut self.ints).map(|()| {
+                    out.i32s(&self.ints);
+                })
+            }
+            op::GET_BOOLEAN => {
+                input.u32s(&mut self.vrs)?;
+                self.bools.clear();
+                self.bools.resize(self.vrs.len(), false);
+                i.get_boolean(&self.vrs, &mut self.bools).map(|()| {
+                    out.bools(&self.bools);
+                })
+            }
             op::SET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
                 input.i32s(&mut self.ints)?;

@@ -207,16 +207,18 @@ pub enum Error {
     },
 
     /// `fmi2Instantiate` returned NULL.
-    #[error("fmi2Instantiate failed for instance '{instance}' of model '{model}'")]
+    #[error("fmi2Instantiate failed for instance '{instance}' of model '{model}'{messages}")]
     InstantiationFailed {
         /// The model name.
         model: String,
         /// The requested instance name.
         instance: String,
+        /// What the FMU logged during the call.
+        messages: FmuMessages,
     },
 
     /// A function returned `fmi2Discard`.
-    #[error("{function} returned fmi2Discard on instance '{instance}' at t={time}")]
+    #[error("{function} returned fmi2Discard on instance '{instance}' at t={time}{messages}")]
     Discard {
         /// The FMI function.
         function: &'static str,
@@ -224,10 +226,12 @@ pub enum Error {
         instance: String,
         /// The instance's communication time when the call was made.
         time: f64,
+        /// The FMU's last log messages.
+        messages: FmuMessages,
     },
 
     /// A function returned `fmi2Error`.
-    #[error("{function} returned fmi2Error on instance '{instance}' at t={time}")]
+    #[error("{function} returned fmi2Error on instance '{instance}' at t={time}{messages}")]
     Failed {
         /// The FMI function.
         function: &'static str,
@@ -235,10 +239,12 @@ pub enum Error {
         instance: String,
         /// The instance's communication time when the call was made.
         time: f64,
+        /// The FMU's last log messages.
+        messages: FmuMessages,
     },
 
     /// A function returned `fmi2Fatal`; the FMU is unusable from now on.
-    #[error("{function} returned fmi2Fatal on instance '{instance}' at t={time}")]
+    #[error("{function} returned fmi2Fatal on instance '{instance}' at t={time}{messages}")]
     Fatal {
         /// The FMI function.
         function: &'static str,
@@ -246,6 +252,8 @@ pub enum Error {
         instance: String,
         /// The instance's communication time when the call was made.
         time: f64,
+        /// The FMU's last log messages.
+        messages: FmuMessages,
     },
 
     /// A function returned `fmi2Pending` (asynchronous stepping is not supported).
@@ -275,7 +283,7 @@ pub enum Error {
     },
 
     /// A call was refused because an earlier call of this FMU returned `fmi2Fatal`.
-    #[error("{function} refused on instance '{instance}' at t={time}: the FMU returned fmi2Fatal earlier")]
+    #[error("{function} refused on instance '{instance}' at t={time}: the FMU returned fmi2Fatal earlier{messages}")]
     FmuDead {
         /// The FMI function that was not called.
         function: &'static str,
@@ -283,6 +291,8 @@ pub enum Error {
         instance: String,
         /// The instance's communication time.
         time: f64,
+        /// The instance's last log messages.
+        messages: FmuMessages,
     },
 
     /// An FMU state was used with an instance it does not belong to.
@@ -368,6 +378,22 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+}
+
+/// The last messages an FMU instance logged (at most five, each cut to 300
+/// characters), reported with a failed call: `; the FMU's last messages:
+/// [category] text | …`, or nothing when it logged none. Errors are always
+/// kept; other messages when they are shown (`--fmu-log`, `-v`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct FmuMessages(pub Vec<String>);
+
+impl fmt::Display for FmuMessages {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_empty() {
+            return Ok(());
+        }
+        write!(f, "; the FMU's last messages: {}", self.0.join(" | "))
+    }
 }
 
 impl Error {

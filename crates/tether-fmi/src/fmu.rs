@@ -1,7 +1,7 @@
 //! [`Fmu`]: an opened FMU (unpacked files, parsed model description, loaded library).
 
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, PoisonError, RwLock};
 
 use crate::archive::{self, ExtractLimits, FmuDir};
 use crate::error::{Error, Result};
@@ -34,6 +34,29 @@ impl InstanceOptions {
         self.logging_on = logging_on;
         self
     }
+}
+
+/// FMU debug logging for the whole process (`tether --fmu-log`): `None` off,
+/// `Some(categories)` on (empty: every category).
+static DEBUG_LOGGING: RwLock<Option<Vec<String>>> = RwLock::new(None);
+
+/// Switches FMU debug logging on (`Some`) or off (`None`) for every instance
+/// created from now on, whatever its [`InstanceOptions`]: `loggingOn` is true
+/// in `fmi2Instantiate`, and with categories `fmi2SetDebugLogging(true, …)`
+/// selects them (those the model description does not declare are skipped
+/// with a warning, if it declares any). The messages go to the `log` facade
+/// with the target `fmu::<instance>`.
+pub fn set_debug_logging(categories: Option<Vec<String>>) {
+    *DEBUG_LOGGING
+        .write()
+        .unwrap_or_else(PoisonError::into_inner) = categories;
+}
+
+fn debug_logging() -> Option<Vec<String>> {
+    DEBUG_LOGGING
+        .read()
+        .unwrap_or_else(PoisonError::into_inner)
+        .clone()
 }
 
 /// An opened FMI 2.0 co-simulation FMU.
@@ -164,6 +187,7 @@ impl Fmu {
         } else {
             None
         };
+        let debug = debug_logging();
         let mut raw = RawComponent::fmi2Instantiate(
             self.shared.library()?,
             Arc::clone(&self.shared.dir),
@@ -173,10 +197,31 @@ impl Fmu {
                 guid: &md.guid,
                 resource_location: &self.resource_location(),
                 visible: options.visible,
-                logging_on: options.logging_on,
+                logging_on: options.logging_on || debug.is_some(),
             },
         )?;
         raw.once = once;
-        Ok(Instance::new(raw, Arc::clone(&self.shared)))
+        let mut instance = Instance::new(raw, Arc::clone(&self.shared));
+        if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
+            let declared = &md.log_categories;
+            let mut categories = Vec::new();
+            for category in &wanted {
+                if declared.is_empty() || declared.iter().any(|c| c.name == *category) {
+                    categories.push(category.as_str());
+                } else {
+                    let names: Vec<&str> = declared.iter().map(|c| c.name.as_str()).collect();
+                    log::warn!(
+                        "model '{}' declares no log category '{category}' (it declares: {}); \
+                         not asked of instance '{instance_name}'",
+                        md.model_name,
+                        names.join(", ")
+                    );
+                }
+            }
+            if !categories.is_empty() {
+                instance.set_debug_logging(true, &categories)?;
+            }
+        }
+        Ok(instance)
     }
 }

@@ -63,8 +63,8 @@ mod xml;
 
 pub use archive::{remove_extractions_now, sweep_leftovers, ExtractLimits};
 pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
-pub use error::{Error, Result};
-pub use fmu::{Fmu, InstanceOptions, OpenOptions};
+pub use error::{Error, FmuMessages, Result};
+pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};
 pub use library::PLATFORM;
 pub use model_description::{

@@ -40,6 +40,26 @@ pub(crate) fn binary_path(root: &Path, model_identifier: &str) -> PathBuf {
         .join(format!("{model_identifier}.so"))
 }
 
+/// The loader's own words (libloading's error says only "dlopen failed"; the
+/// reason is its source), with a hint for FMUs that need the Python runtime.
+fn load_message(e: &libloading::Error) -> String {
+    let mut message = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(cause) = source {
+        message = format!("{message}: {cause}");
+        source = cause.source();
+    }
+    if message.contains("undefined symbol: _Py") || message.contains("undefined symbol: Py") {
+        message.push_str(
+            " (the FMU needs the Python runtime, as FMUs exported by pythonfmu do: preload \
+             libpython, e.g. LD_PRELOAD=$(python3 -c \"import sysconfig, os; \
+             print(os.path.join(sysconfig.get_config_var('LIBDIR'), \
+             sysconfig.get_config_var('LDLIBRARY')))\"))",
+        );
+    }
+    one_line(&message)
+}
+
 impl Library {
     /// Loads `path` (binding all symbols now) and resolves every FMI 2.0 function.
     pub(crate) fn load(path: &Path) -> Result<Library> {
@@ -51,7 +71,7 @@ impl Library {
             unsafe { UnixLibrary::open(Some(path), RTLD_NOW | RTLD_LOCAL) }.map_err(|e| {
                 Error::LibraryLoad {
                     path: path.to_owned(),
-                    message: one_line(&e.to_string()),
+                    message: load_message(&e),
                 }
             })?;
         let handle = libloading::Library::from(handle);

@@ -5,7 +5,9 @@
 //! component environment passed to `fmi2Instantiate` is a [`LogEnv`], whose first field
 //! is the address of [`sink`]: the C side needs no link-time reference to Rust.
 
+use std::collections::VecDeque;
 use std::ffi::{c_char, c_int, c_void, CStr};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -37,6 +39,13 @@ pub const RATE_LIMIT: u32 = 20;
 /// The rate limit's window.
 pub const WINDOW: Duration = Duration::from_secs(1);
 
+/// Messages kept per instance for error reports: the last ones, each cut to
+/// [`RECENT_CHARS`] characters.
+pub const RECENT: usize = 5;
+
+/// Longest message kept for an error report, in characters.
+pub const RECENT_CHARS: usize = 300;
+
 /// The component environment of one instance: the functions the C shim calls, then
 /// the log target and the rate limit for this instance.
 #[repr(C)]
@@ -46,6 +55,12 @@ pub(crate) struct LogEnv {
     target: String,
     /// Per category (as the FMU spells it): the current window.
     windows: Mutex<Vec<(Vec<u8>, Window)>>,
+    /// Whether the message being formatted is to be shown (set by `wanted`
+    /// for `sink`); otherwise it is only kept in `recent`.
+    show: AtomicBool,
+    /// The last messages formatted (every error, every message shown), for
+    /// the report of a failed call.
+    recent: Mutex<VecDeque<String>>,
 }
 
 /// One category's rate-limit window.
@@ -66,7 +81,32 @@ impl LogEnv {
             wanted,
             target: format!("fmu::{instance}"),
             windows: Mutex::new(Vec::new()),
+            show: AtomicBool::new(false),
+            recent: Mutex::new(VecDeque::with_capacity(RECENT)),
         })
+    }
+
+    /// The last messages of the instance, oldest first (at most [`RECENT`]).
+    pub(crate) fn recent(&self) -> Vec<String> {
+        let recent = self.recent.lock().unwrap_or_else(PoisonError::into_inner);
+        recent.iter().cloned().collect()
+    }
+
+    fn keep(&self, category: &str, message: &str) {
+        let mut text = if category.is_empty() {
+            message.trim().to_string()
+        } else {
+            format!("[{category}] {}", message.trim())
+        };
+        if let Some((cut, _)) = text.char_indices().nth(RECENT_CHARS) {
+            text.truncate(cut);
+            text.push('…');
+        }
+        let mut recent = self.recent.lock().unwrap_or_else(PoisonError::into_inner);
+        if recent.len() == RECENT {
+            recent.pop_front();
+        }
+        recent.push_back(text.replace(['\n', '\r'], " "));
     }
 
     /// Whether a message of `level` in `category` is shown: counts it against the
@@ -176,7 +216,9 @@ fn text(ptr: *const c_char) -> String {
     c.to_string_lossy().into_owned()
 }
 
-/// Asked by `c/logger.c` before it formats a message: 1 if it is shown.
+/// Asked by `c/logger.c` before it formats a message: 1 if it is shown or
+/// kept for error reports (every error is: formatting errors costs little,
+/// they are rare), 0 if it is dropped unformatted.
 extern "C" fn wanted(env: *const LogEnv, status: c_int, category: *const c_char) -> c_int {
     if env.is_null() {
         return 0;
@@ -185,16 +227,15 @@ extern "C" fn wanted(env: *const LogEnv, status: c_int, category: *const c_char)
     // after fmi2FreeInstance.
     let env = unsafe { &*env };
     let level = level_for(Status::from(status));
-    if !log::log_enabled!(target: &env.target, level) {
-        return 0;
-    }
     let category: &[u8] = if category.is_null() {
         b""
     } else {
         // SAFETY: a non-NULL category is a NUL-terminated string valid during the call.
         unsafe { CStr::from_ptr(category) }.to_bytes()
     };
-    c_int::from(env.admit(level, category))
+    let show = log::log_enabled!(target: &env.target, level) && env.admit(level, category);
+    env.show.store(show, Ordering::Relaxed);
+    c_int::from(show || level == log::Level::Error)
 }
 
 /// Receives a formatted message from `c/logger.c`.
@@ -212,12 +253,12 @@ extern "C" fn sink(
     // to a `LogEnv` boxed in the owning component and freed only after fmi2FreeInstance.
     let env = unsafe { &*env };
     let level = level_for(Status::from(status));
-    if !log::log_enabled!(target: &env.target, level) {
-        return;
-    }
     let category = text(category);
     let message = text(message);
-    log::log!(target: &env.target, level, "[{category}] {message}");
+    env.keep(&category, &message);
+    if env.show.load(Ordering::Relaxed) && log::log_enabled!(target: &env.target, level) {
+        log::log!(target: &env.target, level, "[{category}] {message}");
+    }
 }
 
 #[cfg(test)]

@@ -108,6 +108,14 @@ impl Backend {
         either!(self, i => i.get_real(vrs, out))
     }
 
+    pub(crate) fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+        either!(self, i => i.get_integer(vrs, out))
+    }
+
+    pub(crate) fn get_boolean(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
+        either!(self, i => i.get_boolean(vrs, out))
+    }
+
     #[inline]
     pub(crate) fn set_real_input_derivatives(
         &mut self,

@@ -15,6 +15,9 @@ pub enum MasterError {
         /// What is wrong, on one line.
         reason: String,
     },
+    /// `[output]` (or `--output-variables`) selects something that is not there.
+    #[error("{0}")]
+    InvalidOutput(String),
     /// A number outside its allowed range (method parameter, step, stop time …).
     #[error("invalid {name} = {value}: expected {expected}")]
     InvalidParameter {
@@ -206,6 +209,24 @@ pub enum MasterError {
     /// An FMI call or FMU load failed.
     #[error(transparent)]
     Fmi(#[from] tether_fmi::Error),
+    /// An instance's FMU cannot be opened (its path, as resolved against the
+    /// system file's folder, is in the error).
+    #[error("instance '{instance}': {error}")]
+    InstanceFmu {
+        /// The instance.
+        instance: String,
+        /// Why the FMU cannot be opened.
+        error: tether_fmi::Error,
+    },
+    /// The terms of a `drives` expression cancel: the multiplier acts on no
+    /// input, and the interface Jacobian would be singular.
+    #[error("{owner}: drives '{drives}' cancel out: the multiplier acts on no input (every input's coefficients sum to 0), so the interface Jacobian would be singular")]
+    DrivesCancel {
+        /// `constraint 'link'`.
+        owner: String,
+        /// The expression as written.
+        drives: String,
+    },
     /// Writing results failed. (The I/O error is in the message, not also a
     /// `source`, so that a printed chain names it once.)
     #[error("recording results: {0}")]

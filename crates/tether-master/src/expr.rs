@@ -157,8 +157,18 @@ impl<'a> Parser<'a> {
             .rest()
             .starts_with(|c: char| c.is_ascii_digit() || c == '.')
         {
+            let at = self.pos;
             coefficient *= self.number()?;
             if !self.eat('*') {
+                self.skip_ws();
+                if self.rest().is_empty() || self.rest().starts_with(['+', '-']) {
+                    let constant = self.text[at..self.pos].trim().to_string();
+                    self.pos = at;
+                    return self.fail(format!(
+                        "a constant term ({constant}) is not allowed: an expression is a sum of \
+                         terms coefficient*instance.variable (an offset belongs in an FMU output)"
+                    ));
+                }
                 return self.fail("expected '*' after a coefficient");
             }
             self.skip_ws();

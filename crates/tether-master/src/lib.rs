@@ -51,8 +51,8 @@ pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::Simulation;
 pub use spec::{
     CheckRollback, ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment,
-    InitialMultiplier, InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
+    InitialMultiplier, InstanceSpec, JointInitial, JointSpec, OutputSpec, StartValue, SystemSpec,
 };
 pub use start::{apply_start_value, Settable};
-pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination};
+pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination, SUMMARY_SCHEMA};
 pub use threads::{Parallel, ParallelInfo};

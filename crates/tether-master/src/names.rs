@@ -54,6 +54,23 @@ pub(crate) fn find_instance<'a>(
     })
 }
 
+/// `; did you mean 'a', 'b'?` with the close `names`, or `; columns are: …`
+/// (the first twelve of them), for a name or pattern that matched nothing.
+pub(crate) fn suggest<'a>(name: &str, names: impl Iterator<Item = &'a str> + Clone) -> String {
+    let close: Vec<&str> = names.clone().filter(|n| similar(n, name)).take(6).collect();
+    if !close.is_empty() {
+        return format!("; did you mean '{}'?", close.join("', '"));
+    }
+    let all: Vec<&str> = names.collect();
+    let shown: Vec<&str> = all.iter().take(12).copied().collect();
+    let more = if all.len() > shown.len() {
+        format!(" … ({} in all)", all.len())
+    } else {
+        String::new()
+    };
+    format!("; columns are: {}{more}", shown.join(", "))
+}
+
 /// Names within edit distance 2 or sharing a prefix of 3 characters.
 fn similar(a: &str, b: &str) -> bool {
     let prefix = a.chars().zip(b.chars()).take_while(|(x, y)| x == y).count();

@@ -417,6 +417,9 @@ fn drive_inputs(
     m: usize,
     slaves: &mut [Slave],
 ) -> Result<(), MasterError> {
+    // Per driven input, the sum of its coefficients: all zero means the
+    // terms cancel.
+    let mut sums: Vec<(usize, u32, f64)> = Vec::new();
     for term in &expr.terms {
         let s = find_slave(owner, &term.instance, slaves)?;
         let var = slaves[s]
@@ -435,6 +438,19 @@ fn drive_inputs(
             });
         }
         slaves[s].add_input(var.value_reference, m, term.coefficient);
+        match sums
+            .iter_mut()
+            .find(|(i, vr, _)| *i == s && *vr == var.value_reference)
+        {
+            Some(sum) => sum.2 += term.coefficient,
+            None => sums.push((s, var.value_reference, term.coefficient)),
+        }
+    }
+    if sums.iter().all(|&(_, _, sum)| sum == 0.0) {
+        return Err(MasterError::DrivesCancel {
+            owner: owner.to_string(),
+            drives: expr.to_string(),
+        });
     }
     Ok(())
 }

@@ -26,9 +26,24 @@ pub struct Simulation {
     /// Current macro point index N.
     n: u64,
     steps: u64,
-    columns: Vec<String>,
-    /// The recorded values of the current point, in column order.
+    /// Every column, recorded or not.
+    all_columns: Vec<String>,
+    /// The values of every column at the current point.
     row: Vec<f64>,
+    /// The columns the observers receive (`[output] variables`) …
+    columns: Vec<String>,
+    /// … their indices in `row`, when not all of them …
+    keep: Option<Vec<usize>>,
+    /// … and their values at the current point.
+    selected: Vec<f64>,
+    /// Macro steps between recorded points (`[output] interval`).
+    every: u64,
+    /// The last accepted point when it was not recorded (off the output
+    /// grid): its time and values, written at the end of the run.
+    held: Option<(u64, f64)>,
+    held_values: Vec<f64>,
+    /// The error that stopped the run, if any.
+    failure: Option<String>,
     /// Per column, the magnitude beyond which the run has diverged.
     limits: Vec<f64>,
     /// Per residual column, the largest |g| over the points so far.
@@ -90,6 +105,7 @@ impl Simulation {
         if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
             system.check_rollback(exp.start, exp.step)?;
         }
+        let every = spec.output.every(exp.step)?;
         let mut columns = Vec::new();
         for slave in &system.slaves {
             columns.extend(slave.recorded_names().iter().cloned());
@@ -98,6 +114,18 @@ impl Simulation {
         columns.extend(unknowns.iter().map(|u| u.name.clone()));
         let first_residual = columns.len();
         columns.extend(unknowns.iter().filter_map(|u| u.residual.clone()));
+        let keep = spec.output.select(&columns)?;
+        let keep = (keep.len() < columns.len()).then_some(keep);
+        let selected: Vec<String> = match &keep {
+            Some(keep) => keep.iter().map(|&i| columns[i].clone()).collect(),
+            None => columns.clone(),
+        };
+        stats.method = method;
+        stats.order = settings.order;
+        stats.start = exp.start;
+        stats.step = exp.step;
+        stats.stop = stop;
+        stats.output_interval = every as f64 * exp.step;
         let mut sim = Simulation {
             experiment: exp,
             system,
@@ -109,7 +137,14 @@ impl Simulation {
             max_residuals: vec![0.0; columns.len() - first_residual],
             first_residual,
             last_recorded: None,
-            columns,
+            selected: vec![0.0; selected.len()],
+            held_values: vec![0.0; selected.len()],
+            columns: selected,
+            all_columns: columns,
+            keep,
+            every,
+            held: None,
+            failure: None,
             stats,
             residual_warning: settings.residual_warning,
             time_phases: false,
@@ -129,8 +164,10 @@ impl Simulation {
         Ok(sim)
     }
 
-    /// Column names after `time`: every Real output as `<instance>.<variable>`,
-    /// then `<constraint>.lambda`, then `<constraint>.g`.
+    /// Column names after `time`, as recorded: every output (Real, then
+    /// Integer, then Boolean) as `<instance>.<variable>`, then
+    /// `<constraint>.lambda`, then `<constraint>.g`; only those selected by
+    /// `[output] variables` when it is given.
     pub fn columns(&self) -> &[String] {
         &self.columns
     }
@@ -139,7 +176,34 @@ impl Simulation {
     /// the order of [`Simulation::columns`]: what observers receive as
     /// [`Sample::values`].
     pub fn values(&self) -> &[f64] {
-        &self.row
+        match self.keep {
+            Some(_) => &self.selected,
+            None => &self.row,
+        }
+    }
+
+    /// The units the FMUs declare for the recorded outputs among
+    /// [`columns`](Self::columns): `(column, unit)` pairs.
+    pub fn units(&self) -> Vec<(String, String)> {
+        let mut units = Vec::new();
+        for slave in &self.system.slaves {
+            let md = slave.fmu.model_description();
+            for column in slave.recorded_names() {
+                if !self.columns.contains(column) {
+                    continue;
+                }
+                let variable = &column[slave.name.len() + 1..];
+                let unit = md
+                    .variable(variable)
+                    .ok()
+                    .and_then(|v| v.real())
+                    .and_then(|r| r.attributes.unit.clone());
+                if let Some(unit) = unit {
+                    units.push((column.clone(), unit));
+                }
+            }
+        }
+        units
     }
 
     /// The current macro time T_N = T_0 + N·H.
@@ -180,11 +244,23 @@ impl Simulation {
         self.step_end = None;
     }
 
-    /// Counters so far.
+    /// Counters so far, and how the run ended (or that it is still running).
     pub fn stats(&self) -> RunStats {
         let mut stats = self.stats.clone();
         stats.times.measured = self.time_phases;
-        stats.residuals = self.columns[self.first_residual..]
+        stats.end_time = self.last_recorded;
+        stats.completed =
+            self.failure.is_none() && (self.n >= self.steps || stats.termination.is_some());
+        stats.stop_reason = match (&self.failure, &stats.termination) {
+            (Some(e), _) => e.clone(),
+            (None, Some(end)) => format!(
+                "instance '{}' requested the end of the simulation at t = {}",
+                end.instance, end.requested_at
+            ),
+            (None, None) if stats.completed => "completed".into(),
+            (None, None) => "running".into(),
+        };
+        stats.residuals = self.all_columns[self.first_residual..]
             .iter()
             .cloned()
             .zip(self.max_residuals.iter().copied())
@@ -209,16 +285,27 @@ impl Simulation {
             t_next: self.time_at(self.n + 1),
         };
         let mut lap = Lap::start(self.time_phases);
-        self.method
-            .step(&mut self.system, at, &mut self.stats, &mut lap)?;
+        let stepped = self
+            .method
+            .step(&mut self.system, at, &mut self.stats, &mut lap);
+        if let Err(e) = stepped {
+            if !matches!(e, MasterError::TerminationRequested { .. }) {
+                self.failure = Some(e.to_string());
+            }
+            return Err(e);
+        }
         self.n += 1;
         self.step_end = lap.last();
         self.stats.macro_steps += 1;
         self.fill_row();
-        self.check_divergence()
+        self.check_divergence().inspect_err(|e| {
+            self.failure = Some(e.to_string());
+        })
     }
 
-    /// Run to the stop time, feeding every accepted point to the observers.
+    /// Run to the stop time, feeding the accepted points on the output grid
+    /// (`[output] interval`, by default every one) and the last accepted
+    /// point to the observers.
     /// An instance's request to end the simulation (fmi2Discard with
     /// `fmi2Terminated`) ends the run normally at the last accepted point,
     /// noted in [`RunStats::termination`]. On a normal end every instance is
@@ -254,14 +341,27 @@ impl Simulation {
                     }
                     Err(e) => return Err(e),
                 }
-                self.notify(observers)?;
+                if self.n.is_multiple_of(self.every) || self.n == self.steps {
+                    self.notify(observers)?;
+                } else {
+                    self.hold();
+                }
                 progress(self.n, self.steps);
             }
             // A normal end: fmi2Terminate before the instances are freed.
             self.system.terminate()?;
             self.method.terminate()
         })();
+        // The last accepted point is recorded even when it is off the output
+        // grid (unless recording itself failed).
+        let outcome = match outcome {
+            Err(e @ MasterError::Recording(_)) => Err(e),
+            outcome => self.release_held(observers).and(outcome),
+        };
         let message = outcome.as_ref().err().map(|e: &MasterError| e.to_string());
+        if self.failure.is_none() {
+            self.failure = message.clone();
+        }
         // Every observer is finished, even after another one failed; the
         // run's own error comes first, then the first observer's.
         let mut finished = Ok(());
@@ -290,15 +390,46 @@ impl Simulation {
         let sample = Sample {
             step: self.n,
             time: self.time(),
-            values: &self.row,
+            values: match self.keep {
+                Some(_) => &self.selected,
+                None => &self.row,
+            },
         };
         for o in observers.iter_mut() {
             o.sample(sample)?;
         }
         self.last_recorded = Some(sample.time);
+        self.held = None;
         if let Some(clock) = clock {
             self.stats.times.recording += clock.elapsed();
         }
+        Ok(())
+    }
+
+    /// Keep the current point, not on the output grid, for the end.
+    fn hold(&mut self) {
+        let values = match self.keep {
+            Some(_) => &self.selected,
+            None => &self.row,
+        };
+        self.held_values.copy_from_slice(values);
+        self.held = Some((self.n, self.time()));
+    }
+
+    /// Record the held point, if it is the last accepted one not yet recorded.
+    fn release_held(&mut self, observers: &mut [&mut dyn Observer]) -> Result<(), MasterError> {
+        let Some((step, time)) = self.held.take() else {
+            return Ok(());
+        };
+        let sample = Sample {
+            step,
+            time,
+            values: &self.held_values,
+        };
+        for o in observers.iter_mut() {
+            o.sample(sample)?;
+        }
+        self.last_recorded = Some(time);
         Ok(())
     }
 
@@ -319,6 +450,11 @@ impl Simulation {
             *max = max.max(residual.abs());
             i += 1;
         }
+        if let Some(keep) = &self.keep {
+            for (value, &k) in self.selected.iter_mut().zip(keep) {
+                *value = self.row[k];
+            }
+        }
     }
 
     /// An error naming the first recorded value that is not finite or beyond
@@ -329,7 +465,7 @@ impl Simulation {
             None => Ok(()),
             Some(i) => Err(MasterError::Diverged {
                 time: self.time(),
-                quantity: self.columns[i].clone(),
+                quantity: self.all_columns[i].clone(),
                 value: self.row[i],
                 limit: self.limits[i],
             }),

@@ -87,6 +87,12 @@ pub struct Slave {
     derivative_reads: Vec<(u32, i32, usize)>,
     pub(crate) recorded_names: Vec<String>,
     recorded_vrs: Vec<u32>,
+    /// Integer and Enumeration outputs, recorded after the Real ones.
+    recorded_ints: Vec<u32>,
+    int_buf: Vec<i32>,
+    /// Boolean outputs, recorded after the Integer ones (as 0 and 1).
+    recorded_bools: Vec<u32>,
+    bool_buf: Vec<bool>,
     /// Recorded outputs after the latest read.
     pub(crate) recorded_values: Vec<f64>,
     pub(crate) counters: InstanceCounters,
@@ -115,9 +121,13 @@ impl Slave {
             None => {
                 // An isolated instance's library is loaded by its host only.
                 let fmu = match spec.isolation {
-                    Isolation::Process => Fmu::open_unloaded(&spec.fmu, &Default::default())?,
-                    Isolation::None => Fmu::open(&spec.fmu)?,
-                };
+                    Isolation::Process => Fmu::open_unloaded(&spec.fmu, &Default::default()),
+                    Isolation::None => Fmu::open(&spec.fmu),
+                }
+                .map_err(|error| MasterError::InstanceFmu {
+                    instance: spec.name.clone(),
+                    error,
+                })?;
                 opened.push((spec.fmu.clone(), fmu.clone()));
                 fmu
             }
@@ -181,10 +191,24 @@ impl Slave {
         let model_name = md.model_name.clone();
         let mut recorded_names = Vec::new();
         let mut recorded_vrs = Vec::new();
-        for v in &md.model_variables {
-            if v.causality == Causality::Output && v.base_type() == BaseType::Real {
-                recorded_names.push(format!("{}.{}", spec.name, v.name));
-                recorded_vrs.push(v.value_reference);
+        let mut recorded_ints = Vec::new();
+        let mut recorded_bools = Vec::new();
+        // Columns: the Real outputs, then the Integer (and Enumeration)
+        // ones, then the Boolean ones, each in the order of the model description.
+        for kind in [BaseType::Real, BaseType::Integer, BaseType::Boolean] {
+            for v in &md.model_variables {
+                let base = match v.base_type() {
+                    BaseType::Enumeration => BaseType::Integer,
+                    other => other,
+                };
+                if v.causality == Causality::Output && base == kind {
+                    recorded_names.push(format!("{}.{}", spec.name, v.name));
+                    match kind {
+                        BaseType::Real => recorded_vrs.push(v.value_reference),
+                        BaseType::Integer => recorded_ints.push(v.value_reference),
+                        _ => recorded_bools.push(v.value_reference),
+                    }
+                }
             }
         }
         let timeout = spec.call_timeout.map(std::time::Duration::from_secs_f64);
@@ -208,9 +232,13 @@ impl Slave {
             value_slots: Vec::new(),
             value_buf: Vec::new(),
             derivative_reads: Vec::new(),
-            recorded_values: vec![0.0; recorded_vrs.len()],
+            recorded_values: vec![0.0; recorded_names.len()],
             recorded_names,
             recorded_vrs,
+            int_buf: vec![0; recorded_ints.len()],
+            recorded_ints,
+            bool_buf: vec![false; recorded_bools.len()],
+            recorded_bools,
             counters: InstanceCounters {
                 name: name.to_string(),
                 ..Default::default()
@@ -546,15 +574,36 @@ impl Slave {
         }
     }
 
-    /// Read every Real output into `recorded_values`.
-    /// Every value must be finite, as in [`read_coupled`](Self::read_coupled).
+    /// Read every Real, Integer and Boolean output into `recorded_values`.
+    /// Every Real value must be finite, as in [`read_coupled`](Self::read_coupled).
     pub(crate) fn read_recorded(&mut self, run: Run) -> Result<(), MasterError> {
-        if !self.recorded_vrs.is_empty() {
+        let reals = self.recorded_vrs.len();
+        if reals > 0 {
             self.backend
-                .get_real(&self.recorded_vrs, &mut self.recorded_values)?;
+                .get_real(&self.recorded_vrs, &mut self.recorded_values[..reals])?;
             self.counters.get_reals += 1;
         }
-        match self.recorded_values.iter().position(|v| !v.is_finite()) {
+        if !self.recorded_ints.is_empty() {
+            self.backend
+                .get_integer(&self.recorded_ints, &mut self.int_buf)?;
+            self.counters.get_integers += 1;
+            for (slot, &v) in self.recorded_values[reals..].iter_mut().zip(&self.int_buf) {
+                *slot = f64::from(v);
+            }
+        }
+        if !self.recorded_bools.is_empty() {
+            self.backend
+                .get_boolean(&self.recorded_bools, &mut self.bool_buf)?;
+            self.counters.get_booleans += 1;
+            let first = reals + self.recorded_ints.len();
+            for (slot, &v) in self.recorded_values[first..].iter_mut().zip(&self.bool_buf) {
+                *slot = if v { 1.0 } else { 0.0 };
+            }
+        }
+        match self.recorded_values[..reals]
+            .iter()
+            .position(|v| !v.is_finite())
+        {
             None => Ok(()),
             Some(i) => {
                 let column = &self.recorded_names[i];

@@ -39,6 +39,103 @@ pub struct SystemSpec {
     /// (the paper's γ̃, r̃: an FMU that applies a joint's force law itself).
     #[serde(rename = "coupling_variable", default)]
     pub coupling_variables: Vec<CouplingVariableSpec>,
+    /// What is recorded: the output grid and the columns (`[output]`).
+    #[serde(default)]
+    pub output: OutputSpec,
+    /// The file this description was read from (set by
+    /// [`SystemSpec::from_file`]), named in its error messages.
+    #[serde(skip)]
+    pub source: Option<PathBuf>,
+}
+
+/// `x` without the last digits of rounding (`0.8999999999999999` is `0.9`),
+/// for messages: twelve significant digits.
+pub(crate) fn tidy(x: f64) -> f64 {
+    format!("{x:.11e}").parse().unwrap_or(x)
+}
+
+/// `[output]`: which points and which columns reach the observers (the
+/// results file). The run itself, its divergence checks and the summary's
+/// max |g| still see every macro point and every column.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// Record every `interval / step`-th macro point (a whole multiple of the
+    /// step), plus the last point of the run. Default: every macro point.
+    #[serde(default)]
+    pub interval: Option<f64>,
+    /// Column patterns: `*` matches any characters, everything else is taken
+    /// literally (`body.R[1,2]`, `link.*`). Default (empty): every column.
+    #[serde(default)]
+    pub variables: Vec<String>,
+}
+
+impl OutputSpec {
+    /// The macro steps between two recorded points: `interval / step`, which
+    /// must be a whole number ≥ 1 (to a relative 1e-9).
+    pub fn every(&self, step: f64) -> Result<u64, MasterError> {
+        let Some(interval) = self.interval else {
+            return Ok(1);
+        };
+        let ratio = interval / step;
+        let whole = ratio.round();
+        if !interval.is_finite() || whole < 1.0 || (ratio - whole).abs() > 1e-9 * whole {
+            return Err(MasterError::InvalidParameter {
+                name: "output interval".into(),
+                value: interval,
+                expected: format!(
+                    "a whole multiple of the step H = {step} (the nearest is {}·H)",
+                    whole.max(1.0)
+                ),
+            });
+        }
+        Ok(whole as u64)
+    }
+
+    /// The indices of the `columns` the patterns select, in column order;
+    /// every column without patterns. A pattern that matches no column is an
+    /// error naming it.
+    pub fn select(&self, columns: &[String]) -> Result<Vec<usize>, MasterError> {
+        if self.variables.is_empty() {
+            return Ok((0..columns.len()).collect());
+        }
+        for pattern in &self.variables {
+            if !columns.iter().any(|c| matches_pattern(pattern, c)) {
+                let hint = crate::names::suggest(pattern, columns.iter().map(String::as_str));
+                return Err(MasterError::InvalidOutput(format!(
+                    "output variable pattern '{pattern}' matches no column{hint}"
+                )));
+            }
+        }
+        Ok((0..columns.len())
+            .filter(|&i| {
+                self.variables
+                    .iter()
+                    .any(|p| matches_pattern(p, &columns[i]))
+            })
+            .collect())
+    }
+}
+
+/// Whether `name` matches `pattern`: `*` matches any run of characters
+/// (also none), every other character only itself.
+pub fn matches_pattern(pattern: &str, name: &str) -> bool {
+    let mut parts = pattern.split('*');
+    let first = parts.next().unwrap_or("");
+    let Some(mut rest) = name.strip_prefix(first) else {
+        return false;
+    };
+    let parts: Vec<&str> = parts.collect();
+    let Some((last, middle)) = parts.split_last() else {
+        return rest.is_empty(); // no '*': the whole name
+    };
+    for part in middle {
+        match rest.find(part) {
+            Some(i) => rest = &rest[i + part.len()..],
+            None => return false,
+        }
+    }
+    rest.len() >= last.len() && rest.ends_with(last)
 }
 
 /// Time grid: `T_n = start + n·step`, up to `stop`.
@@ -363,6 +460,7 @@ impl SystemSpec {
             },
             other => other,
         })?;
+        spec.source = Some(path.to_path_buf());
         let base = path.parent().unwrap_or(Path::new("."));
         for inst in &mut spec.instances {
             if inst.fmu.is_relative() {
@@ -378,6 +476,13 @@ impl SystemSpec {
             path: PathBuf::from("<text>"),
             reason: e.to_string().replace('\n', " ").trim().to_string(),
         })
+    }
+
+    /// The file named in errors: [`source`](Self::source), else `<system>`.
+    fn source_name(&self) -> PathBuf {
+        self.source
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("<system>"))
     }
 
     /// Check what can be checked without the FMUs: times, settings, names.
@@ -407,6 +512,7 @@ impl SystemSpec {
             }
         }
         self.method.validate()?;
+        self.output.every(e.step)?;
         let c = &self.coupling;
         if c.order > 2 {
             return Err(param(
@@ -450,7 +556,7 @@ impl SystemSpec {
         }
         if self.instances.is_empty() {
             return Err(MasterError::SystemFile {
-                path: PathBuf::from("<system>"),
+                path: self.source_name(),
                 reason: "no [[instance]] given".into(),
             });
         }
@@ -470,7 +576,7 @@ impl SystemSpec {
                 && name.chars().all(|c| c.is_alphanumeric() || c == '_');
             if !valid {
                 return Err(MasterError::SystemFile {
-                    path: PathBuf::from("<system>"),
+                    path: self.source_name(),
                     reason: format!(
                         "name '{name}' must start with a letter and contain only letters, digits and '_'"
                     ),
@@ -478,7 +584,7 @@ impl SystemSpec {
             }
             if !seen.insert(name.clone()) {
                 return Err(MasterError::SystemFile {
-                    path: PathBuf::from("<system>"),
+                    path: self.source_name(),
                     reason: format!("name '{name}' is used twice"),
                 });
             }
@@ -542,8 +648,8 @@ impl SystemSpec {
         let end = self.end_time();
         ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
             format!(
-                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {end}",
-                e.stop, e.start, e.step
+                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {}",
+                e.stop, e.start, e.step, tidy(end)
             )
         })
     }
@@ -558,6 +664,56 @@ impl SystemSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `*` matches any characters (also none), everything else only itself:
+    /// brackets, commas and dots are literal.
+    #[test]
+    fn output_patterns_take_everything_but_the_star_literally() {
+        let yes = [
+            ("body.A.R[1,2]", "body.A.R[1,2]"),
+            ("body.*.R[1,2]", "body.A.R[1,2]"),
+            ("*.lambda[*]", "hinge.lambda[3]"),
+            ("*", "x"),
+            ("link.*", "link."),
+            ("a*b*c", "abbc"),
+        ];
+        for (pattern, name) in yes {
+            assert!(matches_pattern(pattern, name), "{pattern} {name}");
+        }
+        let no = [
+            ("body.A.R[1,2]", "body.A.R[1,3]"),
+            ("body.A.R[1,?]", "body.A.R[1,2]"),
+            ("body.A.R[12]", "body.A.R[1,2]"),
+            ("link.*", "links.g"),
+            ("a*b*c", "acb"),
+            ("*.g", "link.gx"),
+            ("ab*ba", "aba"),
+        ];
+        for (pattern, name) in no {
+            assert!(!matches_pattern(pattern, name), "{pattern} {name}");
+        }
+        let columns: Vec<String> = ["b.R[1,1]", "b.R[1,2]", "h.lambda[1]", "h.g[1]"]
+            .map(String::from)
+            .to_vec();
+        let only = |patterns: &[&str]| OutputSpec {
+            interval: None,
+            variables: patterns.iter().map(|p| p.to_string()).collect(),
+        };
+        assert_eq!(
+            only(&["h.*", "b.R[1,2]"]).select(&columns).unwrap(),
+            [1, 2, 3]
+        );
+        assert_eq!(only(&[]).select(&columns).unwrap(), [0, 1, 2, 3]);
+        let interval = |dt: f64| OutputSpec {
+            interval: Some(dt),
+            variables: Vec::new(),
+        };
+        assert_eq!(interval(0.3).every(1e-3).unwrap(), 300);
+        assert_eq!(interval(1e-3).every(1e-3).unwrap(), 1);
+        assert!(interval(1.5e-3).every(1e-3).is_err());
+        assert!(interval(0.0).every(1e-3).is_err());
+        assert!(interval(f64::NAN).every(1e-3).is_err());
+    }
 
     #[test]
     fn a_stop_time_off_the_grid_is_named_with_the_actual_end() {
@@ -578,7 +734,11 @@ mod tests {
         assert_eq!(off.end_time(), 1e-3);
         assert_eq!(
             off.grid_warning().as_deref(),
-            Some("stop = 0.0001 is not on the macro grid start + n·step (start = 0, step = 0.001): the run ends at t = 0.001")
+            Some("stop = 0.0001 is not on the macro grid start + n·step (start = 0, step = 0.001): the run ends at t = 0.001"),
+        );
+        assert_eq!(
+            spec(1.0, 0.3).grid_warning().as_deref(),
+            Some("stop = 1 is not on the macro grid start + n·step (start = 0, step = 0.3): the run ends at t = 0.9")
         );
     }
 

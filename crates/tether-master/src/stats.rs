@@ -1,6 +1,9 @@
 //! Counters of a run: what the algorithm asked of the FMUs and where the time went.
 
 use std::fmt;
+
+use serde::ser::{SerializeMap, Serializer};
+use serde::Serialize;
 use std::time::{Duration, Instant};
 
 /// FMI calls made on one instance.
@@ -18,6 +21,10 @@ pub struct InstanceCounters {
     pub set_reals: u64,
     /// `fmi2GetReal` calls (coupled and recorded outputs).
     pub get_reals: u64,
+    /// `fmi2GetInteger` calls (recorded Integer and Enumeration outputs).
+    pub get_integers: u64,
+    /// `fmi2GetBoolean` calls (recorded Boolean outputs).
+    pub get_booleans: u64,
     /// `fmi2SetRealInputDerivatives` calls.
     pub set_input_derivatives: u64,
     /// `fmi2GetRealOutputDerivatives` calls.
@@ -47,9 +54,31 @@ pub struct PhaseTimes {
     pub recording: Duration,
 }
 
-/// Everything counted during a run.
+/// Everything counted during a run, and how it ended. Serialised (serde) as
+/// the run summary of `docs/run-summary.md`: `tether run --summary-json`
+/// writes it, the Python package's `stats` is the same object.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RunStats {
+    /// The coupling method and its parameters.
+    pub method: crate::Method,
+    /// Degree k of the coupling polynomials.
+    pub order: usize,
+    /// Start time T_0.
+    pub start: f64,
+    /// Macro-step size H.
+    pub step: f64,
+    /// The end of the macro grid (`stop` rounded to the grid).
+    pub stop: f64,
+    /// Time between recorded points (`[output] interval`, a multiple of H).
+    pub output_interval: f64,
+    /// The time of the last recorded row, if any.
+    pub end_time: Option<f64>,
+    /// Whether the run reached the stop time, or ended there normally at an
+    /// instance's request.
+    pub completed: bool,
+    /// `completed`, `running`, the instance's request to end, or the error
+    /// that stopped the run.
+    pub stop_reason: String,
     /// Accepted macro steps.
     pub macro_steps: u64,
     /// Linear solves of the interface Jacobian (one per matrix factorised).
@@ -74,7 +103,7 @@ pub struct RunStats {
 }
 
 /// An instance's request to end the simulation, and where the run ended.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Termination {
     /// The instance that asked.
     pub instance: String,
@@ -205,5 +234,159 @@ impl Lap {
     /// The clock reading of the last split (the next phase's start), if timed.
     pub fn last(&self) -> Option<Instant> {
         self.last
+    }
+}
+
+/// The version of the run summary's schema (`docs/run-summary.md`), its
+/// `schema` field: raised when a field changes meaning or goes away.
+pub const SUMMARY_SCHEMA: &str = "tether-run-summary/1";
+
+impl RunStats {
+    /// The run summary as JSON text (`docs/run-summary.md`).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("a run summary always serialises")
+    }
+}
+
+/// Seconds as a number.
+fn secs(d: std::time::Duration) -> f64 {
+    d.as_secs_f64()
+}
+
+/// Pairs as a JSON object, in their order.
+struct Ordered<'a, V>(Vec<(&'a str, V)>);
+
+impl<V: Serialize> Serialize for Ordered<'_, V> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut map = s.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            map.serialize_entry(k, v)?;
+        }
+        map.end()
+    }
+}
+
+#[derive(Serialize)]
+struct Calls {
+    do_step: u64,
+    get_fmu_state: u64,
+    set_fmu_state: u64,
+    set_real: u64,
+    get_real: u64,
+    get_integer: u64,
+    get_boolean: u64,
+    set_real_input_derivatives: u64,
+    get_real_output_derivatives: u64,
+}
+
+#[derive(Serialize)]
+struct Times {
+    measured: bool,
+    setup: f64,
+    predictor: f64,
+    jacobian: f64,
+    solve: f64,
+    corrector: f64,
+    recording: f64,
+}
+
+#[derive(Serialize)]
+struct Parallel {
+    workers: usize,
+    handoff: f64,
+    sequential: f64,
+    parallel: f64,
+    trial_sequential: f64,
+    trial_parallel: f64,
+}
+
+#[derive(Serialize)]
+struct Summary<'a> {
+    schema: &'static str,
+    method: &'a crate::Method,
+    order: usize,
+    start: f64,
+    step: f64,
+    stop: f64,
+    output_interval: f64,
+    completed: bool,
+    stop_reason: &'a str,
+    end_time: Option<f64>,
+    termination: Option<&'a Termination>,
+    macro_steps: u64,
+    jacobian_solves: u64,
+    wall_time: f64,
+    max_abs_g: Ordered<'a, Option<f64>>,
+    residual_warning: f64,
+    instances: Ordered<'a, Calls>,
+    times: Times,
+    parallel: Parallel,
+}
+
+impl Serialize for RunStats {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let t = &self.times;
+        let p = &self.parallel;
+        Summary {
+            schema: SUMMARY_SCHEMA,
+            method: &self.method,
+            order: self.order,
+            start: self.start,
+            step: self.step,
+            stop: self.stop,
+            output_interval: self.output_interval,
+            completed: self.completed,
+            stop_reason: &self.stop_reason,
+            end_time: self.end_time,
+            termination: self.termination.as_ref(),
+            macro_steps: self.macro_steps,
+            jacobian_solves: self.jacobian_solves,
+            wall_time: secs(self.wall),
+            // NaN (a residual that was not finite) as null.
+            max_abs_g: Ordered(
+                self.residuals
+                    .iter()
+                    .map(|(name, max)| (name.as_str(), max.is_finite().then_some(*max)))
+                    .collect(),
+            ),
+            residual_warning: self.residual_warning,
+            instances: Ordered(
+                self.instances
+                    .iter()
+                    .map(|c| {
+                        let calls = Calls {
+                            do_step: c.do_steps,
+                            get_fmu_state: c.state_gets,
+                            set_fmu_state: c.state_sets,
+                            set_real: c.set_reals,
+                            get_real: c.get_reals,
+                            get_integer: c.get_integers,
+                            get_boolean: c.get_booleans,
+                            set_real_input_derivatives: c.set_input_derivatives,
+                            get_real_output_derivatives: c.get_output_derivatives,
+                        };
+                        (c.name.as_str(), calls)
+                    })
+                    .collect(),
+            ),
+            times: Times {
+                measured: t.measured,
+                setup: secs(t.setup),
+                predictor: secs(t.predictor),
+                jacobian: secs(t.jacobian),
+                solve: secs(t.solve),
+                corrector: secs(t.corrector),
+                recording: secs(t.recording),
+            },
+            parallel: Parallel {
+                workers: p.workers,
+                handoff: secs(p.handoff),
+                sequential: secs(p.sequential),
+                parallel: secs(p.parallel),
+                trial_sequential: secs(p.trial_sequential),
+                trial_parallel: secs(p.trial_parallel),
+            },
+        }
+        .serialize(s)
     }
 }

@@ -45,7 +45,9 @@ const SIGNAL_INTERVAL: Duration = Duration::from_millis(50);
 /// The class of a failure, as the Python half names it.
 fn kind_of(e: &MasterError) -> &'static str {
     match e {
-        MasterError::Fmi(_) | MasterError::MissingCapability { .. } => "fmu",
+        MasterError::Fmi(_)
+        | MasterError::InstanceFmu { .. }
+        | MasterError::MissingCapability { .. } => "fmu",
         MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
         MasterError::InvalidParameter { .. } => "settings",
@@ -58,7 +60,9 @@ fn kind_of(e: &MasterError) -> &'static str {
         | MasterError::Joint { .. }
         | MasterError::WrongVariable { .. }
         | MasterError::MissingLevel { .. }
-        | MasterError::StartValue { .. } => "system",
+        | MasterError::StartValue { .. }
+        | MasterError::DrivesCancel { .. }
+        | MasterError::InvalidOutput(_) => "system",
         _ => "other",
     }
 }
@@ -169,46 +173,19 @@ fn interrupt_reason(err: PyErr, py: Python<'_>) -> Option<String> {
     }
 }
 
+/// The run summary of `RunStats` (its serde schema, docs/run-summary.md:
+/// the same as `tether run --summary-json`), with `stop_reason` as the
+/// package words it and the summary text `tether run` prints.
 fn stats_dict<'py>(
     py: Python<'py>,
     stats: &RunStats,
     stop_reason: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("macro_steps", stats.macro_steps)?;
-    d.set_item("jacobian_solves", stats.jacobian_solves)?;
-    d.set_item("wall_time", stats.wall.as_secs_f64())?;
+    let json = py.import("json")?;
+    let d = json
+        .call_method1("loads", (stats.to_json(),))?
+        .cast_into::<PyDict>()?;
     d.set_item("stop_reason", stop_reason)?;
-    let instances = PyDict::new(py);
-    for c in &stats.instances {
-        let i = PyDict::new(py);
-        i.set_item("do_step", c.do_steps)?;
-        i.set_item("get_fmu_state", c.state_gets)?;
-        i.set_item("set_fmu_state", c.state_sets)?;
-        i.set_item("set_real", c.set_reals)?;
-        i.set_item("get_real", c.get_reals)?;
-        i.set_item("set_real_input_derivatives", c.set_input_derivatives)?;
-        i.set_item("get_real_output_derivatives", c.get_output_derivatives)?;
-        instances.set_item(&c.name, i)?;
-    }
-    d.set_item("instances", instances)?;
-    let t = &stats.times;
-    let times = PyDict::new(py);
-    times.set_item("measured", t.measured)?;
-    times.set_item("setup", t.setup.as_secs_f64())?;
-    times.set_item("predictor", t.predictor.as_secs_f64())?;
-    times.set_item("jacobian", t.jacobian.as_secs_f64())?;
-    times.set_item("solve", t.solve.as_secs_f64())?;
-    times.set_item("corrector", t.corrector.as_secs_f64())?;
-    times.set_item("recording", t.recording.as_secs_f64())?;
-    d.set_item("times", times)?;
-    let p = &stats.parallel;
-    let parallel = PyDict::new(py);
-    parallel.set_item("workers", p.workers)?;
-    parallel.set_item("handoff", p.handoff.as_secs_f64())?;
-    parallel.set_item("sequential", p.sequential.as_secs_f64())?;
-    parallel.set_item("parallel", p.parallel.as_secs_f64())?;
-    d.set_item("parallel", parallel)?;
     d.set_item("summary", stats.to_string())?;
     Ok(d)
 }

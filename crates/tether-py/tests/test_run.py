@@ -74,6 +74,7 @@ def test_result_api(oscillator_toml):
     assert stats["instances"]["mass1"]["do_step"] > 100
     assert set(stats["instances"]["mass1"]) == {
         "do_step", "get_fmu_state", "set_fmu_state", "set_real", "get_real",
+        "get_integer", "get_boolean",
         "set_real_input_derivatives", "get_real_output_derivatives",
     }
     assert set(stats["times"]) >= {"setup", "predictor", "jacobian", "solve", "corrector", "recording"}
@@ -154,3 +155,20 @@ def test_system_built_in_code_runs_like_the_file(tmp_path, oscillator_toml, osci
 def test_system_without_experiment_is_an_error():
     with pytest.raises(tether.SystemFileError, match="no experiment"):
         tether.System().to_toml()
+
+
+def test_stats_have_the_schema_of_the_cli_summary_json(tmp_path, tether_bin, oscillator_toml):
+    """result.stats is the run summary `tether run --summary-json` writes
+    (docs/run-summary.md), plus the text `summary`."""
+    import json
+
+    summary = tmp_path / "summary.json"
+    cli(tether_bin, "run", str(oscillator_toml), "--stop", "0.1", "--out", str(tmp_path / "r.csv"),
+        "--summary-json", str(summary))
+    theirs = json.loads(summary.read_text())
+    ours = tether.run(oscillator_toml, stop=0.1).stats
+    assert set(ours) == set(theirs) | {"summary"}
+    assert ours["schema"] == theirs["schema"] == "tether-run-summary/1"
+    for key in ["method", "order", "step", "stop", "completed", "stop_reason", "end_time",
+                "macro_steps", "jacobian_solves", "max_abs_g", "instances"]:
+        assert ours[key] == theirs[key], key

@@ -64,6 +64,7 @@ pub fn plot_series(
             .iter()
             .map(|r| (r.table.source.clone(), &r.table))
             .collect(),
+        units: Vec::new(),
     };
     plot::save(path, &figure)
 }

@@ -183,16 +183,19 @@ pub(crate) fn check(site: CallSite<'_>, code: fmi2Status) -> crate::Result<()> {
             function,
             instance: instance(),
             time,
+            messages: Default::default(),
         }),
         Status::Error => Err(crate::Error::Failed {
             function,
             instance: instance(),
             time,
+            messages: Default::default(),
         }),
         Status::Fatal => Err(crate::Error::Fatal {
             function,
             instance: instance(),
             time,
+            messages: Default::default(),
         }),
         Status::Pending => Err(crate::Error::Pending {
             function,

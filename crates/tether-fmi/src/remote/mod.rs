@@ -314,6 +314,28 @@ impl RemoteInstance {
     }
 
     /// Reals of the last reply into `out`.
+    /// Values read from a reply into `out`, which must have their number.
+    fn copy_reply<T: Copy>(
+        &mut self,
+        read: io::Result<()>,
+        values: &[T],
+        out: &mut [T],
+    ) -> Result<()> {
+        let read = read.and_then(|()| {
+            if values.len() == out.len() {
+                Ok(())
+            } else {
+                Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    "wrong number of values",
+                ))
+            }
+        });
+        read.map_err(|e| self.protocol_error(e))?;
+        out.copy_from_slice(values);
+        Ok(())
+    }
+
     fn read_reals(&mut self, out: &mut [f64]) -> Result<()> {
         let read = In::new(&self.reply[1..]).f64s_into(out);
         read.map_err(|e| self.protocol_error(e))
@@ -404,6 +426,24 @@ impl RemoteInstance {
         self.out.start(op::GET_REAL).u32s(vrs);
         self.call("fmi2GetReal")?;
         self.read_reals(out)
+    }
+
+    /// `fmi2GetInteger` into `out`.
+    pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+        self.out.start(op::GET_INTEGER).u32s(vrs);
+        self.call("fmi2GetInteger")?;
+        let mut values = Vec::with_capacity(out.len());
+        let read = In::new(&self.reply[1..]).i32s(&mut values);
+        self.copy_reply(read, &values, out)
+    }
+
+    /// `fmi2GetBoolean` into `out`.
+    pub fn get_boolean(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
+        self.out.start(op::GET_BOOLEAN).u32s(vrs);
+        self.call("fmi2GetBoolean")?;
+        let mut values = Vec::with_capacity(out.len());
+        let read = In::new(&self.reply[1..]).bools(&mut values);
+        self.copy_reply(read, &values, out)
     }
 
     /// `fmi2SetInteger`.

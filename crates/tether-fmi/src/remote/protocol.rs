@@ -7,7 +7,7 @@
 
 use std::io::{self, Read, Write};
 
-use crate::error::Error;
+use crate::error::{Error, FmuMessages};
 
 /// Changes whenever a message changes: master and host must agree.
 pub const VERSION: u32 = 1;
@@ -38,6 +38,8 @@ pub mod op {
     pub const SERIALIZE_STATE: u8 = 21;
     pub const DESERIALIZE_STATE: u8 = 22;
     pub const FREE_INSTANCE: u8 = 23;
+    pub const GET_INTEGER: u8 = 25;
+    pub const GET_BOOLEAN: u8 = 26;
     /// Answered by `exit` without a reply (for tests of the transport's cost).
     pub const PING: u8 = 24;
 }
@@ -180,38 +182,43 @@ impl Out {
     }
     /// An error of a call (status errors keep their kind, others their message).
     pub fn error(&mut self, e: &Error) -> &mut Out {
-        let (kind, function, instance, time, code) = match e {
+        let none = FmuMessages::default();
+        let (kind, function, instance, time, code, messages) = match e {
             Error::Discard {
                 function,
                 instance,
                 time,
-            } => (0, *function, instance.as_str(), *time, 0),
+                messages,
+            } => (0, *function, instance.as_str(), *time, 0, messages),
             Error::Failed {
                 function,
                 instance,
                 time,
-            } => (1, *function, instance.as_str(), *time, 0),
+                messages,
+            } => (1, *function, instance.as_str(), *time, 0, messages),
             Error::Fatal {
                 function,
                 instance,
                 time,
-            } => (2, *function, instance.as_str(), *time, 0),
+                messages,
+            } => (2, *function, instance.as_str(), *time, 0, messages),
             Error::Pending {
                 function,
                 instance,
                 time,
-            } => (3, *function, instance.as_str(), *time, 0),
+            } => (3, *function, instance.as_str(), *time, 0, &none),
             Error::FmuDead {
                 function,
                 instance,
                 time,
-            } => (4, *function, instance.as_str(), *time, 0),
+                messages,
+            } => (4, *function, instance.as_str(), *time, 0, messages),
             Error::UnknownStatus {
                 function,
                 instance,
                 time,
                 code,
-            } => (5, *function, instance.as_str(), *time, *code),
+            } => (5, *function, instance.as_str(), *time, *code, &none),
             other => {
                 return self.u8(6).str(&crate::error::one_line(&other.to_string()));
             }
@@ -221,6 +228,11 @@ impl Out {
             .str(instance)
             .f64(time)
             .i32(code)
+            .u32(u32::try_from(messages.0.len()).unwrap_or(u32::MAX));
+        for m in &messages.0 {
+            self.str(m);
+        }
+        self
     }
     /// Writes the frame (its length first) to `to`.
     pub fn send(&mut self, to: &mut impl Write) -> io::Result<()> {
@@ -383,21 +395,29 @@ impl<'a> In<'a> {
         let instance = self.str()?.to_string();
         let time = self.f64()?;
         let code = self.i32()?;
+        let count = self.u32()?;
+        let mut messages = FmuMessages::default();
+        for _ in 0..count {
+            messages.0.push(self.str()?.to_string());
+        }
         Ok(match kind {
             0 => Error::Discard {
                 function,
                 instance,
                 time,
+                messages,
             },
             1 => Error::Failed {
                 function,
                 instance,
                 time,
+                messages,
             },
             2 => Error::Fatal {
                 function,
                 instance,
                 time,
+                messages,
             },
             3 => Error::Pending {
                 function,
@@ -408,6 +428,7 @@ impl<'a> In<'a> {
                 function,
                 instance,
                 time,
+                messages,
             },
             _ => Error::UnknownStatus {
                 function,
@@ -434,6 +455,7 @@ mod tests {
                 function: "fmi2DoStep",
                 instance: "mass2".into(),
                 time: 0.5,
+                messages: FmuMessages(vec!["[logStatusError] step too large".into()]),
             });
         let mut wire = Vec::new();
         out.send(&mut wire).unwrap();
@@ -451,7 +473,8 @@ mod tests {
         let e = input.error("mass2").unwrap();
         assert_eq!(
             e.to_string(),
-            "fmi2DoStep returned fmi2Discard on instance 'mass2' at t=0.5"
+            "fmi2DoStep returned fmi2Discard on instance 'mass2' at t=0.5; \
+             the FMU's last messages: [logStatusError] step too large"
         );
         assert!(input.u8().is_err(), "nothing left");
         // A truncated frame is an error, not a panic.

@@ -120,6 +120,16 @@ pub(crate) fn tick(v: &f64) -> String {
     }
 }
 
+/// [`tick`] for an axis spanning `span`: a value within a billionth of the
+/// span of zero (a tick placed at 0 with rounding error, `-5.6e-17`) is `0`.
+pub(crate) fn tick_on(v: f64, span: f64) -> String {
+    if v.abs() <= 1e-9 * span.abs() {
+        "0".into()
+    } else {
+        tick(&v)
+    }
+}
+
 /// Two significant digits: axis values of a log-spaced grid.
 pub(crate) fn tick2(v: &f64) -> String {
     let a = v.abs();
@@ -143,4 +153,16 @@ pub(crate) fn tick2(v: &f64) -> String {
 
 pub(crate) fn text_error<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tick_on;
+
+    #[test]
+    fn a_tick_at_zero_with_rounding_error_reads_zero() {
+        assert_eq!(tick_on(-5.551115123125783e-17, 2.0), "0");
+        assert_eq!(tick_on(0.25, 2.0), "0.25");
+        assert_eq!(tick_on(-3e-6, 1e-5), "-3.0e-6".replace(".0e", "e"));
+    }
 }

@@ -3,7 +3,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::{colour, padded_range, text_error, tick, Figure};
+use super::{colour, padded_range, text_error, tick, tick_on, Figure};
 use crate::Table;
 
 /// Columns over time for one or more runs.
@@ -14,6 +14,9 @@ pub struct SeriesPlot<'a> {
     pub columns: Vec<String>,
     /// The runs, with their legend labels.
     pub runs: Vec<(String, &'a Table)>,
+    /// Units of columns, where known (as the FMUs declare them), for the
+    /// axis labels: `mass1.x [m]`.
+    pub units: Vec<(String, String)>,
 }
 
 impl Figure for SeriesPlot<'_> {
@@ -55,12 +58,18 @@ impl Figure for SeriesPlot<'_> {
                 .y_label_area_size(80)
                 .build_cartesian_2d(t0.max(0.0).min(t0)..t1, y0..y1)
                 .map_err(text_error)?;
+            let y_desc = match self.units.iter().find(|(c, _)| c == column) {
+                Some((_, unit)) => format!("{column} [{unit}]"),
+                None => column.clone(),
+            };
+            let x_tick = |v: &f64| tick_on(*v, t1 - t0);
+            let y_tick = |v: &f64| tick_on(*v, y1 - y0);
             chart
                 .configure_mesh()
-                .x_desc("time")
-                .y_desc(column.as_str())
-                .x_label_formatter(&tick)
-                .y_label_formatter(&tick)
+                .x_desc("time [s]")
+                .y_desc(y_desc)
+                .x_label_formatter(&x_tick)
+                .y_label_formatter(&y_tick)
                 .label_style(("sans-serif", 15))
                 .axis_desc_style(("sans-serif", 17))
                 .light_line_style(RGBColor(235, 235, 235))

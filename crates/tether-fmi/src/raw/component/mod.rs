@@ -118,6 +118,7 @@ impl RawComponent {
                 function: "fmi2Instantiate",
                 instance: args.instance_name.to_owned(),
                 time: 0.0,
+                messages: Default::default(),
             });
         }
         log::trace!(target: "tether_fmi::call", "fmi2Instantiate({})", args.instance_name);
@@ -142,6 +143,7 @@ impl RawComponent {
             return Err(Error::InstantiationFailed {
                 model: args.model.to_owned(),
                 instance: args.instance_name.to_owned(),
+                messages: crate::error::FmuMessages(env.recent()),
             });
         }
         Ok(RawComponent {
@@ -205,6 +207,7 @@ impl RawComponent {
             function,
             instance: self.name.to_string(),
             time: self.time,
+            messages: crate::error::FmuMessages(self._env.recent()),
         }
     }
 
@@ -215,7 +218,15 @@ impl RawComponent {
         if status == fmi2Fatal {
             self.library.mark_fatal();
         }
-        check(self.site(function), status)
+        check(self.site(function), status).map_err(|mut e| {
+            if let Error::Discard { messages, .. }
+            | Error::Failed { messages, .. }
+            | Error::Fatal { messages, .. } = &mut e
+            {
+                *messages = crate::error::FmuMessages(self._env.recent());
+            }
+            e
+        })
     }
 
     #[inline]

@@ -1,0 +1,45 @@
+//! Helpers shared by the CLI test files that `mod common;` them.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Runs the `tether` binary in `dir` with extra environment variables.
+pub fn tether_env(args: &[&str], dir: &Path, env: &[(&str, &str)]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tether"))
+        .args(args)
+        .envs(env.iter().copied())
+        .current_dir(dir)
+        .output()
+        .expect("run tether")
+}
+
+/// Runs the `tether` binary in `dir`.
+pub fn tether(args: &[&str], dir: &Path) -> Output {
+    tether_env(args, dir, &[])
+}
+
+/// The packaged workspace oscillator FMU.
+pub fn oscillator() -> PathBuf {
+    tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU")
+}
+
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Stderr of a run that must have succeeded.
+pub fn success(out: &Output) -> String {
+    let text = stderr(out);
+    assert!(out.status.success(), "expected success: {text}");
+    assert!(!text.contains("panicked"), "{text}");
+    text
+}
+
+/// The last line of stderr, which must be the one-line error (exit code 1).
+pub fn error_line(out: &Output) -> String {
+    let text = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "expected exit 1: {text}");
+    assert!(!text.contains("panicked"), "{text}");
+    text.lines().last().unwrap_or_default().to_string()
+}

@@ -1,0 +1,376 @@
+//! What `tether run` records and reports: `[output]` and its flags (interval,
+//! column patterns), Integer and Boolean outputs, the JSON run summary, and
+//! the checks of the command line made before a run starts.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{error_line, oscillator, success, tether};
+
+/// The paper's oscillator pair with `mass1` from `fmu1` (parameters
+/// `extra` added), `[output]` text `output`, stop 1, H = 1e-3.
+fn system(dir: &Path, fmu1: &Path, extra: &str, output: &str) -> PathBuf {
+    let text = format!(
+        r#"
+name = "pair"
+[experiment]
+stop = 1.0
+step = 1e-3
+[method]
+kind = "baumgarte"
+beta = 2e-3
+gamma = 1e-6
+[coupling]
+parallel = "off"
+{output}
+[[instance]]
+name = "mass1"
+fmu = "{fmu1}"
+parameters = {{ m = 1.0{extra} }}
+[[instance]]
+name = "mass2"
+fmu = "{oscillator}"
+parameters = {{ m = 2.0 }}
+[[constraint]]
+name = "link"
+position = "mass2.x - mass1.x"
+velocity = "mass2.v - mass1.v"
+acceleration = "mass2.a - mass1.a"
+drives = "mass1.F - mass2.F"
+"#,
+        fmu1 = fmu1.display(),
+        oscillator = oscillator().display(),
+    );
+    let path = dir.join("pair.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Header and rows of a results file (names with commas are quoted).
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .unwrap();
+    let header = reader
+        .headers()
+        .unwrap()
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let rows = reader
+        .records()
+        .map(|r| r.unwrap().iter().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    (header, rows)
+}
+
+/// `--output-interval` records every 0.3 s and the last point; the values are
+/// those of the full run at the same times, bit for bit; `--output-variables`
+/// keeps the matching columns in their order; `[output]` in the file does the
+/// same as the flags.
+#[test]
+fn the_output_grid_and_the_columns_are_chosen_and_the_values_unchanged() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    let full = dir.path().join("full.csv");
+    success(&tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            full.to_str().unwrap(),
+        ],
+        dir.path(),
+    ));
+    let coarse = dir.path().join("coarse.csv");
+    let text = success(&tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            coarse.to_str().unwrap(),
+            "--output-interval",
+            "0.3",
+            "--output-variables",
+            "mass1.*",
+            "--output-variables",
+            "link.g",
+        ],
+        dir.path(),
+    ));
+    assert!(text.contains("macro steps: 1000"), "{text}");
+    let (all_names, all_rows) = read_csv(&full);
+    let (names, rows) = read_csv(&coarse);
+    assert_eq!(names, ["time", "mass1.x", "mass1.v", "mass1.a", "link.g"]);
+    let times: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(times, [0.0, 0.3, 0.6, 0.9, 1.0]);
+    for row in &rows {
+        let n = (row[0] / 1e-3).round() as usize;
+        for (k, name) in names.iter().enumerate() {
+            let j = all_names.iter().position(|c| c == name).unwrap();
+            assert_eq!(
+                row[k].to_bits(),
+                all_rows[n][j].to_bits(),
+                "{name} at {}",
+                row[0]
+            );
+        }
+    }
+    // The same from the system file.
+    let sys = system(
+        dir.path(),
+        &oscillator(),
+        "",
+        "[output]\ninterval = 0.3\nvariables = [\"mass1.*\", \"link.g\"]",
+    );
+    let from_file = dir.path().join("file.csv");
+    success(&tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            from_file.to_str().unwrap(),
+        ],
+        dir.path(),
+    ));
+    assert_eq!(
+        std::fs::read_to_string(&from_file).unwrap(),
+        std::fs::read_to_string(&coarse).unwrap()
+    );
+}
+
+#[test]
+fn an_output_interval_off_the_step_and_a_pattern_matching_nothing_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "r.csv"];
+        args.extend_from_slice(extra);
+        tether(&args, dir.path())
+    };
+    assert_eq!(
+        error_line(&run(&["--output-interval", "0.0025"])),
+        "error: invalid output interval = 0.0025: expected a whole multiple of the step \
+         H = 0.001 (the nearest is 3·H)"
+    );
+    assert_eq!(
+        error_line(&run(&["--output-interval", "-1"])),
+        "error: invalid output interval = -1: expected a whole multiple of the step \
+         H = 0.001 (the nearest is 1·H)"
+    );
+    assert_eq!(
+        error_line(&run(&["--output-variables", "mass3.*"])),
+        "error: output variable pattern 'mass3.*' matches no column; did you mean \
+         'mass1.x', 'mass1.v', 'mass1.a', 'mass2.x', 'mass2.v', 'mass2.a'?"
+    );
+    // A negative step is a value, refused as one.
+    assert_eq!(
+        error_line(&run(&["--step", "-1e-3"])),
+        "error: invalid step = -0.001: expected a finite macro-step size > 0"
+    );
+}
+
+/// `--plot … --columns X` with a column the run does not record stops before
+/// the run (no results file is written).
+#[test]
+fn plot_columns_are_checked_before_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    let out = tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--plot",
+            "p.svg",
+            "--columns",
+            "link.lambda,mass1.q",
+        ],
+        dir.path(),
+    );
+    assert_eq!(
+        error_line(&out),
+        "error: --columns mass1.q: the run records no column 'mass1.q'; columns are: mass1.x, \
+         mass1.v, mass1.a, mass2.x, mass2.v, mass2.a, link.lambda, link.g"
+    );
+    assert!(!dir.path().join("r.csv").exists());
+}
+
+/// Integer and Boolean outputs are columns, as numbers (0/1 for Booleans),
+/// after the Real outputs of their instance; the faults FMU with two of its
+/// parameters declared as outputs (`flood`, an Integer, 2000; `exact`, a
+/// Boolean, false).
+#[test]
+fn integer_and_boolean_outputs_are_recorded_as_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let faults = tether_fmu_build::workspace_fmu("faults").expect("package the faults FMU");
+    let edited = tether_tests::faulty::edited_fmu(&faults, dir.path(), "typed", |xml| {
+        xml.replace(
+            "name=\"flood\" valueReference=\"10\" description=\"Mode 6: warnings logged by each \
+             fmi2DoStep from `at` on\" causality=\"parameter\" variability=\"fixed\"",
+            "name=\"flood\" valueReference=\"10\" description=\"Mode 6\" causality=\"output\" \
+             variability=\"discrete\"",
+        )
+        .replace(
+            "causality=\"parameter\" variability=\"fixed\" initial=\"exact\">\n      <Boolean",
+            "causality=\"output\" variability=\"discrete\" initial=\"exact\">\n      <Boolean",
+        )
+    });
+    let sys = system(dir.path(), &edited, "", "");
+    let summary = dir.path().join("s.json");
+    success(&tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--stop",
+            "0.01",
+            "--summary-json",
+            summary.to_str().unwrap(),
+        ],
+        dir.path(),
+    ));
+    let (names, rows) = read_csv(&dir.path().join("r.csv"));
+    assert_eq!(
+        names[..6],
+        [
+            "time",
+            "mass1.x",
+            "mass1.v",
+            "mass1.a",
+            "mass1.flood",
+            "mass1.exact"
+        ]
+    );
+    assert_eq!(rows.len(), 11);
+    for row in &rows {
+        assert_eq!((row[4], row[5]), (2000.0, 0.0));
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    // One read of each kind per recorded point.
+    assert_eq!(json["instances"]["mass1"]["get_integer"], 11);
+    assert_eq!(json["instances"]["mass1"]["get_boolean"], 11);
+    assert_eq!(json["instances"]["mass2"]["get_integer"], 0);
+}
+
+/// The JSON summary has the documented fields, agrees with the text summary,
+/// and is written for a failed run too, saying why it stopped.
+#[test]
+fn the_json_summary_says_how_the_run_went() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    let summary = dir.path().join("summary.json");
+    let text = success(&tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--output-interval",
+            "0.01",
+            "--summary-json",
+            summary.to_str().unwrap(),
+        ],
+        dir.path(),
+    ));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(json["schema"], "tether-run-summary/1");
+    assert_eq!(json["method"]["kind"], "baumgarte");
+    assert_eq!(json["method"]["beta"], 2e-3);
+    assert_eq!(json["order"], 0);
+    assert_eq!(json["step"], 1e-3);
+    assert_eq!(json["output_interval"], 0.01);
+    assert_eq!(json["completed"], true);
+    assert_eq!(json["stop_reason"], "completed");
+    assert_eq!(json["end_time"], 1.0);
+    assert_eq!(json["macro_steps"], 1000);
+    assert!(json["wall_time"].as_f64().unwrap() > 0.0);
+    assert_eq!(json["instances"]["mass1"]["do_step"], 3000);
+    assert_eq!(json["instances"]["mass2"]["get_fmu_state"], 1000);
+    let g = json["max_abs_g"]["link.g"].as_f64().unwrap();
+    assert!(g > 0.0 && g < 1e-4, "{g}");
+    assert!(text.contains(&format!("link.g {g:.2e}")), "{text}");
+    assert_eq!(json["residual_warning"], 1e-3);
+    assert!(json["termination"].is_null());
+
+    // A run that fails: the summary is still written, with the reason.
+    let sys = system(
+        dir.path(),
+        &tether_fmu_build::workspace_fmu("quirks").unwrap(),
+        ", nan_after = 0.5",
+        "",
+    );
+    let out = tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--summary-json",
+            summary.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    let line = error_line(&out);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(json["completed"], false);
+    let reason = json["stop_reason"].as_str().unwrap();
+    assert!(
+        reason.contains("mass1") && line.ends_with(reason),
+        "{reason} / {line}"
+    );
+    let end = json["end_time"].as_f64().unwrap();
+    assert!((0.49..0.5).contains(&end), "{end}");
+}
+
+/// `run --plot` labels the axes with the units the FMUs declare; ticks at
+/// zero read `0`, not a rounding error such as `-5.6e-17`.
+#[test]
+fn plot_axes_carry_units_and_clean_zero_ticks() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    success(&tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--plot",
+            "p.svg",
+            "--columns",
+            "mass1.x,mass1.v",
+            "link.lambda",
+        ],
+        dir.path(),
+    ));
+    let svg = std::fs::read_to_string(dir.path().join("p.svg")).unwrap();
+    // The texts of the SVG's <text> elements.
+    let texts: Vec<&str> = svg
+        .split("<text")
+        .skip(1)
+        .filter_map(|s| s.split_once('>'))
+        .filter_map(|(_, rest)| rest.split('<').next())
+        .map(str::trim)
+        .collect();
+    for label in ["mass1.x [m]", "mass1.v [m/s]", "link.lambda", "time [s]"] {
+        assert!(texts.contains(&label), "{label}: {texts:?}");
+    }
+    // Every tick label is a plain number, none a tiny multiple of the span.
+    let ticks: Vec<&str> = texts
+        .iter()
+        .copied()
+        .filter(|s| s.parse::<f64>().is_ok())
+        .collect();
+    assert!(ticks.contains(&"0"), "{ticks:?}");
+    for t in &ticks {
+        let v: f64 = t.parse().unwrap();
+        assert!(v == 0.0 || v.abs() > 1e-6, "tick {t}");
+    }
+}
