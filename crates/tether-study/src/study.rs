@@ -3,13 +3,14 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use tether_master::SystemSpec;
 
-use crate::convergence::{convergence, Convergence};
+use crate::convergence::{convergence, Convergence, ConvergenceCurve};
 use crate::output;
+use crate::runner::RunResult;
 use crate::series::{series, Series};
-use crate::stability::{stability, Stability};
+use crate::stability::{stability, Stability, StabilityMap};
 use crate::{Overrides, StudyError};
 
 /// One variant of the system: a label and the settings that differ.
@@ -25,7 +26,7 @@ pub struct VariantSpec {
 }
 
 /// A system ready to run, with its label.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Variant {
     /// Name in legends and CSV files.
     pub label: String,
@@ -34,7 +35,8 @@ pub struct Variant {
 }
 
 /// What a study does.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Kind {
     /// Time series of every variant.
     Series(Series),
@@ -157,7 +159,12 @@ impl Study {
 
     /// Read the system file and apply the settings of every variant.
     pub fn variants(&self) -> Result<Vec<Variant>, StudyError> {
-        let system = SystemSpec::from_file(&self.system)?;
+        self.variants_of(&SystemSpec::from_file(&self.system)?)
+    }
+
+    /// Apply the settings of every variant to `system` (the study's system,
+    /// given rather than read from [`Study::system`]).
+    pub fn variants_of(&self, system: &SystemSpec) -> Result<Vec<Variant>, StudyError> {
         let specs = if self.variants.is_empty() {
             vec![VariantSpec::default()]
         } else {
@@ -199,23 +206,28 @@ impl Study {
         progress: &(dyn Fn() + Sync),
     ) -> Result<StudyReport, StudyError> {
         let variants = self.variants()?;
-        std::fs::create_dir_all(out_dir).map_err(|e| StudyError::Io {
-            path: out_dir.to_path_buf(),
-            source: e,
-        })?;
-        let stem = out_dir.join(&self.output);
-        let plots: Vec<PathBuf> = self
-            .formats
-            .iter()
-            .map(|f| stem.with_extension(f))
-            .collect();
-        let csv = stem.with_extension("csv");
+        create_dir(out_dir)?;
+        let results = match &self.kind {
+            Kind::Series(s) => StudyResults::Series(series(&variants, s, progress)?),
+            Kind::Convergence(c) => {
+                StudyResults::Convergence(convergence(&variants, c, &self.base, progress)?)
+            }
+            Kind::Stability(s) => StudyResults::Stability(stability(&variants, s, progress)?),
+        };
+        self.report(&results, Some(out_dir))
+    }
+
+    /// The text summary of a study's results and, with `out_dir`, the files
+    /// `<output>.csv`, `<output>.txt` and the plots written into it.
+    pub fn report(
+        &self,
+        results: &StudyResults,
+        out_dir: Option<&Path>,
+    ) -> Result<StudyReport, StudyError> {
         let mut summary = format!("{}\n", self.title);
-        match &self.kind {
-            Kind::Series(s) => {
-                let runs = series(&variants, s, progress)?;
-                output::write_series(&csv, &runs)?;
-                for run in &runs {
+        match (&self.kind, results) {
+            (Kind::Series(_), StudyResults::Series(runs)) => {
+                for run in runs {
                     let _ = writeln!(
                         summary,
                         "  {}: {}",
@@ -226,26 +238,53 @@ impl Study {
                         }
                     );
                 }
+            }
+            (Kind::Convergence(c), StudyResults::Convergence(curves)) => {
+                summary += &output::convergence_table(c, curves);
+            }
+            (Kind::Stability(s), StudyResults::Stability(maps)) => {
+                summary += &output::stability_text(s, maps)?;
+            }
+            _ => {
+                return Err(StudyError::Invalid(
+                    "the results are of another kind of study".into(),
+                ))
+            }
+        }
+        let Some(out_dir) = out_dir else {
+            return Ok(StudyReport {
+                files: Vec::new(),
+                summary,
+            });
+        };
+        create_dir(out_dir)?;
+        let stem = out_dir.join(&self.output);
+        let plots: Vec<PathBuf> = self
+            .formats
+            .iter()
+            .map(|f| stem.with_extension(f))
+            .collect();
+        let csv = stem.with_extension("csv");
+        match (&self.kind, results) {
+            (Kind::Series(s), StudyResults::Series(runs)) => {
+                output::write_series(&csv, runs)?;
                 for p in &plots {
-                    output::plot_series(p, &self.title, s, &runs)?;
+                    output::plot_series(p, &self.title, s, runs)?;
                 }
             }
-            Kind::Convergence(c) => {
-                let curves = convergence(&variants, c, &self.base, progress)?;
-                output::write_convergence(&csv, c, &curves)?;
-                summary += &output::convergence_table(c, &curves);
+            (Kind::Convergence(c), StudyResults::Convergence(curves)) => {
+                output::write_convergence(&csv, c, curves)?;
                 for p in &plots {
-                    output::plot_convergence(p, &self.title, c, &curves)?;
+                    output::plot_convergence(p, &self.title, c, curves)?;
                 }
             }
-            Kind::Stability(s) => {
-                let maps = stability(&variants, s, progress)?;
-                output::write_stability(&csv, s, &maps)?;
-                summary += &output::stability_text(s, &maps)?;
+            (Kind::Stability(s), StudyResults::Stability(maps)) => {
+                output::write_stability(&csv, s, maps)?;
                 for p in &plots {
-                    output::plot_stability(p, &self.title, s, &maps)?;
+                    output::plot_stability(p, &self.title, s, maps)?;
                 }
             }
+            _ => unreachable!("the kinds were matched above"),
         }
         let txt = stem.with_extension("txt");
         std::fs::write(&txt, &summary).map_err(|e| StudyError::Io {
@@ -256,6 +295,24 @@ impl Study {
         files.extend(plots);
         Ok(StudyReport { files, summary })
     }
+}
+
+fn create_dir(dir: &Path) -> Result<(), StudyError> {
+    std::fs::create_dir_all(dir).map_err(|e| StudyError::Io {
+        path: dir.to_path_buf(),
+        source: e,
+    })
+}
+
+/// The results of a study, before they are written.
+#[derive(Debug, Clone)]
+pub enum StudyResults {
+    /// One run per variant.
+    Series(Vec<RunResult>),
+    /// One curve per variant.
+    Convergence(Vec<ConvergenceCurve>),
+    /// One map per variant.
+    Stability(Vec<StabilityMap>),
 }
 
 #[cfg(test)]
