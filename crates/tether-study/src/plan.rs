@@ -12,7 +12,9 @@
 //! resolved (absolute FMU paths, every setting applied) and the study.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::convergence::{
@@ -91,6 +93,42 @@ impl Plan {
                 .map(|(variant, x, y)| Job::Cell { variant, x, y })
                 .collect(),
         })
+    }
+
+    /// Run every job in parallel over the cores (rayon) and put the results
+    /// together: what [`Study::run`] computes. `progress` is called after
+    /// each finished run; once it returns false no further run starts and
+    /// the study ends with [`StudyError::Interrupted`].
+    pub fn run_all(
+        &self,
+        progress: &(dyn Fn() -> bool + Sync),
+    ) -> Result<StudyResults, StudyError> {
+        let total = self.check()?;
+        let jobs = self.jobs()?;
+        let stop = AtomicBool::new(false);
+        let done = AtomicUsize::new(0);
+        let results: Vec<Option<JobResult>> = jobs
+            .par_iter()
+            .map(|&job| {
+                if stop.load(Ordering::Relaxed) {
+                    return Ok(None);
+                }
+                let result = self.run(job)?;
+                done.fetch_add(1, Ordering::Relaxed);
+                if !progress() {
+                    stop.store(true, Ordering::Relaxed);
+                }
+                Ok(Some(result))
+            })
+            .collect::<Result<_, StudyError>>()?;
+        let results: Option<Vec<JobResult>> = results.into_iter().collect();
+        match results {
+            Some(results) => self.results(results),
+            None => Err(StudyError::Interrupted {
+                done: done.into_inner(),
+                total,
+            }),
+        }
     }
 
     /// Run the jobs `indices` (each in `0..check()`), one after the other.

@@ -6,11 +6,12 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use tether_master::SystemSpec;
 
-use crate::convergence::{convergence, Convergence, ConvergenceCurve};
+use crate::convergence::{Convergence, ConvergenceCurve};
 use crate::output;
+use crate::plan::Plan;
 use crate::runner::RunResult;
-use crate::series::{series, Series};
-use crate::stability::{stability, Stability, StabilityMap};
+use crate::series::Series;
+use crate::stability::{Stability, StabilityMap};
 use crate::{Overrides, StudyError};
 
 /// One variant of the system: a label and the settings that differ.
@@ -142,6 +143,46 @@ impl Study {
         Ok(study)
     }
 
+    /// The study of `tether sweep`: `kind` over the system file `system`,
+    /// whose settings `set` hold for every run; `spec` is the system with
+    /// them applied (for the title). The results go to `<name>.*` (default:
+    /// `convergence` / `stability`) in the plot `formats`.
+    pub fn sweep(
+        system: PathBuf,
+        spec: &SystemSpec,
+        set: Overrides,
+        kind: Kind,
+        name: Option<String>,
+        formats: Vec<String>,
+    ) -> Result<Study, StudyError> {
+        let name = name.unwrap_or_else(|| {
+            match kind {
+                Kind::Convergence(_) => "convergence",
+                Kind::Stability(_) => "stability",
+                Kind::Series(_) => "series",
+            }
+            .to_string()
+        });
+        let study = Study {
+            title: format!(
+                "{}: {}, k = {}",
+                spec.name.as_deref().unwrap_or(&name),
+                spec.method,
+                spec.coupling.order
+            ),
+            system,
+            base: PathBuf::from("."),
+            output: name,
+            skip_if_missing: false,
+            formats,
+            set,
+            variants: Vec::new(),
+            kind,
+        };
+        study.validate()?;
+        Ok(study)
+    }
+
     fn validate(&self) -> Result<(), StudyError> {
         for f in &self.formats {
             if f != "svg" && f != "png" {
@@ -207,13 +248,10 @@ impl Study {
     ) -> Result<StudyReport, StudyError> {
         let variants = self.variants()?;
         create_dir(out_dir)?;
-        let results = match &self.kind {
-            Kind::Series(s) => StudyResults::Series(series(&variants, s, progress)?),
-            Kind::Convergence(c) => {
-                StudyResults::Convergence(convergence(&variants, c, &self.base, progress)?)
-            }
-            Kind::Stability(s) => StudyResults::Stability(stability(&variants, s, progress)?),
-        };
+        let results = Plan::new(self, variants).run_all(&|| {
+            progress();
+            true
+        })?;
         self.report(&results, Some(out_dir))
     }
 
