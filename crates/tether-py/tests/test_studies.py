@@ -182,3 +182,22 @@ def test_run_progress_callback(oscillator_toml):
         tether.run(oscillator_toml, stop=1e6, step=1e-3, progress=progress)
     assert seen and seen[-1][1] == 10**9
     assert 0 < len(e.value.result) < 10**9
+
+
+def test_ctrl_c_stops_a_local_study(tmp_path, monkeypatch, oscillator_toml):
+    import os
+    import signal
+    import threading
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    # 400 cells of 2000 steps each: far longer than the 0.5 s to the signal.
+    grid = dict(MAP, x="mass1.c,mass2.c=1e2..1e4:20:log", y="mass1.d,mass2.d=1..10:20",
+                step=1e-3, stop=2.0, parallel="off")
+    timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(tether.Interrupted, match=r"study interrupted after \d+ of 400 runs"):
+            tether.sweep_stability(oscillator_toml, **grid)
+    finally:
+        timer.cancel()
+    assert list(tmp_path.iterdir()) == []
