@@ -7,8 +7,11 @@ Starts a `LocalCluster` of worker processes (one thread each), unless given a
 scheduler address, then alternates the local run (the cells in parallel over
 this machine's cores) with the same map on the cluster: with the default
 chunks (at least 64 tasks) and with one task per cell. Checks that every run
-gives the same map, bit for bit, and prints the times, the ratios and the
-cluster's overhead per run: (cluster time − local time) / cells.
+gives the same map, bit for bit, and prints the wall times, the ratios and
+the cluster's overhead per run: (cluster time − local time) / cells. Also the
+CPU time of all processes taking part (this one, with a LocalCluster's
+scheduler, and the workers): on a machine loaded by other work the wall
+times are noise, the CPU times much less.
 """
 
 import argparse
@@ -57,9 +60,16 @@ def main() -> None:
     setup = time.perf_counter() - started
     client.run(lambda: __import__("tether"))  # import on the workers once
     times = {"local": [], "cluster": [], "cluster, 1 cell per task": []}
+    cpu = {label: [] for label in times}
+
+    def cpu_now() -> float:
+        workers = client.run(time.process_time)
+        return time.process_time() + sum(workers.values())
+
     reference = None
     for r in range(a.repeat):
         for label in times:
+            cpu0 = cpu_now()
             start = time.perf_counter()
             if label == "local":
                 result = tether.sweep_stability(system, **kw)
@@ -68,11 +78,13 @@ def main() -> None:
             else:
                 result = tether.sweep_stability(system, executor=client, chunksize=1, **kw)
             times[label].append(time.perf_counter() - start)
+            cpu[label].append(cpu_now() - cpu0)
             [m] = result.maps
             bits = (m.classes.tolist(), m.reached.view(np.uint64).tolist(), m.reasons.tolist())
             reference = reference or bits
             assert bits == reference, f"{label} differs"
-            print(f"round {r + 1}: {label} {times[label][-1]:.2f} s", flush=True)
+            print(f"round {r + 1}: {label} {times[label][-1]:.2f} s wall, {cpu[label][-1]:.2f} s CPU",
+                  flush=True)
     workers = len(client.scheduler_info()["workers"])
     client.close()
     if cluster is not None:
@@ -81,14 +93,15 @@ def main() -> None:
     print(f"{n}×{n} = {cells} cells ({counts['stable']} stable, {counts['unstable']} unstable, "
           f"{counts['failed']} failed), 1000 steps each; {workers} workers; identical maps: yes")
     print(f"cluster start {setup:.2f} s; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    local = statistics.median(times["local"])
-    for label, t in times.items():
-        med = statistics.median(t)
-        line = f"{label}: median {med:.2f} s (min {min(t):.2f})"
-        if label != "local":
-            line += (f", ratio to local {med / local:.3f}, "
-                     f"overhead per run {(med - local) / cells * 1e3:.2f} ms")
-        print(line)
+    for what, table in (("wall", times), ("CPU", cpu)):
+        local = statistics.median(table["local"])
+        for label, t in table.items():
+            med = statistics.median(t)
+            line = f"{what:>4} {label}: median {med:.2f} s (min {min(t):.2f})"
+            if label != "local":
+                line += (f", ratio to local {med / local:.3f}, "
+                         f"overhead per run {(med - local) / cells * 1e3:.2f} ms")
+            print(line)
 
 
 if __name__ == "__main__":

@@ -263,8 +263,24 @@ impl Study {
         out_dir: Option<&Path>,
     ) -> Result<StudyReport, StudyError> {
         let mut summary = format!("{}\n", self.title);
+        // Where the CSV and the plots go, if anywhere.
+        let out = match out_dir {
+            Some(dir) => {
+                create_dir(dir)?;
+                let stem = dir.join(&self.output);
+                let plots: Vec<PathBuf> = self
+                    .formats
+                    .iter()
+                    .map(|f| stem.with_extension(f))
+                    .collect();
+                Some((stem, plots))
+            }
+            None => None,
+        };
+        let csv = out.as_ref().map(|(stem, _)| stem.with_extension("csv"));
+        let plots = out.as_ref().map_or(&[][..], |(_, plots)| plots.as_slice());
         match (&self.kind, results) {
-            (Kind::Series(_), StudyResults::Series(runs)) => {
+            (Kind::Series(s), StudyResults::Series(runs)) => {
                 for run in runs {
                     let _ = writeln!(
                         summary,
@@ -276,12 +292,30 @@ impl Study {
                         }
                     );
                 }
+                if let Some(csv) = &csv {
+                    output::write_series(csv, runs)?;
+                }
+                for p in plots {
+                    output::plot_series(p, &self.title, s, runs)?;
+                }
             }
             (Kind::Convergence(c), StudyResults::Convergence(curves)) => {
                 summary += &output::convergence_table(c, curves);
+                if let Some(csv) = &csv {
+                    output::write_convergence(csv, c, curves)?;
+                }
+                for p in plots {
+                    output::plot_convergence(p, &self.title, c, curves)?;
+                }
             }
             (Kind::Stability(s), StudyResults::Stability(maps)) => {
                 summary += &output::stability_text(s, maps)?;
+                if let Some(csv) = &csv {
+                    output::write_stability(csv, s, maps)?;
+                }
+                for p in plots {
+                    output::plot_stability(p, &self.title, s, maps)?;
+                }
             }
             _ => {
                 return Err(StudyError::Invalid(
@@ -289,41 +323,12 @@ impl Study {
                 ))
             }
         }
-        let Some(out_dir) = out_dir else {
+        let (Some((stem, plots)), Some(csv)) = (out, csv) else {
             return Ok(StudyReport {
                 files: Vec::new(),
                 summary,
             });
         };
-        create_dir(out_dir)?;
-        let stem = out_dir.join(&self.output);
-        let plots: Vec<PathBuf> = self
-            .formats
-            .iter()
-            .map(|f| stem.with_extension(f))
-            .collect();
-        let csv = stem.with_extension("csv");
-        match (&self.kind, results) {
-            (Kind::Series(s), StudyResults::Series(runs)) => {
-                output::write_series(&csv, runs)?;
-                for p in &plots {
-                    output::plot_series(p, &self.title, s, runs)?;
-                }
-            }
-            (Kind::Convergence(c), StudyResults::Convergence(curves)) => {
-                output::write_convergence(&csv, c, curves)?;
-                for p in &plots {
-                    output::plot_convergence(p, &self.title, c, curves)?;
-                }
-            }
-            (Kind::Stability(s), StudyResults::Stability(maps)) => {
-                output::write_stability(&csv, s, maps)?;
-                for p in &plots {
-                    output::plot_stability(p, &self.title, s, maps)?;
-                }
-            }
-            _ => unreachable!("the kinds were matched above"),
-        }
         let txt = stem.with_extension("txt");
         std::fs::write(&txt, &summary).map_err(|e| StudyError::Io {
             path: txt.clone(),
