@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use tether_master::SystemSpec;
-use tether_study::{Axis, Convergence, Kind, ReferenceSpec, Stability, Study, VariantSpec};
+use tether_study::{Axis, Convergence, Kind, ReferenceSpec, Stability, Study};
 
 use crate::settings::Settings;
 
@@ -84,20 +84,14 @@ struct StabilityArgs {
 }
 
 pub fn main(args: Args) -> Result<()> {
-    let (common, kind, default_name) = match args.kind {
+    let (common, kind) = match args.kind {
         SweepKind::Convergence(c) => {
-            let reference = match c.reference.as_str() {
-                "finest" | "two-mass-oscillator" => ReferenceSpec::Named(c.reference),
-                file => ReferenceSpec::Csv {
-                    csv: std::path::absolute(file)?,
-                },
-            };
             let kind = Kind::Convergence(Convergence {
                 steps: c.steps,
-                reference,
+                reference: ReferenceSpec::parse_cli(&c.reference)?,
                 columns: crate::columns::split(&c.columns),
             });
-            (c.common, kind, "convergence")
+            (c.common, kind)
         }
         SweepKind::Stability(s) => {
             let kind = Kind::Stability(Box::new(Stability {
@@ -106,7 +100,7 @@ pub fn main(args: Args) -> Result<()> {
                 growth: s.growth,
                 monitor: s.monitor,
             }));
-            (s.common, kind, "stability")
+            (s.common, kind)
         }
     };
     // The flags act on the system file like `tether run`'s (errors show
@@ -114,22 +108,13 @@ pub fn main(args: Args) -> Result<()> {
     let mut spec = SystemSpec::from_file(&common.system)?;
     let set = common.settings.overrides()?;
     crate::settings::apply(&set, &mut spec)?;
-    let name = common.name.unwrap_or_else(|| default_name.to_string());
-    let study = Study {
-        title: format!(
-            "{}: {}, k = {}",
-            spec.name.as_deref().unwrap_or(&name),
-            spec.method,
-            spec.coupling.order
-        ),
-        system: common.system.clone(),
-        base: PathBuf::from("."),
-        output: name,
-        skip_if_missing: false,
-        formats: common.format,
+    let study = Study::sweep(
+        common.system.clone(),
+        &spec,
         set,
-        variants: Vec::<VariantSpec>::new(),
         kind,
-    };
+        common.name,
+        common.format,
+    )?;
     crate::study::run_one(&study, &common.out_dir, common.quiet)
 }

@@ -5,6 +5,8 @@
 
 use std::time::Instant;
 
+mod tune;
+
 use crate::explicit::Explicit;
 use crate::feedthrough::Feedthrough;
 use crate::observer::{Observer, Sample};

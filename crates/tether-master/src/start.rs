@@ -1,7 +1,8 @@
 //! Applying start values (parameters, input starts) to an instance by name.
 
 use tether_fmi::{
-    BaseType, Causality, Instance, ModelDescription, ValueReference, Variability, VariableKind,
+    BaseType, Causality, Instance, ModelDescription, ScalarVariable, ValueReference, Variability,
+    VariableKind,
 };
 
 use crate::names::describe;
@@ -49,8 +50,9 @@ pub fn apply_start_value(
     name: &str,
     value: &StartValue,
 ) -> Result<(), MasterError> {
+    let owner = instance.name().to_string();
     let fail = |reason: String| MasterError::StartValue {
-        instance: instance.name().to_string(),
+        instance: owner.clone(),
         variable: name.to_string(),
         value: value.to_string(),
         reason,
@@ -66,8 +68,61 @@ pub fn apply_start_value(
     {
         return Err(fail(format!("it is {} and cannot be set", describe(var))));
     }
+    set_value(instance, var, value, fail)
+}
+
+/// Set `name = value` on `instance` between macro steps, where FMI 2.0 allows
+/// it: an input other than those the coupling drives (`coupled`: their value
+/// references), or a tunable parameter. Refuses fixed parameters and
+/// everything else with a message naming the variable.
+pub(crate) fn set_between_steps(
+    instance: &mut impl Settable,
+    md: &ModelDescription,
+    name: &str,
+    value: &StartValue,
+    coupled: &[u32],
+) -> Result<BaseType, MasterError> {
+    let owner = instance.name().to_string();
+    let fail = |reason: String| MasterError::StartValue {
+        instance: owner.clone(),
+        variable: name.to_string(),
+        value: value.to_string(),
+        reason: format!("{reason} (between steps)"),
+    };
+    let var = md.variable(name)?;
+    let settable = match var.causality {
+        Causality::Input => var.variability != Variability::Constant,
+        Causality::Parameter => var.variability == Variability::Tunable,
+        _ => false,
+    };
+    if !settable {
+        let what = describe(var);
+        return Err(fail(match (var.causality, var.variability) {
+            (Causality::Parameter, Variability::Fixed) => format!(
+                "it is {what} with variability \"fixed\", which FMI 2.0 lets a master set only \
+                 before initialization; give it as a start value (parameters, --set)"
+            ),
+            _ => format!("it is {what}; only inputs and tunable parameters can be set"),
+        }));
+    }
+    if coupled.contains(&var.value_reference) {
+        return Err(fail(
+            "it is an input the coupling drives; the master sets it at every step".into(),
+        ));
+    }
+    set_value(instance, var, value, fail)?;
+    Ok(var.base_type())
+}
+
+/// Check `value` against the variable's type and range, then set it.
+fn set_value(
+    instance: &mut impl Settable,
+    var: &ScalarVariable,
+    value: &StartValue,
+    fail: impl Fn(String) -> MasterError,
+) -> Result<(), MasterError> {
     let vr = [var.value_reference];
-    check_range(&var.kind, value).map_err(fail)?;
+    check_range(&var.kind, value).map_err(&fail)?;
     match (var.base_type(), value) {
         (BaseType::Real, StartValue::Real(x)) => instance.set_real(&vr, &[*x])?,
         (BaseType::Real, StartValue::Integer(i)) => instance.set_real(&vr, &[*i as f64])?,

@@ -25,6 +25,8 @@ use tether_master::{
     Sample, Simulation, StartValue, SystemSpec,
 };
 
+mod study;
+
 create_exception!(
     _tether,
     Failure,
@@ -135,10 +137,25 @@ impl Observer for Rows {
 }
 
 /// Stops a run when Python has a pending signal: every [`SIGNAL_INTERVAL`]
-/// it takes the GIL and runs the signal handlers; an exception from one
+/// it takes the GIL, calls the optional progress callback with `(step,
+/// total)` and runs the signal handlers; an exception from either
 /// (`KeyboardInterrupt` for Ctrl-C) stops the run.
 struct Signals {
     last: Instant,
+    /// The callback and the run's number of steps.
+    progress: Option<(Py<PyAny>, u64)>,
+    /// The last step handed over.
+    step: u64,
+}
+
+impl Signals {
+    fn new(progress: Option<(Py<PyAny>, u64)>) -> Signals {
+        Signals {
+            last: Instant::now(),
+            progress,
+            step: 0,
+        }
+    }
 }
 
 impl Observer for Signals {
@@ -146,7 +163,8 @@ impl Observer for Signals {
         Ok(())
     }
 
-    fn sample(&mut self, _sample: Sample<'_>) -> std::io::Result<()> {
+    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
+        self.step = sample.step;
         Ok(())
     }
 
@@ -159,7 +177,13 @@ impl Observer for Signals {
             return None;
         }
         self.last = Instant::now();
-        Python::attach(|py| interrupt_reason(py.check_signals().err()?, py))
+        Python::attach(|py| {
+            let called = match &self.progress {
+                Some((f, total)) => f.call1(py, (self.step, *total)).map(drop),
+                None => Ok(()),
+            };
+            interrupt_reason(called.and_then(|()| py.check_signals()).err()?, py)
+        })
     }
 }
 
@@ -404,11 +428,12 @@ fn dump_toml(value: &Bound<'_, PyAny>) -> PyResult<String> {
 /// Run a system to its stop time with the GIL released; returns
 /// `(columns, data, stats)`.
 #[pyfunction]
-#[pyo3(signature = (path=None, text=None, **kwargs))]
+#[pyo3(signature = (path=None, text=None, progress=None, **kwargs))]
 fn run(
     py: Python<'_>,
     path: Option<PathBuf>,
     text: Option<&str>,
+    progress: Option<Py<PyAny>>,
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Py<PyAny>> {
     let spec = load_spec(path, text, kwargs)?;
@@ -423,9 +448,7 @@ fn run(
                 .saturating_mul(width * 8)
                 .min(1 << 30),
         );
-        let mut signals = Signals {
-            last: Instant::now(),
-        };
+        let mut signals = Signals::new(progress.map(|f| (f, sim.total_steps())));
         let result = sim.run(&mut [&mut rows, &mut signals], &mut |_, _| {});
         Ok((rows, result.map(|_| ()), sim.stats()))
     });
@@ -615,6 +638,24 @@ impl PySimulation {
             self.rows.push(sim.time(), sim.values());
         }
         Ok(made)
+    }
+
+    /// Set an input the coupling does not drive, or a tunable parameter, of
+    /// an instance (`"instance.variable"`) before the next step.
+    fn set_parameter(&mut self, target: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let value = start_value(value)?;
+        let Some(sim) = self.sim.as_mut() else {
+            return Err(closed());
+        };
+        sim.set_parameter(target, &value).map_err(|e| {
+            let kind = match &e {
+                MasterError::StartValue { .. }
+                | MasterError::UnknownInstance { .. }
+                | MasterError::Fmi(tether_fmi::Error::UnknownVariable { .. }) => "settings",
+                other => kind_of(other),
+            };
+            failure(kind, message(&e), None)
+        })
     }
 
     /// The number of steps from now to the first grid point at or after `t`.
@@ -930,9 +971,7 @@ fn simulate_one(
         rows.push(start + n as f64 * step, &row);
         Ok(())
     };
-    let mut signals = Signals {
-        last: Instant::now(),
-    };
+    let mut signals = Signals::new(None);
     let mut outcome: Result<(), SimulateError> =
         record(&mut instance, &mut rows, 0).map_err(Into::into);
     let mut made = 0;
@@ -973,5 +1012,9 @@ fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_system, m)?)?;
     m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
     m.add_class::<PySimulation>()?;
+    m.add_class::<study::PyPlan>()?;
+    m.add_function(wrap_pyfunction!(study::plan_sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(study::plan_study, m)?)?;
+    m.add_function(wrap_pyfunction!(study::run_jobs, m)?)?;
     Ok(())
 }

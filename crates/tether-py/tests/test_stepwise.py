@@ -44,3 +44,45 @@ def test_run_until_and_outputs(oscillator_toml):
     assert result.complete and sim.done
     assert same_bits(result["mass1.v"], whole["mass1.v"])
     assert sim.stats["macro_steps"] == whole.stats["macro_steps"] == 1000
+
+
+def test_set_parameter_between_steps(oscillator_toml, oscillator_fmu):
+    # A third oscillator that no constraint drives: its force F is free.
+    system = tether.System.from_file(oscillator_toml)
+    system.add_instance("mass3", oscillator_fmu, {"m": 1.5, "c": 800.0, "d": 4.0, "v0": 1.0, "exact": True})
+    plain = tether.run(system, stop=0.4)
+    sim = tether.Simulation(system, stop=0.4)
+    sim.run_until(0.2)
+    x1, v1, t1 = sim.outputs["mass3.x"], sim.outputs["mass3.v"], sim.time
+    sim.set_parameter("mass3.F", 40.0)
+    result = sim.run()
+    # The coupled pair does not see it; mass3 follows the closed form of a
+    # damped oscillator under a constant force from t1 on.
+    assert same_bits(result["mass1.x"], plain["mass1.x"])
+    before = result.time <= t1 + 1e-12
+    assert same_bits(result["mass3.x"][before], plain["mass3.x"][before])
+    m, c, d, f = 1.5, 800.0, 4.0, 40.0
+    delta = d / (2 * m)
+    wd = np.sqrt(c / m - delta**2)
+    tau = result.time[~before] - t1
+    a0 = x1 - f / c
+    b0 = (v1 + delta * a0) / wd
+    exact = f / c + np.exp(-delta * tau) * (a0 * np.cos(wd * tau) + b0 * np.sin(wd * tau))
+    assert np.max(np.abs(result["mass3.x"][~before] - exact)) < 1e-12
+
+
+def test_set_parameter_refusals(oscillator_toml):
+    sim = tether.Simulation(oscillator_toml)
+    with pytest.raises(tether.SettingsError, match="fixed.*start value"):
+        sim.set_parameter("mass1.m", 2.0)
+    with pytest.raises(tether.SettingsError, match="coupling drives"):
+        sim.set_parameter("mass1.F", 1.0)
+    with pytest.raises(tether.SettingsError, match="Real output"):
+        sim.set_parameter("mass1.x", 1.0)
+    with pytest.raises(tether.SettingsError, match="mass9"):
+        sim.set_parameter("mass9.F", 1.0)
+    with pytest.raises(tether.SettingsError, match="Fx"):
+        sim.set_parameter("mass1.Fx", 1.0)
+    sim.close()
+    with pytest.raises(tether.TetherError, match="closed"):
+        sim.set_parameter("mass1.F", 1.0)

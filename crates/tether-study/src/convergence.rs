@@ -81,31 +81,68 @@ pub fn convergence(
     base: &Path,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<ConvergenceCurve>, StudyError> {
+    convergence_check(variants, study)?;
+    let jobs = convergence_jobs(variants.len(), study);
+    let runs: Vec<RunResult> = jobs
+        .par_iter()
+        .map(|&(v, h)| {
+            let result = convergence_run(&variants[v], h);
+            progress();
+            result
+        })
+        .collect();
+    convergence_curves(variants, study, base, &jobs, &runs)
+}
+
+/// Check each variant once (at the first H), as `tether run` would before
+/// its first step.
+pub fn convergence_check(variants: &[Variant], study: &Convergence) -> Result<(), StudyError> {
     study.validate()?;
     for v in variants {
         let mut spec = v.spec.clone();
         spec.experiment.step = study.steps[0];
         runner::check(&spec)?;
     }
-    let jobs: Vec<(usize, f64)> = (0..variants.len())
+    Ok(())
+}
+
+/// The runs of `variants` variants as jobs `(variant, H)`, every variant's
+/// steps in the study's order.
+pub fn convergence_jobs(variants: usize, study: &Convergence) -> Vec<(usize, f64)> {
+    (0..variants)
         .flat_map(|v| study.steps.iter().map(move |&h| (v, h)))
-        .collect();
-    let runs: Vec<RunResult> = jobs
-        .par_iter()
-        .map(|&(v, h)| {
-            let mut spec = variants[v].spec.clone();
-            spec.experiment.step = h;
-            let result = runner::run(&spec, &format!("{} H = {h:e}", variants[v].label));
-            progress();
-            result
-        })
-        .collect();
+        .collect()
+}
+
+/// One run of a study: the variant at macro-step size `h`.
+pub fn convergence_run(variant: &Variant, h: f64) -> RunResult {
+    let mut spec = variant.spec.clone();
+    spec.experiment.step = h;
+    runner::run(&spec, &format!("{} H = {h:e}", variant.label))
+}
+
+/// The curves from the runs of every job of [`convergence_jobs`], in its
+/// order: the errors against the reference and the fitted orders.
+pub fn convergence_curves(
+    variants: &[Variant],
+    study: &Convergence,
+    base: &Path,
+    jobs: &[(usize, f64)],
+    runs: &[RunResult],
+) -> Result<Vec<ConvergenceCurve>, StudyError> {
+    if jobs.len() != runs.len() {
+        return Err(StudyError::Invalid(format!(
+            "{} runs for {} jobs",
+            runs.len(),
+            jobs.len()
+        )));
+    }
     let finest = study.finest();
     let mut curves = Vec::new();
     for (v, variant) in variants.iter().enumerate() {
         let mine: Vec<(f64, &RunResult)> = jobs
             .iter()
-            .zip(&runs)
+            .zip(runs)
             .filter(|((j, _), _)| *j == v)
             .map(|((_, h), r)| (*h, r))
             .collect();

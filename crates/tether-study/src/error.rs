@@ -50,6 +50,14 @@ pub enum StudyError {
         /// What went wrong.
         reason: String,
     },
+    /// The study was stopped before all its runs finished (Ctrl-C).
+    #[error("study interrupted after {done} of {total} runs")]
+    Interrupted {
+        /// Runs finished.
+        done: usize,
+        /// Runs of the study.
+        total: usize,
+    },
     /// Writing results failed.
     #[error("{}: {source}", path.display())]
     Io {

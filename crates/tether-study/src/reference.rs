@@ -21,6 +21,22 @@ pub enum ReferenceSpec {
     },
 }
 
+impl ReferenceSpec {
+    /// The command-line form: `finest`, `two-mass-oscillator`, or the path
+    /// of a results CSV (made absolute against the current directory).
+    pub fn parse_cli(text: &str) -> Result<ReferenceSpec, StudyError> {
+        Ok(match text {
+            "finest" | "two-mass-oscillator" => ReferenceSpec::Named(text.to_string()),
+            file => ReferenceSpec::Csv {
+                csv: std::path::absolute(file).map_err(|e| StudyError::Io {
+                    path: PathBuf::from(file),
+                    source: e,
+                })?,
+            },
+        })
+    }
+}
+
 /// A reference ready for lookups.
 #[derive(Debug, Clone)]
 pub enum Reference {

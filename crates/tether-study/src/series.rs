@@ -33,14 +33,28 @@ pub fn series(
     for v in variants {
         runner::check(&v.spec)?;
     }
-    let mut runs: Vec<RunResult> = variants
+    let runs: Vec<RunResult> = variants
         .par_iter()
         .map(|v| {
-            let r = runner::run(&v.spec, &v.label);
+            let r = series_run(v);
             progress();
             r
         })
         .collect();
+    series_finish(study, runs)
+}
+
+/// One run of a series: the variant as it is.
+pub fn series_run(variant: &Variant) -> RunResult {
+    runner::run(&variant.spec, &variant.label)
+}
+
+/// Add the derived columns to the runs (one per variant, in order) and
+/// check that the columns shown exist.
+pub fn series_finish(
+    study: &Series,
+    mut runs: Vec<RunResult>,
+) -> Result<Vec<RunResult>, StudyError> {
     for run in &mut runs {
         for (name, text) in &study.derived {
             add_derived(&mut run.table, name, text)?;

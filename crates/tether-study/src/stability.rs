@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use tether_master::{Overrides, StartValue};
+use tether_master::{Overrides, StartValue, SystemSpec};
 
 use crate::axis::Axis;
 use crate::runner::{self, Outcome, RunResult};
@@ -108,41 +108,91 @@ pub fn stability(
     study: &Stability,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<StabilityMap>, StudyError> {
+    stability_check(variants, study)?;
+    let jobs = stability_jobs(variants.len(), study)?;
+    let cells: Vec<Result<Cell, StudyError>> = jobs
+        .par_iter()
+        .map(|&(v, x, y)| {
+            let cell = stability_cell(&variants[v], study, x, y);
+            progress();
+            cell
+        })
+        .collect();
+    stability_maps(
+        variants,
+        study,
+        cells.into_iter().collect::<Result<_, _>>()?,
+    )
+}
+
+/// Check names, capabilities and parameters once per variant (at its first
+/// cell), as `tether run` would before its first step.
+pub fn stability_check(variants: &[Variant], study: &Stability) -> Result<(), StudyError> {
     let (xs, ys) = study.validate()?;
-    let cell_spec = |v: &Variant, x: f64, y: f64| -> Result<_, StudyError> {
-        let mut set = Overrides::default();
-        for t in &study.x.targets {
-            set_target(&mut set, t, x);
-        }
-        for t in &study.y.targets {
-            set_target(&mut set, t, y);
-        }
-        let mut spec = v.spec.clone();
-        set.apply(&mut spec)?;
-        Ok(spec)
-    };
-    // Names, capabilities and parameters are checked once, at the first cell.
     for v in variants {
-        runner::check(&cell_spec(v, xs[0], ys[0])?)?;
+        runner::check(&cell_spec(v, study, xs[0], ys[0])?)?;
     }
-    let jobs: Vec<(usize, f64, f64)> = (0..variants.len())
+    Ok(())
+}
+
+/// The cells of the maps of `variants` variants as jobs `(variant, x, y)`,
+/// every variant's x varying fastest.
+pub fn stability_jobs(
+    variants: usize,
+    study: &Stability,
+) -> Result<Vec<(usize, f64, f64)>, StudyError> {
+    let (xs, ys) = study.validate()?;
+    Ok((0..variants)
         .flat_map(|v| {
             let xs = &xs;
             ys.iter()
                 .flat_map(move |&y| xs.iter().map(move |&x| (v, x, y)))
         })
-        .collect();
-    let cells: Vec<Result<Cell, StudyError>> = jobs
-        .par_iter()
-        .map(|&(v, x, y)| {
-            let spec = cell_spec(&variants[v], x, y)?;
-            let run = runner::run(&spec, &variants[v].label);
-            progress();
-            classify(&run, x, y, study)
-        })
-        .collect();
-    let mut cells = cells.into_iter().collect::<Result<Vec<_>, _>>()?;
+        .collect())
+}
+
+/// The system of one cell: the variant with the axis values set.
+fn cell_spec(v: &Variant, study: &Stability, x: f64, y: f64) -> Result<SystemSpec, StudyError> {
+    let mut set = Overrides::default();
+    for t in &study.x.targets {
+        set_target(&mut set, t, x);
+    }
+    for t in &study.y.targets {
+        set_target(&mut set, t, y);
+    }
+    let mut spec = v.spec.clone();
+    set.apply(&mut spec)?;
+    Ok(spec)
+}
+
+/// One cell: run the variant with the axis values `x`, `y` and classify it.
+/// The same wherever it runs: the cell depends on nothing but its arguments.
+pub fn stability_cell(
+    variant: &Variant,
+    study: &Stability,
+    x: f64,
+    y: f64,
+) -> Result<Cell, StudyError> {
+    let spec = cell_spec(variant, study, x, y)?;
+    let run = runner::run(&spec, &variant.label);
+    classify(&run, x, y, study)
+}
+
+/// The maps from the cells of every job of [`stability_jobs`], in its order.
+pub fn stability_maps(
+    variants: &[Variant],
+    study: &Stability,
+    mut cells: Vec<Cell>,
+) -> Result<Vec<StabilityMap>, StudyError> {
+    let (xs, ys) = study.validate()?;
     let per_map = xs.len() * ys.len();
+    if cells.len() != per_map * variants.len() {
+        return Err(StudyError::Invalid(format!(
+            "{} cells for {} maps of {per_map}",
+            cells.len(),
+            variants.len()
+        )));
+    }
     Ok(variants
         .iter()
         .map(|v| StabilityMap {

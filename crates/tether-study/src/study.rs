@@ -3,13 +3,15 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use tether_master::SystemSpec;
 
-use crate::convergence::{convergence, Convergence};
+use crate::convergence::{Convergence, ConvergenceCurve};
 use crate::output;
-use crate::series::{series, Series};
-use crate::stability::{stability, Stability};
+use crate::plan::Plan;
+use crate::runner::RunResult;
+use crate::series::Series;
+use crate::stability::{Stability, StabilityMap};
 use crate::{Overrides, StudyError};
 
 /// One variant of the system: a label and the settings that differ.
@@ -25,7 +27,7 @@ pub struct VariantSpec {
 }
 
 /// A system ready to run, with its label.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Variant {
     /// Name in legends and CSV files.
     pub label: String,
@@ -34,7 +36,8 @@ pub struct Variant {
 }
 
 /// What a study does.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Kind {
     /// Time series of every variant.
     Series(Series),
@@ -140,6 +143,46 @@ impl Study {
         Ok(study)
     }
 
+    /// The study of `tether sweep`: `kind` over the system file `system`,
+    /// whose settings `set` hold for every run; `spec` is the system with
+    /// them applied (for the title). The results go to `<name>.*` (default:
+    /// `convergence` / `stability`) in the plot `formats`.
+    pub fn sweep(
+        system: PathBuf,
+        spec: &SystemSpec,
+        set: Overrides,
+        kind: Kind,
+        name: Option<String>,
+        formats: Vec<String>,
+    ) -> Result<Study, StudyError> {
+        let name = name.unwrap_or_else(|| {
+            match kind {
+                Kind::Convergence(_) => "convergence",
+                Kind::Stability(_) => "stability",
+                Kind::Series(_) => "series",
+            }
+            .to_string()
+        });
+        let study = Study {
+            title: format!(
+                "{}: {}, k = {}",
+                spec.name.as_deref().unwrap_or(&name),
+                spec.method,
+                spec.coupling.order
+            ),
+            system,
+            base: PathBuf::from("."),
+            output: name,
+            skip_if_missing: false,
+            formats,
+            set,
+            variants: Vec::new(),
+            kind,
+        };
+        study.validate()?;
+        Ok(study)
+    }
+
     fn validate(&self) -> Result<(), StudyError> {
         for f in &self.formats {
             if f != "svg" && f != "png" {
@@ -157,7 +200,12 @@ impl Study {
 
     /// Read the system file and apply the settings of every variant.
     pub fn variants(&self) -> Result<Vec<Variant>, StudyError> {
-        let system = SystemSpec::from_file(&self.system)?;
+        self.variants_of(&SystemSpec::from_file(&self.system)?)
+    }
+
+    /// Apply the settings of every variant to `system` (the study's system,
+    /// given rather than read from [`Study::system`]).
+    pub fn variants_of(&self, system: &SystemSpec) -> Result<Vec<Variant>, StudyError> {
         let specs = if self.variants.is_empty() {
             vec![VariantSpec::default()]
         } else {
@@ -199,23 +247,41 @@ impl Study {
         progress: &(dyn Fn() + Sync),
     ) -> Result<StudyReport, StudyError> {
         let variants = self.variants()?;
-        std::fs::create_dir_all(out_dir).map_err(|e| StudyError::Io {
-            path: out_dir.to_path_buf(),
-            source: e,
+        create_dir(out_dir)?;
+        let results = Plan::new(self, variants).run_all(&|| {
+            progress();
+            true
         })?;
-        let stem = out_dir.join(&self.output);
-        let plots: Vec<PathBuf> = self
-            .formats
-            .iter()
-            .map(|f| stem.with_extension(f))
-            .collect();
-        let csv = stem.with_extension("csv");
+        self.report(&results, Some(out_dir))
+    }
+
+    /// The text summary of a study's results and, with `out_dir`, the files
+    /// `<output>.csv`, `<output>.txt` and the plots written into it.
+    pub fn report(
+        &self,
+        results: &StudyResults,
+        out_dir: Option<&Path>,
+    ) -> Result<StudyReport, StudyError> {
         let mut summary = format!("{}\n", self.title);
-        match &self.kind {
-            Kind::Series(s) => {
-                let runs = series(&variants, s, progress)?;
-                output::write_series(&csv, &runs)?;
-                for run in &runs {
+        // Where the CSV and the plots go, if anywhere.
+        let out = match out_dir {
+            Some(dir) => {
+                create_dir(dir)?;
+                let stem = dir.join(&self.output);
+                let plots: Vec<PathBuf> = self
+                    .formats
+                    .iter()
+                    .map(|f| stem.with_extension(f))
+                    .collect();
+                Some((stem, plots))
+            }
+            None => None,
+        };
+        let csv = out.as_ref().map(|(stem, _)| stem.with_extension("csv"));
+        let plots = out.as_ref().map_or(&[][..], |(_, plots)| plots.as_slice());
+        match (&self.kind, results) {
+            (Kind::Series(s), StudyResults::Series(runs)) => {
+                for run in runs {
                     let _ = writeln!(
                         summary,
                         "  {}: {}",
@@ -226,27 +292,43 @@ impl Study {
                         }
                     );
                 }
-                for p in &plots {
-                    output::plot_series(p, &self.title, s, &runs)?;
+                if let Some(csv) = &csv {
+                    output::write_series(csv, runs)?;
+                }
+                for p in plots {
+                    output::plot_series(p, &self.title, s, runs)?;
                 }
             }
-            Kind::Convergence(c) => {
-                let curves = convergence(&variants, c, &self.base, progress)?;
-                output::write_convergence(&csv, c, &curves)?;
-                summary += &output::convergence_table(c, &curves);
-                for p in &plots {
-                    output::plot_convergence(p, &self.title, c, &curves)?;
+            (Kind::Convergence(c), StudyResults::Convergence(curves)) => {
+                summary += &output::convergence_table(c, curves);
+                if let Some(csv) = &csv {
+                    output::write_convergence(csv, c, curves)?;
+                }
+                for p in plots {
+                    output::plot_convergence(p, &self.title, c, curves)?;
                 }
             }
-            Kind::Stability(s) => {
-                let maps = stability(&variants, s, progress)?;
-                output::write_stability(&csv, s, &maps)?;
-                summary += &output::stability_text(s, &maps)?;
-                for p in &plots {
-                    output::plot_stability(p, &self.title, s, &maps)?;
+            (Kind::Stability(s), StudyResults::Stability(maps)) => {
+                summary += &output::stability_text(s, maps)?;
+                if let Some(csv) = &csv {
+                    output::write_stability(csv, s, maps)?;
                 }
+                for p in plots {
+                    output::plot_stability(p, &self.title, s, maps)?;
+                }
+            }
+            _ => {
+                return Err(StudyError::Invalid(
+                    "the results are of another kind of study".into(),
+                ))
             }
         }
+        let (Some((stem, plots)), Some(csv)) = (out, csv) else {
+            return Ok(StudyReport {
+                files: Vec::new(),
+                summary,
+            });
+        };
         let txt = stem.with_extension("txt");
         std::fs::write(&txt, &summary).map_err(|e| StudyError::Io {
             path: txt.clone(),
@@ -256,6 +338,24 @@ impl Study {
         files.extend(plots);
         Ok(StudyReport { files, summary })
     }
+}
+
+fn create_dir(dir: &Path) -> Result<(), StudyError> {
+    std::fs::create_dir_all(dir).map_err(|e| StudyError::Io {
+        path: dir.to_path_buf(),
+        source: e,
+    })
+}
+
+/// The results of a study, before they are written.
+#[derive(Debug, Clone)]
+pub enum StudyResults {
+    /// One run per variant.
+    Series(Vec<RunResult>),
+    /// One curve per variant.
+    Convergence(Vec<ConvergenceCurve>),
+    /// One map per variant.
+    Stability(Vec<StabilityMap>),
 }
 
 #[cfg(test)]

@@ -3,8 +3,8 @@
 use std::path::{Path, PathBuf};
 
 use tether_study::{
-    convergence, stability, Axis, Class, Convergence, Kind, Overrides, ReferenceSpec, Scale,
-    Stability, Study, Variant,
+    convergence, stability, Axis, Class, Convergence, JobResult, Kind, Overrides, Plan,
+    ReferenceSpec, Scale, Stability, Study, StudyResults, Variant,
 };
 
 fn system_file(dir: &Path) -> PathBuf {
@@ -215,4 +215,54 @@ fn bad_studies_name_the_culprit() {
     .unwrap();
     let e = study.run(dir.path(), &|| {}).unwrap_err().to_string();
     assert!(e.contains("mass1.phi") && e.contains("mass1.x"), "{e}");
+}
+
+#[test]
+fn a_plan_after_a_toml_round_trip_gives_the_local_results_job_by_job() {
+    // What a cluster does with a plan: jobs run one at a time, in any order,
+    // from the plan's TOML, then put together. Same numbers as the local study.
+    let dir = tempfile::tempdir().unwrap();
+    system_file(dir.path());
+    let path = dir.path().join("map.toml");
+    std::fs::write(
+        &path,
+        r#"
+        system = "oscillator.toml"
+        [set]
+        step = 5e-3
+        stop = 0.5
+        method = { kind = "baumgarte", beta = 0.2, gamma = 1e-2 }
+        [stability]
+        x = { targets = ["mass1.c", "mass2.c"], from = 1e2, to = 1e5, points = 3, scale = "log" }
+        y = { targets = ["mass1.d", "mass2.d"], values = [0.1, 10.0] }
+        growth = 1.0
+        monitor = ["mass1.v"]
+        "#,
+    )
+    .unwrap();
+    let study = Study::from_file(&path).unwrap();
+    let local = study.run(&dir.path().join("local"), &|| {}).unwrap();
+    let plan = Plan::new(&study, study.variants().unwrap());
+    let plan = Plan::from_toml(&plan.to_toml().unwrap()).unwrap();
+    let n = plan.check().unwrap();
+    assert_eq!(n, 6);
+    let mut results: Vec<(usize, JobResult)> = (0..n)
+        .rev()
+        .map(|i| (i, plan.run_jobs(&[i]).unwrap().remove(0)))
+        .collect();
+    results.sort_by_key(|r| r.0);
+    let results = plan
+        .results(results.into_iter().map(|r| r.1).collect())
+        .unwrap();
+    let remote = study
+        .report(&results, Some(&dir.path().join("remote")))
+        .unwrap();
+    assert_eq!(local.summary, remote.summary);
+    let csv = |d: &str| std::fs::read(dir.path().join(d).join("map.csv")).unwrap();
+    assert_eq!(csv("local"), csv("remote"));
+    let StudyResults::Stability(maps) = results else {
+        panic!("a stability study")
+    };
+    assert!(maps[0].cells.iter().any(|c| c.class == Class::Stable));
+    assert!(maps[0].cells.iter().any(|c| c.class == Class::Unstable));
 }

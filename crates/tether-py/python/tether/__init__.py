@@ -14,7 +14,10 @@ Entry points:
 - :func:`run` a system file or :class:`System` to its stop time,
 - :class:`Simulation` to advance it step by step and read outputs between steps,
 - :func:`simulate` one FMU on its own and :func:`info` for its model description,
-- :class:`System` to build (or load and change) a system in code.
+- :class:`System` to build (or load and change) a system in code,
+- :func:`sweep_stability`, :func:`sweep_convergence` and :func:`study` for
+  studies, here or on a ``concurrent.futures`` executor or a Dask cluster,
+- :func:`run_many` for many runs of one system.
 
 Errors are :class:`TetherError` subclasses with the one-line messages of the
 ``tether`` command; a run that stops early carries its partial
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
@@ -34,6 +37,12 @@ from . import _tether
 __all__ = [
     "run",
     "run_many",
+    "sweep_stability",
+    "sweep_convergence",
+    "study",
+    "StudyResult",
+    "StabilityMap",
+    "ConvergenceCurve",
     "simulate",
     "info",
     "Simulation",
@@ -366,6 +375,7 @@ def run(
     parallel: Union[str, bool, None] = None,
     divergence_factor: Optional[float] = None,
     parameters: Optional[Mapping[str, ParameterValue]] = None,
+    progress: Optional[Callable[[int, int], Any]] = None,
 ) -> Result:
     """Run a coupled system to its stop time, like ``tether run``.
 
@@ -381,6 +391,9 @@ def run(
       ``"off"`` (or True/False),
     - ``parameters``: FMU start values, ``{"mass1.m": 2.0}`` (``--set``).
 
+    ``progress(step, total)`` is called every 50 ms while the run goes on
+    (an exception from it stops the run as Ctrl-C does).
+
     The results are the same, bit for bit, as the CSV of ``tether run``. The
     GIL is released while the master runs; Ctrl-C stops the run after the
     current macro step and raises :class:`Interrupted` with the partial
@@ -393,7 +406,7 @@ def run(
         divergence_factor=divergence_factor, parameters=parameters,
     )
     try:
-        raw = _tether.run(**_source(system), **kw)
+        raw = _tether.run(**_source(system), progress=progress, **kw)
     except _tether.Failure as f:
         raise _error(f) from None
     return Result(*raw)
@@ -421,7 +434,7 @@ def run_many(
     ``executor`` is anything with ``submit(fn, *args)`` returning futures with
     ``result()``: a ``concurrent.futures`` executor (``ProcessPoolExecutor``
     runs them in parallel processes; a thread pool gains little, each run
-    holds a core) or, untested, a ``dask.distributed.Client``. Without one the
+    holds a core) or a ``dask.distributed.Client``. Without one the
     runs are made here, one after the other. Each run is the same as
     :func:`run` with those overrides, bit for bit, wherever it is made.
 
@@ -548,6 +561,20 @@ class Simulation:
             raise TetherError(f"the simulation is at its stop time t = {self.time}")
         return self.time
 
+    def set_parameter(self, name: str, value: ParameterValue) -> None:
+        """Set ``name`` (``"instance.variable"``) to ``value`` before the next
+        step, where FMI 2.0 allows it: an input the coupling does not drive,
+        or a parameter with variability "tunable". A fixed parameter (settable
+        only before initialization: give it in ``parameters=``), an output,
+        an input the coupling drives, a value of the wrong type or outside the
+        variable's min/max raise :class:`SettingsError`. The value holds from
+        the current time on; outputs that depend on it show it from the next
+        point on (:attr:`outputs` are those of the accepted step)."""
+        try:
+            self._sim.set_parameter(name, value)
+        except _tether.Failure as f:
+            raise _error(f) from None
+
     def run_until(self, t: float) -> float:
         """Advance to the first macro point at or after ``t`` (at most to the
         stop time); returns the new time. Ctrl-C raises :class:`Interrupted`."""
@@ -628,3 +655,13 @@ def info(fmu: PathLike) -> Dict[str, Any]:
         return _tether.info(os.fspath(fmu))
     except _tether.Failure as f:
         raise _error(f) from None
+
+
+from .studies import (  # noqa: E402  (they use the classes above)
+    ConvergenceCurve,
+    StabilityMap,
+    StudyResult,
+    study,
+    sweep_convergence,
+    sweep_stability,
+)

@@ -1,13 +1,18 @@
 """Type stubs of the extension module; the public API is the ``tether`` package."""
 
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 _Raw = Tuple[List[str], bytes, Dict[str, Any]]
 
 class Failure(Exception):
     """(kind, message, partial) of a failure; ``tether`` raises its own classes."""
 
-def run(path: Optional[str] = None, text: Optional[str] = None, **overrides: Any) -> _Raw: ...
+def run(
+    path: Optional[str] = None,
+    text: Optional[str] = None,
+    progress: Optional[Callable[[int, int], Any]] = None,
+    **overrides: Any,
+) -> _Raw: ...
 def simulate(
     fmu: str,
     start: Optional[float] = None,
@@ -41,3 +46,34 @@ class Simulation:
     def result(self) -> _Raw: ...
     def advance(self, count: int) -> int: ...
     def steps_to(self, t: float) -> int: ...
+    def set_parameter(self, target: str, value: Any) -> None: ...
+
+class StudyPlan:
+    @property
+    def payload(self) -> str: ...
+    @property
+    def jobs(self) -> int: ...
+    @property
+    def kind(self) -> str: ...
+    def run_local(
+        self, out_dir: Optional[str] = None, progress: Optional[Callable[[int, int], Any]] = None
+    ) -> Dict[str, Any]: ...
+    def finish(self, results: Sequence[Any], out_dir: Optional[str] = None) -> Dict[str, Any]: ...
+
+def plan_sweep(
+    kind: str,
+    path: Optional[str] = None,
+    text: Optional[str] = None,
+    x: Any = None,
+    y: Any = None,
+    growth: Optional[float] = None,
+    monitor: Optional[List[str]] = None,
+    steps: Optional[List[float]] = None,
+    reference: Optional[str] = None,
+    columns: Optional[List[str]] = None,
+    name: Optional[str] = None,
+    formats: Optional[List[str]] = None,
+    **overrides: Any,
+) -> StudyPlan: ...
+def plan_study(path: str) -> StudyPlan: ...
+def run_jobs(payload: str, indices: List[int]) -> List[Tuple[Any, ...]]: ...
