@@ -4,6 +4,8 @@
 //!
 //! Run with `cargo bench -p tether-bench`; see docs/performance.md.
 
+pub mod scale;
+
 use std::ffi::{c_char, c_int, c_long, CString};
 use std::path::{Path, PathBuf};
 use std::process::Command;

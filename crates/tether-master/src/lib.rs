@@ -19,6 +19,7 @@
 //!
 //! The algorithm as implemented is described in `docs/algorithm.md`.
 
+mod arrays;
 mod coupling;
 mod error;
 mod explicit;
@@ -37,11 +38,13 @@ mod runs;
 mod simulation;
 mod slave;
 mod solve;
+mod sparse_lu;
 pub mod spec;
 mod start;
 mod stats;
 mod system;
 mod threads;
+mod touched;
 
 pub use error::MasterError;
 pub use method::Method;

@@ -129,6 +129,12 @@ impl Simulation {
         Ok(sim)
     }
 
+    /// Number of perturbed runs per macro step of the predictor/corrector
+    /// methods: the groups of unknowns that drive disjoint instances.
+    pub fn perturbation_groups(&self) -> usize {
+        self.system.groups.len()
+    }
+
     /// Column names after `time`: every Real output as `<instance>.<variable>`,
     /// then `<constraint>.lambda`, then `<constraint>.g`.
     pub fn columns(&self) -> &[String] {
