@@ -152,6 +152,26 @@ fn alternated(family: Family, largest: usize, reps: usize) {
     );
 }
 
+/// The dense and the sparse solve of chain and tree matrices of size n:
+/// where the sparse path takes over (`DENSE_MAX` in solve.rs).
+fn crossover(reps: usize) {
+    println!(
+        "\nsolve of one n × n interface matrix (row scaling, LU, condition), µs: dense | sparse"
+    );
+    println!("{:>5} {:>17} {:>17}", "n", "chain", "tree");
+    for n in [8, 16, 24, 32, 48, 64, 128, 256] {
+        let (cd, cs) = tether_master::bench_hooks::solve_times(n, false, reps);
+        let (td, ts) = tether_master::bench_hooks::solve_times(n, true, reps);
+        println!(
+            "{n:>5} {:>8.2} | {:>6.2} {:>8.2} | {:>6.2}",
+            cd * 1e6,
+            cs * 1e6,
+            td * 1e6,
+            ts * 1e6
+        );
+    }
+}
+
 fn main() {
     let wanted: Vec<String> = std::env::args()
         .skip(1)
@@ -168,6 +188,7 @@ fn main() {
             .unwrap_or_default()
             .trim()
     );
+    crossover(reps);
     let chains = [2, 8, 32, 128, 256];
     table(Family::OscillatorChain, &[2, 8, 32, 128, 512, 1024], reps);
     table(Family::PendulumChain, &chains, reps);

@@ -58,3 +58,9 @@ pub use spec::{
 pub use start::apply_start_value;
 pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination};
 pub use threads::{Parallel, ParallelInfo};
+
+/// Timings for the benchmarks (not a stable interface).
+#[doc(hidden)]
+pub mod bench_hooks {
+    pub use crate::solve::solve_times;
+}

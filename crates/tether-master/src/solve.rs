@@ -366,6 +366,90 @@ pub(crate) fn solve(
     ))
 }
 
+/// Jacobians of a chain (tridiagonal) and of a binary tree (each node
+/// coupled to its parent and children), with random entries on the
+/// pattern: one column per node.
+pub(crate) fn pattern_matrix(
+    n: usize,
+    tree: bool,
+    seed: u64,
+) -> (Vec<usize>, Vec<usize>, nalgebra::DMatrix<f64>) {
+    let mut state = seed;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut ptr = vec![0];
+    let mut rows = Vec::new();
+    let mut a = nalgebra::DMatrix::zeros(n, n);
+    for c in 0..n {
+        let mut column: Vec<usize> = if tree {
+            let mut v = vec![c, 2 * c + 1, 2 * c + 2];
+            if c > 0 {
+                v.push((c - 1) / 2);
+            }
+            v
+        } else {
+            vec![c.saturating_sub(1), c, c + 1]
+        };
+        column.retain(|&r| r < n);
+        column.sort_unstable();
+        column.dedup();
+        for &r in &column {
+            // Diagonally weighted, with row scales of 1e-6 … 1.
+            let diagonal = if r == c { 4.0 } else { 0.0 };
+            a[(r, c)] = (next() + diagonal) * 10f64.powi(-((r % 4) as i32) * 2);
+        }
+        rows.extend(column);
+        ptr.push(rows.len());
+    }
+    (ptr, rows, a)
+}
+
+/// Seconds per solve of one matrix of [`pattern_matrix`] on the dense and on
+/// the sparse path (medians of alternated blocks): where `DENSE_MAX` comes
+/// from (`cargo bench -p tether-bench -- scale`).
+pub fn solve_times(n: usize, tree: bool, reps: usize) -> (f64, f64) {
+    let (ptr, rows, a) = pattern_matrix(n, tree, 0x9e37_79b9 + n as u64);
+    let mut dense = Solver::default();
+    let mut sparse = Solver {
+        sparse: Some(SparseLu::new(n, ptr.clone(), rows.clone())),
+        ..Solver::default()
+    };
+    let solves = (20_000 / (n * n).max(1)).clamp(20, 2_000);
+    let time = |solver: &mut Solver| {
+        let clock = std::time::Instant::now();
+        for _ in 0..solves {
+            if let Some(sp) = &mut solver.sparse {
+                for c in 0..n {
+                    for k in ptr[c]..ptr[c + 1] {
+                        sp.values[k] = a[(rows[k], c)];
+                    }
+                }
+                sp.x.fill(1.0);
+            } else {
+                let (m, b) = solver.system(n);
+                m.copy_from_slice(a.as_slice());
+                b.fill(1.0);
+            }
+            std::hint::black_box(solver.solve(0.0, "position", f64::INFINITY).is_ok());
+        }
+        clock.elapsed().as_secs_f64() / solves as f64
+    };
+    let (mut d, mut s) = (Vec::new(), Vec::new());
+    for _ in 0..reps.max(1) {
+        d.push(time(&mut dense));
+        s.push(time(&mut sparse));
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    (median(d), median(s))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -501,44 +585,6 @@ mod tests {
             assert_eq!(sa, mats[2].as_slice());
             assert_eq!(sb, &g[2 * n..]);
         }
-    }
-
-    /// Jacobians of a chain (tridiagonal) and of a binary tree (each node
-    /// coupled to its parent and children), with random entries on the
-    /// pattern: one column per node.
-    fn pattern_matrix(n: usize, tree: bool, seed: u64) -> (Vec<usize>, Vec<usize>, DMatrix<f64>) {
-        let mut state = seed;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
-        let mut ptr = vec![0];
-        let mut rows = Vec::new();
-        let mut a = DMatrix::zeros(n, n);
-        for c in 0..n {
-            let mut column: Vec<usize> = if tree {
-                let mut v = vec![c, 2 * c + 1, 2 * c + 2];
-                if c > 0 {
-                    v.push((c - 1) / 2);
-                }
-                v
-            } else {
-                vec![c.saturating_sub(1), c, c + 1]
-            };
-            column.retain(|&r| r < n);
-            column.sort_unstable();
-            column.dedup();
-            for &r in &column {
-                // Diagonally weighted, with row scales of 1e-6 … 1.
-                let diagonal = if r == c { 4.0 } else { 0.0 };
-                a[(r, c)] = (next() + diagonal) * 10f64.powi(-((r % 4) as i32) * 2);
-            }
-            rows.extend(column);
-            ptr.push(rows.len());
-        }
-        (ptr, rows, a)
     }
 
     #[test]
