@@ -62,11 +62,12 @@ impl Jacobians {
         (&self.rows[start..end], values)
     }
 
-    /// A solver for these Jacobians: dense up to [`DENSE_MAX`] unknowns,
-    /// sparse on their pattern beyond.
+    /// A solver for these Jacobians: sparse on their pattern above
+    /// [`DENSE_MAX`] unknowns when at most a quarter of the entries are on
+    /// the pattern, dense otherwise.
     pub fn solver(&self) -> Solver {
         let mut solver = Solver::default();
-        if self.n > DENSE_MAX {
+        if self.n > DENSE_MAX && 4 * self.rows.len() <= self.n * self.n {
             let (ptr, rows) = (self.ptr.clone(), self.rows.clone());
             solver.sparse = Some(SparseLu::new(self.n, ptr, rows));
         }
@@ -149,10 +150,13 @@ impl Jacobians {
     }
 }
 
-/// Largest number of unknowns solved densely. Above it the sparse LU is
-/// faster on the joint systems measured (chains and trees; the `scale`
-/// benchmark), and the dense inverse's O(n³) would dominate the step.
-pub(crate) const DENSE_MAX: usize = 32;
+/// Largest number of unknowns always solved densely. The sparse LU is the
+/// faster from about 16 unknowns on chain and tree patterns (the `scale`
+/// benchmark's crossover table: at 16, 2 µs against 4 µs; at 32, 3 µs
+/// against 19 µs), where the dense inverse's O(n³) starts to dominate; 20
+/// keeps every system of the fmpy cross-check (at most 17 unknowns) on the
+/// dense path's arithmetic, bit for bit.
+pub(crate) const DENSE_MAX: usize = 20;
 
 /// A reusable solver for `A x = b` with `n × n` systems.
 #[derive(Debug, Default)]
