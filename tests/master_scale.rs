@@ -1,5 +1,5 @@
 //! Large systems: chains written with array blocks (`count = N`), solved on
-//! the dense path (≤ 32 unknowns) and on the sparse path (more), against the
+//! the dense path (≤ 20 unknowns) and on the sparse path (more), against the
 //! closed form of the rigid chain, and the number of perturbed runs per step.
 //!
 //! A chain of oscillators joined by rigid links moves as one oscillator with

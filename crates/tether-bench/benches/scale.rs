@@ -84,7 +84,7 @@ fn shares(p: &PhaseTimes) -> String {
     let parts = [p.predictor, p.jacobian, p.solve, p.corrector].map(|d| d.as_secs_f64());
     let total: f64 = parts.iter().sum::<f64>().max(1e-300);
     let [a, b, c, d] = parts.map(|x| 100.0 * x / total);
-    format!("{a:3.0} {b:3.0} {c:3.0} {d:3.0}")
+    format!("{a:.0}/{b:.0}/{c:.0}/{d:.0}")
 }
 
 fn table(family: Family, sizes: &[usize], reps: usize) {
@@ -92,17 +92,7 @@ fn table(family: Family, sizes: &[usize], reps: usize) {
         "\n{} (Method 1, index 2, H = 1e-3; medians of {reps} blocks)",
         family.name()
     );
-    println!(
-        "{:>5} {:>6} {:>10} {:>9} {:>9} {:>11} {:>12}  {}",
-        "N",
-        "groups",
-        "setup ms",
-        "µs/inst",
-        "KiB/inst",
-        "µs/step",
-        "µs/step/inst",
-        "pred jac solve corr %"
-    );
+    println!("| system | N | groups | setup / instance | µs per step | µs per step and instance | phases P/J/S/C % |");
     for &n in sizes {
         let (mut sim, setup, grown) = build(family, n, reps);
         let mut times = Vec::new();
@@ -120,11 +110,10 @@ fn table(family: Family, sizes: &[usize], reps: usize) {
             format!("{:.1}", g / 1024.0 / n as f64)
         });
         println!(
-            "{n:>5} {:>6} {:>10.1} {:>9.1} {:>9} {:>11.1} {:>12.3}  {}",
+            "| {} | {n} | {} | {:.0} µs, {memory} KiB | {:.1} | {:.3} | {} |",
+            family.name(),
             sim.perturbation_groups(),
-            setup.as_secs_f64() * 1e3,
             setup.as_secs_f64() * 1e6 / n as f64,
-            memory,
             step * 1e6,
             step * 1e6 / n as f64,
             shares(&phases)

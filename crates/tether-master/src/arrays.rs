@@ -259,7 +259,7 @@ impl Parser<'_> {
                 }
                 self.pos += 1;
                 let x = argument.real();
-                if !(x >= 1.0) {
+                if x.is_nan() || x < 1.0 {
                     return Err(format!("log2 of {x} in \"{{{}}}\" (needs ≥ 1)", self.text));
                 }
                 Ok(Number::Integer(x.log2().floor() as i64))

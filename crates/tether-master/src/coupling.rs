@@ -90,9 +90,9 @@ impl Coupling {
 
     /// Evaluate every row at `level` into `out`.
     pub fn eval(&self, level: RowLevel, view: &View, out: &mut [f64]) {
-        for r in 0..self.unknowns.len() {
+        for (r, slot) in out.iter_mut().enumerate().take(self.unknowns.len()) {
             if let Some(value) = self.eval_row(r, level, view) {
-                out[r] = value;
+                *slot = value;
             }
         }
         // One kinematics read and one force law per joint condition; each port

@@ -631,7 +631,7 @@ mod tests {
         let n = 50;
         let (ptr, rows, mut a) = pattern_matrix(n, false, 7);
         // Row 20 becomes twice row 21 (on the shared pattern entries): rank deficient.
-        let mut with = |a: &DMatrix<f64>| {
+        let with = |a: &DMatrix<f64>| {
             let mut solver = Solver {
                 sparse: Some(SparseLu::new(n, ptr.clone(), rows.clone())),
                 ..Solver::default()

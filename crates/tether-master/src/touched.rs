@@ -111,8 +111,8 @@ impl Touched {
             unknown_rows[m].iter().for_each(|&r| add_row(&mut rows, r));
             // The force laws of the joints reading a perturbed instance change
             // the port rows they load.
-            for i in 0..joints.len() {
-                for &(_, _, row) in &coupling.joints[joints[i]].targets {
+            for &j in &joints {
+                for &(_, _, row) in &coupling.joints[j].targets {
                     add_row(&mut rows, row);
                 }
             }
