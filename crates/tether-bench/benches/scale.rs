@@ -11,18 +11,9 @@
 
 use std::time::{Duration, Instant};
 
+use tether_bench::median;
 use tether_bench::scale::Family;
 use tether_master::{PhaseTimes, Simulation};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
 
 fn reps() -> usize {
     std::env::var("TETHER_BENCH_REPS")
