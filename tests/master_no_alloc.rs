@@ -217,3 +217,82 @@ fn joint_macro_steps_do_not_allocate() {
     }
     assert!(failures.is_empty(), "allocations per run: {failures:?}");
 }
+
+/// The sparse path (more than 20 unknowns): a chain of 40 oscillators and a
+/// chain of 12 hinged bars (11 hinges: 22 multipliers and 44 force ports),
+/// written with array blocks, for the predictor/corrector methods and the
+/// explicit method.
+#[test]
+fn sparse_macro_steps_do_not_allocate() {
+    let oscillator = tether_fmu_build::workspace_fmu("oscillator").expect("oscillator FMU");
+    let link = tether_fmu_build::workspace_fmu("link").expect("link FMU");
+    let oscillators = format!(
+        r#"
+        [experiment]
+        stop = 0.1
+        step = 1e-3
+        [[instance]]
+        name = "mass{{i}}"
+        count = 40
+        fmu = "{}"
+        parameters = {{ m = "{{1.0 + i % 2}}", c = 1000.0, d = 10.0, x0 = 0.0, v0 = 100.0, exact = true }}
+        [[constraint]]
+        name = "link{{i}}"
+        count = 39
+        position = "mass{{i + 1}}.x - mass{{i}}.x"
+        velocity = "mass{{i + 1}}.v - mass{{i}}.v"
+        acceleration = "mass{{i + 1}}.a - mass{{i}}.a"
+        drives = "mass{{i}}.F - mass{{i + 1}}.F"
+        "#,
+        oscillator.display()
+    );
+    let bars = format!(
+        r#"
+        [experiment]
+        stop = 0.1
+        step = 1e-3
+        [[instance]]
+        name = "bar0"
+        fmu = "{fmu}"
+        parameters = {{ pinned = true, phi0 = -0.7853981633974483 }}
+        [[instance]]
+        name = "bar{{i + 1}}"
+        count = 11
+        fmu = "{fmu}"
+        parameters = {{ phi0 = -0.7853981633974483, x0 = "{{0.7071067811865476 * (i + 1)}}", y0 = "{{-0.7071067811865476 * (i + 1)}}" }}
+        [[joint]]
+        name = "hinge{{i}}"
+        count = 11
+        kind = "atpoint"
+        plane = "xy"
+        i = "bar{{i}}.B"
+        j = "bar{{i + 1}}.A"
+        "#,
+        fmu = link.display()
+    );
+    let mut failures = Vec::new();
+    for (name, text) in [("oscillator chain", oscillators), ("bar chain", bars)] {
+        let base = SystemSpec::from_toml(&text).expect("valid system");
+        for method in [
+            tether_master::Method::Baumgarte {
+                beta: 2e-3,
+                gamma: 1e-6,
+            },
+            tether_master::Method::Baumgarte {
+                beta: 2e-3,
+                gamma: 0.0,
+            },
+            tether_master::Method::Weighted { a: 1.0, b: 0.0 },
+            tether_master::Method::Explicit { mu: 1e-2 },
+        ] {
+            let mut spec = base.clone();
+            spec.method = method;
+            let n = steady_state_allocations(&spec, false);
+            eprintln!("{name}, {method}: {n} allocations in 90 steps");
+            if n != 0 {
+                failures.push(format!("{name}, {method}: {n}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "allocations per run: {failures:?}");
+}

@@ -28,23 +28,13 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use tether_bench::{
-    floor, fmpy_loop, fmpy_reference, host_probe, workspace_root, Case, StateError,
+    floor, fmpy_loop, fmpy_reference, host_probe, median, workspace_root, Case, StateError,
 };
 use tether_fmi::Fmu;
 use tether_master::spec::Isolation;
 use tether_master::{
     CsvRecorder, InstanceCounters, Method, Observer, Parallel, Sample, Simulation, SystemSpec,
 };
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
 
 fn minimum(v: &[f64]) -> f64 {
     v.iter().copied().fold(f64::INFINITY, f64::min)

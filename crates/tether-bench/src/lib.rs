@@ -4,12 +4,25 @@
 //!
 //! Run with `cargo bench -p tether-bench`; see docs/performance.md.
 
+pub mod scale;
+
 use std::ffi::{c_char, c_int, c_long, CString};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use tether_fmi::Fmu;
 use tether_master::{Method, StartValue, SystemSpec};
+
+/// The median of `v` (the mean of the middle two for an even count).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
 
 /// The workspace root.
 pub fn workspace_root() -> PathBuf {

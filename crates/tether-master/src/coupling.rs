@@ -90,37 +90,52 @@ impl Coupling {
 
     /// Evaluate every row at `level` into `out`.
     pub fn eval(&self, level: RowLevel, view: &View, out: &mut [f64]) {
-        for (r, unknown) in self.unknowns.iter().enumerate() {
-            out[r] = match unknown.row {
-                Row::Constraint(c) => self.constraints[c].eval(level, view),
-                // Joint rows are filled below, one kinematics read per joint.
-                Row::Joint { .. } => continue,
-                Row::Variable(v) => {
-                    let var = &self.variables[v];
-                    view.unknown(var.unknown) - var.value.eval(view)
-                }
-                // Port rows first accumulate Σ λ·law below.
-                Row::Port(_) => 0.0,
-            };
+        for (r, slot) in out.iter_mut().enumerate().take(self.unknowns.len()) {
+            if let Some(value) = self.eval_row(r, level, view) {
+                *slot = value;
+            }
         }
         // One kinematics read and one force law per joint condition; each port
         // sums its contributions in (joint, condition) order.
         for joint in &self.joints {
-            let (ki, kj) = joint.kinematics(view);
-            let mut targets = joint.targets.iter().peekable();
-            for (c, condition) in joint.conditions.iter().enumerate() {
-                out[joint.first_unknown + c] = condition.value(level, &ki, &kj);
-                if targets.peek().is_some_and(|t| t.0 == c) {
-                    let law = condition.law(&ki, &kj);
-                    let lambda = view.unknown(joint.first_unknown + c);
-                    while let Some(&(_, component, row)) = targets.next_if(|t| t.0 == c) {
-                        out[row] += lambda * law[component];
-                    }
-                }
-            }
+            self.eval_joint(joint, level, view, out);
         }
         for port in &self.ports {
             out[port.unknown] = view.unknown(port.unknown) - out[port.unknown];
+        }
+    }
+
+    /// Row `r` on its own: a constraint or variable row's value, 0 for a port
+    /// row (its joints add Σ λ·law, then it becomes `u − Σ`); `None` for a
+    /// joint row (filled by [`Coupling::eval_joint`]).
+    #[inline]
+    pub fn eval_row(&self, r: usize, level: RowLevel, view: &View) -> Option<f64> {
+        match self.unknowns[r].row {
+            Row::Constraint(c) => Some(self.constraints[c].eval(level, view)),
+            Row::Joint { .. } => None,
+            Row::Variable(v) => {
+                let var = &self.variables[v];
+                Some(view.unknown(var.unknown) - var.value.eval(view))
+            }
+            Row::Port(_) => Some(0.0),
+        }
+    }
+
+    /// A joint's condition rows, and its force laws added to the port rows
+    /// it loads: one kinematics read and one law per loading condition.
+    #[inline]
+    pub fn eval_joint(&self, joint: &Joint, level: RowLevel, view: &View, out: &mut [f64]) {
+        let (ki, kj) = joint.kinematics(view);
+        let mut targets = joint.targets.iter().peekable();
+        for (c, condition) in joint.conditions.iter().enumerate() {
+            out[joint.first_unknown + c] = condition.value(level, &ki, &kj);
+            if targets.peek().is_some_and(|t| t.0 == c) {
+                let law = condition.law(&ki, &kj);
+                let lambda = view.unknown(joint.first_unknown + c);
+                while let Some(&(_, component, row)) = targets.next_if(|t| t.0 == c) {
+                    out[row] += lambda * law[component];
+                }
+            }
         }
     }
 

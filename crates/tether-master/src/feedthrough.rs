@@ -8,7 +8,7 @@
 use crate::polynomial::Taylor;
 use crate::rows::{Column, RowLevel, View};
 use crate::slave::Run;
-use crate::solve::Solver;
+use crate::solve::{Jacobians, Solver};
 use crate::spec::InitialMultiplier;
 use crate::stats::RunStats;
 use crate::system::System;
@@ -31,9 +31,15 @@ pub(crate) struct Feedthrough {
     touched: Vec<bool>,
     /// Instances whose outputs count as perturbed for one column.
     live: Vec<bool>,
+    /// Per unknown: its column in the solve, if it is being solved for.
+    column: Vec<Option<usize>>,
     /// Row values, and the residuals of `unknowns` at `polys`.
     rows: Vec<f64>,
     r0: Vec<f64>,
+    /// ∂r/∂u of every row on the pattern of the rows each unknown touches.
+    jac: Jacobians,
+    /// For all unknowns at once (dense or sparse by size), and for a subset.
+    all: Solver,
     solver: Solver,
 }
 
@@ -50,8 +56,11 @@ impl Feedthrough {
             outputs,
             touched: vec![false; system.slaves.len()],
             live: vec![false; system.slaves.len()],
+            column: vec![None; nu],
             rows: vec![0.0; nu],
             r0: Vec::with_capacity(nu),
+            jac: Jacobians::new(&system.touched, 1),
+            all: Jacobians::new(&system.touched, 1).solver(),
             solver: Solver::default(),
         }
     }
@@ -128,28 +137,31 @@ impl Feedthrough {
         self.r0.clear();
         self.r0.extend(self.unknowns.iter().map(|&m| self.rows[m]));
         let n = self.unknowns.len();
-        self.solver.system(n).0.fill(0.0);
-        for group in &system.groups {
-            if !group.iter().any(|m| self.unknowns.contains(m)) {
+        self.column.fill(None);
+        for (k, &m) in self.unknowns.iter().enumerate() {
+            self.column[m] = Some(k);
+        }
+        for (group, members) in system.groups.iter().zip(&system.group_slaves) {
+            if !group.iter().any(|&m| self.column[m].is_some()) {
                 continue;
             }
-            let members = || group.iter().copied().filter(|m| self.unknowns.contains(m));
+            let column = &self.column;
+            let members_solved = || group.iter().copied().filter(|&m| column[m].is_some());
             self.bumped.copy_from_slice(&self.polys);
-            self.touched.fill(false);
-            for m in members() {
+            for m in members_solved() {
                 self.bumped[m].value += system.delta(m);
                 for &s in &system.owners[m] {
                     self.touched[s] = true;
                 }
             }
-            for (s, slave) in system.slaves.iter_mut().enumerate() {
+            for &s in members {
                 if self.touched[s] {
+                    let slave = &mut system.slaves[s];
                     slave.apply_inputs(&self.bumped)?;
                     slave.read_coupled(&mut self.perturbed[s], Run::Feedthrough)?;
                 }
             }
-            for m in members() {
-                self.live.fill(false);
+            for m in members_solved() {
                 for &s in &system.owners[m] {
                     self.live[s] = true;
                 }
@@ -164,28 +176,53 @@ impl Feedthrough {
                         perturbed: &self.perturbed,
                     }),
                 };
-                system.coupling.eval(level, &view, &mut self.rows);
-                let col = self.unknowns.iter().position(|&x| x == m);
-                let col = col.expect("a member of the unknowns");
-                let w = &mut self.solver.system(n).0[col * n..(col + 1) * n];
-                for ((w, &r), r0) in w.iter_mut().zip(&self.unknowns).zip(&self.r0) {
-                    *w = (self.rows[r] - r0) / delta;
+                let touched = &system.touched;
+                touched.eval(&system.coupling, m, level, &view, &mut self.rows);
+                for &s in &system.owners[m] {
+                    self.live[s] = false;
+                }
+                let (rows, w) = self.jac.column_mut(m);
+                for (w, &r) in w.iter_mut().zip(rows) {
+                    *w = (self.rows[r] - row_at(&self.r0, column, r)) / delta;
                 }
             }
-            for (s, slave) in system.slaves.iter_mut().enumerate() {
+            for &s in members {
                 if self.touched[s] {
-                    slave.apply_inputs(&self.polys)?;
+                    self.touched[s] = false;
+                    system.slaves[s].apply_inputs(&self.polys)?;
                 }
             }
         }
         stats.jacobian_solves += 1;
-        self.solver.system(n).1.copy_from_slice(&self.r0);
-        let step = self
-            .solver
-            .solve(time, "acceleration", system.max_condition)?;
+        let solver = if n == self.column.len() {
+            // Every unknown: the rows are in unknown order.
+            self.jac.load_level(&mut self.all, &self.r0, 0);
+            &mut self.all
+        } else {
+            let (w, b) = self.solver.system(n);
+            w.fill(0.0);
+            for (k, &m) in self.unknowns.iter().enumerate() {
+                let (rows, values) = self.jac.column_mut(m);
+                for (&r, &value) in rows.iter().zip(values.iter()) {
+                    if let Some(i) = self.column[r] {
+                        w[i + k * n] = value;
+                    }
+                }
+            }
+            b.copy_from_slice(&self.r0);
+            &mut self.solver
+        };
+        let step = solver.solve(time, "acceleration", system.max_condition)?;
         for (&m, s) in self.unknowns.iter().zip(step) {
             system.history[m][0] -= s;
         }
         Ok(())
     }
+}
+
+/// The residual of row `r` at the unperturbed point, for rows solved for
+/// (`r0` in the order of `column`); other rows' entries are not used.
+#[inline]
+fn row_at(r0: &[f64], column: &[Option<usize>], r: usize) -> f64 {
+    column[r].map_or(0.0, |i| r0[i])
 }

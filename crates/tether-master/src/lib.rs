@@ -19,6 +19,7 @@
 //!
 //! The algorithm as implemented is described in `docs/algorithm.md`.
 
+mod arrays;
 mod backend;
 mod coupling;
 mod error;
@@ -38,11 +39,13 @@ mod runs;
 mod simulation;
 mod slave;
 mod solve;
+mod sparse_lu;
 pub mod spec;
 mod start;
 mod stats;
 mod system;
 mod threads;
+mod touched;
 
 pub use error::MasterError;
 pub use method::Method;
@@ -56,3 +59,9 @@ pub use spec::{
 pub use start::{apply_start_value, Settable};
 pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination, SUMMARY_SCHEMA};
 pub use threads::{Parallel, ParallelInfo};
+
+/// Timings for the benchmarks (not a stable interface).
+#[doc(hidden)]
+pub mod bench_hooks {
+    pub use crate::solve::solve_times;
+}

@@ -21,8 +21,8 @@ pub(crate) struct PredictorCorrector {
     order: usize,
     /// The levels the method evaluates, position first.
     levels: Vec<RowLevel>,
-    /// Rows that are the same on every level (coupling variables and ports).
-    algebraic_rows: Vec<usize>,
+    /// Per row: the same on every level (coupling variables and ports).
+    algebraic_rows: Vec<bool>,
     /// How the perturbed runs are executed.
     runs: Box<dyn PerturbedRuns>,
     /// Each unknown's polynomial over the step: predictor, then corrector.
@@ -70,7 +70,7 @@ impl PredictorCorrector {
             method,
             order,
             algebraic_rows: (0..nu)
-                .filter(|&r| system.coupling.unknowns[r].is_algebraic())
+                .map(|r| system.coupling.unknowns[r].is_algebraic())
                 .collect(),
             runs,
             polys: vec![Taylor::default(); nu],
@@ -82,8 +82,8 @@ impl PredictorCorrector {
             outputs: vec![outputs.clone(); system.groups.len()],
             live: vec![false; system.slaves.len()],
             rows: vec![0.0; levels.len() * nu],
-            jac: Jacobians::new(nu, levels.len()),
-            solver: Solver::default(),
+            jac: Jacobians::new(&system.touched, levels.len()),
+            solver: Jacobians::new(&system.touched, 1).solver(),
             corrected: vec![0.0; nu],
             levels,
         }
@@ -128,7 +128,7 @@ impl PredictorCorrector {
     /// run from the saved states with u^p_m + Δu_m in the interpolation
     /// polynomial of each unknown m of the group; column m of the interface
     /// Jacobian is (g^{pp_m} − g^p)/Δu_m, with only m's own instances read
-    /// as perturbed.
+    /// as perturbed and only the rows they touch evaluated.
     fn perturb(
         &mut self,
         system: &mut System,
@@ -149,7 +149,6 @@ impl PredictorCorrector {
         let nu = system.coupling.len();
         for (group, outputs) in system.groups.iter().zip(&self.outputs) {
             for &m in group {
-                self.live.fill(false);
                 for &s in &system.owners[m] {
                     self.live[s] = true;
                 }
@@ -163,12 +162,21 @@ impl PredictorCorrector {
                         perturbed: outputs,
                     }),
                 };
+                let touched = &system.touched;
                 for (&level, rows) in self.levels.iter().zip(self.rows.chunks_exact_mut(nu)) {
-                    system.coupling.eval(level, &view, rows);
+                    touched.eval(&system.coupling, m, level, &view, rows);
                 }
-                let column = self.jac.column_mut(m);
-                for ((j, row), g) in column.iter_mut().zip(&self.rows).zip(&self.g) {
-                    *j = (row - g) / self.delta[m];
+                for &s in &system.owners[m] {
+                    self.live[s] = false;
+                }
+                let (rows, column) = self.jac.column_mut(m);
+                let levels = self.rows.chunks_exact(nu).zip(self.g.chunks_exact(nu));
+                for (values, (perturbed, g)) in
+                    column.chunks_exact_mut(rows.len().max(1)).zip(levels)
+                {
+                    for (j, &r) in values.iter_mut().zip(rows) {
+                        *j = (perturbed[r] - g[r]) / self.delta[m];
+                    }
                 }
             }
         }
@@ -190,10 +198,9 @@ impl PredictorCorrector {
                 // port and coupling-variable rows are not stabilised.
                 let velocity = level(RowLevel::Velocity).map(|v| (v, beta));
                 let acceleration = level(RowLevel::Acceleration).map(|a| (a, gamma));
-                let (a, b) = self.solver.system(self.u_pred.len());
                 let plain = &self.algebraic_rows;
                 self.jac
-                    .baumgarte(&self.g, velocity, acceleration, plain, a, b);
+                    .baumgarte(&mut self.solver, &self.g, velocity, acceleration, plain);
                 let name = if self.levels.len() == 1 {
                     "position"
                 } else {
@@ -216,7 +223,7 @@ impl PredictorCorrector {
                         _ => (1.0, "position"),
                     };
                     stats.jacobian_solves += 1;
-                    self.solver.load_level(&self.jac, &self.g, l);
+                    self.jac.load_level(&mut self.solver, &self.g, l);
                     let step = self.solver.solve(time, name, limit)?;
                     for ((c, p), s) in self.corrected.iter_mut().zip(&self.u_pred).zip(step) {
                         *c += weight * (p - s);

@@ -166,6 +166,12 @@ impl Simulation {
         Ok(sim)
     }
 
+    /// Number of perturbed runs per macro step of the predictor/corrector
+    /// methods: the groups of unknowns that drive disjoint instances.
+    pub fn perturbation_groups(&self) -> usize {
+        self.system.groups.len()
+    }
+
     /// Column names after `time`, as recorded: every output (Real, then
     /// Integer, then Boolean) as `<instance>.<variable>`, then
     /// `<constraint>.lambda`, then `<constraint>.g`; only those selected by

@@ -11,98 +11,155 @@
 #[cfg(test)]
 use nalgebra::{DMatrix, DVector};
 
+use crate::sparse_lu::{Singular, SparseLu};
+use crate::touched::Touched;
 use crate::MasterError;
 
 /// The interface Jacobians ∂g/∂u of every level a method evaluates
-/// (position first), column after column: column `m` holds its rows of every
-/// level in turn, so the finite difference in unknown `m` fills one
-/// contiguous run of `levels × n` values.
+/// (position first), on the pattern of the rows each unknown touches
+/// ([`Touched`]): column `m` holds its touched rows of every level in turn,
+/// so the finite difference in unknown `m` fills one contiguous run of
+/// `levels × rows` values. Entries off the pattern are exact zeros.
 #[derive(Debug, Default, Clone)]
 pub(crate) struct Jacobians {
     n: usize,
     levels: usize,
+    /// Column c's rows are `rows[ptr[c]..ptr[c + 1]]`, sorted.
+    ptr: Vec<usize>,
+    rows: Vec<usize>,
     data: Vec<f64>,
 }
 
 impl Jacobians {
-    /// Zero Jacobians of `levels` levels for `n` unknowns.
-    pub fn new(n: usize, levels: usize) -> Jacobians {
+    /// Zero Jacobians of `levels` levels on the pattern of `touched`.
+    pub fn new(touched: &Touched, levels: usize) -> Jacobians {
+        Jacobians {
+            n: touched.row_ptr.len() - 1,
+            levels,
+            ptr: touched.row_ptr.clone(),
+            rows: touched.rows.clone(),
+            data: vec![0.0; touched.nnz() * levels],
+        }
+    }
+
+    /// Zero Jacobians with every entry on the pattern (tests).
+    #[cfg(test)]
+    pub fn dense(n: usize, levels: usize) -> Jacobians {
         Jacobians {
             n,
             levels,
+            ptr: (0..=n).map(|c| c * n).collect(),
+            rows: (0..n * n).map(|i| i % n).collect(),
             data: vec![0.0; n * n * levels],
         }
     }
 
-    /// Column `m` of every level, level after level.
+    /// The rows of column `m`, and its values of every level, level after level.
     #[inline]
-    pub fn column_mut(&mut self, m: usize) -> &mut [f64] {
-        let len = self.levels * self.n;
-        &mut self.data[m * len..(m + 1) * len]
+    pub fn column_mut(&mut self, m: usize) -> (&[usize], &mut [f64]) {
+        let (start, end) = (self.ptr[m], self.ptr[m + 1]);
+        let values = &mut self.data[start * self.levels..end * self.levels];
+        (&self.rows[start..end], values)
     }
 
-    /// Entry `(r, c)` of level `l`.
-    #[inline]
-    pub fn get(&self, l: usize, r: usize, c: usize) -> f64 {
-        self.data[(c * self.levels + l) * self.n + r]
+    /// A solver for these Jacobians: sparse on their pattern above
+    /// [`DENSE_MAX`] unknowns when at most a quarter of the entries are on
+    /// the pattern, dense otherwise.
+    pub fn solver(&self) -> Solver {
+        let mut solver = Solver::default();
+        if self.n > DENSE_MAX && 4 * self.rows.len() <= self.n * self.n {
+            let (ptr, rows) = (self.ptr.clone(), self.rows.clone());
+            solver.sparse = Some(SparseLu::new(self.n, ptr, rows));
+        }
+        solver
     }
 
-    /// Level `l` into `a` (column-major `n × n`).
-    pub fn level_into(&self, l: usize, a: &mut [f64]) {
+    /// Load every column into `solver`'s matrix, entry `k` of column `c`
+    /// (row `r`) as `value(column values, rows in the column, k, r)`, and
+    /// hand out its right-hand side.
+    fn load<'s>(
+        &self,
+        solver: &'s mut Solver,
+        value: impl Fn(&[f64], usize, usize, usize) -> f64,
+    ) -> &'s mut [f64] {
         let n = self.n;
-        for (c, column) in a.chunks_exact_mut(n).enumerate() {
-            for (r, x) in column.iter_mut().enumerate() {
-                *x = self.get(l, r, c);
+        let columns = (0..n).map(|c| {
+            let (start, end) = (self.ptr[c], self.ptr[c + 1]);
+            let values = &self.data[start * self.levels..end * self.levels];
+            (c, &self.rows[start..end], values)
+        });
+        if solver.sparse.is_none() {
+            let (a, b) = solver.system(n);
+            a.fill(0.0);
+            for (c, rows, column) in columns {
+                for (k, &r) in rows.iter().enumerate() {
+                    a[r + c * n] = value(column, rows.len(), k, r);
+                }
+            }
+            return b;
+        }
+        let sparse = solver.sparse.as_mut().expect("checked above");
+        for (c, rows, column) in columns {
+            let start = sparse.column_start(c);
+            for (k, &r) in rows.iter().enumerate() {
+                sparse.values[start + k] = value(column, rows.len(), k, r);
             }
         }
+        &mut sparse.x
     }
 
-    /// `G^B = G + β Ġ + γ G̈` into `a` (column-major `n × n`) and
-    /// `g^B = g + β ġ + γ g̈` into `b`, from `g` (the conditions of every
-    /// level, level after level); a level is added with its weight when it
-    /// is evaluated (`Some(index)`). Rows in `plain` (coupling variables and
-    /// ports) keep their position level.
+    /// Load level `l` of the Jacobians and of `g` (every row of every
+    /// level, level after level) into `solver`.
+    pub fn load_level(&self, solver: &mut Solver, g: &[f64], l: usize) {
+        let n = self.n;
+        let b = self.load(solver, |column, len, k, _| column[l * len + k]);
+        b.copy_from_slice(&g[l * n..(l + 1) * n]);
+    }
+
+    /// `G^B = G + β Ġ + γ G̈` and `g^B = g + β ġ + γ g̈` into `solver`, from
+    /// `g` (the conditions of every level, level after level); a level is
+    /// added with its weight when it is evaluated (`Some(index)`). Rows
+    /// marked in `plain` (coupling variables and ports) keep their position
+    /// level.
     pub fn baumgarte(
         &self,
+        solver: &mut Solver,
         g: &[f64],
         velocity: Option<(usize, f64)>,
         acceleration: Option<(usize, f64)>,
-        plain: &[usize],
-        a: &mut [f64],
-        b: &mut [f64],
+        plain: &[bool],
     ) {
-        let n = self.n;
-        let stabilised = |level: &[f64], r: usize| {
-            let mut sum = level[r];
+        let stabilised = |level: &[f64], len: usize, k: usize, r: usize| {
+            let mut sum = level[k];
+            if plain[r] {
+                return sum;
+            }
             if let Some((v, beta)) = velocity {
-                sum += beta * level[v * n + r];
+                sum += beta * level[v * len + k];
             }
             if let Some((acc, gamma)) = acceleration {
-                sum += gamma * level[acc * n + r];
+                sum += gamma * level[acc * len + k];
             }
             sum
         };
-        let len = self.levels * n;
-        for c in 0..n {
-            let column = &self.data[c * len..(c + 1) * len];
-            for r in 0..n {
-                a[r + c * n] = stabilised(column, r);
-            }
-        }
+        let n = self.n;
+        let b = self.load(solver, stabilised);
         for (r, x) in b.iter_mut().enumerate() {
-            *x = stabilised(g, r);
-        }
-        for &r in plain {
-            for c in 0..n {
-                a[r + c * n] = self.get(0, r, c);
-            }
-            b[r] = g[r];
+            *x = stabilised(g, n, r, r);
         }
     }
 }
 
+/// Largest number of unknowns always solved densely. The sparse LU is the
+/// faster from about 16 unknowns on chain and tree patterns (the `scale`
+/// benchmark's crossover table: at 16, 2 µs against 4 µs; at 32, 3 µs
+/// against 19 µs), where the dense inverse's O(n³) starts to dominate; 20
+/// keeps every system of the fmpy cross-check (at most 17 unknowns) on the
+/// dense path's arithmetic, bit for bit.
+pub(crate) const DENSE_MAX: usize = 20;
+
 /// A reusable solver for `A x = b` with `n × n` systems.
-#[derive(Debug, Default, Clone)]
+#[derive(Debug, Default)]
 pub(crate) struct Solver {
     n: usize,
     /// The system matrix, column-major; scaled and factorised in place.
@@ -117,6 +174,8 @@ pub(crate) struct Solver {
     inverse: Vec<f64>,
     /// The solution.
     x: Vec<f64>,
+    /// The sparse path, for systems above [`DENSE_MAX`] unknowns.
+    sparse: Option<SparseLu>,
 }
 
 impl Solver {
@@ -140,14 +199,6 @@ impl Solver {
         self.x.resize(n, 0.0);
     }
 
-    /// Load level `l` of `jac` and of `g` (every level, level after level).
-    pub fn load_level(&mut self, jac: &Jacobians, g: &[f64], l: usize) {
-        let n = jac.n;
-        let (sa, sb) = self.system(n);
-        jac.level_into(l, sa);
-        sb.copy_from_slice(&g[l * n..(l + 1) * n]);
-    }
-
     /// Load `A` and `b` (copies, no allocation once sized).
     #[cfg(test)]
     pub fn load(&mut self, a: &DMatrix<f64>, b: &DVector<f64>) {
@@ -161,8 +212,9 @@ impl Solver {
     /// Solve the loaded system. Rows are scaled to unit max-norm first
     /// (position, velocity and acceleration rows have very different
     /// magnitudes), then the 1-norm condition number of the scaled matrix is
-    /// estimated from its inverse. A condition above `limit` or an exactly
-    /// singular matrix is an error naming the time and the level.
+    /// taken from its inverse (dense path) or estimated from its LU factors
+    /// (sparse path, [`crate::sparse_lu`]). A condition above `limit` or an
+    /// exactly singular matrix is an error naming the time and the level.
     pub fn solve(
         &mut self,
         time: f64,
@@ -175,6 +227,13 @@ impl Solver {
             condition,
             limit,
         };
+        if let Some(sparse) = &mut self.sparse {
+            let condition = sparse.solve().map_err(|Singular(c)| singular(c))?;
+            if !(condition.is_finite() && condition <= limit) {
+                return Err(singular(condition));
+            }
+            return Ok(&sparse.x);
+        }
         let n = self.n;
         let a = &mut self.a;
         for i in 0..n {
@@ -311,6 +370,90 @@ pub(crate) fn solve(
     ))
 }
 
+/// Jacobians of a chain (tridiagonal) and of a binary tree (each node
+/// coupled to its parent and children), with random entries on the
+/// pattern: one column per node.
+pub(crate) fn pattern_matrix(
+    n: usize,
+    tree: bool,
+    seed: u64,
+) -> (Vec<usize>, Vec<usize>, nalgebra::DMatrix<f64>) {
+    let mut state = seed;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut ptr = vec![0];
+    let mut rows = Vec::new();
+    let mut a = nalgebra::DMatrix::zeros(n, n);
+    for c in 0..n {
+        let mut column: Vec<usize> = if tree {
+            let mut v = vec![c, 2 * c + 1, 2 * c + 2];
+            if c > 0 {
+                v.push((c - 1) / 2);
+            }
+            v
+        } else {
+            vec![c.saturating_sub(1), c, c + 1]
+        };
+        column.retain(|&r| r < n);
+        column.sort_unstable();
+        column.dedup();
+        for &r in &column {
+            // Diagonally weighted, with row scales of 1e-6 … 1.
+            let diagonal = if r == c { 4.0 } else { 0.0 };
+            a[(r, c)] = (next() + diagonal) * 10f64.powi(-((r % 4) as i32) * 2);
+        }
+        rows.extend(column);
+        ptr.push(rows.len());
+    }
+    (ptr, rows, a)
+}
+
+/// Seconds per solve of one matrix of [`pattern_matrix`] on the dense and on
+/// the sparse path (medians of alternated blocks): where `DENSE_MAX` comes
+/// from (`cargo bench -p tether-bench -- scale`).
+pub fn solve_times(n: usize, tree: bool, reps: usize) -> (f64, f64) {
+    let (ptr, rows, a) = pattern_matrix(n, tree, 0x9e37_79b9 + n as u64);
+    let mut dense = Solver::default();
+    let mut sparse = Solver {
+        sparse: Some(SparseLu::new(n, ptr.clone(), rows.clone())),
+        ..Solver::default()
+    };
+    let solves = (20_000 / (n * n).max(1)).clamp(20, 2_000);
+    let time = |solver: &mut Solver| {
+        let clock = std::time::Instant::now();
+        for _ in 0..solves {
+            if let Some(sp) = &mut solver.sparse {
+                for c in 0..n {
+                    for k in ptr[c]..ptr[c + 1] {
+                        sp.values[k] = a[(rows[k], c)];
+                    }
+                }
+                sp.x.fill(1.0);
+            } else {
+                let (m, b) = solver.system(n);
+                m.copy_from_slice(a.as_slice());
+                b.fill(1.0);
+            }
+            std::hint::black_box(solver.solve(0.0, "position", f64::INFINITY).is_ok());
+        }
+        clock.elapsed().as_secs_f64() / solves as f64
+    };
+    let (mut d, mut s) = (Vec::new(), Vec::new());
+    for _ in 0..reps.max(1) {
+        d.push(time(&mut dense));
+        s.push(time(&mut sparse));
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    (median(d), median(s))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -403,9 +546,10 @@ mod tests {
         for (n, plain) in [(3, vec![1]), (3, vec![]), (1, vec![]), (1, vec![0])] {
             let levels = 3;
             let value = |l: usize, r: usize, c: usize| ((l * 7 + r * 3 + c) as f64).sin() * 1e3;
-            let mut jac = Jacobians::new(n, levels);
+            let mut jac = Jacobians::dense(n, levels);
             for c in 0..n {
-                for (i, x) in jac.column_mut(c).iter_mut().enumerate() {
+                let (_, column) = jac.column_mut(c);
+                for (i, x) in column.iter_mut().enumerate() {
                     *x = value(i / n, i % n, c);
                 }
             }
@@ -414,15 +558,10 @@ mod tests {
                 .collect();
             let g: Vec<f64> = (0..levels * n).map(|i| (i as f64 + 0.5).cos()).collect();
             let (beta, gamma) = (0.3, 0.07);
-            let (mut a, mut b) = (vec![0.0; n * n], vec![0.0; n]);
-            jac.baumgarte(
-                &g,
-                Some((1, beta)),
-                Some((2, gamma)),
-                &plain,
-                &mut a,
-                &mut b,
-            );
+            let mask: Vec<bool> = (0..n).map(|r| plain.contains(&r)).collect();
+            let mut solver = jac.solver();
+            jac.baumgarte(&mut solver, &g, Some((1, beta)), Some((2, gamma)), &mask);
+            let (a, b) = solver.system(n);
             for c in 0..n {
                 for r in 0..n {
                     let mut expected = mats[0][(r, c)];
@@ -445,11 +584,87 @@ mod tests {
                 }
                 assert_eq!(b[r].to_bits(), expected.to_bits(), "n = {n}, row {r}");
             }
-            let mut solver = Solver::default();
-            solver.load_level(&jac, &g, 2);
+            jac.load_level(&mut solver, &g, 2);
             let (sa, sb) = solver.system(n);
             assert_eq!(sa, mats[2].as_slice());
             assert_eq!(sb, &g[2 * n..]);
         }
+    }
+
+    #[test]
+    fn sparse_and_dense_solves_agree_on_chains_and_trees() {
+        for (n, tree) in [(40, false), (200, false), (63, true), (255, true)] {
+            let (ptr, rows, a) = pattern_matrix(n, tree, 0x1234_5678 + n as u64);
+            let b = DVector::from_fn(n, |i, _| (i as f64 * 0.37).sin());
+            let mut sparse = Solver {
+                sparse: Some(SparseLu::new(n, ptr.clone(), rows.clone())),
+                ..Solver::default()
+            };
+            for _ in 0..2 {
+                // Twice: the second solve reuses the symbolic factorisation.
+                let values = &mut sparse.sparse.as_mut().unwrap().values;
+                for c in 0..n {
+                    for k in ptr[c]..ptr[c + 1] {
+                        values[k] = a[(rows[k], c)];
+                    }
+                }
+                sparse
+                    .sparse
+                    .as_mut()
+                    .unwrap()
+                    .x
+                    .copy_from_slice(b.as_slice());
+                let x_sparse =
+                    DVector::from_column_slice(sparse.solve(0.0, "position", 1e12).unwrap());
+                let x_dense = solve(&a, &b, 0.0, "position", 1e12).unwrap();
+                let error = (&x_sparse - &x_dense).norm();
+                assert!(
+                    error <= 1e-12 * x_dense.norm(),
+                    "n = {n}, tree {tree}: {error}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_sparse_condition_check_fires_on_singular_systems() {
+        let n = 50;
+        let (ptr, rows, mut a) = pattern_matrix(n, false, 7);
+        // Row 20 becomes twice row 21 (on the shared pattern entries): rank deficient.
+        let with = |a: &DMatrix<f64>| {
+            let mut solver = Solver {
+                sparse: Some(SparseLu::new(n, ptr.clone(), rows.clone())),
+                ..Solver::default()
+            };
+            let sparse = solver.sparse.as_mut().unwrap();
+            for c in 0..n {
+                for k in ptr[c]..ptr[c + 1] {
+                    sparse.values[k] = a[(rows[k], c)];
+                }
+            }
+            sparse.x.fill(1.0);
+            solver
+                .solve(1.5, "baumgarte", 1e12)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        };
+        assert!(with(&a).is_ok());
+        // Rows and columns 20, 21 decoupled from the rest, their 2 × 2 block
+        // nearly singular: a condition far above the limit.
+        for (r, c) in [(19, 20), (22, 21), (20, 19), (21, 22)] {
+            a[(r, c)] = 0.0;
+        }
+        a[(21, 21)] = a[(21, 20)] * a[(20, 21)] / a[(20, 20)] * (1.0 + 1e-14);
+        let err = with(&a).unwrap_err();
+        assert!(
+            err.contains("t = 1.5") && err.contains("condition"),
+            "{err}"
+        );
+        // An exactly zero row.
+        for c in 0..n {
+            a[(30, c)] = 0.0;
+        }
+        let err = with(&a).unwrap_err();
+        assert!(err.contains("inf"), "{err}");
     }
 }

@@ -472,10 +472,18 @@ impl SystemSpec {
 
     /// Read a system description from TOML text (paths are left as written).
     pub fn from_toml(text: &str) -> Result<SystemSpec, MasterError> {
-        toml::from_str(text).map_err(|e| MasterError::SystemFile {
+        let error = |reason: String| MasterError::SystemFile {
             path: PathBuf::from("<text>"),
-            reason: e.to_string().replace('\n', " ").trim().to_string(),
-        })
+            reason: reason.replace('\n', " ").trim().to_string(),
+        };
+        // Array blocks (`count = N`) are expanded first (crate::arrays).
+        if let Ok(mut table) = text.parse::<toml::Table>() {
+            if crate::arrays::has_arrays(&table) {
+                crate::arrays::expand(&mut table).map_err(error)?;
+                return SystemSpec::deserialize(table).map_err(|e| error(e.to_string()));
+            }
+        }
+        toml::from_str(text).map_err(|e| error(e.to_string()))
     }
 
     /// The file named in errors: [`source`](Self::source), else `<system>`.

@@ -7,6 +7,7 @@ use crate::polynomial::Taylor;
 use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, InitialMultiplier, SystemSpec};
 use crate::stats::{Lap, RunStats};
+use crate::touched::Touched;
 use crate::{MasterError, Method};
 
 /// The instances and their coupling, as every method sees them.
@@ -23,6 +24,8 @@ pub(crate) struct System {
     pub groups: Vec<Vec<usize>>,
     /// Per group, the instances its perturbed run steps (those its unknowns drive).
     pub group_slaves: Vec<Vec<usize>>,
+    /// The rows each unknown's perturbation touches (the Jacobian's pattern).
+    pub touched: Touched,
     /// Finite-difference increment ε (`coupling.epsilon`).
     pub epsilon: f64,
     /// Largest condition number a linear solve accepts (`coupling.max_condition`).
@@ -41,25 +44,31 @@ impl System {
             .map(|instance| Slave::instantiate(instance, &mut opened))
             .collect::<Result<Vec<_>, _>>()?;
         let coupling = Coupling::build(spec, &mut slaves, method, order)?;
-        let mut owners = vec![Vec::new(); coupling.len()];
+        let mut owners: Vec<Vec<usize>> = vec![Vec::new(); coupling.len()];
         for (s, slave) in slaves.iter().enumerate() {
             for input in &slave.inputs {
                 for &(m, _) in &input.terms {
-                    if !owners[m].contains(&s) {
+                    // Instances come in order: a repeat is the last one.
+                    if owners[m].last() != Some(&s) {
                         owners[m].push(s);
                     }
                 }
             }
         }
-        let groups = perturbation_groups(&owners);
+        let groups = perturbation_groups(&owners, slaves.len());
         let group_slaves = groups
             .iter()
             .map(|group| {
-                (0..slaves.len())
-                    .filter(|s| group.iter().any(|&m| owners[m].contains(s)))
-                    .collect()
+                let mut members: Vec<usize> = group
+                    .iter()
+                    .flat_map(|&m| owners[m].iter().copied())
+                    .collect();
+                members.sort_unstable();
+                members.dedup();
+                members
             })
             .collect();
+        let touched = Touched::new(&coupling, &owners, slaves.len());
         let exp = spec.experiment;
         let every_step = spec.coupling.check_rollback == CheckRollback::EveryStep;
         for slave in &mut slaves {
@@ -82,6 +91,7 @@ impl System {
             owners,
             groups,
             group_slaves,
+            touched,
             epsilon: spec.coupling.epsilon,
             max_condition: spec.coupling.max_condition,
         })
@@ -176,22 +186,35 @@ pub(crate) trait MacroStep: Send {
 }
 
 /// Group unknowns so that no two in a group drive the same instance: one
-/// perturbed run per group serves every unknown in it (greedy colouring).
-fn perturbation_groups(owners: &[Vec<usize>]) -> Vec<Vec<usize>> {
-    let mut groups: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
+/// perturbed run per group serves every unknown in it (greedy colouring:
+/// each unknown joins the first group none of its instances is in). Linear
+/// in the number of (unknown, instance) pairs times the groups an instance
+/// is in, which is bounded by the unknowns driving it.
+pub(crate) fn perturbation_groups(owners: &[Vec<usize>], instances: usize) -> Vec<Vec<usize>> {
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    // Per instance: the groups it is already in.
+    let mut used: Vec<Vec<usize>> = vec![Vec::new(); instances];
+    let mut taken: Vec<usize> = Vec::new();
     for (m, own) in owners.iter().enumerate() {
-        match groups
-            .iter_mut()
-            .find(|(_, used)| own.iter().all(|s| !used.contains(s)))
-        {
-            Some((members, used)) => {
-                members.push(m);
-                used.extend(own.iter().copied());
-            }
-            None => groups.push((vec![m], own.clone())),
+        taken.clear();
+        taken.extend(own.iter().flat_map(|&s| used[s].iter().copied()));
+        taken.sort_unstable();
+        taken.dedup();
+        // The first group index not taken.
+        let g = taken
+            .iter()
+            .enumerate()
+            .find(|&(i, &t)| i != t)
+            .map_or(taken.len(), |(i, _)| i);
+        if g == groups.len() {
+            groups.push(Vec::new());
+        }
+        groups[g].push(m);
+        for &s in own {
+            used[s].push(g);
         }
     }
-    groups.into_iter().map(|(members, _)| members).collect()
+    groups
 }
 
 #[cfg(test)]
@@ -202,7 +225,7 @@ mod tests {
     fn unknowns_on_different_instances_share_a_perturbed_run() {
         // λ0 drives A and B, λ1 drives only A, λ2 only C, λ3 only B.
         let owners = vec![vec![0, 1], vec![0], vec![2], vec![1]];
-        let groups = perturbation_groups(&owners);
+        let groups = perturbation_groups(&owners, 3);
         assert_eq!(groups, vec![vec![0, 2], vec![1, 3]]);
     }
 }

@@ -111,13 +111,10 @@ pub(crate) fn strategy(
         Parallel::Auto if cores < 2 => return Ok(Box::new(sequential)),
         _ => cores.max(2) - 1,
     };
-    let capable: Vec<bool> = slaves
-        .iter()
-        .enumerate()
-        .map(|(s, slave)| {
-            group_slaves.iter().any(|g| g.contains(&s)) && slave.can_run_in_parallel()
-        })
-        .collect();
+    let mut capable = vec![false; slaves.len()];
+    for &s in group_slaves.iter().flatten() {
+        capable[s] = slaves[s].can_run_in_parallel();
+    }
     if !capable.contains(&true) {
         return Ok(Box::new(sequential));
     }

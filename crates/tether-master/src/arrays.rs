@@ -1,0 +1,354 @@
+//! Array blocks in the system file: an `[[instance]]`, `[[constraint]]`,
+//! `[[joint]]` or `[[coupling_variable]]` block with `count = N` stands for
+//! N blocks, i = 0 … N − 1, each with every `{expression}` in its strings
+//! replaced by the expression's value at i (docs/system-file.md, "Many
+//! instances"). Blocks without `count` are left as written.
+//!
+//! Expressions: integers and decimals, `i`, `+ - * / %`, parentheses and
+//! `log2(x)` (the floor of the base-2 logarithm, for the depth of a node
+//! of a binary tree). Integer operands give integer results (`/` rounds
+//! down); a decimal anywhere makes the result a decimal. A string that is one
+//! placeholder and nothing else becomes that number (for parameters).
+
+use toml::{Table, Value};
+
+/// The sections whose blocks can repeat.
+const SECTIONS: [&str; 4] = ["instance", "constraint", "joint", "coupling_variable"];
+
+/// Whether the file has any array block (else it is read as it is, with
+/// the TOML reader's line numbers in errors).
+pub(crate) fn has_arrays(table: &Table) -> bool {
+    SECTIONS.iter().any(|section| {
+        table
+            .get(*section)
+            .and_then(Value::as_array)
+            .is_some_and(|blocks| blocks.iter().any(|b| b.get("count").is_some()))
+    })
+}
+
+/// Expand every array block in place. Errors name the block and the text.
+pub(crate) fn expand(table: &mut Table) -> Result<(), String> {
+    for section in SECTIONS {
+        let Some(Value::Array(blocks)) = table.get_mut(section) else {
+            continue;
+        };
+        let mut expanded = Vec::with_capacity(blocks.len());
+        for (b, block) in std::mem::take(blocks).into_iter().enumerate() {
+            let Value::Table(mut block) = block else {
+                expanded.push(block);
+                continue;
+            };
+            let Some(count) = block.remove("count") else {
+                expanded.push(Value::Table(block));
+                continue;
+            };
+            let where_ = format!("[[{section}]] block {} (count = {count})", b + 1);
+            let count = count
+                .as_integer()
+                .and_then(|c| usize::try_from(c).ok())
+                .ok_or_else(|| format!("{where_}: count must be an integer ≥ 0"))?;
+            for i in 0..count {
+                let mut copy = Value::Table(block.clone());
+                substitute(&mut copy, i as i64).map_err(|e| format!("{where_}, i = {i}: {e}"))?;
+                expanded.push(copy);
+            }
+        }
+        *blocks = expanded;
+    }
+    Ok(())
+}
+
+/// Replace the placeholders of every string in `value` (recursively).
+fn substitute(value: &mut Value, i: i64) -> Result<(), String> {
+    match value {
+        Value::String(text) => {
+            if let Some(inner) = sole_placeholder(text) {
+                *value = match evaluate(inner, i)? {
+                    Number::Integer(n) => Value::Integer(n),
+                    Number::Real(x) => Value::Float(x),
+                };
+            } else {
+                *text = fill(text, i)?;
+            }
+        }
+        Value::Array(items) => {
+            for item in items {
+                substitute(item, i)?;
+            }
+        }
+        Value::Table(table) => {
+            for (_, item) in table.iter_mut() {
+                substitute(item, i)?;
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// `"{expr}"` alone: the expression.
+fn sole_placeholder(text: &str) -> Option<&str> {
+    let inner = text.strip_prefix('{')?.strip_suffix('}')?;
+    (!inner.contains(['{', '}'])).then_some(inner)
+}
+
+/// `text` with each `{expr}` replaced by its value.
+fn fill(text: &str, i: i64) -> Result<String, String> {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(open) = rest.find('{') {
+        out.push_str(&rest[..open]);
+        let close = rest[open..]
+            .find('}')
+            .ok_or_else(|| format!("unclosed '{{' in \"{text}\""))?;
+        out.push_str(&evaluate(&rest[open + 1..open + close], i)?.to_string());
+        rest = &rest[open + close + 1..];
+    }
+    if rest.contains('}') {
+        return Err(format!("unopened '}}' in \"{text}\""));
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Number {
+    Integer(i64),
+    Real(f64),
+}
+
+impl Number {
+    fn real(self) -> f64 {
+        match self {
+            Number::Integer(n) => n as f64,
+            Number::Real(x) => x,
+        }
+    }
+}
+
+impl std::fmt::Display for Number {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Number::Integer(n) => write!(f, "{n}"),
+            Number::Real(x) => write!(f, "{x:?}"),
+        }
+    }
+}
+
+/// The value of `expr` at `i`.
+fn evaluate(expr: &str, i: i64) -> Result<Number, String> {
+    let mut parser = Parser {
+        text: expr,
+        bytes: expr.as_bytes(),
+        pos: 0,
+        i,
+    };
+    let value = parser.sum()?;
+    parser.skip_spaces();
+    if parser.pos != parser.bytes.len() {
+        return Err(parser.error("an operator or the end"));
+    }
+    Ok(value)
+}
+
+struct Parser<'a> {
+    text: &'a str,
+    bytes: &'a [u8],
+    pos: usize,
+    i: i64,
+}
+
+impl Parser<'_> {
+    fn error(&self, expected: &str) -> String {
+        format!(
+            "expected {expected} at {} in \"{{{}}}\"",
+            self.pos + 1,
+            self.text
+        )
+    }
+
+    fn skip_spaces(&mut self) {
+        while self
+            .bytes
+            .get(self.pos)
+            .is_some_and(u8::is_ascii_whitespace)
+        {
+            self.pos += 1;
+        }
+    }
+
+    fn peek(&mut self) -> Option<u8> {
+        self.skip_spaces();
+        self.bytes.get(self.pos).copied()
+    }
+
+    fn sum(&mut self) -> Result<Number, String> {
+        let mut left = self.product()?;
+        while let Some(op @ (b'+' | b'-')) = self.peek() {
+            self.pos += 1;
+            let right = self.product()?;
+            left = self.apply(op, left, right)?;
+        }
+        Ok(left)
+    }
+
+    fn product(&mut self) -> Result<Number, String> {
+        let mut left = self.factor()?;
+        while let Some(op @ (b'*' | b'/' | b'%')) = self.peek() {
+            self.pos += 1;
+            let right = self.factor()?;
+            left = self.apply(op, left, right)?;
+        }
+        Ok(left)
+    }
+
+    fn factor(&mut self) -> Result<Number, String> {
+        match self.peek() {
+            Some(b'-') => {
+                self.pos += 1;
+                Ok(match self.factor()? {
+                    Number::Integer(n) => Number::Integer(-n),
+                    Number::Real(x) => Number::Real(-x),
+                })
+            }
+            Some(b'(') => {
+                self.pos += 1;
+                let value = self.sum()?;
+                if self.peek() != Some(b')') {
+                    return Err(self.error("')'"));
+                }
+                self.pos += 1;
+                Ok(value)
+            }
+            Some(b'0'..=b'9' | b'.') => {
+                let start = self.pos;
+                while self
+                    .bytes
+                    .get(self.pos)
+                    .is_some_and(|b| b.is_ascii_digit() || *b == b'.')
+                {
+                    self.pos += 1;
+                }
+                let literal = &self.text[start..self.pos];
+                if literal.contains('.') {
+                    literal
+                        .parse()
+                        .map(Number::Real)
+                        .map_err(|_| self.error("a number"))
+                } else {
+                    literal
+                        .parse()
+                        .map(Number::Integer)
+                        .map_err(|_| self.error("a number"))
+                }
+            }
+            Some(b'i')
+                if !self
+                    .bytes
+                    .get(self.pos + 1)
+                    .is_some_and(u8::is_ascii_alphanumeric) =>
+            {
+                self.pos += 1;
+                Ok(Number::Integer(self.i))
+            }
+            Some(b'l') if self.text[self.pos..].starts_with("log2(") => {
+                self.pos += "log2(".len();
+                let argument = self.sum()?;
+                if self.peek() != Some(b')') {
+                    return Err(self.error("')'"));
+                }
+                self.pos += 1;
+                let x = argument.real();
+                if x.is_nan() || x < 1.0 {
+                    return Err(format!("log2 of {x} in \"{{{}}}\" (needs ≥ 1)", self.text));
+                }
+                Ok(Number::Integer(x.log2().floor() as i64))
+            }
+            _ => Err(self.error("a number, i, log2( or '('")),
+        }
+    }
+
+    fn apply(&self, op: u8, a: Number, b: Number) -> Result<Number, String> {
+        let zero = || format!("division by zero in \"{{{}}}\"", self.text);
+        Ok(match (a, b) {
+            (Number::Integer(x), Number::Integer(y)) => Number::Integer(match op {
+                b'+' => x + y,
+                b'-' => x - y,
+                b'*' => x * y,
+                b'/' => x.checked_div_euclid(y).ok_or_else(zero)?,
+                _ => x.checked_rem_euclid(y).ok_or_else(zero)?,
+            }),
+            (a, b) => {
+                let (x, y) = (a.real(), b.real());
+                Number::Real(match op {
+                    b'+' => x + y,
+                    b'-' => x - y,
+                    b'*' => x * y,
+                    b'/' if y == 0.0 => return Err(zero()),
+                    b'/' => x / y,
+                    _ if y == 0.0 => return Err(zero()),
+                    _ => x % y,
+                })
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn expressions_evaluate_with_integer_and_decimal_arithmetic() {
+        let at = |e: &str, i| evaluate(e, i).unwrap();
+        assert_eq!(at("i", 7), Number::Integer(7));
+        assert_eq!(at("i + 1", 7), Number::Integer(8));
+        assert_eq!(at("(i - 1) / 2", 6), Number::Integer(2));
+        assert_eq!(at("i % 3 * 2", 7), Number::Integer(2));
+        assert_eq!(at("log2(i + 1)", 6), Number::Integer(2));
+        assert_eq!(at("log2(i + 1)", 7), Number::Integer(3));
+        assert_eq!(at("0.5 + i", 2), Number::Real(2.5));
+        assert_eq!(at("-i * 1.5", 2), Number::Real(-3.0));
+        for bad in ["i +", "j", "(i", "i / 0", "log2(0)", "1.2.3"] {
+            assert!(evaluate(bad, 1).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn array_blocks_expand_and_other_blocks_stay() {
+        let mut table: Table = toml::from_str(
+            r#"
+            [[instance]]
+            name = "single"
+            [[instance]]
+            name = "m{i}"
+            count = 3
+            parameters = { x0 = "{0.5 * i}", n = "{i}", label = "body {i + 1}" }
+            [[constraint]]
+            name = "link{i}"
+            count = 2
+            position = "m{i+1}.x - m{i}.x"
+            "#,
+        )
+        .unwrap();
+        assert!(has_arrays(&table));
+        expand(&mut table).unwrap();
+        let instances = table["instance"].as_array().unwrap();
+        assert_eq!(instances.len(), 4);
+        assert_eq!(instances[0]["name"].as_str(), Some("single"));
+        assert_eq!(instances[3]["name"].as_str(), Some("m2"));
+        assert!(instances[3].get("count").is_none());
+        let p = &instances[3]["parameters"];
+        assert_eq!(p["x0"].as_float(), Some(1.0));
+        assert_eq!(p["n"].as_integer(), Some(2));
+        assert_eq!(p["label"].as_str(), Some("body 3"));
+        let constraints = table["constraint"].as_array().unwrap();
+        assert_eq!(constraints[1]["position"].as_str(), Some("m2.x - m1.x"));
+        let mut bad: Table = toml::from_str("[[joint]]\nname = \"j{i\"\ncount = 1").unwrap();
+        let err = expand(&mut bad).unwrap_err();
+        assert!(
+            err.contains("[[joint]] block 1") && err.contains("unclosed"),
+            "{err}"
+        );
+    }
+}
