@@ -39,6 +39,59 @@ pub struct SystemSpec {
     /// (the paper's γ̃, r̃: an FMU that applies a joint's force law itself).
     #[serde(rename = "coupling_variable", default)]
     pub coupling_variables: Vec<CouplingVariableSpec>,
+    /// Signal connections `from = "inst.output"` → `to = "inst.input"`,
+    /// passed at macro points (docs/algorithm.md, "Signal connections").
+    #[serde(rename = "connection", default, skip_serializing_if = "Vec::is_empty")]
+    pub connections: Vec<ConnectionSpec>,
+    /// How signal connections are evaluated.
+    #[serde(default, skip_serializing_if = "SignalSettings::is_default")]
+    pub signals: SignalSettings,
+}
+
+/// A signal connection: the receiving input takes `gain·value + offset` of
+/// the sending output at macro points.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConnectionSpec {
+    /// The sending output, `<instance>.<variable>`.
+    pub from: String,
+    /// The receiving input, `<instance>.<variable>`.
+    pub to: String,
+    /// Factor of a linear transformation (Real only; default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain: Option<f64>,
+    /// Offset of a linear transformation (Real only; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<f64>,
+}
+
+/// `[signals]`: the order in which signal-connected instances see each
+/// other's values within a macro step.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SignalSettings {
+    /// `"jacobi"` (the default) or `"gauss_seidel"`.
+    pub scheme: SignalScheme,
+}
+
+impl SignalSettings {
+    fn is_default(&self) -> bool {
+        *self == SignalSettings::default()
+    }
+}
+
+/// Jacobi: every receiver takes the senders' values at T_N. Gauss–Seidel:
+/// the signal-only instances step one after another in the order of the
+/// system file, before the constraint-coupled ones; a receiver takes the
+/// values at T_{N+1} of the senders that stepped before it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SignalScheme {
+    /// All senders' values at T_N.
+    #[default]
+    Jacobi,
+    /// Senders already stepped in this macro step give their values at T_{N+1}.
+    GaussSeidel,
 }
 
 /// Time grid: `T_n = start + n·step`, up to `stop`.
@@ -451,6 +504,17 @@ impl SystemSpec {
                     path: PathBuf::from("<system>"),
                     reason: format!("name '{name}' is used twice"),
                 });
+            }
+        }
+        for c in &self.connections {
+            for (what, v) in [("gain", c.gain), ("offset", c.offset)] {
+                if let Some(v) = v.filter(|v| !v.is_finite()) {
+                    return Err(param(
+                        &format!("{what} of the connection to {}", c.to),
+                        v,
+                        "a finite number",
+                    ));
+                }
             }
         }
         for joint in &self.joints {
