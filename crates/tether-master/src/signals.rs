@@ -340,6 +340,8 @@ fn resolve(
         ));
     }
     let units = match (unit_of(&out), unit_of(&input)) {
+        // A gain or offset is the user's conversion.
+        _ if c.gain.is_some() || c.offset.is_some() => None,
         (Some(a), Some(b)) if a != b => Some(fail(format!(
             "{} is in '{a}' and {} in '{b}': units differ and there is no conversion",
             c.from, c.to
