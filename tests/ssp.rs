@@ -28,21 +28,16 @@ fn assert_same(a: &MemoryRecorder, b: &MemoryRecorder) {
     }
 }
 
-/// The fixture folder with the workspace FMUs copied into resources/.
+/// The nested fixture in a folder with the workspace FMUs and the .ssv in
+/// resources/.
 fn fixture() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/ssp/controlled_mass");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/ssp");
     std::fs::create_dir(dir.path().join("resources")).unwrap();
-    std::fs::copy(
-        src.join("SystemStructure.ssd"),
-        dir.path().join("SystemStructure.ssd"),
-    )
-    .unwrap();
-    std::fs::copy(
-        src.join("resources/mass.ssv"),
-        dir.path().join("resources/mass.ssv"),
-    )
-    .unwrap();
+    let ssd = src.join("nested/SystemStructure.ssd");
+    std::fs::copy(ssd, dir.path().join("SystemStructure.ssd")).unwrap();
+    let ssv = src.join("controlled_mass/resources/mass.ssv");
+    std::fs::copy(ssv, dir.path().join("resources/mass.ssv")).unwrap();
     for name in ["oscillator", "controller"] {
         std::fs::copy(fmu(name), dir.path().join(format!("resources/{name}.fmu"))).unwrap();
     }
@@ -80,7 +75,7 @@ fn a_hand_written_ssd_runs_like_the_equivalent_system_file() {
     let loaded = tether_ssp::read(dir.path(), Some(1e-3), None).unwrap();
     assert_eq!(
         loaded.skipped,
-        ["com.example.layout (SystemStructure.ssd:59)"]
+        ["com.example.layout (SystemStructure.ssd:58)"]
     );
     let spec = &loaded.spec;
     let names: Vec<&str> = spec.instances.iter().map(|i| i.name.as_str()).collect();
@@ -145,12 +140,12 @@ fn unsupported_elements_are_errors_naming_element_and_line() {
         (
             r#"<ssd:Connection startElement="mass" startConnector="x" endElement="control" endConnector="measured"/>"#,
             r#"<ssd:Connection startElement="mass" startConnector="x" endElement="control" endConnector="measured"><ssc:BooleanMappingTransformation/></ssd:Connection>"#,
-            "SystemStructure.ssd:55: <ssc:BooleanMappingTransformation> in <ssd:Connection> is not supported",
+            "SystemStructure.ssd:54: <ssc:BooleanMappingTransformation> in <ssd:Connection> is not supported",
         ),
         (
             r#"<ssd:ParameterBinding source="resources/mass.ssv"/>"#,
             r#"<ssd:ParameterBinding source="resources/mass.ssv" prefix="mass."/>"#,
-            "SystemStructure.ssd:20: <ssd:ParameterBinding> prefix=\"mass.\" is not supported",
+            "SystemStructure.ssd:19: <ssd:ParameterBinding> prefix=\"mass.\" is not supported",
         ),
         (
             r#"<ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>"#,

@@ -613,32 +613,33 @@ impl Reader {
                         let mut value = None;
                         for v in &p.children {
                             let text = || self.required(v, "value");
-                            value =
-                                Some(match v.name.as_str() {
-                                    "ssv:Real" => {
-                                        StartValue::Real(self.number(v, "value")?.ok_or_else(
-                                            || self.at(v, "<ssv:Real> needs the attribute 'value'"),
-                                        )?)
-                                    }
-                                    "ssv:Integer" => {
-                                        StartValue::Integer(text()?.trim().parse().map_err(
-                                            |_| self.at(v, "<ssv:Integer> value is not an integer"),
-                                        )?)
-                                    }
-                                    "ssv:Boolean" => StartValue::Boolean(match text()?.trim() {
-                                        "true" | "1" => true,
-                                        "false" | "0" => false,
-                                        other => return Err(self.at(
+                            value = Some(match v.name.as_str() {
+                                "ssv:Real" => {
+                                    StartValue::Real(self.number(v, "value")?.ok_or_else(|| {
+                                        self.at(v, "<ssv:Real> needs the attribute 'value'")
+                                    })?)
+                                }
+                                "ssv:Integer" => {
+                                    StartValue::Integer(text()?.trim().parse().map_err(|_| {
+                                        self.at(v, "<ssv:Integer> value is not an integer")
+                                    })?)
+                                }
+                                "ssv:Boolean" => StartValue::Boolean(match text()?.trim() {
+                                    "true" | "1" => true,
+                                    "false" | "0" => false,
+                                    other => {
+                                        return Err(self.at(
                                             v,
                                             format!(
                                                 "<ssv:Boolean> value=\"{other}\" is not a boolean"
                                             ),
-                                        )),
-                                    }),
-                                    "ssv:String" => StartValue::String(text()?.to_string()),
-                                    "ssd:Annotations" | "ssv:Annotations" => continue,
-                                    _ => return Err(self.unsupported(v, "(parameter type)")),
-                                });
+                                        ))
+                                    }
+                                }),
+                                "ssv:String" => StartValue::String(text()?.to_string()),
+                                "ssd:Annotations" | "ssv:Annotations" => continue,
+                                _ => return Err(self.unsupported(v, "(parameter type)")),
+                            });
                         }
                         let value = value.ok_or_else(|| {
                             self.at(p, format!("parameter '{name}' has no value"))
