@@ -789,3 +789,111 @@ fn flat_name(path: &[String]) -> String {
         _ => format!("_{joined}"),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An SSD in a folder with empty stand-ins for the FMUs (reading does not
+    /// open them).
+    fn folder(ssd: &str) -> TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("a.fmu"), b"").unwrap();
+        std::fs::write(dir.path().join("SystemStructure.ssd"), ssd).unwrap();
+        dir
+    }
+
+    fn ssd(unit_from: &str, unit_to: &str, extra: &str) -> String {
+        format!(
+            r#"<?xml version="1.0"?>
+<ssd:SystemStructureDescription version="1.0" name="t"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="s">
+    <ssd:Elements>
+      <ssd:Component name="a" source="a.fmu">
+        <ssd:Connectors><ssd:Connector name="y" kind="output"><ssc:Real unit="{unit_from}"/></ssd:Connector></ssd:Connectors>
+      </ssd:Component>
+      <ssd:Component name="b" source="a.fmu">
+        <ssd:Connectors><ssd:Connector name="u" kind="input"><ssc:Real unit="{unit_to}"/></ssd:Connector></ssd:Connectors>
+      </ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="a" startConnector="y" endElement="b" endConnector="u"/>
+    </ssd:Connections>
+    {extra}
+  </ssd:System>
+  <ssd:Units>
+    <ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>
+    <ssc:Unit name="mm"><ssc:BaseUnit m="1" factor="0.001"/></ssc:Unit>
+    <ssc:Unit name="K"><ssc:BaseUnit K="1"/></ssc:Unit>
+    <ssc:Unit name="degC"><ssc:BaseUnit K="1" offset="273.15"/></ssc:Unit>
+  </ssd:Units>
+  <ssd:DefaultExperiment stopTime="1"/>
+</ssd:SystemStructureDescription>"#
+        )
+    }
+
+    fn connection(from: &str, to: &str) -> Result<ConnectionSpec, SspError> {
+        let dir = folder(&ssd(from, to, ""));
+        read(dir.path(), Some(0.1), None).map(|l| l.spec.connections[0].clone())
+    }
+
+    #[test]
+    fn units_with_the_same_dimension_are_converted() {
+        let c = connection("m", "mm").unwrap();
+        assert_eq!((c.gain, c.offset), (Some(1000.0), None));
+        let c = connection("degC", "K").unwrap();
+        assert_eq!((c.gain, c.offset), (None, Some(273.15)));
+        let c = connection("m", "m").unwrap();
+        assert_eq!((c.gain, c.offset), (None, None));
+        let err = connection("m", "K").unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "SystemStructure.ssd:15: <ssd:Connection> a.y → b.u: units 'm' and 'K' differ and \
+             there is no conversion between them"
+        );
+    }
+
+    #[test]
+    fn the_tether_annotation_gives_step_method_and_constraints() {
+        let annotation = r#"<ssd:Annotations>
+      <ssc:Annotation type="org.tether.system">
+        <tether:System xmlns:tether="urn:tether:ssp:1"><![CDATA[
+step = 0.25
+[method]
+kind = "weighted"
+a = 0.5
+[[constraint]]
+name = "c"
+position = "b.u - a.y"
+drives = "b.u"
+]]></tether:System>
+      </ssc:Annotation>
+      <ssc:Annotation type="com.example.other"><x/></ssc:Annotation>
+    </ssd:Annotations>"#;
+        let dir = folder(&ssd("m", "m", annotation));
+        let loaded = read(dir.path(), None, None).unwrap();
+        assert_eq!(loaded.spec.experiment.step, 0.25);
+        assert_eq!(
+            loaded.spec.method,
+            tether_master::Method::Weighted { a: 0.5, b: 0.0 }
+        );
+        assert_eq!(loaded.spec.constraints[0].position, "b.u - a.y");
+        assert_eq!(
+            loaded.skipped,
+            ["com.example.other (SystemStructure.ssd:30)"]
+        );
+        // --step wins over the annotation.
+        let loaded = read(dir.path(), Some(0.5), None).unwrap();
+        assert_eq!(loaded.spec.experiment.step, 0.5);
+        // An unknown key in the annotation is an error with its line.
+        let bad = annotation.replace("a = 0.5", "a = 0.5\nbogus = 1");
+        let dir = folder(&ssd("m", "m", &bad));
+        let err = read(dir.path(), None, None).err().unwrap().to_string();
+        assert!(
+            err.starts_with("SystemStructure.ssd:18: the org.tether.system annotation:"),
+            "{err}"
+        );
+    }
+}
