@@ -283,3 +283,74 @@ fn a_system_of_signals_only_runs_without_constraints() -> Result<(), MasterError
     assert_eq!(results[0], results[1]);
     Ok(())
 }
+
+/// A free oscillator A pushes oscillator B through a one-way spring
+/// (`B.F_ext = 1000·A.x`, a connection with a gain). B interpolates inputs,
+/// so it receives A's position as the polynomial of degree k through A's
+/// last values: the error of B against the exact solution (matrix
+/// exponential of both, A unaffected by B) falls as H^(k+1), under both
+/// schemes. A starts at rest (x0 = 0.1, v0 = 0), so that the start-up steps
+/// of lower degree (docs/algorithm.md) do not cap the order.
+#[test]
+fn interpolating_receivers_get_polynomials_of_degree_k() {
+    const G: f64 = 1000.0;
+    let osc = tether_fmu_build::workspace_fmu("oscillator").unwrap();
+    let exact = |t: f64| {
+        #[rustfmt::skip]
+        let a = Matrix4::new(
+            0.0,     1.0,     0.0,          0.0,
+            -C / M1, -D / M1, 0.0,          0.0,
+            0.0,     0.0,     0.0,          1.0,
+            G / M2,  0.0,     -C / M2,      -D / M2,
+        );
+        ((a * t).exp() * Vector4::new(0.1, 0.0, 0.0, 0.0))[2]
+    };
+    let error = |h: f64, order: usize, scheme: &str| {
+        let text = format!(
+            r#"
+            [experiment]
+            stop = 0.2
+            step = {h}
+            [coupling]
+            order = {order}
+            [signals]
+            scheme = "{scheme}"
+            [[instance]]
+            name = "a"
+            fmu = "{osc}"
+            parameters = {{ m = {M1}, c = {C}, d = {D}, x0 = 0.1, v0 = 0.0, exact = true }}
+            [[instance]]
+            name = "b"
+            fmu = "{osc}"
+            parameters = {{ m = {M2}, c = {C}, d = {D}, x0 = 0.0, v0 = 0.0, exact = true }}
+            [[connection]]
+            from = "a.x"
+            to = "b.F_ext"
+            gain = {G}
+            "#,
+            osc = osc.display()
+        );
+        let spec = SystemSpec::from_toml(&text).unwrap();
+        let mut sim = Simulation::new(&spec).unwrap();
+        let mut rec = MemoryRecorder::default();
+        sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
+        let x = rec.columns.iter().position(|c| c == "b.x").unwrap();
+        rec.times
+            .iter()
+            .zip(&rec.rows)
+            .map(|(t, row)| (row[x] - exact(*t)).abs())
+            .fold(0.0, f64::max)
+    };
+    for scheme in ["jacobi", "gauss_seidel"] {
+        for order in 0..=2 {
+            let (e1, e2) = (error(2e-3, order, scheme), error(1e-3, order, scheme));
+            let expected = f64::powi(2.0, order as i32 + 1);
+            let ratio = e1 / e2;
+            println!("{scheme}, k = {order}: {e1:.3e} -> {e2:.3e}, ratio {ratio:.2} (expected {expected})");
+            assert!(
+                (0.8 * expected..1.25 * expected).contains(&ratio),
+                "{scheme}, k = {order}: ratio {ratio}"
+            );
+        }
+    }
+}
