@@ -16,6 +16,7 @@ mod progress;
 mod run;
 mod settings;
 mod simulate;
+mod ssp;
 mod study;
 mod sweep;
 mod watchdog;
@@ -51,7 +52,7 @@ enum Command {
     Info(info::Args),
     /// Run one FMU at a fixed communication step and write its outputs to CSV.
     Simulate(simulate::Args),
-    /// Run a coupled system described by a system file and write CSV.
+    /// Run a coupled system (a system file, or SSP: .ssp, .ssd or a folder) and write CSV.
     Run(run::Args),
     /// Report the largest deviation per column between two result files.
     Compare(compare::Args),
@@ -61,6 +62,8 @@ enum Command {
     Sweep(sweep::Args),
     /// Run study files: convergence, stability maps, time series; with plots.
     Study(study::Args),
+    /// SSP: export a system file as .ssp, import an .ssp as a system file.
+    Ssp(ssp::Args),
 }
 
 /// `eprintln!` that never panics: a closed or full stderr (`2>/dev/full`) is no
@@ -151,6 +154,7 @@ fn main() -> ExitCode {
         Command::Plot(args) => plot::main(args),
         Command::Sweep(args) => sweep::main(args),
         Command::Study(args) => study::main(args),
+        Command::Ssp(args) => ssp::main(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

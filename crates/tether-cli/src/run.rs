@@ -3,14 +3,15 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use tether_master::{CsvRecorder, MemoryRecorder, Observer, Simulation, SystemSpec};
+use tether_master::{CsvRecorder, MemoryRecorder, Observer, Simulation};
 
 use crate::settings::Settings;
 
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
-    /// The system file (TOML), see docs/system-file.md.
+    /// The system file (TOML, docs/system-file.md), or SSP: an .ssp archive,
+    /// a SystemStructure.ssd or a folder holding one (docs/ssp.md).
     system: PathBuf,
     #[command(flatten)]
     settings: Settings,
@@ -58,8 +59,10 @@ pub struct Args {
 
 pub fn main(args: Args) -> Result<()> {
     crate::interrupt::install()?;
-    let mut spec = SystemSpec::from_file(&args.system)?;
-    crate::settings::apply(&args.settings.overrides()?, &mut spec)?;
+    let overrides = args.settings.overrides()?;
+    // `_ssp` keeps an extracted archive's FMUs until the run ends.
+    let (mut spec, _ssp) = crate::ssp::load(&args.system, overrides.step, overrides.stop)?;
+    crate::settings::apply(&overrides, &mut spec)?;
     crate::isolation::apply(args.isolate, args.call_timeout, &mut spec)?;
     if let Some(dt) = args.output_interval {
         spec.output.interval = Some(dt);

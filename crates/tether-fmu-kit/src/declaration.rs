@@ -172,6 +172,27 @@ pub struct DefaultExperiment {
     pub step_size: f64,
 }
 
+/// The optional capabilities an FMU declares in `<CoSimulation>`. The kit
+/// implements all of them; a model may declare fewer, as many tool-exported
+/// FMUs do, and the kit then refuses the calls it does not declare
+/// (fmi2Error).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capabilities {
+    /// `canGetAndSetFMUstate` (and `canSerializeFMUstate`): fmi2GetFMUstate,
+    /// fmi2SetFMUstate, fmi2FreeFMUstate and the serialization functions.
+    pub can_get_and_set_fmu_state: bool,
+    /// `canInterpolateInputs`: fmi2SetRealInputDerivatives.
+    pub can_interpolate_inputs: bool,
+}
+
+impl Capabilities {
+    /// Every capability the kit implements (the default).
+    pub const ALL: Capabilities = Capabilities {
+        can_get_and_set_fmu_state: true,
+        can_interpolate_inputs: true,
+    };
+}
+
 /// Everything static about a model.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Declaration {
@@ -188,6 +209,8 @@ pub struct Declaration {
     /// 0 if [`crate::Model::output_derivatives`] is not implemented.
     pub max_output_derivative_order: u32,
     pub default_experiment: DefaultExperiment,
+    /// The optional capabilities declared (default [`Capabilities::ALL`]).
+    pub capabilities: Capabilities,
 }
 
 impl Declaration {
@@ -208,6 +231,7 @@ impl Declaration {
             stop_time: 1.0,
             step_size: 1e-3,
         },
+        capabilities: Capabilities::ALL,
     };
 }
 

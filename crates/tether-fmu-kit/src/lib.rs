@@ -20,7 +20,7 @@ pub mod snapshot;
 pub mod xml;
 
 pub use declaration::{
-    Boolean, Declaration, DefaultExperiment, Integer, Output, Parameters, Real, State,
+    Boolean, Capabilities, Declaration, DefaultExperiment, Integer, Output, Parameters, Real, State,
 };
 pub use input::InputJet;
 pub use marker::MarkerKinematics;

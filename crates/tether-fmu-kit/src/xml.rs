@@ -123,9 +123,12 @@ fn render(d: &Declaration, guid: &str) -> String {
     );
     let _ = writeln!(
         x,
-        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true" maxOutputDerivativeOrder="{}" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="false" canGetAndSetFMUstate="true" canSerializeFMUstate="true" providesDirectionalDerivative="false"/>"#,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="{}" maxOutputDerivativeOrder="{}" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="false" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
         escape(d.model_identifier),
+        d.capabilities.can_interpolate_inputs,
         d.max_output_derivative_order,
+        d.capabilities.can_get_and_set_fmu_state,
+        d.capabilities.can_get_and_set_fmu_state,
     );
 
     let units = used_units(d);

@@ -234,6 +234,15 @@ pub enum MasterError {
     /// A worker thread for parallel perturbed runs could not be started.
     #[error("cannot start a worker thread for parallel perturbed runs: {0}")]
     Thread(String),
+    /// A signal connection cannot be made (types, units, causality, a second
+    /// sender, a direct-feedthrough loop).
+    #[error("connection {connection}: {reason}")]
+    Connection {
+        /// `from → to`, as written.
+        connection: String,
+        /// What is wrong, on one line.
+        reason: String,
+    },
     /// A worker thread panicked during perturbed runs.
     #[error("a worker thread panicked during parallel perturbed runs")]
     Worker,

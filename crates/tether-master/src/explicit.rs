@@ -34,7 +34,7 @@ impl MacroStep for Explicit {
         lap: &mut Lap,
     ) -> Result<(), MasterError> {
         // Every instance steps with u_N held as its inputs.
-        for slave in &mut system.slaves {
+        for slave in system.slaves.iter_mut().filter(|s| !s.stepped_ahead) {
             slave.do_step(at.t, at.h)?;
         }
         lap.split_into(&mut stats.times.predictor);

@@ -100,7 +100,9 @@ impl Feedthrough {
     ) -> Result<(), MasterError> {
         self.unknowns.clear();
         self.unknowns.extend(0..system.coupling.len());
-        self.newton(system, level, time, stats)?;
+        if !self.unknowns.is_empty() {
+            self.newton(system, level, time, stats)?;
+        }
         self.hold_inputs(system)
     }
 

@@ -36,6 +36,7 @@ mod predictor_corrector;
 mod resolve;
 mod rows;
 mod runs;
+mod signals;
 mod simulation;
 mod slave;
 mod solve;
@@ -53,8 +54,9 @@ pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLU
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::Simulation;
 pub use spec::{
-    CheckRollback, ConstraintSpec, CouplingSettings, CouplingVariableSpec, Experiment,
-    InitialMultiplier, InstanceSpec, JointInitial, JointSpec, OutputSpec, StartValue, SystemSpec,
+    CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
+    Experiment, InitialMultiplier, InstanceSpec, JointInitial, JointSpec, OutputSpec, SignalScheme,
+    SignalSettings, StartValue, SystemSpec,
 };
 pub use start::{apply_start_value, Settable};
 pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination, SUMMARY_SCHEMA};

@@ -99,7 +99,8 @@ impl PredictorCorrector {
     }
 
     /// Step 2, predictor (eqs. 56–58): each unknown's polynomial extrapolated
-    /// from its history, every instance stepped with it, g^p (ġ^p, g̈^p)
+    /// from its history, every instance stepped with it (but those the
+    /// signals' Gauss–Seidel sweep has stepped already), g^p (ġ^p, g̈^p)
     /// evaluated from the outputs at T_{N+1}.
     fn predict(
         &mut self,
@@ -112,8 +113,10 @@ impl PredictorCorrector {
             self.u_pred[m] = self.polys[m].at(at.h);
         }
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
-            slave.apply_inputs(&self.polys)?;
-            slave.do_step(at.t, at.h)?;
+            if !slave.stepped_ahead {
+                slave.apply_inputs(&self.polys)?;
+                slave.do_step(at.t, at.h)?;
+            }
             slave.read_coupled(out, Run::Predictor)?;
         }
         let view = View::at(&self.predicted, &self.u_pred);
@@ -272,6 +275,14 @@ impl MacroStep for PredictorCorrector {
         // Start-up: only N+1 points of history exist at T_N (docs/algorithm.md).
         let n = usize::try_from(at.n).unwrap_or(usize::MAX);
         let (predictor_degree, corrector_degree) = (self.order.min(n), self.order.min(n + 1));
+        if self.u_pred.is_empty() {
+            // Nothing to solve for (signal connections only): every
+            // instance steps once, and that is the accepted point.
+            for slave in system.slaves.iter_mut().filter(|s| !s.stepped_ahead) {
+                slave.do_step(at.t, at.h)?;
+            }
+            return system.read_accepted(Run::Corrector);
+        }
         self.save(system)?;
         self.predict(system, at, predictor_degree)?;
         lap.split_into(&mut stats.times.predictor);

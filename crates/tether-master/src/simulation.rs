@@ -12,6 +12,7 @@ use crate::feedthrough::Feedthrough;
 use crate::observer::{Observer, Sample};
 use crate::predictor_corrector::PredictorCorrector;
 use crate::rows::RowLevel;
+use crate::signals::Signals;
 use crate::slave::Run;
 use crate::spec::{CheckRollback, SystemSpec};
 use crate::stats::{Lap, RunStats, Termination};
@@ -25,6 +26,8 @@ pub struct Simulation {
     system: System,
     /// The coupling method's macro step.
     method: Box<dyn MacroStep>,
+    /// Signal connections, passed around the method's step.
+    signals: Signals,
     /// Current macro point index N.
     n: u64,
     steps: u64,
@@ -83,6 +86,7 @@ impl Simulation {
         let steps = spec.macro_steps();
         let stop = exp.start + steps as f64 * exp.step;
         let mut system = System::new(spec, &method, stop)?;
+        let mut signals = Signals::build(spec, &mut system.slaves)?;
         let (step, initial_level): (Box<dyn MacroStep>, _) = match method {
             Method::Explicit { mu } => (
                 Box::new(Explicit::new(&system, mu)),
@@ -102,7 +106,11 @@ impl Simulation {
             }
         };
         let mut stats = RunStats::default();
+        // Signals at T_0 before and after the consistent multipliers, which
+        // may depend on signal inputs and change outputs that senders read.
+        signals.initialize(&mut system.slaves)?;
         Feedthrough::new(&system).initial(&mut system, initial_level, exp.start, &mut stats)?;
+        signals.initialize(&mut system.slaves)?;
         system.read_accepted(Run::Initial)?;
         if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
             system.check_rollback(exp.start, exp.step)?;
@@ -132,6 +140,7 @@ impl Simulation {
             experiment: exp,
             system,
             method: step,
+            signals,
             n: 0,
             steps,
             row: vec![0.0; columns.len()],
@@ -294,8 +303,13 @@ impl Simulation {
         };
         let mut lap = Lap::start(self.time_phases);
         let stepped = self
-            .method
-            .step(&mut self.system, at, &mut self.stats, &mut lap);
+            .signals
+            .send(&mut self.system.slaves, at)
+            .and_then(|()| {
+                self.method
+                    .step(&mut self.system, at, &mut self.stats, &mut lap)
+            })
+            .and_then(|()| self.signals.receive(&mut self.system.slaves));
         if let Err(e) = stepped {
             if !matches!(e, MasterError::TerminationRequested { .. }) {
                 self.failure = Some(e.to_string());

@@ -42,6 +42,8 @@ pub(crate) enum Run {
     Corrector,
     /// The explicit method's `fmi2DoStep` (the accepted point).
     Explicit,
+    /// The `fmi2DoStep` after which a signal connection's sender is read.
+    Signal,
     /// `fmi2GetFMUstate` / `fmi2SetFMUstate` (the rollback checks).
     Rollback,
     /// Initialization (the point T_0).
@@ -57,6 +59,7 @@ impl Run {
             Run::Perturbed => "after a perturbed run's fmi2DoStep",
             Run::Corrector => "after the corrector's fmi2DoStep",
             Run::Explicit => "after fmi2DoStep",
+            Run::Signal => "after fmi2DoStep (the sender of a signal connection)",
             Run::Rollback => "after fmi2GetFMUstate/fmi2SetFMUstate",
             Run::Initial => "after initialization",
         }
@@ -99,6 +102,9 @@ pub struct Slave {
     pub(crate) can_interpolate_inputs: bool,
     pub(crate) max_output_derivative_order: u32,
     pub(crate) can_get_and_set_state: bool,
+    /// Stepped by the signal connections' Gauss–Seidel sweep before the
+    /// method's step, which then only reads its outputs.
+    pub(crate) stepped_ahead: bool,
     /// `check_rollback = "every_step"`: read the coupled outputs back after
     /// each restore and compare them with those at the save.
     pub(crate) verify_restore: bool,
@@ -246,6 +252,7 @@ impl Slave {
             can_interpolate_inputs,
             max_output_derivative_order,
             can_get_and_set_state,
+            stepped_ahead: false,
             verify_restore: false,
             at_save: Vec::new(),
             readback: Vec::new(),
@@ -545,7 +552,7 @@ impl Slave {
     /// The error for output `variable` = `value` (not finite) read after `run`.
     #[cold]
     #[inline(never)]
-    fn non_finite(&self, variable: String, value: f64, run: Run) -> MasterError {
+    pub(crate) fn non_finite(&self, variable: String, value: f64, run: Run) -> MasterError {
         MasterError::NonFiniteOutput {
             instance: self.name.clone(),
             variable,

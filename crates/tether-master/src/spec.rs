@@ -39,8 +39,15 @@ pub struct SystemSpec {
     /// (the paper's γ̃, r̃: an FMU that applies a joint's force law itself).
     #[serde(rename = "coupling_variable", default)]
     pub coupling_variables: Vec<CouplingVariableSpec>,
+    /// Signal connections `from = "inst.output"` → `to = "inst.input"`,
+    /// passed at macro points (docs/algorithm.md, "Signal connections").
+    #[serde(rename = "connection", default, skip_serializing_if = "Vec::is_empty")]
+    pub connections: Vec<ConnectionSpec>,
+    /// How signal connections are evaluated.
+    #[serde(default, skip_serializing_if = "SignalSettings::is_default")]
+    pub signals: SignalSettings,
     /// What is recorded: the output grid and the columns (`[output]`).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "OutputSpec::is_unset")]
     pub output: OutputSpec,
     /// The file this description was read from (set by
     /// [`SystemSpec::from_file`]), named in its error messages.
@@ -71,6 +78,10 @@ pub struct OutputSpec {
 }
 
 impl OutputSpec {
+    fn is_unset(&self) -> bool {
+        *self == OutputSpec::default()
+    }
+
     /// The macro steps between two recorded points: `interval / step`, which
     /// must be a whole number ≥ 1 (to a relative 1e-9).
     pub fn every(&self, step: f64) -> Result<u64, MasterError> {
@@ -136,6 +147,52 @@ pub fn matches_pattern(pattern: &str, name: &str) -> bool {
         }
     }
     rest.len() >= last.len() && rest.ends_with(last)
+}
+
+/// A signal connection: the receiving input takes `gain·value + offset` of
+/// the sending output at macro points.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConnectionSpec {
+    /// The sending output, `<instance>.<variable>`.
+    pub from: String,
+    /// The receiving input, `<instance>.<variable>`.
+    pub to: String,
+    /// Factor of a linear transformation (Real only; default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain: Option<f64>,
+    /// Offset of a linear transformation (Real only; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<f64>,
+}
+
+/// `[signals]`: the order in which signal-connected instances see each
+/// other's values within a macro step.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SignalSettings {
+    /// `"jacobi"` (the default) or `"gauss_seidel"`.
+    pub scheme: SignalScheme,
+}
+
+impl SignalSettings {
+    fn is_default(&self) -> bool {
+        *self == SignalSettings::default()
+    }
+}
+
+/// Jacobi: every receiver takes the senders' values at T_N. Gauss–Seidel:
+/// the signal-only instances step one after another in the order of the
+/// system file, before the constraint-coupled ones; a receiver takes the
+/// values at T_{N+1} of the senders that stepped before it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SignalScheme {
+    /// All senders' values at T_N.
+    #[default]
+    Jacobi,
+    /// Senders already stepped in this macro step give their values at T_{N+1}.
+    GaussSeidel,
 }
 
 /// Time grid: `T_n = start + n·step`, up to `stop`.
@@ -595,6 +652,17 @@ impl SystemSpec {
                     path: self.source_name(),
                     reason: format!("name '{name}' is used twice"),
                 });
+            }
+        }
+        for c in &self.connections {
+            for (what, v) in [("gain", c.gain), ("offset", c.offset)] {
+                if let Some(v) = v.filter(|v| !v.is_finite()) {
+                    return Err(param(
+                        &format!("{what} of the connection to {}", c.to),
+                        v,
+                        "a finite number",
+                    ));
+                }
             }
         }
         for joint in &self.joints {

@@ -103,7 +103,7 @@ impl Model for Faults {
             stop_time: 1.0,
             step_size: 1e-3,
         },
-
+        ..Declaration::EMPTY
     };
 
     fn new(p: &Parameters) -> Result<Self, String> {

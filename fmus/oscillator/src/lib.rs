@@ -1,9 +1,11 @@
-//! Single-mass oscillator: m ẍ = F − c x − d v.
+//! Single-mass oscillator: m ẍ = F + F_ext − c x − d v.
 //!
 //! Outputs position `x`, velocity `v` and acceleration `a` (direct feedthrough of the
-//! force `F`), with output derivatives up to order 2. With `exact = true` a step is
-//! the matrix exponential of the system augmented with the input polynomial, exact
-//! for inputs of degree ≤ 2.
+//! forces `F` and `F_ext`), with output derivatives up to order 2. With
+//! `exact = true` a step is the matrix exponential of the system augmented with the
+//! input polynomial, exact for inputs of degree ≤ 2. Two force inputs let a
+//! constraint drive one (`F`) while a signal connection drives the other (`F_ext`,
+//! e.g. from a controller); the model only sees their sum.
 
 use std::cell::Cell;
 
@@ -88,9 +90,14 @@ impl Model for Oscillator {
         ],
         boolean_parameters: &[Boolean::new("exact", false)
             .description("Integrate exactly (matrix exponential) instead of with Dop853")],
-        inputs: &[Real::new("F", 0.0)
-            .unit("N")
-            .description("Force on the mass")],
+        inputs: &[
+            Real::new("F", 0.0)
+                .unit("N")
+                .description("Force on the mass"),
+            Real::new("F_ext", 0.0)
+                .unit("N")
+                .description("Additional force on the mass (added to F)"),
+        ],
         outputs: &[
             Output::new("x")
                 .unit("m")
@@ -103,7 +110,7 @@ impl Model for Oscillator {
             Output::new("a")
                 .unit("m/s2")
                 .description("Acceleration")
-                .depends_on(&["pos", "vel", "F"]),
+                .depends_on(&["pos", "vel", "F", "F_ext"]),
         ],
         states: &[
             State::new("pos")
@@ -144,11 +151,11 @@ impl Model for Oscillator {
 
     fn derivatives(&self, _t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
         dx[0] = x[1];
-        dx[1] = self.acceleration(x[0], x[1], u[0]);
+        dx[1] = self.acceleration(x[0], x[1], u[0] + u[1]);
     }
 
     fn outputs(&self, _t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
-        y.copy_from_slice(&[x[0], x[1], self.acceleration(x[0], x[1], u[0])]);
+        y.copy_from_slice(&[x[0], x[1], self.acceleration(x[0], x[1], u[0] + u[1])]);
     }
 
     fn output_derivatives(
@@ -159,7 +166,7 @@ impl Model for Oscillator {
         order: u32,
         dy: &mut [f64],
     ) -> bool {
-        let f = u[0];
+        let f = total(u);
         let a = self.acceleration(x[0], x[1], f.value);
         let jerk = self.acceleration(x[1], a, f.d1);
         match order {
@@ -174,13 +181,22 @@ impl Model for Oscillator {
         if !self.exact {
             return false;
         }
-        let f = u[0];
+        let f = total(u);
         let z = [x[0], x[1], f.value, f.d1, f.d2];
         let rows = self.transition(h);
         // Summed in column order, as nalgebra's matrix-vector product does.
         let dot = |row: &[f64; 5]| (1..5).fold(row[0] * z[0], |acc, j| acc + row[j] * z[j]);
         x.copy_from_slice(&[dot(&rows[0]), dot(&rows[1])]);
         true
+    }
+}
+
+/// The total force F + F_ext with its derivatives.
+fn total(u: &[InputJet]) -> InputJet {
+    InputJet {
+        value: u[0].value + u[1].value,
+        d1: u[0].d1 + u[1].d1,
+        d2: u[0].d2 + u[1].d2,
     }
 }
 

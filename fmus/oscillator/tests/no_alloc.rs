@@ -50,10 +50,10 @@ static GLOBAL: Counting = Counting;
 
 type M = Oscillator;
 const OK: i32 = 0;
-// Value references: exact 6, F 7, x 8, v 9, a 10.
+// Value references: exact 6, F 7, F_ext 8, x 9, v 10, a 11.
 const EXACT: u32 = 6;
 const F: u32 = 7;
-const OUTPUTS: [u32; 3] = [8, 9, 10];
+const OUTPUTS: [u32; 3] = [9, 10, 11];
 
 fn instance(name: &str) -> Fmi2Component {
     let name = CString::new(name).unwrap();

@@ -5,15 +5,16 @@ use oscillator::Oscillator;
 use tether_fmu_kit::instance::{Instance, Status};
 use tether_fmu_kit::machine::Call;
 
-// Value references: m 0, c 1, d 2, x0 3, v0 4, tolerance 5, exact 6, F 7, x 8, v 9, a 10.
+// Value references: m 0, c 1, d 2, x0 3, v0 4, tolerance 5, exact 6, F 7, F_ext 8,
+// x 9, v 10, a 11.
 const C: u32 = 1;
 const X0: u32 = 3;
 const V0: u32 = 4;
 const EXACT: u32 = 6;
 const F: u32 = 7;
-const X: u32 = 8;
-const V: u32 = 9;
-const A: u32 = 10;
+const X: u32 = 9;
+const V: u32 = 10;
+const A: u32 = 11;
 
 fn oscillator(exact: bool, reals: &[(u32, f64)]) -> Instance<Oscillator> {
     let mut inst = Instance::new("test", None, false);

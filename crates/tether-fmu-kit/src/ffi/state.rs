@@ -32,12 +32,25 @@ unsafe fn fmu_state<'a>(state: Fmi2FmuState, fingerprint: u64) -> Outcome<&'a mu
     Ok(state)
 }
 
+/// Refuses the FMU-state functions of a model that declares
+/// `canGetAndSetFMUstate="false"`.
+fn declared<M: Model>() -> Outcome {
+    if M::DECLARATION.capabilities.can_get_and_set_fmu_state {
+        Ok(())
+    } else {
+        Err(Failure::usage(
+            "FMU states are not supported (canGetAndSetFMUstate=\"false\")",
+        ))
+    }
+}
+
 /// fmi2GetFMUstate: updates `*state` in place if it is non-null, else allocates.
 ///
 /// # Safety
 /// See [`with_instance`] and [`fmu_state`]; `state` must be null or writable.
 pub unsafe fn get_fmu_state<M: Model>(c: Fmi2Component, state: *mut Fmi2FmuState) -> Fmi2Status {
     let f = |inst: &mut Instance<M>| -> Outcome {
+        declared::<M>()?;
         if state.is_null() {
             return Err(null("FMUstate"));
         }
@@ -65,6 +78,7 @@ pub unsafe fn get_fmu_state<M: Model>(c: Fmi2Component, state: *mut Fmi2FmuState
 /// See [`with_instance`] and [`fmu_state`].
 pub unsafe fn set_fmu_state<M: Model>(c: Fmi2Component, state: Fmi2FmuState) -> Fmi2Status {
     let f = |inst: &mut Instance<M>| -> Outcome {
+        declared::<M>()?;
         // SAFETY: forwarded contract.
         let state = unsafe { fmu_state(state, inst.fingerprint())? };
         inst.restore(&state.snapshot)
@@ -105,6 +119,7 @@ pub unsafe fn serialized_fmu_state_size<M: Model>(
     size: *mut usize,
 ) -> Fmi2Status {
     let f = |inst: &mut Instance<M>| -> Outcome {
+        declared::<M>()?;
         // SAFETY: forwarded contract.
         let state = unsafe { fmu_state(state, inst.fingerprint())? };
         if size.is_null() {
@@ -129,6 +144,7 @@ pub unsafe fn serialize_fmu_state<M: Model>(
     // SAFETY: the caller guarantees size writable bytes.
     let out = unsafe { slice_mut(bytes.cast::<u8>(), size) };
     let f = |inst: &mut Instance<M>| -> Outcome {
+        declared::<M>()?;
         // SAFETY: forwarded contract.
         let state = unsafe { fmu_state(state, inst.fingerprint())? };
         let data = state.snapshot.serialize(inst.fingerprint());
@@ -161,6 +177,7 @@ pub unsafe fn deserialize_fmu_state<M: Model>(
     // SAFETY: the caller guarantees size readable bytes.
     let data = unsafe { slice(bytes.cast::<u8>(), size) };
     let f = |inst: &mut Instance<M>| -> Outcome {
+        declared::<M>()?;
         let data = data.ok_or_else(|| null("serializedState"))?;
         if state.is_null() {
             return Err(null("FMUstate"));

@@ -177,6 +177,11 @@ pub unsafe fn set_real_input_derivatives<M: Model>(
     // SAFETY: this function's contract (module docs): n orders.
     let orders = unsafe { slice(order, n) };
     let set = |inst: &mut Instance<M>, vrs: &[u32], values: &[f64]| {
+        if !M::DECLARATION.capabilities.can_interpolate_inputs {
+            return Err(Failure::usage(
+                "input derivatives are not supported (canInterpolateInputs=\"false\")",
+            ));
+        }
         inst.set_real_input_derivatives(vrs, orders.ok_or_else(|| null("order"))?, values)
     };
     // SAFETY: this function's contract (module docs).

@@ -1,0 +1,445 @@
+//! Signal connections `[[connection]] from = "a.y" to = "b.u"`: an output's
+//! value handed to an input at macro points, without a solve and without
+//! rollback (docs/algorithm.md, "Signal connections").
+//!
+//! Around the method's macro step: [`Signals::send`] sets every receiving
+//! input for the step T_N → T_{N+1} (before `save`, so that repeated runs of
+//! a constraint-coupled instance see the same signal inputs), and
+//! [`Signals::receive`] reads the senders at T_{N+1} (after `correct`).
+//! A Real input of an instance that declares `canInterpolateInputs` gets the
+//! polynomial of degree k through the sender's last values; every other
+//! input is held constant over the step.
+
+use tether_fmi::{BaseType, Causality, ScalarVariable};
+
+use crate::names::{describe, find_instance};
+use crate::polynomial::{extrapolation, interpolation, Taylor};
+use crate::slave::{Run, Slave};
+use crate::spec::{ConnectionSpec, SignalScheme, SystemSpec};
+use crate::start::Settable;
+use crate::system::StepAt;
+use crate::MasterError;
+
+/// The FMI type a connection carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Real,
+    Integer,
+    Boolean,
+}
+
+/// One resolved connection.
+#[derive(Debug, Clone)]
+struct Link {
+    /// `a.y → b.u`, for messages.
+    name: String,
+    /// The sender's variable name.
+    variable: String,
+    from: usize,
+    from_vr: u32,
+    to: usize,
+    to_vr: u32,
+    kind: Kind,
+    gain: f64,
+    offset: f64,
+    /// The receiver takes the polynomial (Real input, `canInterpolateInputs`).
+    interpolate: bool,
+}
+
+/// The signal connections of a system and the senders' last values.
+pub(crate) struct Signals {
+    links: Vec<Link>,
+    /// Per link: the sender's values `[y_N, y_{N-1}, y_{N-2}]`.
+    history: Vec<[f64; 3]>,
+    /// Per link: the sender's value at T_{N+1}, once read.
+    next: Vec<f64>,
+    /// Degree k of the polynomials (`[coupling] order`).
+    order: usize,
+    /// Gauss–Seidel: the signal-only instances, stepped in this order.
+    sequence: Vec<usize>,
+    /// Per instance: stepped already in the current macro step.
+    fresh: Vec<bool>,
+}
+
+impl Signals {
+    /// Resolve the system file's connections against the instances (after
+    /// the coupling: an input an unknown drives cannot also be a receiver).
+    pub fn build(spec: &SystemSpec, slaves: &mut [Slave]) -> Result<Signals, MasterError> {
+        let mut links: Vec<Link> = Vec::new();
+        let mut unit_errors = Vec::new();
+        for c in &spec.connections {
+            let (link, units) = resolve(c, slaves)?;
+            unit_errors.extend(units);
+            if let Some(other) = links
+                .iter()
+                .find(|l| l.to == link.to && l.to_vr == link.to_vr)
+            {
+                return Err(MasterError::Connection {
+                    connection: link.name.clone(),
+                    reason: format!(
+                        "input {} already receives the connection {}",
+                        c.to, other.name
+                    ),
+                });
+            }
+            if slaves[link.to].inputs.iter().any(|i| i.vr == link.to_vr) {
+                return Err(MasterError::Connection {
+                    connection: link.name,
+                    reason: format!(
+                        "input {} is driven by a constraint, joint or coupling variable",
+                        c.to
+                    ),
+                });
+            }
+            links.push(link);
+        }
+        check_loops(&links, slaves)?;
+        if let Some(e) = unit_errors.into_iter().next() {
+            return Err(e);
+        }
+        let scheme = spec.signals.scheme;
+        let mut sequence = Vec::new();
+        if scheme == SignalScheme::GaussSeidel {
+            for (s, slave) in slaves.iter_mut().enumerate() {
+                let linked = links.iter().any(|l| l.from == s || l.to == s);
+                if linked && !slave.is_coupled() {
+                    slave.stepped_ahead = true;
+                    sequence.push(s);
+                }
+            }
+        }
+        Ok(Signals {
+            history: vec![[0.0; 3]; links.len()],
+            next: vec![0.0; links.len()],
+            links,
+            order: spec.coupling.order,
+            sequence,
+            fresh: vec![false; slaves.len()],
+        })
+    }
+
+    /// Values at T_0: read the senders and set the receivers until nothing
+    /// changes (as often as the longest chain of direct feedthrough needs;
+    /// there are no loops), then start every history there.
+    pub fn initialize(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
+        for _ in 0..=self.links.len() {
+            let mut changed = false;
+            for l in 0..self.links.len() {
+                let value = self.read(slaves, l, Run::Initial)?;
+                changed |= value.to_bits() != self.history[l][0].to_bits();
+                self.history[l] = [value; 3];
+                let held = Taylor {
+                    value,
+                    ..Taylor::default()
+                };
+                self.set(slaves, l, held)?;
+            }
+            if !changed {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// Before the method's step T_N → T_{N+1}: set every receiving input.
+    /// Gauss–Seidel first steps the signal-only instances one after another,
+    /// each with the values at T_{N+1} of the senders stepped before it.
+    pub fn send(&mut self, slaves: &mut [Slave], at: StepAt) -> Result<(), MasterError> {
+        if self.links.is_empty() {
+            return Ok(());
+        }
+        self.fresh.fill(false);
+        for i in 0..self.sequence.len() {
+            let s = self.sequence[i];
+            for l in 0..self.links.len() {
+                if self.links[l].to == s {
+                    let poly = self.polynomial(l, at);
+                    self.set(slaves, l, poly)?;
+                }
+            }
+            slaves[s].do_step(at.t, at.h)?;
+            self.fresh[s] = true;
+            for l in 0..self.links.len() {
+                if self.links[l].from == s {
+                    self.next[l] = self.read(slaves, l, Run::Signal)?;
+                }
+            }
+        }
+        for l in 0..self.links.len() {
+            if !self.sequence.contains(&self.links[l].to) {
+                let poly = self.polynomial(l, at);
+                self.set(slaves, l, poly)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// After the method's step: read the senders at T_{N+1} (those not read
+    /// by the Gauss–Seidel sweep) and shift the histories.
+    pub fn receive(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
+        for l in 0..self.links.len() {
+            if !self.fresh[self.links[l].from] {
+                self.next[l] = self.read(slaves, l, Run::Signal)?;
+            }
+            let h = &mut self.history[l];
+            *h = [self.next[l], h[0], h[1]];
+        }
+        Ok(())
+    }
+
+    /// The sender's polynomial over the step, as link `l`'s receiver takes
+    /// it: through y_{N+1} when the sender has stepped already
+    /// (Gauss–Seidel), else extrapolated from y_N, y_{N-1}, …; degree 0
+    /// (held) for a receiver that cannot interpolate.
+    fn polynomial(&self, l: usize, at: StepAt) -> Taylor {
+        let link = &self.links[l];
+        let n = usize::try_from(at.n).unwrap_or(usize::MAX);
+        let k = if link.interpolate { self.order } else { 0 };
+        let history = &self.history[l];
+        if self.fresh[link.from] {
+            interpolation(self.next[l], history, k.min(n + 1), at.h)
+        } else {
+            extrapolation(history, k.min(n), at.h)
+        }
+    }
+
+    /// Read link `l`'s sender (Integer and Boolean as numbers).
+    fn read(&self, slaves: &mut [Slave], l: usize, run: Run) -> Result<f64, MasterError> {
+        let link = &self.links[l];
+        let slave = &mut slaves[link.from];
+        let value = match link.kind {
+            Kind::Real => {
+                let mut v = [0.0];
+                slave.backend.get_real(&[link.from_vr], &mut v)?;
+                v[0]
+            }
+            Kind::Integer => {
+                let mut v = [0];
+                slave.backend.get_integer(&[link.from_vr], &mut v)?;
+                f64::from(v[0])
+            }
+            Kind::Boolean => {
+                let mut v = [false];
+                slave.backend.get_boolean(&[link.from_vr], &mut v)?;
+                f64::from(u8::from(v[0]))
+            }
+        };
+        slave.counters.get_reals += 1;
+        if !value.is_finite() {
+            return Err(slave.non_finite(link.variable.clone(), value, run));
+        }
+        Ok(value)
+    }
+
+    /// Set link `l`'s receiver to `gain·p + offset` (with its derivatives
+    /// when it interpolates and k > 0).
+    fn set(&self, slaves: &mut [Slave], l: usize, p: Taylor) -> Result<(), MasterError> {
+        let link = &self.links[l];
+        let slave = &mut slaves[link.to];
+        let vr = [link.to_vr];
+        match link.kind {
+            Kind::Real => {
+                let value = link.gain * p.value + link.offset;
+                slave.backend.set_real(&vr, &[value])?;
+                if link.interpolate && self.order > 0 {
+                    let orders = [1, 2];
+                    let d = [link.gain * p.d1, link.gain * p.d2];
+                    let n = self.order.min(2);
+                    slave.backend.set_real_input_derivatives(
+                        &[vr[0]; 2][..n],
+                        &orders[..n],
+                        &d[..n],
+                    )?;
+                    slave.counters.set_input_derivatives += 1;
+                }
+            }
+            // Values read from an Integer output: exact in f64.
+            Kind::Integer => slave.backend.set_integer(&vr, &[p.value as i32])?,
+            Kind::Boolean => slave.backend.set_boolean(&vr, &[p.value != 0.0])?,
+        }
+        slave.counters.set_reals += 1;
+        Ok(())
+    }
+}
+
+/// `inst.variable` split at the first dot.
+fn split<'a>(name: &str, text: &'a str) -> Result<(&'a str, &'a str), MasterError> {
+    text.split_once('.').ok_or_else(|| MasterError::Connection {
+        connection: name.to_string(),
+        reason: format!("'{text}' is not <instance>.<variable>"),
+    })
+}
+
+fn kind_of(var: &ScalarVariable) -> Option<Kind> {
+    match var.base_type() {
+        BaseType::Real => Some(Kind::Real),
+        BaseType::Integer | BaseType::Enumeration => Some(Kind::Integer),
+        BaseType::Boolean => Some(Kind::Boolean),
+        BaseType::String => None,
+    }
+}
+
+fn unit_of(var: &ScalarVariable) -> Option<&str> {
+    var.real().and_then(|r| r.attributes.unit.as_deref())
+}
+
+/// One connection checked against the FMUs: an output to an input of the
+/// same type; with the error to report if the units differ (after the
+/// loops, which say more about the system).
+fn resolve(
+    c: &ConnectionSpec,
+    slaves: &[Slave],
+) -> Result<(Link, Option<MasterError>), MasterError> {
+    let name = format!("{} → {}", c.from, c.to);
+    let owner = format!("connection {name}");
+    let names = slaves.iter().map(|s| s.name.as_str());
+    let end = |text: &str, causality: Causality, role: &str| {
+        let (instance, variable) = split(&name, text)?;
+        let s = find_instance(&owner, instance, names.clone())?;
+        let var = slaves[s]
+            .fmu
+            .model_description()
+            .variable(variable)?
+            .clone();
+        let kind = kind_of(&var);
+        if var.causality != causality || kind.is_none() {
+            return Err(MasterError::WrongVariable {
+                instance: instance.to_string(),
+                variable: variable.to_string(),
+                found: describe(&var),
+                role: format!("'{role}' of {owner}"),
+                expected: format!(
+                    "a Real, Integer or Boolean {}",
+                    if causality == Causality::Output {
+                        "output"
+                    } else {
+                        "input"
+                    }
+                ),
+            });
+        }
+        Ok((s, var, kind.unwrap_or(Kind::Real)))
+    };
+    let (from, out, kind) = end(&c.from, Causality::Output, "from")?;
+    let (to, input, to_kind) = end(&c.to, Causality::Input, "to")?;
+    let fail = |reason: String| MasterError::Connection {
+        connection: name.clone(),
+        reason,
+    };
+    if kind != to_kind {
+        return Err(fail(format!(
+            "{} is {} and {} is {}: a connection joins variables of one type",
+            c.from,
+            describe(&out),
+            c.to,
+            describe(&input)
+        )));
+    }
+    if kind != Kind::Real && (c.gain.is_some() || c.offset.is_some()) {
+        return Err(fail(
+            "gain and offset apply to Real connections only".to_string(),
+        ));
+    }
+    let units = match (unit_of(&out), unit_of(&input)) {
+        // A gain or offset is the user's conversion.
+        _ if c.gain.is_some() || c.offset.is_some() => None,
+        (Some(a), Some(b)) if a != b => Some(fail(format!(
+            "{} is in '{a}' and {} in '{b}': units differ and there is no conversion",
+            c.from, c.to
+        ))),
+        _ => None,
+    };
+    let link = Link {
+        name,
+        variable: out.name.clone(),
+        from,
+        from_vr: out.value_reference,
+        to,
+        to_vr: input.value_reference,
+        kind,
+        gain: c.gain.unwrap_or(1.0),
+        offset: c.offset.unwrap_or(0.0),
+        interpolate: kind == Kind::Real && slaves[to].can_interpolate_inputs,
+    };
+    Ok((link, units))
+}
+
+/// Whether output `output` of instance `slave` depends directly on input
+/// `input` (ModelStructure/Outputs; an output listed without dependencies
+/// depends on every input).
+fn feeds_through(slave: &Slave, input: u32, output: u32) -> bool {
+    let md = slave.fmu.model_description();
+    let variable = |vr: u32, causality: Causality| {
+        md.model_variables
+            .iter()
+            .position(|v| v.value_reference == vr && v.causality == causality)
+            .map(|i| i + 1)
+    };
+    let (Some(i), Some(o)) = (
+        variable(input, Causality::Input),
+        variable(output, Causality::Output),
+    ) else {
+        return true;
+    };
+    match md.model_structure.outputs.iter().find(|u| u.index == o) {
+        // Not listed: no structure information, assume the worst.
+        None => true,
+        Some(u) => u.dependencies.as_ref().is_none_or(|d| d.contains(&i)),
+    }
+}
+
+/// An error naming the first loop of connections that passes through
+/// direct feedthrough only (an algebraic loop the macro points cannot
+/// resolve): link a feeds link b when b's sender output depends directly on
+/// a's receiver input.
+fn check_loops(links: &[Link], slaves: &[Slave]) -> Result<(), MasterError> {
+    let feeds =
+        |a: &Link, b: &Link| a.to == b.from && feeds_through(&slaves[a.to], a.to_vr, b.from_vr);
+    // Depth-first search with colours: 0 new, 1 on the path, 2 done.
+    let mut colour = vec![0u8; links.len()];
+    let mut path = Vec::new();
+    fn visit(
+        l: usize,
+        links: &[Link],
+        feeds: &dyn Fn(&Link, &Link) -> bool,
+        colour: &mut [u8],
+        path: &mut Vec<usize>,
+    ) -> Option<Vec<usize>> {
+        colour[l] = 1;
+        path.push(l);
+        for next in 0..links.len() {
+            if !feeds(&links[l], &links[next]) {
+                continue;
+            }
+            if colour[next] == 1 {
+                let start = path.iter().position(|&p| p == next).unwrap_or(0);
+                return Some(path[start..].to_vec());
+            }
+            if colour[next] == 0 {
+                if let Some(cycle) = visit(next, links, feeds, colour, path) {
+                    return Some(cycle);
+                }
+            }
+        }
+        path.pop();
+        colour[l] = 2;
+        None
+    }
+    for l in 0..links.len() {
+        if colour[l] == 0 {
+            if let Some(cycle) = visit(l, links, &feeds, &mut colour, &mut path) {
+                let names: Vec<&str> = cycle.iter().map(|&c| links[c].name.as_str()).collect();
+                return Err(MasterError::Connection {
+                    connection: names[0].to_string(),
+                    reason: format!(
+                        "direct-feedthrough loop: {} (each sender's output depends directly on \
+                         the input the previous connection sets); break it with an FMU \
+                         whose output does not depend on its input",
+                        names.join(", then ")
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,208 @@
+//! libcosim (the Open Simulation Platform's master, through libcosimpy)
+//! against Tether on SSP: a signal-only system — the workspace's oscillator
+//! under PI control, no constraint — exported by Tether, and the hand-written
+//! SSD of tests/fixtures, each run by both with the same Jacobi algorithm and
+//! step (inputs held over a step). The results agree to
+//! |a − b| ≤ 1e-12·max(1, |b|) at every step.
+//!
+//! Needs `libcosimpy` in the test Python: `.ci/run` installs it into
+//! `TETHER_PYTHON`, and without `TETHER_PYTHON` it is installed into the
+//! tests' own virtualenv. Only where it cannot be installed or imported does
+//! the test say so and pass.
+
+use std::path::Path;
+use std::process::Command;
+
+use tether_master::{MemoryRecorder, Simulation, SystemSpec};
+use tether_tests::fmpy::{python, workspace_root};
+
+fn fmu(name: &str) -> std::path::PathBuf {
+    tether_fmu_build::workspace_fmu(name).expect("package the workspace FMU")
+}
+
+/// The pinned libcosimpy (as `.ci/run` installs it).
+const LIBCOSIMPY: &str = "libcosimpy==0.0.6";
+
+/// The test Python if it can import libcosimpy, else why not. The tests'
+/// own virtualenv (without `TETHER_PYTHON`) gets libcosimpy installed.
+fn libcosim_python() -> Result<std::path::PathBuf, String> {
+    let python = python()?;
+    let import = || {
+        Command::new(&python)
+            .args(["-c", "import libcosimpy.CosimExecution"])
+            .output()
+            .map_err(|e| e.to_string())
+    };
+    let mut out = import()?;
+    if !out.status.success() && std::env::var_os("TETHER_PYTHON").is_none() {
+        let pip = Command::new(&python)
+            .args(["-m", "pip", "install", "--quiet", LIBCOSIMPY])
+            .output()
+            .map_err(|e| e.to_string())?;
+        if !pip.status.success() {
+            return Err(format!(
+                "pip install {LIBCOSIMPY}: {}",
+                String::from_utf8_lossy(&pip.stderr)
+                    .trim()
+                    .replace('\n', " ")
+            ));
+        }
+        out = import()?;
+    }
+    if out.status.success() {
+        Ok(python)
+    } else {
+        Err(String::from_utf8_lossy(&out.stderr)
+            .trim()
+            .replace('\n', " "))
+    }
+}
+
+/// Run `ssp_dir` in libcosim; the rows of `columns` after every step.
+fn libcosim(
+    python: &Path,
+    ssp_dir: &Path,
+    step: f64,
+    stop: f64,
+    columns: &[&str],
+) -> Vec<Vec<f64>> {
+    let out = ssp_dir.join("libcosim.csv");
+    let script = workspace_root().join("tests/libcosim/run_ssp.py");
+    let mut cmd = Command::new(python);
+    cmd.arg(script)
+        .arg(ssp_dir)
+        .arg(step.to_string())
+        .arg(stop.to_string())
+        .arg(&out)
+        .args(columns);
+    let output = cmd.output().expect("run python");
+    assert!(
+        output.status.success(),
+        "libcosim failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let text = std::fs::read_to_string(out).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect()
+}
+
+fn tether(spec: &SystemSpec, columns: &[&str]) -> Vec<Vec<f64>> {
+    let mut sim = Simulation::new(spec).unwrap();
+    let mut rec = MemoryRecorder::default();
+    sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
+    let idx: Vec<usize> = columns
+        .iter()
+        .map(|c| rec.columns.iter().position(|n| n == c).unwrap())
+        .collect();
+    rec.times
+        .iter()
+        .zip(&rec.rows)
+        .skip(1)
+        .map(|(t, row)| {
+            std::iter::once(*t)
+                .chain(idx.iter().map(|&i| row[i]))
+                .collect()
+        })
+        .collect()
+}
+
+fn compare(ours: &[Vec<f64>], theirs: &[Vec<f64>]) -> f64 {
+    assert_eq!(ours.len(), theirs.len(), "number of steps");
+    let mut worst: f64 = 0.0;
+    for (a, b) in ours.iter().zip(theirs) {
+        assert!((a[0] - b[0]).abs() < 1e-9, "time {} vs {}", a[0], b[0]);
+        for (x, y) in a[1..].iter().zip(&b[1..]) {
+            let rel = (x - y).abs() / y.abs().max(1.0);
+            assert!(rel <= 1e-12, "t = {}: Tether {x}, libcosim {y}", a[0]);
+            worst = worst.max(rel);
+        }
+    }
+    worst
+}
+
+const COLUMNS: [&str; 3] = ["mass.x", "mass.v", "ctrl.u"];
+
+fn signal_only_system() -> SystemSpec {
+    let text = format!(
+        r#"
+        name = "controlled_mass"
+        [experiment]
+        stop = 0.5
+        step = 1e-3
+
+        [[instance]]
+        name = "mass"
+        fmu = "{osc}"
+        parameters = {{ m = 2.0, c = 800.0, d = 5.0, v0 = 0.0, exact = true }}
+
+        [[instance]]
+        name = "ctrl"
+        fmu = "{ctrl}"
+        parameters = {{ kp = 500.0, ki = 2000.0 }}
+
+        [[connection]]
+        from = "mass.x"
+        to = "ctrl.y"
+
+        [[connection]]
+        from = "ctrl.u"
+        to = "mass.F_ext"
+        "#,
+        osc = fmu("oscillator").display(),
+        ctrl = fmu("controller").display()
+    );
+    SystemSpec::from_toml(&text).unwrap()
+}
+
+#[test]
+fn libcosim_and_tether_agree_on_an_exported_signal_only_system() {
+    let python = match libcosim_python() {
+        Ok(p) => p,
+        Err(why) => {
+            eprintln!("SKIPPED: libcosimpy cannot be imported by the test Python ({why}); .ci/run installs it");
+            return;
+        }
+    };
+    let spec = signal_only_system();
+    let dir = tempfile::tempdir().unwrap();
+    let ssp = dir.path().join("system.ssp");
+    tether_ssp::write(&spec, &ssp).unwrap();
+    // libcosim reads unpacked SSP folders.
+    let unpacked = dir.path().join("unpacked");
+    zip::ZipArchive::new(std::fs::File::open(&ssp).unwrap())
+        .unwrap()
+        .extract(&unpacked)
+        .unwrap();
+    let theirs = libcosim(&python, &unpacked, 1e-3, 0.5, &COLUMNS);
+    let read = tether_ssp::read(&ssp, None, None).unwrap();
+    let ours = tether(&read.spec, &COLUMNS);
+    let worst = compare(&ours, &theirs);
+    println!("largest |a - b| / max(1, |b|) over 500 steps: {worst:.1e}");
+}
+
+#[test]
+fn libcosim_and_tether_agree_on_the_hand_written_ssd() {
+    let python = match libcosim_python() {
+        Ok(p) => p,
+        Err(why) => {
+            eprintln!("SKIPPED: libcosimpy cannot be imported by the test Python ({why}); .ci/run installs it");
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let src = workspace_root().join("tests/fixtures/ssp/controlled_mass");
+    std::fs::create_dir(dir.path().join("resources")).unwrap();
+    for f in ["SystemStructure.ssd", "resources/mass.ssv"] {
+        std::fs::copy(src.join(f), dir.path().join(f)).unwrap();
+    }
+    for name in ["oscillator", "controller"] {
+        std::fs::copy(fmu(name), dir.path().join(format!("resources/{name}.fmu"))).unwrap();
+    }
+    let theirs = libcosim(&python, dir.path(), 1e-3, 0.5, &COLUMNS);
+    let read = tether_ssp::read(dir.path(), Some(1e-3), None).unwrap();
+    let ours = tether(&read.spec, &COLUMNS);
+    let worst = compare(&ours, &theirs);
+    println!("largest |a - b| / max(1, |b|) over 500 steps: {worst:.1e}");
+}
