@@ -356,3 +356,129 @@ fn interpolating_receivers_get_polynomials_of_degree_k() {
         }
     }
 }
+
+/// The counter FMU of tests/fixtures/fmi/counter.c, compiled and packaged
+/// into `dir`.
+fn counter_fmu(dir: &std::path::Path) -> std::path::PathBuf {
+    use tether_tests::fmi::{compile_shared_library, zip_directory};
+    let root = dir.join("counter-unpacked");
+    let binaries = root.join("binaries").join("linux64");
+    std::fs::create_dir_all(&binaries).unwrap();
+    let source = include_str!("fixtures/fmi/counter.c");
+    compile_shared_library(&binaries, "counter", source, &[]);
+    std::fs::remove_file(binaries.join("counter.c")).unwrap();
+    let var = |name: &str, vr: u32, causality: &str, ty: &str| {
+        let variability = if ty == "Real" {
+            "continuous"
+        } else {
+            "discrete"
+        };
+        let start = if causality == "input" {
+            r#" start="0""#
+        } else {
+            ""
+        };
+        let start = if ty == "Boolean" && causality == "input" {
+            r#" start="false""#
+        } else {
+            start
+        };
+        format!(
+            r#"<ScalarVariable name="{name}" valueReference="{vr}" causality="{causality}" variability="{variability}"><{ty}{start}/></ScalarVariable>"#
+        )
+    };
+    let xml = format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="counter" guid="{{counter}}" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="counter" canHandleVariableCommunicationStepSize="true" canGetAndSetFMUstate="false"/>
+  <ModelVariables>
+    {}
+    {}
+    {}
+    {}
+    {}
+    {}
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs><Unknown index="1" dependencies=""/><Unknown index="2" dependencies=""/><Unknown index="5" dependencies="3"/><Unknown index="6" dependencies="4"/></Outputs>
+  </ModelStructure>
+</fmiModelDescription>
+"#,
+        var("count", 0, "output", "Integer"),
+        var("odd", 1, "output", "Boolean"),
+        var("in_i", 2, "input", "Integer"),
+        var("in_b", 3, "input", "Boolean"),
+        var("got_i", 4, "output", "Real"),
+        var("got_b", 5, "output", "Real"),
+    );
+    std::fs::write(root.join("modelDescription.xml"), xml).unwrap();
+    let archive = dir.join("counter.fmu");
+    zip_directory(&root, &archive);
+    archive
+}
+
+fn counters(fmu: &std::path::Path, scheme: &str, extra: &str) -> SystemSpec {
+    let text = format!(
+        r#"
+        [experiment]
+        stop = 0.01
+        step = 1e-3
+        [signals]
+        scheme = "{scheme}"
+        [[instance]]
+        name = "a"
+        fmu = "{fmu}"
+        [[instance]]
+        name = "b"
+        fmu = "{fmu}"
+        [[connection]]
+        from = "a.count"
+        to = "b.in_i"
+        [[connection]]
+        from = "a.odd"
+        to = "b.in_b"
+        {extra}
+        "#,
+        fmu = fmu.display()
+    );
+    SystemSpec::from_toml(&text).unwrap()
+}
+
+/// Integer and Boolean outputs reach Integer and Boolean inputs, held over
+/// the step: b sees a's count at T_N (Jacobi) or at T_{N+1} (Gauss–Seidel,
+/// a steps first). Mixing the types, or a gain on an Integer, is refused.
+#[test]
+fn integer_and_boolean_connections_pass_values_at_macro_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = counter_fmu(dir.path());
+    for (scheme, lag) in [("jacobi", 1.0), ("gauss_seidel", 0.0)] {
+        let mut sim = Simulation::new(&counters(&fmu, scheme, "")).unwrap();
+        let mut rec = MemoryRecorder::default();
+        sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
+        let col = |name: &str| rec.columns.iter().position(|c| c == name).unwrap();
+        let (got_i, got_b) = (col("b.got_i"), col("b.got_b"));
+        for (n, row) in rec.rows.iter().enumerate().skip(1) {
+            let count = n as f64 - lag;
+            assert_eq!(row[got_i], count, "{scheme}, step {n}");
+            assert_eq!(row[got_b], count % 2.0, "{scheme}, step {n}");
+        }
+    }
+    let message = setup_error(&counters(
+        &fmu,
+        "jacobi",
+        "[[connection]]\nfrom = \"a.odd\"\nto = \"a.in_i\"",
+    ));
+    assert!(
+        message.contains("a connection joins variables of one type"),
+        "{message}"
+    );
+    let message = setup_error(&counters(
+        &fmu,
+        "jacobi",
+        "[[connection]]\nfrom = \"b.count\"\nto = \"a.in_i\"\ngain = 2.0",
+    ));
+    assert!(
+        message.contains("gain and offset apply to Real connections only"),
+        "{message}"
+    );
+}
