@@ -40,7 +40,7 @@ pub struct SystemSpec {
     #[serde(rename = "coupling_variable", default)]
     pub coupling_variables: Vec<CouplingVariableSpec>,
     /// What is recorded: the output grid and the columns (`[output]`).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "OutputSpec::is_default")]
     pub output: OutputSpec,
     /// The file this description was read from (set by
     /// [`SystemSpec::from_file`]), named in its error messages.
@@ -71,6 +71,11 @@ pub struct OutputSpec {
 }
 
 impl OutputSpec {
+    /// Every point and every column (an `[output]` that changes nothing).
+    pub fn is_default(&self) -> bool {
+        *self == OutputSpec::default()
+    }
+
     /// The macro steps between two recorded points: `interval / step`, which
     /// must be a whole number ≥ 1 (to a relative 1e-9).
     pub fn every(&self, step: f64) -> Result<u64, MasterError> {
