@@ -374,3 +374,41 @@ fn plot_axes_carry_units_and_clean_zero_ticks() {
         assert!(v == 0.0 || v.abs() > 1e-6, "tick {t}");
     }
 }
+
+/// A run that fails between two points of the output grid still records its
+/// last accepted point, the time the error line names.
+#[test]
+fn a_failed_run_on_a_coarse_grid_keeps_its_last_accepted_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let quirks = tether_fmu_build::workspace_fmu("quirks").unwrap();
+    let sys = system(dir.path(), &quirks, ", nan_after = 0.5", "");
+    let out = tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--output-interval",
+            "0.3",
+        ],
+        dir.path(),
+    );
+    let line = error_line(&out);
+    let (_, rows) = read_csv(&dir.path().join("r.csv"));
+    let times: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(times[..2], [0.0, 0.3]);
+    assert_eq!(times.len(), 3, "{times:?}");
+    let last = times[2];
+    assert!((0.49..0.5).contains(&last), "{last}");
+    assert!(
+        line.contains(&format!(
+            "results up to t = {last} kept in r.csv (marked incomplete)"
+        )),
+        "{line}"
+    );
+    let text = std::fs::read_to_string(dir.path().join("r.csv")).unwrap();
+    assert!(
+        text.lines().last().unwrap().starts_with("# incomplete: "),
+        "{text}"
+    );
+}

@@ -47,7 +47,7 @@ pub struct SystemSpec {
     #[serde(default, skip_serializing_if = "SignalSettings::is_default")]
     pub signals: SignalSettings,
     /// What is recorded: the output grid and the columns (`[output]`).
-    #[serde(default, skip_serializing_if = "OutputSpec::is_unset")]
+    #[serde(default, skip_serializing_if = "OutputSpec::is_default")]
     pub output: OutputSpec,
     /// The file this description was read from (set by
     /// [`SystemSpec::from_file`]), named in its error messages.
@@ -78,7 +78,8 @@ pub struct OutputSpec {
 }
 
 impl OutputSpec {
-    fn is_unset(&self) -> bool {
+    /// Every point and every column (an `[output]` that changes nothing).
+    pub fn is_default(&self) -> bool {
         *self == OutputSpec::default()
     }
 
