@@ -1,31 +1,22 @@
-//! Which FMI call this thread is inside, for a program's exit hook or signal
-//! handler: when an FMU calls `exit()` or `abort()`, the process ends inside
-//! the FMU and the error value never comes back, so the hook asks
-//! [`current_call`] whom to blame.
+//! Which FMI call is in progress, on this thread for a program's exit hook or
+//! signal handler (when an FMU calls `exit()` or `abort()`, the process ends
+//! inside the FMU and the error value never comes back, so the hook asks
+//! [`current_call`] whom to blame), and on every thread for a watchdog or a
+//! Ctrl-C handler ([`calls_in_progress`]: which call is stuck).
 //!
-//! Every call records its function, instance and time in a thread-local cell
-//! before entering the FMU and clears it after (two stores, no allocation).
-//!
-//! It also publishes them for other threads ([`calls_in_progress`]), so that a
-//! watchdog or a Ctrl-C handler can say which call is stuck: a few relaxed
-//! atomic stores into this thread's slot and a sequence number that is odd
-//! while the call runs. Instance names are found by an id in a registry that
-//! holds them while the instance lives.
+//! Every call publishes its function, instance and time in its thread's slot
+//! before entering the FMU, and a sequence number that is odd while the call
+//! runs: a few relaxed atomic stores through a constant thread-local pointer,
+//! no allocation, no lock. Instance names are found by an id in a registry
+//! that holds them while the instance lives. Slots are never freed: a thread
+//! that ends gives its slot back for the next one.
 
 use std::cell::Cell;
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
-/// The function, the instance name and the instance's time of the call in
-/// progress on this thread.
-type Entry = (&'static str, *const str, f64);
-
-thread_local! {
-    static CURRENT: Cell<Option<Entry>> = const { Cell::new(None) };
-}
-
-/// An FMI call in progress on the calling thread.
+/// An FMI call in progress.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CurrentCall {
     /// The C function, e.g. `fmi2DoStep`.
@@ -39,39 +30,39 @@ pub struct CurrentCall {
 /// The FMI call this thread is inside, if any: from an exit hook, a signal
 /// handler or a logger callback running on the thread that called the FMU.
 pub fn current_call() -> Option<CurrentCall> {
-    let (function, instance, time) = CURRENT.try_with(Cell::get).ok().flatten()?;
-    // SAFETY: the pointer is set by `Entered::new` from the name of the component
-    // being called and cleared when that call returns; while it is set, code on this
-    // thread runs only inside the call (the FMU itself, its callbacks, or a hook or
-    // handler they trigger), during which the component and its name are alive.
-    let instance = unsafe { &*instance }.to_owned();
-    Some(CurrentCall {
-        function,
-        instance,
-        time,
-    })
+    let slot = SLOT.try_with(Cell::get).ok()?;
+    if slot.is_null() {
+        return None;
+    }
+    // SAFETY: slots are leaked, never freed (`register`).
+    let slot = unsafe { &*slot };
+    slot.read().map(|(call, _)| call)
 }
 
 /// Marks the calling thread as inside `function` of `instance` until dropped.
 pub(crate) struct Entered {
-    previous: Option<Entry>,
+    slot: &'static Published,
 }
 
 impl Entered {
     #[inline]
     pub(crate) fn new(function: &'static str, instance: &Name, time: f64) -> Entered {
-        let entry = (function, &*instance.name as *const str, time);
-        let previous = CURRENT.try_with(|c| c.replace(Some(entry))).ok().flatten();
-        let _ = SLOT.try_with(|s| s.0.enter(function, instance.id, time));
-        Entered { previous }
+        let slot = match SLOT.try_with(Cell::get) {
+            Ok(p) if !p.is_null() => {
+                // SAFETY: slots are leaked, never freed (`register`).
+                unsafe { &*p }
+            }
+            _ => register(),
+        };
+        slot.enter(function, instance.id, time);
+        Entered { slot }
     }
 }
 
 impl Drop for Entered {
     #[inline]
     fn drop(&mut self) {
-        let _ = CURRENT.try_with(|c| c.set(self.previous));
-        let _ = SLOT.try_with(|s| s.0.leave());
+        self.slot.leave();
     }
 }
 
@@ -123,6 +114,8 @@ impl Drop for Name {
 /// One thread's published call; written by that thread only.
 #[derive(Debug, Default)]
 struct Published {
+    /// Whether a live thread owns the slot.
+    owned: AtomicBool,
     /// Odd while a call runs; changes with every call.
     sequence: AtomicU64,
     function: AtomicUsize,
@@ -150,34 +143,86 @@ impl Published {
             self.sequence.store(s + 1, Ordering::Release);
         }
     }
-}
 
-/// The slots of the live threads that made FMI calls.
-static THREADS: Mutex<Vec<Arc<Published>>> = Mutex::new(Vec::new());
-
-fn threads() -> MutexGuard<'static, Vec<Arc<Published>>> {
-    THREADS.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-/// This thread's slot, registered on first use and removed when it ends.
-struct Slot(Arc<Published>);
-
-impl Slot {
-    fn new() -> Slot {
-        let slot = Arc::new(Published::default());
-        threads().push(Arc::clone(&slot));
-        Slot(slot)
+    /// The call in progress and its key, if any.
+    fn read(&'static self) -> Option<(CurrentCall, (usize, u64))> {
+        let sequence = self.sequence.load(Ordering::Acquire);
+        if sequence & 1 == 0 {
+            return None;
+        }
+        let function = self.function.load(Ordering::Relaxed);
+        let len = self.function_len.load(Ordering::Relaxed);
+        let instance = self.instance.load(Ordering::Relaxed);
+        let time = f64::from_bits(self.time.load(Ordering::Relaxed));
+        if self.sequence.load(Ordering::Acquire) != sequence {
+            return None; // the call ended meanwhile
+        }
+        // SAFETY: `function` and `len` were stored together from a `&'static str`
+        // by `enter` of the same call (the sequence number did not change while
+        // they were read), so they describe a valid static string.
+        let function: &'static str = unsafe {
+            std::str::from_utf8_unchecked(std::slice::from_raw_parts(function as *const u8, len))
+        };
+        let instance = names()
+            .get(&instance)
+            .map_or_else(|| "?".to_string(), |n| n.to_string());
+        let call = CurrentCall {
+            function,
+            instance,
+            time,
+        };
+        Some((call, (self as *const Published as usize, sequence)))
     }
 }
 
-impl Drop for Slot {
+/// Every slot ever made (owned or free for the next thread).
+static SLOTS: Mutex<Vec<&'static Published>> = Mutex::new(Vec::new());
+
+fn slots() -> MutexGuard<'static, Vec<&'static Published>> {
+    SLOTS.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Gives the slot back when the thread ends.
+struct Owner(&'static Published);
+
+impl Drop for Owner {
     fn drop(&mut self) {
-        threads().retain(|s| !Arc::ptr_eq(s, &self.0));
+        // `exit()` inside an FMU call runs the thread's destructors before the
+        // exit hooks: the slot then stays as it is, for `current_call`.
+        if self.0.sequence.load(Ordering::Relaxed) & 1 == 1 {
+            return;
+        }
+        let _ = SLOT.try_with(|s| s.set(std::ptr::null()));
+        self.0.owned.store(false, Ordering::Release);
     }
 }
 
 thread_local! {
-    static SLOT: Slot = Slot::new();
+    static SLOT: Cell<*const Published> = const { Cell::new(std::ptr::null()) };
+    static OWNER: Cell<Option<Owner>> = const { Cell::new(None) };
+}
+
+/// This thread's slot, taken on its first call: a free one or a new one
+/// (leaked: slots live as long as the process).
+#[cold]
+#[inline(never)]
+fn register() -> &'static Published {
+    let mut all = slots();
+    let free = all.iter().copied().find(|s| {
+        s.owned
+            .compare_exchange(false, true, Ordering::AcqRel, Ordering::Relaxed)
+            .is_ok()
+    });
+    let slot = free.unwrap_or_else(|| {
+        let slot: &'static Published = Box::leak(Box::default());
+        slot.owned.store(true, Ordering::Relaxed);
+        all.push(slot);
+        slot
+    });
+    drop(all);
+    let _ = SLOT.try_with(|s| s.set(slot));
+    let _ = OWNER.try_with(|o| o.set(Some(Owner(slot))));
+    slot
 }
 
 /// An FMI call in progress on some thread, as [`calls_in_progress`] sees it.
@@ -193,39 +238,12 @@ pub struct CallInProgress {
 /// The FMI calls running on every thread now (of instances in this process and
 /// of isolated ones, whose calls wait for their host).
 pub fn calls_in_progress() -> Vec<CallInProgress> {
-    let slots: Vec<Arc<Published>> = threads().clone();
-    let mut calls = Vec::new();
-    for slot in slots {
-        let sequence = slot.sequence.load(Ordering::Acquire);
-        if sequence & 1 == 0 {
-            continue;
-        }
-        let function = slot.function.load(Ordering::Relaxed);
-        let len = slot.function_len.load(Ordering::Relaxed);
-        let instance = slot.instance.load(Ordering::Relaxed);
-        let time = f64::from_bits(slot.time.load(Ordering::Relaxed));
-        if slot.sequence.load(Ordering::Acquire) != sequence {
-            continue; // the call ended meanwhile
-        }
-        // SAFETY: `function` and `len` were stored together from a `&'static str`
-        // by `Published::enter` of the same call (the sequence number did not
-        // change while they were read), so they describe a valid static string.
-        let function: &'static str = unsafe {
-            std::str::from_utf8_unchecked(std::slice::from_raw_parts(function as *const u8, len))
-        };
-        let instance = names()
-            .get(&instance)
-            .map_or_else(|| "?".to_string(), |n| n.to_string());
-        calls.push(CallInProgress {
-            call: CurrentCall {
-                function,
-                instance,
-                time,
-            },
-            key: (Arc::as_ptr(&slot) as usize, sequence),
-        });
-    }
-    calls
+    let all: Vec<&'static Published> = slots().clone();
+    all.into_iter()
+        .filter(|s| s.owned.load(Ordering::Acquire))
+        .filter_map(Published::read)
+        .map(|(call, key)| CallInProgress { call, key })
+        .collect()
 }
 
 #[cfg(test)]
