@@ -124,7 +124,8 @@ class Result:
     """The results of a run: one row per accepted macro point.
 
     ``columns`` are the names after ``time``, as in the CSV of ``tether run``:
-    every Real output as ``<instance>.<variable>``, then the multipliers
+    every output (Real, then Integer, then Boolean, as numbers) as
+    ``<instance>.<variable>``, then the multipliers
     (``<constraint>.lambda``), then the residuals (``<constraint>.g``).
 
     ``result[name]`` is a NumPy float64 array of one column (``"time"`` too),
@@ -233,6 +234,7 @@ class System:
             "constraint": [],
             "joint": [],
             "coupling_variable": [],
+            "connection": [],
         }
 
     @classmethod
@@ -243,11 +245,10 @@ class System:
         except _tether.Failure as f:
             raise _error(f) from None
         system = cls(data.get("name"))
-        for key in ("experiment", "method", "coupling"):
-            if key in data:
-                system._data[key] = data[key]
-        for key in ("instance", "constraint", "joint", "coupling_variable"):
-            system._data[key] = list(data.get(key, []))
+        # Every section the file has, the lists copied so they can be changed.
+        for key, value in data.items():
+            if key != "name":
+                system._data[key] = list(value) if isinstance(value, list) else value
         for inst in system._data["instance"]:
             inst["fmu"] = os.path.abspath(inst["fmu"])
         return system
@@ -281,13 +282,55 @@ class System:
         return self
 
     def add_instance(
-        self, name: str, fmu: PathLike, parameters: Optional[Mapping[str, ParameterValue]] = None
+        self,
+        name: str,
+        fmu: PathLike,
+        parameters: Optional[Mapping[str, ParameterValue]] = None,
+        isolation: Optional[str] = None,
+        call_timeout: Optional[float] = None,
     ) -> "System":
-        """An FMU instance named ``name`` (the column prefix) with start values."""
+        """An FMU instance named ``name`` (the column prefix) with start values;
+        ``isolation="process"`` runs it in a host process of its own and
+        ``call_timeout`` (seconds) bounds each FMI call (docs/reliability.md)."""
         inst: Dict[str, Any] = {"name": name, "fmu": os.path.abspath(os.fspath(fmu))}
         if parameters:
             inst["parameters"] = dict(parameters)
+        if isolation is not None:
+            inst["isolation"] = isolation
+        if call_timeout is not None:
+            inst["call_timeout"] = float(call_timeout)
         self._data["instance"].append(inst)
+        return self
+
+    def add_connection(
+        self,
+        source: str,
+        target: str,
+        gain: Optional[float] = None,
+        offset: Optional[float] = None,
+    ) -> "System":
+        """A signal connection: the output ``source`` (``"instance.variable"``)
+        is handed to the input ``target`` at macro points, as
+        ``gain·value + offset`` (docs/system-file.md, ``[[connection]]``)."""
+        self._data["connection"].append(
+            _overrides(**{"from": source, "to": target, "gain": gain, "offset": offset})
+        )
+        return self
+
+    def signals(self, scheme: str) -> "System":
+        """The order of signal connections: ``"jacobi"`` or ``"gauss_seidel"``."""
+        self._data["signals"] = {"scheme": scheme}
+        return self
+
+    def output(
+        self, interval: Optional[float] = None, variables: Optional[Sequence[str]] = None
+    ) -> "System":
+        """What is recorded: every ``interval`` (a whole multiple of the step)
+        and the columns matching ``variables`` (``*`` matches any characters)."""
+        self._data["output"] = _overrides(
+            interval=None if interval is None else float(interval),
+            variables=None if variables is None else list(variables),
+        )
         return self
 
     def add_constraint(
