@@ -22,32 +22,40 @@ use tether_fmi::{Error, Fmu, FmuState, Instance, InstanceOptions, StatusKind};
 /// the master closed the connection, 2 when standard input and output are not
 /// pipes or a message could not be read.
 pub fn serve_stdin() -> ExitCode {
-    let fail = |message: &str| {
-        let _ = writeln!(std::io::stderr(), "error: tether-fmi-host: {message}");
-        ExitCode::from(2)
-    };
-    if !is_pipe(0) || !is_pipe(1) {
-        return fail("it runs an FMU for Tether, which starts it with pipes as standard input and output; it is not meant to be started by hand");
+    match serve_standard_streams() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(message) => {
+            let _ = writeln!(std::io::stderr(), "error: tether-fmi-host: {message}");
+            ExitCode::from(2)
+        }
     }
-    let requests = match std::io::stdin().as_fd().try_clone_to_owned() {
-        Ok(fd) => File::from(fd),
-        Err(e) => return fail(&e.to_string()),
-    };
+}
+
+/// [`serve_stdin`] for hosts embedded in another program (the Python
+/// package's `python -m tether._fmi_host`): `Ok` when the master closed the
+/// connection, otherwise what went wrong.
+pub fn serve_standard_streams() -> Result<(), String> {
+    if !is_pipe(0) || !is_pipe(1) {
+        return Err("it runs an FMU for Tether, which starts it with pipes as standard input and output; it is not meant to be started by hand".into());
+    }
+    let requests = File::from(
+        std::io::stdin()
+            .as_fd()
+            .try_clone_to_owned()
+            .map_err(|e| e.to_string())?,
+    );
     // SAFETY: dup and dup2 on the standard descriptors: the replies keep the
     // pipe to the master on a descriptor of their own, and descriptor 1 then
     // refers to standard error, so the FMU's printf cannot break a reply.
     let replies = unsafe {
         let fd = libc::dup(1);
         if fd < 0 || libc::dup2(2, 1) < 0 {
-            return fail(&std::io::Error::last_os_error().to_string());
+            return Err(std::io::Error::last_os_error().to_string());
         }
         File::from(OwnedFd::from_raw_fd(fd))
     };
     watch_hangup(&requests);
-    match serve(requests, replies) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => fail(&e.to_string()),
-    }
+    serve(requests, replies).map_err(|e| e.to_string())
 }
 
 /// Whether descriptor `fd` is a pipe.

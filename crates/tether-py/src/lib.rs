@@ -1003,6 +1003,28 @@ fn simulate_one(
 }
 
 /// The module `tether._tether`.
+// ---------------------------------------------------------------------------
+// Isolated instances (`isolation = "process"`, docs/reliability.md)
+
+/// Start the host processes of isolated instances as `program args…`
+/// (the package's import sets `python -m tether._fmi_host`; the
+/// `TETHER_FMI_HOST` environment variable still comes first).
+#[pyfunction]
+fn use_fmi_host(program: PathBuf, args: Vec<String>) {
+    tether_fmi::remote::set_host(tether_fmi::remote::HostCommand {
+        program,
+        args: args.into_iter().map(Into::into).collect(),
+    });
+}
+
+/// Serve one isolated FMU instance on standard input and output until the
+/// master closes them (the body of `python -m tether._fmi_host`).
+#[pyfunction]
+fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
+    py.detach(tether_fmi_host::serve_standard_streams)
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("tether-fmi-host: {e}")))
+}
+
 #[pymodule]
 fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("Failure", m.py().get_type::<Failure>())?;
@@ -1011,6 +1033,8 @@ fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(info, m)?)?;
     m.add_function(wrap_pyfunction!(load_system, m)?)?;
     m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
+    m.add_function(wrap_pyfunction!(use_fmi_host, m)?)?;
+    m.add_function(wrap_pyfunction!(serve_fmi_host, m)?)?;
     m.add_class::<PySimulation>()?;
     m.add_class::<study::PyPlan>()?;
     m.add_function(wrap_pyfunction!(study::plan_sweep, m)?)?;

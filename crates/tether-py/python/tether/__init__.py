@@ -28,11 +28,17 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
 from . import _tether
+
+# Isolated instances (isolation = "process", docs/reliability.md) run in host
+# processes started as `python -m tether._fmi_host`: the package needs no
+# executable of its own. TETHER_FMI_HOST, when set, still comes first.
+_tether.use_fmi_host(sys.executable, ["-m", "tether._fmi_host"])
 
 __all__ = [
     "run",
