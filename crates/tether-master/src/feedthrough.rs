@@ -60,7 +60,7 @@ impl Feedthrough {
             rows: vec![0.0; nu],
             r0: Vec::with_capacity(nu),
             jac: Jacobians::new(&system.touched, 1),
-            all: Jacobians::new(&system.touched, 1).solver(),
+            all: Solver::new(&system.touched),
             solver: Solver::default(),
         }
     }

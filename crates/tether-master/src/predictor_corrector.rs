@@ -83,7 +83,7 @@ impl PredictorCorrector {
             live: vec![false; system.slaves.len()],
             rows: vec![0.0; levels.len() * nu],
             jac: Jacobians::new(&system.touched, levels.len()),
-            solver: Jacobians::new(&system.touched, 1).solver(),
+            solver: Solver::new(&system.touched),
             corrected: vec![0.0; nu],
             levels,
         }
@@ -172,15 +172,7 @@ impl PredictorCorrector {
                 for &s in &system.owners[m] {
                     self.live[s] = false;
                 }
-                let (rows, column) = self.jac.column_mut(m);
-                let levels = self.rows.chunks_exact(nu).zip(self.g.chunks_exact(nu));
-                for (values, (perturbed, g)) in
-                    column.chunks_exact_mut(rows.len().max(1)).zip(levels)
-                {
-                    for (j, &r) in values.iter_mut().zip(rows) {
-                        *j = (perturbed[r] - g[r]) / self.delta[m];
-                    }
-                }
+                self.jac.difference(m, &self.rows, &self.g, self.delta[m]);
             }
         }
         Ok(())

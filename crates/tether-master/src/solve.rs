@@ -62,16 +62,18 @@ impl Jacobians {
         (&self.rows[start..end], values)
     }
 
-    /// A solver for these Jacobians: sparse on their pattern above
-    /// [`DENSE_MAX`] unknowns when at most a quarter of the entries are on
-    /// the pattern, dense otherwise.
-    pub fn solver(&self) -> Solver {
-        let mut solver = Solver::default();
-        if self.n > DENSE_MAX && 4 * self.rows.len() <= self.n * self.n {
-            let (ptr, rows) = (self.ptr.clone(), self.rows.clone());
-            solver.sparse = Some(SparseLu::new(self.n, ptr, rows));
+    /// Column `m` of every level as the finite difference `(rows − g)/delta`
+    /// on its pattern, from `rows` and `g` (every row of every level, level
+    /// after level).
+    pub fn difference(&mut self, m: usize, rows: &[f64], g: &[f64], delta: f64) {
+        let n = self.n;
+        let (pattern, column) = self.column_mut(m);
+        let levels = rows.chunks_exact(n).zip(g.chunks_exact(n));
+        for (values, (perturbed, g)) in column.chunks_exact_mut(pattern.len().max(1)).zip(levels) {
+            for (j, &r) in values.iter_mut().zip(pattern) {
+                *j = (perturbed[r] - g[r]) / delta;
+            }
         }
-        solver
     }
 
     /// Load every column into `solver`'s matrix, entry `k` of column `c`
@@ -179,6 +181,19 @@ pub(crate) struct Solver {
 }
 
 impl Solver {
+    /// A solver for Jacobians on the pattern of `touched`: sparse above
+    /// [`DENSE_MAX`] unknowns when at most a quarter of the entries are on
+    /// the pattern, dense otherwise.
+    pub fn new(touched: &Touched) -> Solver {
+        let n = touched.row_ptr.len() - 1;
+        let mut solver = Solver::default();
+        if n > DENSE_MAX && 4 * touched.nnz() <= n * n {
+            let (ptr, rows) = (touched.row_ptr.clone(), touched.rows.clone());
+            solver.sparse = Some(SparseLu::new(n, ptr, rows));
+        }
+        solver
+    }
+
     /// Size the system to `n × n` (allocating only when `n` grows) and hand out
     /// the matrix (column-major, like nalgebra's storage) and right-hand side to
     /// fill. Their previous contents are unspecified.
@@ -559,7 +574,7 @@ mod tests {
             let g: Vec<f64> = (0..levels * n).map(|i| (i as f64 + 0.5).cos()).collect();
             let (beta, gamma) = (0.3, 0.07);
             let mask: Vec<bool> = (0..n).map(|r| plain.contains(&r)).collect();
-            let mut solver = jac.solver();
+            let mut solver = Solver::default();
             jac.baumgarte(&mut solver, &g, Some((1, beta)), Some((2, gamma)), &mask);
             let (a, b) = solver.system(n);
             for c in 0..n {
