@@ -138,3 +138,29 @@ fn fixed_parameters_coupled_inputs_and_outputs_are_refused() {
     sim.step().unwrap();
     assert_eq!(sim.value("mass3.F"), None);
 }
+
+/// The progress callback is optional: `run_to_end` gives the same results
+/// as `run` with a callback, which sees every step once, in order.
+#[test]
+fn progress_is_optional_and_sees_every_step() {
+    use tether_master::MemoryRecorder;
+    let mut calls = Vec::new();
+    let mut with = MemoryRecorder::default();
+    let mut sim = Simulation::new(&system()).unwrap();
+    sim.run(&mut [&mut with], &mut |done, total| {
+        calls.push((done, total))
+    })
+    .unwrap();
+    let mut without = MemoryRecorder::default();
+    Simulation::new(&system())
+        .unwrap()
+        .run_to_end(&mut [&mut without])
+        .unwrap();
+    assert_eq!(calls.len(), 500);
+    assert!(calls
+        .iter()
+        .enumerate()
+        .all(|(i, &c)| c == (i as u64 + 1, 500)));
+    assert_eq!(with.times, without.times);
+    assert_eq!(with.rows, without.rows);
+}

@@ -325,9 +325,18 @@ impl Simulation {
         })
     }
 
+    /// [`run`](Self::run) without a progress callback.
+    pub fn run_to_end(
+        &mut self,
+        observers: &mut [&mut dyn Observer],
+    ) -> Result<RunStats, MasterError> {
+        self.run(observers, &mut |_, _| {})
+    }
+
     /// Run to the stop time, feeding the accepted points on the output grid
     /// (`[output] interval`, by default every one) and the last accepted
-    /// point to the observers.
+    /// point to the observers; `progress(steps done, steps in all)` is called
+    /// after every accepted step.
     /// An instance's request to end the simulation (fmi2Discard with
     /// `fmi2Terminated`) ends the run normally at the last accepted point,
     /// noted in [`RunStats::termination`]. On a normal end every instance is
