@@ -1002,7 +1002,6 @@ fn simulate_one(
     Ok((rows, made))
 }
 
-/// The module `tether._tether`.
 // ---------------------------------------------------------------------------
 // Isolated instances (`isolation = "process"`, docs/reliability.md)
 
@@ -1025,6 +1024,7 @@ fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("tether-fmi-host: {e}")))
 }
 
+/// The module `tether._tether`.
 #[pymodule]
 fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("Failure", m.py().get_type::<Failure>())?;
