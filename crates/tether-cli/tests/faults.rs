@@ -686,6 +686,10 @@ fn isolated_log_flood_is_rate_limited() {
 fn isolated_runs_equal_in_process_runs_bit_for_bit() {
     let s = Scratch::new();
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    // The examples name the packaged FMUs in target/fmus.
+    for fmu in ["oscillator", "link", "body3d"] {
+        tether_fmu_build::workspace_fmu(fmu).expect("package the example's FMUs");
+    }
     for (example, flags) in [
         ("oscillator", &[][..]),
         ("oscillator", &["--order", "1", "--parallel", "on"][..]),
