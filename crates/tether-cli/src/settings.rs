@@ -41,6 +41,14 @@ pub struct Settings {
     /// (overrides [coupling] parallel).
     #[arg(long, value_parser = ["auto", "on", "off"])]
     parallel: Option<String>,
+    /// Corrections per macro step, 1 = the paper's single correction
+    /// (overrides [coupling] iterations).
+    #[arg(long)]
+    iterations: Option<usize>,
+    /// An iterated correction stops when every update is below this times
+    /// max(1, |u|) (overrides [coupling] iteration_tol).
+    #[arg(long)]
+    iteration_tol: Option<f64>,
     /// Set an FMU start value for every run: INSTANCE.PARAMETER=VALUE (repeatable).
     #[arg(long = "set", value_name = "INSTANCE.PARAMETER=VALUE")]
     set: Vec<String>,
@@ -69,6 +77,8 @@ impl Settings {
                 .map(str::parse)
                 .transpose()
                 .map_err(anyhow::Error::msg)?,
+            iterations: self.iterations,
+            iteration_tol: self.iteration_tol,
             parameters: Default::default(),
         };
         for setting in &self.set {

@@ -40,6 +40,12 @@ pub struct Overrides {
     /// Perturbed runs on other threads (`[coupling] parallel`).
     #[serde(default)]
     pub parallel: Option<Parallel>,
+    /// Corrections per macro step (`[coupling] iterations`).
+    #[serde(default)]
+    pub iterations: Option<usize>,
+    /// Tolerance of the iterated correction (`[coupling] iteration_tol`).
+    #[serde(default)]
+    pub iteration_tol: Option<f64>,
     /// FMU start values by target `instance.parameter`.
     #[serde(default)]
     pub parameters: BTreeMap<String, StartValue>,
@@ -152,6 +158,8 @@ impl Overrides {
             epsilon: over.epsilon.or(self.epsilon),
             divergence_factor: over.divergence_factor.or(self.divergence_factor),
             parallel: over.parallel.or(self.parallel),
+            iterations: over.iterations.or(self.iterations),
+            iteration_tol: over.iteration_tol.or(self.iteration_tol),
             parameters,
         }
     }
@@ -178,6 +186,12 @@ impl Overrides {
         }
         if let Some(parallel) = self.parallel {
             spec.coupling.parallel = parallel;
+        }
+        if let Some(iterations) = self.iterations {
+            spec.coupling.iterations = iterations;
+        }
+        if let Some(tol) = self.iteration_tol {
+            spec.coupling.iteration_tol = tol;
         }
         spec.method = self.method.apply(spec.method)?;
         for (target, value) in &self.parameters {
@@ -444,6 +458,8 @@ mod tests {
             epsilon: Some(1e-6),
             divergence_factor: Some(1e3),
             parallel: Some(Parallel::Off),
+            iterations: Some(3),
+            iteration_tol: Some(1e-8),
             ..Overrides::default()
         };
         o.set("mass1.c=2e3").unwrap();
@@ -454,6 +470,8 @@ mod tests {
         assert_eq!(spec.coupling.epsilon, 1e-6);
         assert_eq!(spec.coupling.divergence_factor, 1e3);
         assert_eq!(spec.coupling.parallel, Parallel::Off);
+        assert_eq!(spec.coupling.iterations, 3);
+        assert_eq!(spec.coupling.iteration_tol, 1e-8);
         assert_eq!(spec.method, Method::Weighted { a: 0.5, b: 2.0 });
         assert_eq!(spec.instances[0].parameters["c"], StartValue::Real(2e3));
         assert_eq!(spec.instances[1].parameters["m"], StartValue::Integer(3));

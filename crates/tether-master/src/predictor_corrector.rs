@@ -8,6 +8,7 @@ use crate::rows::{Column, RowLevel, View};
 use crate::runs::PerturbedRuns;
 use crate::slave::Run;
 use crate::solve::{Jacobians, Solver};
+use crate::spec::CouplingSettings;
 use crate::stats::{Lap, RunStats};
 use crate::system::{MacroStep, StepAt, System};
 use crate::{MasterError, Method};
@@ -48,13 +49,19 @@ pub(crate) struct PredictorCorrector {
     solver: Solver,
     /// u_{N+1}.
     corrected: Vec<f64>,
+    /// Corrections per macro step (`[coupling] iterations`, 1 = the paper).
+    iterations: usize,
+    /// Relative size of an update below which iterating stops.
+    iteration_tol: f64,
+    /// The point an iterated correction starts from (the last corrected u).
+    iterate_from: Vec<f64>,
 }
 
 impl PredictorCorrector {
     pub fn new(
         system: &System,
         method: Method,
-        order: usize,
+        settings: &CouplingSettings,
         runs: Box<dyn PerturbedRuns>,
     ) -> Self {
         let nu = system.coupling.len();
@@ -68,7 +75,10 @@ impl PredictorCorrector {
         let outputs = &system.outputs;
         PredictorCorrector {
             method,
-            order,
+            order: settings.order,
+            iterations: settings.iterations,
+            iteration_tol: settings.iteration_tol,
+            iterate_from: vec![0.0; nu],
             algebraic_rows: (0..nu)
                 .filter(|&r| system.coupling.unknowns[r].is_algebraic())
                 .collect(),
@@ -233,8 +243,8 @@ impl PredictorCorrector {
     }
 
     /// Step 5, corrector: every driven instance repeats the step from its
-    /// saved state with the interpolation polynomials through u_{N+1}; the
-    /// result is accepted and the history shifts.
+    /// saved state with the interpolation polynomials through u_{N+1}, and
+    /// the outputs at T_{N+1} are read.
     fn correct(
         &mut self,
         system: &mut System,
@@ -247,10 +257,55 @@ impl PredictorCorrector {
         for slave in system.slaves.iter_mut().filter(|s| s.is_coupled()) {
             slave.rerun(&self.polys, at.t, at.h, None)?;
         }
+        system.read_accepted(Run::Corrector)
+    }
+
+    /// Iterated correction (`[coupling] iterations`, beyond the paper): g
+    /// (ġ, g̈) at the corrected point, another solve with the same interface
+    /// Jacobian from there, another corrector run; until every update is
+    /// below `iteration_tol·max(1, |u|)` or `iterations` corrections were
+    /// made. Returns the number of corrections, the first included.
+    fn iterate(
+        &mut self,
+        system: &mut System,
+        at: StepAt,
+        degree: usize,
+        stats: &mut RunStats,
+    ) -> Result<u64, MasterError> {
+        let mut corrections: usize = 1;
+        while corrections < self.iterations {
+            let nu = system.coupling.len();
+            let view = View::at(&system.outputs, &self.corrected);
+            for (&level, g) in self.levels.iter().zip(self.g.chunks_exact_mut(nu)) {
+                system.coupling.eval(level, &view, g);
+            }
+            // The solve starts from `u_pred`: let it start from the last
+            // corrected point, and keep the prediction for afterwards.
+            self.iterate_from.copy_from_slice(&self.corrected);
+            std::mem::swap(&mut self.u_pred, &mut self.iterate_from);
+            let solved = self.solve(system, at.t_next, stats);
+            std::mem::swap(&mut self.u_pred, &mut self.iterate_from);
+            solved?;
+            self.correct(system, at, degree)?;
+            corrections += 1;
+            let tol = self.iteration_tol;
+            let small = self
+                .corrected
+                .iter()
+                .zip(&self.iterate_from)
+                .all(|(u, from)| (u - from).abs() <= tol * u.abs().max(1.0));
+            if small {
+                break;
+            }
+        }
+        Ok(corrections as u64)
+    }
+
+    /// Accept the step: u_{N+1} goes to the head of the history.
+    fn accept(&mut self, system: &mut System) {
         for (history, &u) in system.history.iter_mut().zip(&self.corrected) {
             *history = [u, history[0], history[1]];
         }
-        system.read_accepted(Run::Corrector)
     }
 }
 
@@ -273,7 +328,12 @@ impl MacroStep for PredictorCorrector {
         self.solve(system, at.t_next, stats)?;
         lap.split_into(&mut stats.times.solve);
         self.correct(system, at, corrector_degree)?;
+        // Beyond the paper: repeat the correction (1 = none).
+        let corrections = self.iterate(system, at, corrector_degree, stats)?;
         lap.split_into(&mut stats.times.corrector);
+        stats.corrections += corrections;
+        stats.max_corrections = stats.max_corrections.max(corrections);
+        self.accept(system);
         Ok(())
     }
 

@@ -80,7 +80,7 @@ impl Simulation {
                     system.coupling.len(),
                     (exp.start, stop, exp.tolerance),
                 )?;
-                let pc = PredictorCorrector::new(&system, method, settings.order, runs);
+                let pc = PredictorCorrector::new(&system, method, &settings, runs);
                 (Box::new(pc), RowLevel::Acceleration)
             }
         };

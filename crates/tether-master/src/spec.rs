@@ -80,6 +80,13 @@ pub struct CouplingSettings {
     /// The run summary warns when the largest |g| of a constraint or joint
     /// condition over the run exceeds this (in the condition's units).
     pub residual_warning: f64,
+    /// Corrections per macro step (1 = the paper): after the corrector run,
+    /// g is evaluated again and corrected with the same Jacobian, up to this
+    /// many corrections in all (docs/algorithm.md, iterated correction).
+    pub iterations: usize,
+    /// An iterated correction stops when every update |Δu_m| is below
+    /// `iteration_tol·max(1, |u_m|)`.
+    pub iteration_tol: f64,
 }
 
 /// When the master checks that `fmi2SetFMUstate` restores an instance
@@ -110,6 +117,8 @@ impl Default for CouplingSettings {
             parallel: Parallel::Auto,
             check_rollback: CheckRollback::Setup,
             residual_warning: 1e-3,
+            iterations: 1,
+            iteration_tol: 1e-10,
         }
     }
 }
@@ -415,6 +424,20 @@ impl SystemSpec {
             return Err(param(
                 "residual_warning",
                 c.residual_warning,
+                "a finite number > 0",
+            ));
+        }
+        if c.iterations == 0 || c.iterations > 1000 {
+            return Err(param(
+                "iterations",
+                c.iterations as f64,
+                "a number of corrections per step from 1 to 1000",
+            ));
+        }
+        if !c.iteration_tol.is_finite() || c.iteration_tol <= 0.0 {
+            return Err(param(
+                "iteration_tol",
+                c.iteration_tol,
                 "a finite number > 0",
             ));
         }

@@ -54,6 +54,11 @@ pub struct RunStats {
     pub macro_steps: u64,
     /// Linear solves of the interface Jacobian (one per matrix factorised).
     pub jacobian_solves: u64,
+    /// Corrections made (corrector runs), over all accepted macro steps:
+    /// one per step unless the correction is iterated (`[coupling] iterations`).
+    pub corrections: u64,
+    /// The most corrections made in one macro step.
+    pub max_corrections: u64,
     /// Per-instance FMI call counts.
     pub instances: Vec<InstanceCounters>,
     /// Where the time went.
@@ -95,6 +100,14 @@ impl fmt::Display for RunStats {
             self.jacobian_solves,
             self.wall.as_secs_f64()
         )?;
+        if self.max_corrections > 1 {
+            writeln!(
+                f,
+                "  corrections per step: {:.2} on average, {} at most",
+                self.corrections as f64 / self.macro_steps.max(1) as f64,
+                self.max_corrections
+            )?;
+        }
         for c in &self.instances {
             writeln!(
                 f,

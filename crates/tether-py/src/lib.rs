@@ -258,6 +258,12 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
             "step" => o.step = real(&value)?,
             "epsilon" => o.epsilon = real(&value)?,
             "divergence_factor" => o.divergence_factor = real(&value)?,
+            "iteration_tol" => o.iteration_tol = real(&value)?,
+            "iterations" => {
+                if !value.is_none() {
+                    o.iterations = Some(value.extract()?);
+                }
+            }
             "beta" => method.beta = real(&value)?,
             "gamma" => method.gamma = real(&value)?,
             "a" => method.a = real(&value)?,
@@ -309,7 +315,8 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
             other => {
                 return Err(PyTypeError::new_err(format!(
                 "unexpected override '{other}'; expected stop, step, method, beta, gamma, a, b, \
-                     mu, order, epsilon, parallel, divergence_factor or parameters"
+                     mu, order, epsilon, parallel, divergence_factor, iterations, iteration_tol or \
+                     parameters"
             )))
             }
         }
