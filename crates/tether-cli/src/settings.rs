@@ -49,6 +49,14 @@ pub struct Settings {
     /// max(1, |u|) (overrides [coupling] iteration_tol).
     #[arg(long)]
     iteration_tol: Option<f64>,
+    /// Adaptive macro steps with this relative tolerance of the local error
+    /// estimate (sets [step_control] rtol; the step starts at --step).
+    #[arg(long)]
+    step_rtol: Option<f64>,
+    /// Adaptive macro steps with this absolute tolerance (sets
+    /// [step_control] atol).
+    #[arg(long)]
+    step_atol: Option<f64>,
     /// Set an FMU start value for every run: INSTANCE.PARAMETER=VALUE (repeatable).
     #[arg(long = "set", value_name = "INSTANCE.PARAMETER=VALUE")]
     set: Vec<String>,
@@ -79,6 +87,8 @@ impl Settings {
                 .map_err(anyhow::Error::msg)?,
             iterations: self.iterations,
             iteration_tol: self.iteration_tol,
+            step_rtol: self.step_rtol,
+            step_atol: self.step_atol,
             parameters: Default::default(),
         };
         for setting in &self.set {

@@ -21,6 +21,7 @@
 
 mod coupling;
 mod error;
+mod error_estimate;
 mod explicit;
 pub mod expr;
 mod feedthrough;
@@ -40,6 +41,7 @@ mod solve;
 pub mod spec;
 mod start;
 mod stats;
+mod step_control;
 mod system;
 mod threads;
 
@@ -53,5 +55,6 @@ pub use spec::{
     InitialMultiplier, InstanceSpec, JointInitial, JointSpec, StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
-pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination};
+pub use stats::{AdaptiveStats, InstanceCounters, PhaseTimes, RunStats, Termination};
+pub use step_control::StepControl;
 pub use threads::{Parallel, ParallelInfo};

@@ -46,6 +46,14 @@ pub struct Overrides {
     /// Tolerance of the iterated correction (`[coupling] iteration_tol`).
     #[serde(default)]
     pub iteration_tol: Option<f64>,
+    /// Relative tolerance of adaptive macro steps (`[step_control] rtol`);
+    /// turns them on.
+    #[serde(default)]
+    pub step_rtol: Option<f64>,
+    /// Absolute tolerance of adaptive macro steps (`[step_control] atol`);
+    /// turns them on.
+    #[serde(default)]
+    pub step_atol: Option<f64>,
     /// FMU start values by target `instance.parameter`.
     #[serde(default)]
     pub parameters: BTreeMap<String, StartValue>,
@@ -160,6 +168,8 @@ impl Overrides {
             parallel: over.parallel.or(self.parallel),
             iterations: over.iterations.or(self.iterations),
             iteration_tol: over.iteration_tol.or(self.iteration_tol),
+            step_rtol: over.step_rtol.or(self.step_rtol),
+            step_atol: over.step_atol.or(self.step_atol),
             parameters,
         }
     }
@@ -192,6 +202,12 @@ impl Overrides {
         }
         if let Some(tol) = self.iteration_tol {
             spec.coupling.iteration_tol = tol;
+        }
+        if let Some(rtol) = self.step_rtol {
+            spec.step_control.get_or_insert_with(Default::default).rtol = rtol;
+        }
+        if let Some(atol) = self.step_atol {
+            spec.step_control.get_or_insert_with(Default::default).atol = atol;
         }
         spec.method = self.method.apply(spec.method)?;
         for (target, value) in &self.parameters {
@@ -460,6 +476,7 @@ mod tests {
             parallel: Some(Parallel::Off),
             iterations: Some(3),
             iteration_tol: Some(1e-8),
+            step_atol: Some(1e-7),
             ..Overrides::default()
         };
         o.set("mass1.c=2e3").unwrap();
@@ -472,6 +489,8 @@ mod tests {
         assert_eq!(spec.coupling.parallel, Parallel::Off);
         assert_eq!(spec.coupling.iterations, 3);
         assert_eq!(spec.coupling.iteration_tol, 1e-8);
+        let control = spec.step_control.unwrap();
+        assert_eq!((control.rtol, control.atol), (1e-4, 1e-7));
         assert_eq!(spec.method, Method::Weighted { a: 0.5, b: 2.0 });
         assert_eq!(spec.instances[0].parameters["c"], StartValue::Real(2e3));
         assert_eq!(spec.instances[1].parameters["m"], StartValue::Integer(3));

@@ -3,13 +3,15 @@
 //! Method 1 (Baumgarte, eqs. 65–68) and Method 2 (weighted multipliers,
 //! eqs. 71–76) differ only in the solve.
 
-use crate::polynomial::{extrapolation, interpolation, Taylor};
+use crate::error_estimate::ErrorEstimate;
+use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::rows::{Column, RowLevel, View};
 use crate::runs::PerturbedRuns;
 use crate::slave::Run;
 use crate::solve::{Jacobians, Solver};
 use crate::spec::CouplingSettings;
 use crate::stats::{Lap, RunStats};
+use crate::step_control::StepControl;
 use crate::system::{MacroStep, StepAt, System};
 use crate::{MasterError, Method};
 
@@ -55,6 +57,8 @@ pub(crate) struct PredictorCorrector {
     iteration_tol: f64,
     /// The point an iterated correction starts from (the last corrected u).
     iterate_from: Vec<f64>,
+    /// Adaptive steps: the local error estimate (None: fixed steps).
+    estimate: Option<ErrorEstimate>,
 }
 
 impl PredictorCorrector {
@@ -79,6 +83,7 @@ impl PredictorCorrector {
             iterations: settings.iterations,
             iteration_tol: settings.iteration_tol,
             iterate_from: vec![0.0; nu],
+            estimate: None,
             algebraic_rows: (0..nu)
                 .filter(|&r| system.coupling.unknowns[r].is_algebraic())
                 .collect(),
@@ -100,9 +105,10 @@ impl PredictorCorrector {
     }
 
     /// Step 1: save the state of every instance some unknown drives
-    /// (`fmi2GetFMUstate`).
+    /// (`fmi2GetFMUstate`); with adaptive steps, of every instance.
     fn save(&mut self, system: &mut System) -> Result<(), MasterError> {
-        for slave in system.slaves.iter_mut().filter(|s| s.is_coupled()) {
+        let all = self.estimate.is_some();
+        for slave in system.slaves.iter_mut().filter(|s| all || s.is_coupled()) {
             slave.save_state()?;
         }
         Ok(())
@@ -118,7 +124,7 @@ impl PredictorCorrector {
         degree: usize,
     ) -> Result<(), MasterError> {
         for (m, history) in system.history.iter().enumerate() {
-            self.polys[m] = extrapolation(history, degree, at.h);
+            self.polys[m] = extrapolate(history, degree, at.h, at.past);
             self.u_pred[m] = self.polys[m].at(at.h);
         }
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
@@ -150,7 +156,7 @@ impl PredictorCorrector {
             for &m in group {
                 self.delta[m] = system.delta(m);
                 let u = self.u_pred[m] + self.delta[m];
-                polys[m] = interpolation(u, &system.history[m], degree, at.h);
+                polys[m] = interpolate(u, &system.history[m], degree, at.h, at.past);
             }
         }
         let slaves = &mut system.slaves;
@@ -252,7 +258,7 @@ impl PredictorCorrector {
         degree: usize,
     ) -> Result<(), MasterError> {
         for (m, history) in system.history.iter().enumerate() {
-            self.polys[m] = interpolation(self.corrected[m], history, degree, at.h);
+            self.polys[m] = interpolate(self.corrected[m], history, degree, at.h, at.past);
         }
         for slave in system.slaves.iter_mut().filter(|s| s.is_coupled()) {
             slave.rerun(&self.polys, at.t, at.h, None)?;
@@ -301,6 +307,28 @@ impl PredictorCorrector {
         Ok(corrections as u64)
     }
 
+    /// Adaptive steps: the step's error norm (docs/algorithm.md, Milne's
+    /// device on the coupled states of the predictor and corrector runs);
+    /// a step above 1 is rolled back, every instance to its saved state.
+    fn estimate_error(
+        &mut self,
+        system: &mut System,
+        degree: usize,
+    ) -> Result<Option<f64>, MasterError> {
+        let Some(estimate) = &mut self.estimate else {
+            return Ok(None);
+        };
+        let norm = estimate.norm(&self.predicted, &system.outputs, degree);
+        if norm <= 1.0 {
+            estimate.accept(&system.outputs);
+        } else {
+            for slave in &mut system.slaves {
+                slave.restore_state()?;
+            }
+        }
+        Ok(Some(norm))
+    }
+
     /// Accept the step: u_{N+1} goes to the head of the history.
     fn accept(&mut self, system: &mut System) {
         for (history, &u) in system.history.iter_mut().zip(&self.corrected) {
@@ -316,7 +344,7 @@ impl MacroStep for PredictorCorrector {
         at: StepAt,
         stats: &mut RunStats,
         lap: &mut Lap,
-    ) -> Result<(), MasterError> {
+    ) -> Result<Option<f64>, MasterError> {
         // Start-up: only N+1 points of history exist at T_N (docs/algorithm.md).
         let n = usize::try_from(at.n).unwrap_or(usize::MAX);
         let (predictor_degree, corrector_degree) = (self.order.min(n), self.order.min(n + 1));
@@ -331,14 +359,24 @@ impl MacroStep for PredictorCorrector {
         // Beyond the paper: repeat the correction (1 = none).
         let corrections = self.iterate(system, at, corrector_degree, stats)?;
         lap.split_into(&mut stats.times.corrector);
+        // Beyond the paper: adaptive steps judge the step first.
+        let error = self.estimate_error(system, corrector_degree)?;
+        if error.is_some_and(|e| e.is_nan() || e > 1.0) {
+            return Ok(error);
+        }
         stats.corrections += corrections;
         stats.max_corrections = stats.max_corrections.max(corrections);
         self.accept(system);
-        Ok(())
+        Ok(error)
     }
 
     fn report(&self, stats: &mut RunStats) {
         self.runs.report(stats);
+    }
+
+    fn control_steps(&mut self, system: &System, control: &StepControl) -> bool {
+        self.estimate = Some(ErrorEstimate::new(system, &self.levels, control));
+        true
     }
 
     fn terminate(&mut self) -> Result<(), MasterError> {

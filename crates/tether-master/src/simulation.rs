@@ -12,7 +12,8 @@ use crate::predictor_corrector::PredictorCorrector;
 use crate::rows::RowLevel;
 use crate::slave::Run;
 use crate::spec::{CheckRollback, SystemSpec};
-use crate::stats::{Lap, RunStats, Termination};
+use crate::stats::{AdaptiveStats, Lap, RunStats, Termination};
+use crate::step_control::Controller;
 use crate::system::{MacroStep, StepAt, System};
 use crate::threads;
 use crate::{Experiment, MasterError, Method};
@@ -45,6 +46,22 @@ pub struct Simulation {
     step_end: Option<Instant>,
     /// `[coupling] residual_warning`, for the summary.
     residual_warning: f64,
+    /// Adaptive macro steps (`[step_control]`); `None`: the uniform grid.
+    adaptive: Option<Adaptive>,
+}
+
+/// The variable time grid of adaptive macro steps.
+struct Adaptive {
+    controller: Controller,
+    /// T_N.
+    t: f64,
+    /// The stop time, the last point.
+    stop: f64,
+    /// The next step size to try.
+    h: f64,
+    /// T_N − T_{N−1} and T_{N−1} − T_{N−2}.
+    past: [f64; 2],
+    stats: AdaptiveStats,
 }
 
 impl Simulation {
@@ -84,12 +101,59 @@ impl Simulation {
                 (Box::new(pc), RowLevel::Acceleration)
             }
         };
+        let mut step = step;
+        let adaptive = match &spec.step_control {
+            None => None,
+            Some(control) => {
+                if matches!(method, Method::Explicit { .. }) {
+                    return Err(MasterError::InvalidParameter {
+                        name: "step_control".into(),
+                        value: control.rtol,
+                        expected: "the predictor/corrector methods (baumgarte, weighted): \
+                                   the explicit method has no error estimate"
+                            .into(),
+                    });
+                }
+                if let Some((slave, capability)) = system
+                    .slaves
+                    .iter()
+                    .find_map(|s| s.cannot_vary_steps().map(|c| (s, c)))
+                {
+                    return Err(MasterError::MissingCapability {
+                        instance: slave.name.clone(),
+                        model: slave.model_name.clone(),
+                        capability,
+                        needed_by: "adaptive macro steps ([step_control])".into(),
+                    });
+                }
+                let limits = control.limits(exp.start, exp.stop, exp.step)?;
+                Some((control, limits))
+            }
+        };
         let mut stats = RunStats::default();
         Feedthrough::new(&system).initial(&mut system, initial_level, exp.start, &mut stats)?;
         system.read_accepted(Run::Initial)?;
         if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
             system.check_rollback(exp.start, exp.step)?;
         }
+        let adaptive = match adaptive {
+            None => None,
+            Some((control, limits)) => {
+                step.control_steps(&system, control);
+                let h = limits.h_initial.min(limits.h_max).max(limits.h_min);
+                Some(Adaptive {
+                    controller: Controller::new(limits, settings.order),
+                    t: exp.start,
+                    stop: exp.stop,
+                    h,
+                    past: [h, h],
+                    stats: AdaptiveStats {
+                        h_smallest: f64::INFINITY,
+                        ..AdaptiveStats::default()
+                    },
+                })
+            }
+        };
         let mut columns = Vec::new();
         for slave in &system.slaves {
             columns.extend(slave.recorded_names().iter().cloned());
@@ -114,6 +178,7 @@ impl Simulation {
             residual_warning: settings.residual_warning,
             time_phases: false,
             step_end: None,
+            adaptive,
         };
         sim.fill_row();
         // Finite limits (the factor is finite, > 1), so that ±∞ is always
@@ -142,9 +207,20 @@ impl Simulation {
         &self.row
     }
 
-    /// The current macro time T_N = T_0 + N·H.
+    /// The current macro time T_N (T_0 + N·H on the uniform grid).
     pub fn time(&self) -> f64 {
-        self.time_at(self.n)
+        match &self.adaptive {
+            Some(a) => a.t,
+            None => self.time_at(self.n),
+        }
+    }
+
+    /// Whether the run has reached its last point.
+    pub fn finished(&self) -> bool {
+        match &self.adaptive {
+            Some(a) => a.t >= a.stop,
+            None => self.n >= self.steps,
+        }
     }
 
     fn time_at(&self, n: u64) -> f64 {
@@ -159,7 +235,8 @@ impl Simulation {
         self.last_recorded
     }
 
-    /// Number of macro steps the experiment asks for.
+    /// Number of macro steps the experiment asks for (with adaptive steps:
+    /// how many steps of `[experiment] step` the run spans, for progress).
     pub fn total_steps(&self) -> u64 {
         self.steps
     }
@@ -190,6 +267,7 @@ impl Simulation {
             .zip(self.max_residuals.iter().copied())
             .collect();
         stats.residual_warning = self.residual_warning;
+        stats.adaptive = self.adaptive.as_ref().map(|a| a.stats);
         stats.instances = self
             .system
             .slaves
@@ -200,22 +278,74 @@ impl Simulation {
         stats
     }
 
-    /// Advance one macro step with the configured method.
+    /// Advance one macro step with the configured method (with adaptive
+    /// steps: one accepted step, after as many rejected tries as it takes).
     pub fn step(&mut self) -> Result<(), MasterError> {
-        let at = StepAt {
-            n: self.n,
-            t: self.time(),
-            h: self.experiment.step,
-            t_next: self.time_at(self.n + 1),
-        };
         let mut lap = Lap::start(self.time_phases);
-        self.method
-            .step(&mut self.system, at, &mut self.stats, &mut lap)?;
+        match &self.adaptive {
+            None => {
+                let at = StepAt {
+                    n: self.n,
+                    t: self.time(),
+                    h: self.experiment.step,
+                    t_next: self.time_at(self.n + 1),
+                    past: None,
+                };
+                self.method
+                    .step(&mut self.system, at, &mut self.stats, &mut lap)?;
+            }
+            Some(_) => self.adaptive_step(&mut lap)?,
+        }
         self.n += 1;
         self.step_end = lap.last();
         self.stats.macro_steps += 1;
         self.fill_row();
         self.check_divergence()
+    }
+
+    /// One accepted step of adaptive size: try the controller's step
+    /// (clipped to land on the stop time), roll back and retry smaller while
+    /// the error estimate exceeds the tolerances.
+    fn adaptive_step(&mut self, lap: &mut Lap) -> Result<(), MasterError> {
+        let a = self.adaptive.as_mut().expect("adaptive steps");
+        loop {
+            let remaining = a.stop - a.t;
+            // The last step ends exactly at the stop time; no sliver is left.
+            let last = a.h >= remaining || remaining - a.h < 1e-3 * a.h;
+            let h = if last { remaining } else { a.h };
+            let at = StepAt {
+                n: self.n,
+                t: a.t,
+                h,
+                t_next: if last { a.stop } else { a.t + h },
+                past: Some(a.past),
+            };
+            let error = self
+                .method
+                .step(&mut self.system, at, &mut self.stats, lap)?
+                .expect("the predictor/corrector step estimates its error");
+            let (next, accepted) = a.controller.next(h, error);
+            if accepted {
+                a.t = at.t_next;
+                a.past = [h, a.past[0]];
+                // A clipped last step does not shrink the next proposal.
+                a.h = if last { a.h.max(next) } else { next };
+                a.stats.accepted += 1;
+                a.stats.last_error = error;
+                a.stats.h_smallest = a.stats.h_smallest.min(h);
+                a.stats.h_largest = a.stats.h_largest.max(h);
+                return Ok(());
+            }
+            a.stats.rejected += 1;
+            if h <= a.controller.limits.h_min {
+                return Err(MasterError::StepSizeTooSmall {
+                    time: a.t,
+                    error,
+                    h_min: a.controller.limits.h_min,
+                });
+            }
+            a.h = next;
+        }
     }
 
     /// Run to the stop time, feeding every accepted point to the observers.
@@ -237,7 +367,7 @@ impl Simulation {
         }
         self.notify(observers)?;
         let outcome = (|| {
-            while self.n < self.steps {
+            while !self.finished() {
                 if let Some(reason) = observers.iter_mut().find_map(|o| o.interrupt()) {
                     let time = self.time();
                     return Err(MasterError::Interrupted { time, reason });

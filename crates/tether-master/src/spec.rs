@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::step_control::StepControl;
 use crate::{MasterError, Method, Parallel};
 
 /// A whole system file.
@@ -26,6 +27,9 @@ pub struct SystemSpec {
     /// Settings shared by all methods.
     #[serde(default)]
     pub coupling: CouplingSettings,
+    /// Adaptive macro steps (absent: the fixed `[experiment] step`).
+    #[serde(default)]
+    pub step_control: Option<StepControl>,
     /// The FMU instances, in the order their columns appear in the results.
     #[serde(rename = "instance")]
     pub instances: Vec<InstanceSpec>,
@@ -525,6 +529,9 @@ impl SystemSpec {
     /// from `stop` when `stop` is not on the macro grid.
     pub fn end_time(&self) -> f64 {
         let e = &self.experiment;
+        if self.step_control.is_some() {
+            return e.stop;
+        }
         e.start + self.macro_steps() as f64 * e.step
     }
 
@@ -532,6 +539,9 @@ impl SystemSpec {
     /// of a step): the run ends at the nearest grid point instead.
     pub fn grid_warning(&self) -> Option<String> {
         let e = &self.experiment;
+        if self.step_control.is_some() {
+            return None;
+        }
         let end = self.end_time();
         ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
             format!(

@@ -59,6 +59,8 @@ pub struct RunStats {
     pub corrections: u64,
     /// The most corrections made in one macro step.
     pub max_corrections: u64,
+    /// Adaptive macro steps (`[step_control]`): what the controller did.
+    pub adaptive: Option<AdaptiveStats>,
     /// Per-instance FMI call counts.
     pub instances: Vec<InstanceCounters>,
     /// Where the time went.
@@ -76,6 +78,22 @@ pub struct RunStats {
     /// The threshold above which the summary warns about a residual
     /// (`[coupling] residual_warning`).
     pub residual_warning: f64,
+}
+
+/// What the step-size controller of adaptive macro steps did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct AdaptiveStats {
+    /// Accepted macro steps.
+    pub accepted: u64,
+    /// Rejected (rolled back and retried smaller) macro steps.
+    pub rejected: u64,
+    /// The smallest accepted step size.
+    pub h_smallest: f64,
+    /// The largest accepted step size.
+    pub h_largest: f64,
+    /// The error norm of the last accepted step (≤ 1: its estimated local
+    /// error over the tolerances).
+    pub last_error: f64,
 }
 
 /// An instance's request to end the simulation, and where the run ended.
@@ -100,6 +118,13 @@ impl fmt::Display for RunStats {
             self.jacobian_solves,
             self.wall.as_secs_f64()
         )?;
+        if let Some(a) = &self.adaptive {
+            writeln!(
+                f,
+                "  adaptive steps: {} accepted, {} rejected   H from {:.3e} to {:.3e}",
+                a.accepted, a.rejected, a.h_smallest, a.h_largest
+            )?;
+        }
         if self.max_corrections > 1 {
             writeln!(
                 f,

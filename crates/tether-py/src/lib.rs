@@ -259,6 +259,8 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
             "epsilon" => o.epsilon = real(&value)?,
             "divergence_factor" => o.divergence_factor = real(&value)?,
             "iteration_tol" => o.iteration_tol = real(&value)?,
+            "step_rtol" => o.step_rtol = real(&value)?,
+            "step_atol" => o.step_atol = real(&value)?,
             "iterations" => {
                 if !value.is_none() {
                     o.iterations = Some(value.extract()?);
@@ -315,7 +317,7 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
             other => {
                 return Err(PyTypeError::new_err(format!(
                 "unexpected override '{other}'; expected stop, step, method, beta, gamma, a, b, \
-                     mu, order, epsilon, parallel, divergence_factor, iterations, iteration_tol or \
+                     mu, order, epsilon, parallel, divergence_factor, iterations, iteration_tol, step_rtol, step_atol or \
                      parameters"
             )))
             }
