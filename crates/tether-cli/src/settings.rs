@@ -49,6 +49,11 @@ pub struct Settings {
     /// max(1, |u|) (overrides [coupling] iteration_tol).
     #[arg(long)]
     iteration_tol: Option<f64>,
+    /// When the interface Jacobian is made from perturbed runs: every_step
+    /// (the paper) or reuse (when due, Broyden updates in between; overrides
+    /// [coupling] jacobian).
+    #[arg(long, value_parser = ["every_step", "reuse"])]
+    jacobian: Option<String>,
     /// Adaptive macro steps with this relative tolerance of the local error
     /// estimate (sets [step_control] rtol; the step starts at --step).
     #[arg(long)]
@@ -87,6 +92,12 @@ impl Settings {
                 .map_err(anyhow::Error::msg)?,
             iterations: self.iterations,
             iteration_tol: self.iteration_tol,
+            jacobian: self
+                .jacobian
+                .as_deref()
+                .map(str::parse)
+                .transpose()
+                .map_err(anyhow::Error::msg)?,
             step_rtol: self.step_rtol,
             step_atol: self.step_atol,
             parameters: Default::default(),

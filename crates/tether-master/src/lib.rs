@@ -25,6 +25,7 @@ mod error_estimate;
 mod explicit;
 pub mod expr;
 mod feedthrough;
+mod jacobian_reuse;
 mod joints;
 mod method;
 mod names;
@@ -46,6 +47,7 @@ mod system;
 mod threads;
 
 pub use error::MasterError;
+pub use jacobian_reuse::JacobianMode;
 pub use method::Method;
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Deserializer};
 
-use crate::{Method, Parallel, StartValue, SystemSpec};
+use crate::{JacobianMode, Method, Parallel, StartValue, SystemSpec};
 
 /// Settings that replace those of a system file. `None` (and an empty
 /// [`MethodChange`]) keeps the file's value.
@@ -46,6 +46,9 @@ pub struct Overrides {
     /// Tolerance of the iterated correction (`[coupling] iteration_tol`).
     #[serde(default)]
     pub iteration_tol: Option<f64>,
+    /// When the interface Jacobian is recomputed (`[coupling] jacobian`).
+    #[serde(default)]
+    pub jacobian: Option<JacobianMode>,
     /// Relative tolerance of adaptive macro steps (`[step_control] rtol`);
     /// turns them on.
     #[serde(default)]
@@ -168,6 +171,7 @@ impl Overrides {
             parallel: over.parallel.or(self.parallel),
             iterations: over.iterations.or(self.iterations),
             iteration_tol: over.iteration_tol.or(self.iteration_tol),
+            jacobian: over.jacobian.or(self.jacobian),
             step_rtol: over.step_rtol.or(self.step_rtol),
             step_atol: over.step_atol.or(self.step_atol),
             parameters,
@@ -202,6 +206,9 @@ impl Overrides {
         }
         if let Some(tol) = self.iteration_tol {
             spec.coupling.iteration_tol = tol;
+        }
+        if let Some(mode) = self.jacobian {
+            spec.coupling.jacobian = mode;
         }
         if let Some(rtol) = self.step_rtol {
             spec.step_control.get_or_insert_with(Default::default).rtol = rtol;
@@ -477,6 +484,7 @@ mod tests {
             iterations: Some(3),
             iteration_tol: Some(1e-8),
             step_atol: Some(1e-7),
+            jacobian: Some(JacobianMode::Reuse),
             ..Overrides::default()
         };
         o.set("mass1.c=2e3").unwrap();
@@ -489,6 +497,7 @@ mod tests {
         assert_eq!(spec.coupling.parallel, Parallel::Off);
         assert_eq!(spec.coupling.iterations, 3);
         assert_eq!(spec.coupling.iteration_tol, 1e-8);
+        assert_eq!(spec.coupling.jacobian, JacobianMode::Reuse);
         let control = spec.step_control.unwrap();
         assert_eq!((control.rtol, control.atol), (1e-4, 1e-7));
         assert_eq!(spec.method, Method::Weighted { a: 0.5, b: 2.0 });

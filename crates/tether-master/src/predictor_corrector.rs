@@ -4,6 +4,7 @@
 //! eqs. 71–76) differ only in the solve.
 
 use crate::error_estimate::ErrorEstimate;
+use crate::jacobian_reuse::{JacobianMode, Reuse};
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::rows::{Column, RowLevel, View};
 use crate::runs::PerturbedRuns;
@@ -59,6 +60,12 @@ pub(crate) struct PredictorCorrector {
     iterate_from: Vec<f64>,
     /// Adaptive steps: the local error estimate (None: fixed steps).
     estimate: Option<ErrorEstimate>,
+    /// Jacobian reuse (None: a Jacobian every step).
+    reuse: Option<Reuse>,
+    /// With reuse: g^p kept (iterating overwrites `g`), and g at the
+    /// corrected point.
+    g_predicted: Vec<f64>,
+    g_corrected: Vec<f64>,
 }
 
 impl PredictorCorrector {
@@ -84,6 +91,10 @@ impl PredictorCorrector {
             iteration_tol: settings.iteration_tol,
             iterate_from: vec![0.0; nu],
             estimate: None,
+            reuse: (settings.jacobian == JacobianMode::Reuse)
+                .then(|| Reuse::new(settings.jacobian_max_age, nu, levels.len() * nu)),
+            g_predicted: vec![0.0; levels.len() * nu],
+            g_corrected: vec![0.0; levels.len() * nu],
             algebraic_rows: (0..nu)
                 .filter(|&r| system.coupling.unknowns[r].is_algebraic())
                 .collect(),
@@ -329,6 +340,35 @@ impl PredictorCorrector {
         Ok(Some(norm))
     }
 
+    /// Jacobian reuse: whether this step makes the perturbed runs.
+    fn jacobian_due(&self, at: StepAt) -> bool {
+        let growing = at.n <= self.order as u64;
+        self.reuse.as_ref().is_none_or(|r| r.due(at.h, growing))
+    }
+
+    /// Jacobian reuse, after an accepted step: g at the corrected point, the
+    /// Jacobian's prediction checked and the Broyden update made
+    /// ([`Reuse::after_step`]).
+    fn update_jacobian(&mut self, system: &System) {
+        let Some(reuse) = &mut self.reuse else {
+            return;
+        };
+        let nu = system.coupling.len();
+        let view = View::at(&system.outputs, &self.corrected);
+        for (&level, g) in self
+            .levels
+            .iter()
+            .zip(self.g_corrected.chunks_exact_mut(nu))
+        {
+            system.coupling.eval(level, &view, g);
+        }
+        reuse.after_step(
+            &mut self.jac,
+            (&self.u_pred, &self.corrected),
+            (&self.g_predicted, &self.g_corrected),
+        );
+    }
+
     /// Accept the step: u_{N+1} goes to the head of the history.
     fn accept(&mut self, system: &mut System) {
         for (history, &u) in system.history.iter_mut().zip(&self.corrected) {
@@ -351,7 +391,19 @@ impl MacroStep for PredictorCorrector {
         self.save(system)?;
         self.predict(system, at, predictor_degree)?;
         lap.split_into(&mut stats.times.predictor);
-        self.perturb(system, at, corrector_degree)?;
+        // Beyond the paper: with Jacobian reuse, perturbed runs only when due.
+        if self.jacobian_due(at) {
+            self.perturb(system, at, corrector_degree)?;
+            stats.jacobians += 1;
+            if let Some(reuse) = &mut self.reuse {
+                reuse.made(at.h);
+            }
+        } else {
+            stats.jacobians_reused += 1;
+        }
+        if self.reuse.is_some() {
+            self.g_predicted.copy_from_slice(&self.g);
+        }
         lap.split_into(&mut stats.times.jacobian);
         self.solve(system, at.t_next, stats)?;
         lap.split_into(&mut stats.times.solve);
@@ -366,6 +418,7 @@ impl MacroStep for PredictorCorrector {
         }
         stats.corrections += corrections;
         stats.max_corrections = stats.max_corrections.max(corrections);
+        self.update_jacobian(system);
         self.accept(system);
         Ok(error)
     }

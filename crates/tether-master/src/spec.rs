@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::jacobian_reuse::JacobianMode;
 use crate::step_control::StepControl;
 use crate::{MasterError, Method, Parallel};
 
@@ -91,6 +92,11 @@ pub struct CouplingSettings {
     /// An iterated correction stops when every update |Δu_m| is below
     /// `iteration_tol·max(1, |u_m|)`.
     pub iteration_tol: f64,
+    /// When the interface Jacobian is made from perturbed runs: every step
+    /// (the paper) or only when due, with Broyden updates in between.
+    pub jacobian: JacobianMode,
+    /// With `jacobian = "reuse"`: the most steps a Jacobian is kept.
+    pub jacobian_max_age: u64,
 }
 
 /// When the master checks that `fmi2SetFMUstate` restores an instance
@@ -123,6 +129,8 @@ impl Default for CouplingSettings {
             residual_warning: 1e-3,
             iterations: 1,
             iteration_tol: 1e-10,
+            jacobian: JacobianMode::EveryStep,
+            jacobian_max_age: 20,
         }
     }
 }
@@ -444,6 +452,9 @@ impl SystemSpec {
                 c.iteration_tol,
                 "a finite number > 0",
             ));
+        }
+        if c.jacobian_max_age == 0 {
+            return Err(param("jacobian_max_age", 0.0, "at least 1 step"));
         }
         if self.instances.is_empty() {
             return Err(MasterError::SystemFile {

@@ -59,6 +59,12 @@ pub struct RunStats {
     pub corrections: u64,
     /// The most corrections made in one macro step.
     pub max_corrections: u64,
+    /// Macro steps (tries, with adaptive steps) that made the interface
+    /// Jacobian from perturbed runs.
+    pub jacobians: u64,
+    /// Macro steps (tries) that reused the Jacobian with a Broyden update
+    /// (`[coupling] jacobian = "reuse"`).
+    pub jacobians_reused: u64,
     /// Adaptive macro steps (`[step_control]`): what the controller did.
     pub adaptive: Option<AdaptiveStats>,
     /// Per-instance FMI call counts.
@@ -123,6 +129,13 @@ impl fmt::Display for RunStats {
                 f,
                 "  adaptive steps: {} accepted, {} rejected   H from {:.3e} to {:.3e}",
                 a.accepted, a.rejected, a.h_smallest, a.h_largest
+            )?;
+        }
+        if self.jacobians_reused > 0 {
+            writeln!(
+                f,
+                "  interface Jacobian: recomputed in {} steps, reused in {}",
+                self.jacobians, self.jacobians_reused
             )?;
         }
         if self.max_corrections > 1 {
