@@ -138,8 +138,10 @@ mod tests {
     fn broyden_takes_in_the_secant_and_flags_mispredictions() {
         let mut jac = Jacobians::new(2, 1);
         let truth = [[2.0, 1.0], [0.5, 3.0]];
-        jac.column_mut(0).copy_from_slice(&[truth[0][0], truth[1][0]]);
-        jac.column_mut(1).copy_from_slice(&[truth[0][1], truth[1][1]]);
+        jac.column_mut(0)
+            .copy_from_slice(&[truth[0][0], truth[1][0]]);
+        jac.column_mut(1)
+            .copy_from_slice(&[truth[0][1], truth[1][1]]);
         let mut reuse = Reuse::new(10, 2, 2);
         reuse.made(1e-3);
         let (u_p, u_c) = ([1.0, 2.0], [1.5, 1.0]);
