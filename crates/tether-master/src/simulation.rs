@@ -81,7 +81,12 @@ impl Simulation {
         }
         let exp = spec.experiment;
         let steps = spec.macro_steps();
-        let stop = exp.start + steps as f64 * exp.step;
+        // Adaptive steps end exactly at `stop`, fixed ones on the grid.
+        let stop = if spec.step_control.is_some() {
+            exp.stop
+        } else {
+            exp.start + steps as f64 * exp.step
+        };
         let mut system = System::new(spec, &method, stop)?;
         let (step, initial_level): (Box<dyn MacroStep>, _) = match method {
             Method::Explicit { mu } => (
