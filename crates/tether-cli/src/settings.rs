@@ -84,20 +84,10 @@ impl Settings {
             stop: self.stop,
             epsilon: self.epsilon,
             divergence_factor: None,
-            parallel: self
-                .parallel
-                .as_deref()
-                .map(str::parse)
-                .transpose()
-                .map_err(anyhow::Error::msg)?,
+            parallel: parse(&self.parallel)?,
             iterations: self.iterations,
             iteration_tol: self.iteration_tol,
-            jacobian: self
-                .jacobian
-                .as_deref()
-                .map(str::parse)
-                .transpose()
-                .map_err(anyhow::Error::msg)?,
+            jacobian: parse(&self.jacobian)?,
             step_rtol: self.step_rtol,
             step_atol: self.step_atol,
             parameters: Default::default(),
@@ -107,6 +97,14 @@ impl Settings {
         }
         Ok(overrides)
     }
+}
+
+/// A flag's word parsed into its setting (the words were checked by clap).
+fn parse<T: std::str::FromStr<Err = String>>(word: &Option<String>) -> Result<Option<T>> {
+    word.as_deref()
+        .map(str::parse)
+        .transpose()
+        .map_err(anyhow::Error::msg)
 }
 
 /// Apply overrides made from these flags; errors name the flags.

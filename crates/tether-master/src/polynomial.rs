@@ -77,52 +77,33 @@ pub type Past = Option<[f64; 2]>;
 /// Lagrange polynomial through the actual points `T_N, T_N − past[0],
 /// T_N − past[0] − past[1]` (Newton's divided differences).
 pub fn extrapolate(history: &[f64], degree: usize, h: f64, past: Past) -> Taylor {
-    let Some([h1, h2]) = past else {
-        return extrapolation(history, degree, h);
-    };
-    let value = history[0];
-    match degree {
-        0 => Taylor {
-            value,
-            ..Taylor::default()
-        },
-        1 => Taylor {
-            value,
+    match (past, degree) {
+        (Some([h1, _]), 1) => Taylor {
+            value: history[0],
             d1: (history[0] - history[1]) / h1,
             d2: 0.0,
         },
-        _ => {
+        (Some([h1, h2]), 2..) => {
             // p(τ) = u_N + f[N, N−1] τ + f[N, N−1, N−2] τ (τ + h1).
             let f01 = (history[0] - history[1]) / h1;
             let f12 = (history[1] - history[2]) / h2;
             let f012 = (f01 - f12) / (h1 + h2);
             Taylor {
-                value,
+                value: history[0],
                 d1: f01 + f012 * h1,
                 d2: 2.0 * f012,
             }
         }
+        _ => extrapolation(history, degree, h),
     }
 }
 
 /// The interpolation polynomial: [`interpolation`] on the uniform grid, else
 /// the Lagrange polynomial through `(T_N + h, u_new), (T_N, u_N), (T_N −
-/// past[0], u_{N−1})`.
+/// past[0], u_{N−1})` (degrees 0 and 1 do not depend on the past steps).
 pub fn interpolate(u_new: f64, history: &[f64], degree: usize, h: f64, past: Past) -> Taylor {
-    let Some([h1, _]) = past else {
-        return interpolation(u_new, history, degree, h);
-    };
-    match degree {
-        0 => Taylor {
-            value: u_new,
-            ..Taylor::default()
-        },
-        1 => Taylor {
-            value: history[0],
-            d1: (u_new - history[0]) / h,
-            d2: 0.0,
-        },
-        _ => {
+    match (past, degree) {
+        (Some([h1, _]), 2..) => {
             // p(τ) = u_N + f[N, N−1] τ + f[N+1, N, N−1] τ (τ + h1).
             let f01 = (history[0] - history[1]) / h1;
             let fn0 = (u_new - history[0]) / h;
@@ -133,6 +114,7 @@ pub fn interpolate(u_new: f64, history: &[f64], degree: usize, h: f64, past: Pas
                 d2: 2.0 * f012,
             }
         }
+        _ => interpolation(u_new, history, degree, h),
     }
 }
 
