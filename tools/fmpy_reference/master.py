@@ -46,6 +46,7 @@ class Master:
         self.past = [[u.initial] * 3 if u.initial is not None else [0.0] * 3 for u in self.unknowns]
         self.n = 0
         self.jac = None  # the interface Jacobians, kept for Jacobian reuse
+        self.pattern = None  # the Jacobians' structure, for the sparse Broyden update
         self.reuse = Reuse(system.jacobian_max_age) if system.jacobian == "reuse" else None
         self.states = None  # adaptive steps: the outputs the error estimate covers
         self.columns = [f"{h.name}.{v.name}" for h in self.hosts for v in h.recorded]
@@ -186,6 +187,56 @@ class Master:
 
         output.cache = {}
         return output
+
+    def _pattern(self):
+        """Per row and unknown: whether the master's sparse Jacobian stores the
+        entry (its structure rule: rows reading an instance the unknown drives,
+        rows reading the unknown itself, the joints on such instances with the
+        port rows they load, and the joints loading those port rows)."""
+        nu = len(self.rows)
+
+        def instances(reads):
+            return {self.refs[(i, v)][0] for i, v, _ in reads}
+
+        def kind(row):
+            if hasattr(row, "joint"):
+                return "condition"
+            return "port" if hasattr(row, "contributions") else "row"
+
+        joints = []
+        for row in self.rows:
+            if kind(row) == "condition" and all(j is not row.joint for j in joints):
+                joints.append(row.joint)
+        pattern = [[False] * nu for _ in range(nu)]
+        for m in range(nu):
+            own = set(self.owners[m])
+            rows = set()
+            for r, row in enumerate(self.rows):
+                if kind(row) == "row":
+                    levels = getattr(row, "levels", ("position",))
+                    if any(instances(row.reads(lv)) & own for lv in levels):
+                        rows.add(r)
+                    if getattr(row, "unknown", None) == m:
+                        rows.add(r)
+                elif kind(row) == "port":
+                    if row.unknown == m or any(first + k == m for _, first, k, _ in row.contributions):
+                        rows.add(r)
+            touched = [j for j in joints if instances(j.reads()) & own]
+            for r, row in enumerate(self.rows):
+                if kind(row) == "port" and any(c[0] is j for c in row.contributions for j in touched):
+                    rows.add(r)
+            for r in list(rows):
+                row = self.rows[r]
+                if kind(row) == "port":
+                    for c in row.contributions:
+                        if all(c[0] is not j for j in touched):
+                            touched.append(c[0])
+            for r, row in enumerate(self.rows):
+                if kind(row) == "condition" and any(row.joint is j for j in touched):
+                    rows.add(r)
+            for r in rows:
+                pattern[r][m] = True
+        return pattern
 
     def _value(self, row, level, u, live=None, base=None, output=None):
         return row.value(level, output or self._output(live, base), u)
@@ -370,7 +421,9 @@ class Master:
         if self.reuse is not None:
             out = self._output()
             gc = {lv: [self._value(r, lv, corrected, output=out) for r in self.rows] for lv in self.levels}
-            self.reuse.after_step(self.jac, self.levels, u_pred, corrected, g, gc)
+            if self.pattern is None:
+                self.pattern = self._pattern()
+            self.reuse.after_step(self.jac, self.pattern, self.levels, u_pred, corrected, g, gc)
         self.past = [[corrected[m], p[0], p[1]] for m, p in enumerate(self.past)]
         self.n += 1
         self._accept()
@@ -553,7 +606,7 @@ class Reuse:
     def made(self, h):
         self.age, self.h = 0, h
 
-    def after_step(self, jac, levels, u_p, u_c, g_p, g_c):
+    def after_step(self, jac, pattern, levels, u_p, u_c, g_p, g_c):
         """Check the Jacobian's prediction of g^c - g^p; Broyden-update it if good (Schubert)."""
         if self.age is not None:
             self.age += 1
@@ -570,9 +623,8 @@ class Reuse:
         self.mispredicted = math.isnan(miss) or miss > 0.2 * norm
         if self.mispredicted:
             return
-        # Schubert's sparse update, row by row on the pattern (the entries a
-        # perturbed run can change; off it they stay exact zeros).
-        pattern = [[any(jac[lv][r, m] != 0.0 for lv in levels) for m in range(nu)] for r in range(nu)]
+        # Schubert's sparse update, row by row on the pattern (off it the
+        # entries stay exact zeros).
         row_du2 = [0.0] * nu
         for m in range(nu):
             for r in range(nu):
