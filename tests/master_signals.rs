@@ -500,6 +500,22 @@ fn adaptive_steps_refuse_a_signal_only_instance_without_rollback() {
     );
 }
 
+/// Without constraints, joints or coupling variables the error estimate has
+/// nothing to measure: adaptive steps are refused at setup.
+#[test]
+fn adaptive_steps_need_coupled_quantities() {
+    let mut spec = system(1e-3, 0, "jacobi", "");
+    spec.instances.remove(0);
+    spec.constraints.clear();
+    spec.connections.clear();
+    spec.step_control = Some(tether_master::StepControl::default());
+    let message = setup_error(&spec);
+    assert!(
+        message.contains("step_control") && message.contains("constraints"),
+        "{message}"
+    );
+}
+
 /// A signal-only instance that can roll back does, with the retry: the
 /// linked pair (mass 1 + mass 2, from x = 0.1 at rest) drives oscillator B
 /// through a one-way spring (`B.F_ext = 1000·mass1.x`), with adaptive steps

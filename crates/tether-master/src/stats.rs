@@ -116,7 +116,7 @@ pub struct RunStats {
 }
 
 /// What the step-size controller of adaptive macro steps did.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct AdaptiveStats {
     /// Accepted macro steps.
     pub accepted: u64,
@@ -366,6 +366,11 @@ struct Summary<'a> {
     termination: Option<&'a Termination>,
     macro_steps: u64,
     jacobian_solves: u64,
+    corrections: u64,
+    max_corrections: u64,
+    jacobians: u64,
+    jacobians_reused: u64,
+    adaptive: Option<&'a AdaptiveStats>,
     wall_time: f64,
     max_abs_g: Ordered<'a, Option<f64>>,
     residual_warning: f64,
@@ -392,6 +397,11 @@ impl Serialize for RunStats {
             termination: self.termination.as_ref(),
             macro_steps: self.macro_steps,
             jacobian_solves: self.jacobian_solves,
+            corrections: self.corrections,
+            max_corrections: self.max_corrections,
+            jacobians: self.jacobians,
+            jacobians_reused: self.jacobians_reused,
+            adaptive: self.adaptive.as_ref(),
             wall_time: secs(self.wall),
             // NaN (a residual that was not finite) as null.
             max_abs_g: Ordered(
