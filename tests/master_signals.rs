@@ -7,7 +7,9 @@
 //! integrated exactly (matrix exponential of the affine system).
 
 use nalgebra::{Matrix4, Vector4};
-use tether_master::{MasterError, MemoryRecorder, Simulation, SystemSpec};
+use tether_master::{
+    ConnectionSpec, MasterError, MemoryRecorder, Simulation, StartValue, SystemSpec,
+};
 
 const M1: f64 = 1.0;
 const M2: f64 = 2.0;
@@ -525,7 +527,6 @@ fn adaptive_steps_need_coupled_quantities() {
 #[test]
 fn adaptive_steps_roll_back_signal_only_instances() {
     const G: f64 = 1000.0;
-    let osc = tether_fmu_build::workspace_fmu("oscillator").unwrap();
     let exact = |t: f64| {
         let (m, c, d) = (M1 + M2, 2.0 * C, 2.0 * D);
         #[rustfmt::skip]
@@ -538,48 +539,32 @@ fn adaptive_steps_roll_back_signal_only_instances() {
         (a * t).exp() * Vector4::new(0.1, 0.0, 0.0, 0.0)
     };
     for scheme in ["jacobi", "gauss_seidel"] {
-        let text = format!(
-            r#"
-            [experiment]
-            stop = 0.2
-            step = 1e-3
-            [method]
-            kind = "baumgarte"
-            beta = 2e-3
-            [coupling]
-            order = 0
-            [step_control]
-            rtol = 1e-6
-            atol = 1e-6
-            h_initial = 0.02
-            [signals]
-            scheme = "{scheme}"
-            [[instance]]
-            name = "mass1"
-            fmu = "{osc}"
-            parameters = {{ m = {M1}, c = {C}, d = {D}, x0 = 0.1, v0 = 0.0, exact = true }}
-            [[instance]]
-            name = "mass2"
-            fmu = "{osc}"
-            parameters = {{ m = {M2}, c = {C}, d = {D}, x0 = 0.1, v0 = 0.0, exact = true }}
-            [[instance]]
-            name = "b"
-            fmu = "{osc}"
-            parameters = {{ m = {M2}, c = {C}, d = {D}, x0 = 0.0, v0 = 0.0, exact = true }}
-            [[constraint]]
-            name = "link"
-            position = "mass2.x - mass1.x"
-            velocity = "mass2.v - mass1.v"
-            acceleration = "mass2.a - mass1.a"
-            drives = "mass1.F - mass2.F"
-            [[connection]]
-            from = "mass1.x"
-            to = "b.F_ext"
-            gain = {G}
-            "#,
-            osc = osc.display()
-        );
-        let spec = SystemSpec::from_toml(&text).unwrap();
+        // The controlled pair without its controller, from x = 0.1, and B.
+        let mut spec = system(1e-3, 0, scheme, "");
+        spec.experiment.stop = 0.2;
+        spec.method = tether_master::Method::Baumgarte {
+            beta: 2e-3,
+            gamma: 0.0,
+        };
+        spec.step_control = Some(tether_master::StepControl {
+            rtol: 1e-6,
+            atol: 1e-6,
+            h_initial: Some(0.02),
+            ..tether_master::StepControl::default()
+        });
+        spec.instances.remove(0);
+        let mut b = spec.instances[1].clone();
+        for mass in &mut spec.instances {
+            mass.parameters.insert("x0".into(), StartValue::Real(0.1));
+        }
+        b.name = "b".into();
+        spec.instances.push(b);
+        spec.connections = vec![ConnectionSpec {
+            from: "mass1.x".into(),
+            to: "b.F_ext".into(),
+            gain: Some(G),
+            offset: None,
+        }];
         let mut sim = Simulation::new(&spec).unwrap();
         let mut rec = MemoryRecorder::default();
         let stats = sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
