@@ -609,8 +609,16 @@ fn adaptive_steps_land_on_the_output_grid() {
         spec.output.interval = Some(interval);
         let mut sim = Simulation::new(&spec).unwrap();
         let mut rec = MemoryRecorder::default();
-        let stats = sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
+        let mut progress = Vec::new();
+        let stats = sim
+            .run(&mut [&mut rec], &mut |n, total| progress.push((n, total)))
+            .unwrap();
         assert!(stats.completed);
+        // Progress counts the steps of [experiment] step the time spans.
+        assert!(progress
+            .windows(2)
+            .all(|w| w[0].0 <= w[1].0 && w[1].0 <= w[1].1));
+        assert_eq!(progress.last(), Some(&(10_000, 10_000)));
         assert_eq!(
             rec.times.len(),
             101,

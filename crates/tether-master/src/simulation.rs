@@ -526,6 +526,18 @@ impl Simulation {
         }
     }
 
+    /// Macro steps done, for progress: with adaptive steps, how many steps
+    /// of `[experiment] step` the time reached spans (never beyond the total).
+    fn progress(&self) -> u64 {
+        match &self.adaptive {
+            Some(a) => {
+                let spanned = (a.t - self.experiment.start) / self.experiment.step;
+                (spanned.round() as u64).min(self.steps)
+            }
+            None => self.n,
+        }
+    }
+
     /// Whether the current point goes to the observers: on the output grid,
     /// or the last one.
     fn recorded(&self) -> bool {
@@ -578,7 +590,7 @@ impl Simulation {
                 } else {
                     self.hold();
                 }
-                progress(self.n, self.steps);
+                progress(self.progress(), self.steps);
             }
             // A normal end: fmi2Terminate before the instances are freed.
             self.system.terminate()?;
