@@ -38,6 +38,11 @@ def arguments(argv):
     p.add_argument("--mu", type=float)
     p.add_argument("--order", type=int, help="degree k of the coupling polynomials: 0, 1 or 2")
     p.add_argument("--epsilon", type=float, help="finite-difference increment")
+    p.add_argument("--iterations", type=int, help="corrections per macro step (1 = the paper)")
+    p.add_argument("--iteration-tol", type=float, help="an iterated correction stops below this update")
+    p.add_argument("--jacobian", choices=["every_step", "reuse"], help="when the interface Jacobian is made")
+    p.add_argument("--step-rtol", type=float, help="adaptive macro steps: relative tolerance")
+    p.add_argument("--step-atol", type=float, help="adaptive macro steps: absolute tolerance")
     p.add_argument("--out", "-o", help="output CSV (default: the system file's name with .csv)")
     p.add_argument("--quiet", "-q", action="store_true", help="no run summary")
     return p.parse_args(argv)
@@ -48,6 +53,15 @@ def apply_overrides(system, args):
     for name in ("stop", "step", "epsilon"):
         if getattr(args, name) is not None:
             setattr(system, name, getattr(args, name))
+    for name in ("iterations", "iteration_tol", "jacobian"):
+        if getattr(args, name) is not None:
+            setattr(system, name, getattr(args, name))
+    for name, key in (("step_rtol", "rtol"), ("step_atol", "atol")):
+        if getattr(args, name) is not None:
+            if system.step_control is None:
+                system.step_control = {"rtol": 1e-4, "atol": 1e-6, "h_min": None, "h_max": None,
+                                       "h_initial": None}
+            system.step_control[key] = getattr(args, name)
     if args.order is not None:
         if args.order < 0:
             raise RunError(f"invalid order = {args.order}: expected a polynomial degree k of 0, 1 or 2")
@@ -102,7 +116,7 @@ def run(args):
                 master.set_limits()
                 writer.writerow(["time"] + master.columns)
                 writer.writerow([repr(master.time())] + [repr(v) for v in master.row])
-                while master.n < master.steps:
+                while not master.finished():
                     master.step()
                     writer.writerow([repr(master.time())] + [repr(v) for v in master.row])
             except Exception as e:
@@ -114,6 +128,9 @@ def run(args):
             name = system.name or "system"
             print(f"{name} (fmpy reference): {system.method.describe()} with k = {system.order}, "
                   f"H = {system.step}, t = {system.start} … {master.time()}", file=sys.stderr)
+            if master.control is not None:
+                c = master.control
+                print(f"  adaptive steps: {c.accepted} accepted, {c.rejected} rejected", file=sys.stderr)
             for h in master.hosts:
                 c = h.counters
                 print(f"  {h.name}: {c.do_steps} fmi2DoStep, {c.state_gets} fmi2GetFMUstate, "

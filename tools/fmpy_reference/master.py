@@ -25,12 +25,13 @@ class Master:
         self.h = system.step
         self.t0 = system.start
         self.steps = system.macro_steps()
+        self.control = None if system.step_control is None else Control(system)
         self.hosts = []
         try:
             for spec in system.instances:
                 self.hosts.append(Host(spec))
             self._wire()
-            stop = self.t0 + self.steps * self.h
+            stop = self.t0 + self.steps * self.h if self.control is None else system.stop
             for host in self.hosts:
                 host.initialize(self.t0, stop, system.tolerance)
         except Exception:
@@ -44,6 +45,10 @@ class Master:
         # past[m] = [u_N, u_{N-1}, u_{N-2}]
         self.past = [[u.initial] * 3 if u.initial is not None else [0.0] * 3 for u in self.unknowns]
         self.n = 0
+        self.jac = None  # the interface Jacobians, kept for Jacobian reuse
+        self.pattern = None  # the Jacobians' structure, for the sparse Broyden update
+        self.reuse = Reuse(system.jacobian_max_age) if system.jacobian == "reuse" else None
+        self.states = None  # adaptive steps: the outputs the error estimate covers
         self.columns = [f"{h.name}.{v.name}" for h in self.hosts for v in h.recorded]
         self.columns += [u.column for u in self.unknowns]
         self.columns += [r.residual for r in self.rows if r.residual is not None]
@@ -183,6 +188,56 @@ class Master:
         output.cache = {}
         return output
 
+    def _pattern(self):
+        """Per row and unknown: whether the master's sparse Jacobian stores the
+        entry (its structure rule: rows reading an instance the unknown drives,
+        rows reading the unknown itself, the joints on such instances with the
+        port rows they load, and the joints loading those port rows)."""
+        nu = len(self.rows)
+
+        def instances(reads):
+            return {self.refs[(i, v)][0] for i, v, _ in reads}
+
+        def kind(row):
+            if hasattr(row, "joint"):
+                return "condition"
+            return "port" if hasattr(row, "contributions") else "row"
+
+        joints = []
+        for row in self.rows:
+            if kind(row) == "condition" and all(j is not row.joint for j in joints):
+                joints.append(row.joint)
+        pattern = [[False] * nu for _ in range(nu)]
+        for m in range(nu):
+            own = set(self.owners[m])
+            rows = set()
+            for r, row in enumerate(self.rows):
+                if kind(row) == "row":
+                    levels = getattr(row, "levels", ("position",))
+                    if any(instances(row.reads(lv)) & own for lv in levels):
+                        rows.add(r)
+                    if getattr(row, "unknown", None) == m:
+                        rows.add(r)
+                elif kind(row) == "port":
+                    if row.unknown == m or any(first + k == m for _, first, k, _ in row.contributions):
+                        rows.add(r)
+            touched = [j for j in joints if instances(j.reads()) & own]
+            for r, row in enumerate(self.rows):
+                if kind(row) == "port" and any(c[0] is j for c in row.contributions for j in touched):
+                    rows.add(r)
+            for r in list(rows):
+                row = self.rows[r]
+                if kind(row) == "port":
+                    for c in row.contributions:
+                        if all(c[0] is not j for j in touched):
+                            touched.append(c[0])
+            for r, row in enumerate(self.rows):
+                if kind(row) == "condition" and any(row.joint is j for j in touched):
+                    rows.add(r)
+            for r in rows:
+                pattern[r][m] = True
+        return pattern
+
     def _value(self, row, level, u, live=None, base=None, output=None):
         return row.value(level, output or self._output(live, base), u)
 
@@ -213,6 +268,8 @@ class Master:
                 self._feedthrough_newton(consistent, mu)
         self._apply_constant()
         self._accept()
+        if self.control is not None:
+            self._find_states()
 
     def _residual(self, m, mu, u, live=None, base=None, output=None):
         """g'' (+ 2 g'/mu + g/mu^2 for the explicit method) of row m."""
@@ -263,17 +320,47 @@ class Master:
     # -- the predictor/corrector step -------------------------------------------------------
 
     def _predictor_corrector_step(self):
-        t, h, k, n = self.time(), self.h, self.k, self.n
+        if self.control is None:
+            self._try_step(self.time(), self.h, None)
+            return
+        c = self.control
+        while True:
+            remaining = c.stop - c.t
+            last = c.h >= remaining or remaining - c.h < 1e-3 * c.h
+            h = remaining if last else c.h
+            t_next = c.stop if last else c.t + h
+            error = self._try_step(c.t, h, tuple(c.past), t_next)
+            nxt, accepted = c.next(h, error)
+            if accepted:
+                c.t = t_next
+                c.past = [h, c.past[0]]
+                c.h = max(c.h, nxt) if last else nxt
+                c.accepted += 1
+                return
+            c.rejected += 1
+            if h <= c.h_min:
+                raise RunError(f"adaptive macro steps: at t = {c.t} the local error estimate is {error:.2f} "
+                               f"times the tolerance even at h_min = {c.h_min:e}")
+            c.h = nxt
+
+    def _try_step(self, t, h, steps, t_next=None):
+        """One macro step over [t, t + h]; `steps` = the two step sizes before
+        it on a variable grid (None: uniform). Returns the error norm with
+        adaptive steps (a step above 1 is rolled back, not accepted)."""
+        k, n = self.k, self.n
         # Start-up: N+1 points of history exist at T_N.
         degree_pred = min(k, n)
         degree_corr = min(k, n + 1)
         nu = len(self.unknowns)
+        adaptive = self.control is not None
+        if t_next is None:
+            t_next = self.time_at(n + 1)
 
         # Predictor: extrapolated polynomials (eq. 56-58).
-        jets = [poly.predictor(self.past[m], degree_pred, h) for m in range(nu)]
+        jets = [poly.predictor(self.past[m], degree_pred, h, steps) for m in range(nu)]
         u_pred = [jets[m].at(h) for m in range(nu)]
         for host in self.hosts:
-            if host.is_coupled():
+            if host.is_coupled() or adaptive:
                 host.save_state()
             host.apply(jets, k)
             host.do_step(t, h)
@@ -282,43 +369,120 @@ class Master:
         out = self._output()
         g = {lv: np.array([self._value(r, lv, u_pred, output=out) for r in self.rows]) for lv in self.levels}
 
-        # Perturbed predictors: column m of each level's Jacobian (eq. 59-64).
-        jac = {lv: np.zeros((nu, nu)) for lv in self.levels}
-        eps = self.system.epsilon
-        for m in range(nu):
-            delta = eps * max(abs(self.past[m][0]), 1.0)
-            perturbed = list(jets)
-            perturbed[m] = poly.through(u_pred[m] + delta, self.past[m], degree_corr, h)
-            up = list(u_pred)
-            up[m] = u_pred[m] + delta
-            live = set(self.owners[m])
-            for s in sorted(live):
-                host = self.hosts[s]
-                host.restore_state()
-                host.apply(perturbed, k)
-                host.do_step(t, h)
-                host.read()
-            out = self._output(live, base)
-            for lv in self.levels:
-                for r, row in enumerate(self.rows):
-                    jac[lv][r, m] = (self._value(row, lv, up, output=out) - g[lv][r]) / delta
+        # Perturbed predictors: column m of each level's Jacobian (eq. 59-64);
+        # with Jacobian reuse only when due.
+        if self.reuse is None or self.reuse.due(h, n <= k):
+            jac = {lv: np.zeros((nu, nu)) for lv in self.levels}
+            eps = self.system.epsilon
+            for m in range(nu):
+                delta = eps * max(abs(self.past[m][0]), 1.0)
+                perturbed = list(jets)
+                perturbed[m] = poly.through(u_pred[m] + delta, self.past[m], degree_corr, h, steps)
+                up = list(u_pred)
+                up[m] = u_pred[m] + delta
+                live = set(self.owners[m])
+                for s in sorted(live):
+                    host = self.hosts[s]
+                    host.restore_state()
+                    host.apply(perturbed, k)
+                    host.do_step(t, h)
+                    host.read()
+                out = self._output(live, base)
+                for lv in self.levels:
+                    for r, row in enumerate(self.rows):
+                        jac[lv][r, m] = (self._value(row, lv, up, output=out) - g[lv][r]) / delta
+            self.jac = jac
+            if self.reuse is not None:
+                self.reuse.made(h)
+        jac = self.jac
 
-        corrected = self._corrected(u_pred, g, jac)
+        corrected = self._corrected(u_pred, g, jac, t_next)
+        self._corrector(corrected, degree_corr, t, h, steps)
+        # Iterated correction: g at the corrected point, the same Jacobian.
+        for _ in range(self.system.iterations - 1):
+            out = self._output()
+            gc = {lv: np.array([self._value(r, lv, corrected, output=out) for r in self.rows])
+                  for lv in self.levels}
+            start = corrected
+            corrected = self._corrected(start, gc, jac, t_next)
+            self._corrector(corrected, degree_corr, t, h, steps)
+            tol = self.system.iteration_tol
+            if all(abs(u - f) <= tol * max(abs(u), 1.0) for u, f in zip(corrected, start)):
+                break
 
-        # Corrector: repeat the step with interpolation polynomials.
-        jets = [poly.through(corrected[m], self.past[m], degree_corr, h) for m in range(nu)]
-        for host in self.hosts:
-            if host.is_coupled():
-                host.restore_state()
-                host.apply(jets, k)
-                host.do_step(t, h)
+        error = None
+        if adaptive:
+            error = self._error_norm(base, degree_corr)
+            if not error <= 1.0:
+                for host in self.hosts:
+                    host.restore_state()
+                return error
+            self._note_peaks()
+        if self.reuse is not None:
+            out = self._output()
+            gc = {lv: [self._value(r, lv, corrected, output=out) for r in self.rows] for lv in self.levels}
+            if self.pattern is None:
+                self.pattern = self._pattern()
+            self.reuse.after_step(self.jac, self.pattern, self.levels, u_pred, corrected, g, gc)
         self.past = [[corrected[m], p[0], p[1]] for m, p in enumerate(self.past)]
         self.n += 1
         self._accept()
+        return error
 
-    def _corrected(self, u_pred, g, jac):
+    def _corrector(self, corrected, degree, t, h, steps):
+        """Repeat the step with interpolation polynomials; read the outputs."""
+        jets = [poly.through(corrected[m], self.past[m], degree, h, steps) for m in range(len(corrected))]
+        for host in self.hosts:
+            if host.is_coupled():
+                host.restore_state()
+                host.apply(jets, self.k)
+                host.do_step(t, h)
+                host.read()
+
+    # -- adaptive steps: Milne's device on the states the levels read ----------------------------
+
+    MILNE = (1.0 / 2.0, 1.0 / 6.0, 1.0 / 10.0)
+
+    def _find_states(self):
+        """The outputs whose change (relative 1e-6) changes a position- or
+        velocity-level row the method uses, at the current point."""
+        levels = [lv for lv in self.levels if lv in ("position", "velocity")]
+        u = self._current()
+
+        def rows():
+            out = self._output()
+            return [self._value(r, lv, u, output=out) for lv in levels for r in self.rows]
+
+        reference = rows()
+        self.states = []
+        for s, host in enumerate(self.hosts):
+            for key in list(host.outputs):
+                y = host.values[key]
+                host.values[key] = y + 1e-6 * max(abs(y), 1.0)
+                changed = rows() != reference
+                host.values[key] = y
+                if changed:
+                    self.states.append((s, key))
+        self.peaks = {state: abs(self.hosts[state[0]].values[state[1]]) for state in self.states}
+
+    def _error_norm(self, predicted, degree):
+        c = self.control
+        milne = self.MILNE[min(degree, 2)]
+        worst = 0.0
+        for state in self.states:
+            s, key = state
+            yp, yc = predicted[s][key], self.hosts[s].values[key]
+            scale = c.atol + c.rtol * max(self.peaks[state], abs(yp), abs(yc))
+            worst = max(worst, milne * abs(yp - yc) / scale)
+        return worst
+
+    def _note_peaks(self):
+        for state in self.states:
+            s, key = state
+            self.peaks[state] = max(self.peaks[state], abs(self.hosts[s].values[key]))
+
+    def _corrected(self, u_pred, g, jac, time):
         u_pred = np.array(u_pred)
-        time = self.time_at(self.n + 1)
         limit = self.system.max_condition
         m = self.method
         if m.kind == "baumgarte":
@@ -349,7 +513,10 @@ class Master:
     # -- the run --------------------------------------------------------------------------
 
     def time(self):
-        return self.time_at(self.n)
+        return self.time_at(self.n) if self.control is None else self.control.t
+
+    def finished(self):
+        return self.n >= self.steps if self.control is None else self.control.t >= self.control.stop
 
     def time_at(self, n):
         return self.t0 + n * self.h
@@ -380,3 +547,92 @@ class Master:
         for name, v, limit in zip(self.columns, self.row, self.limits):
             if not math.isfinite(v) or abs(v) > limit:
                 raise RunError(f"coupling diverged at t = {self.time()}: {name} = {v:e} (limit {limit:.1e})")
+
+
+class Control:
+    """Adaptive macro steps: the PI step-size controller (docs/algorithm.md)."""
+
+    def __init__(self, system):
+        c = system.step_control
+        span = system.stop - system.start
+        self.rtol, self.atol = c["rtol"], c["atol"]
+        self.h_min = c["h_min"] if c["h_min"] is not None else 1e-10 * span
+        self.h_max = c["h_max"] if c["h_max"] is not None else span / 10.0
+        h0 = c["h_initial"] if c["h_initial"] is not None else system.step
+        for name, v in (("h_min", self.h_min), ("h_max", self.h_max), ("h_initial", h0)):
+            if not math.isfinite(v) or v <= 0:
+                raise RunError(f"invalid step_control.{name} = {v}: expected a finite step size > 0")
+        if self.h_max < self.h_min:
+            raise RunError(f"invalid step_control.h_max = {self.h_max}: expected h_max >= h_min")
+        self.order = system.order + 2.0
+        self.t, self.stop = system.start, system.stop
+        self.h = max(min(h0, self.h_max), self.h_min)
+        self.past = [self.h, self.h]
+        self.previous, self.was_rejected = 1.0, False
+        self.accepted = self.rejected = 0
+
+    def next(self, h, err):
+        """The next step size after one of h with error norm err, and whether it is accepted."""
+        if math.isnan(err):
+            self.was_rejected = True
+            return min(max(h * 0.2, self.h_min), self.h_max), False
+        err = max(err, 1e-10)
+        p = self.order
+        accepted = err <= 1.0
+        if accepted:
+            f = 0.9 * err ** (-0.7 / p) * self.previous ** (0.4 / p)
+            if self.was_rejected:
+                f = min(f, 1.0)
+            self.previous = err
+        else:
+            f = 0.9 * err ** (-1.0 / p)
+        self.was_rejected = not accepted
+        nxt = h * min(max(f, 0.2), 5.0)
+        return min(max(nxt, self.h_min), self.h_max), accepted
+
+
+class Reuse:
+    """Jacobian reuse: perturbed runs only when due, Broyden updates between."""
+
+    def __init__(self, max_age):
+        self.max_age, self.age, self.h, self.mispredicted = max_age, None, 0.0, False
+
+    def due(self, h, growing):
+        if self.age is None:
+            return True
+        ratio = h / self.h
+        return growing or self.mispredicted or self.age >= self.max_age or not 0.8 <= ratio <= 1.25
+
+    def made(self, h):
+        self.age, self.h = 0, h
+
+    def after_step(self, jac, pattern, levels, u_p, u_c, g_p, g_c):
+        """Check the Jacobian's prediction of g^c - g^p; Broyden-update it if good (Schubert)."""
+        if self.age is not None:
+            self.age += 1
+        nu = len(u_p)
+        du = [c - p for c, p in zip(u_c, u_p)]
+        dg = [g_c[lv][r] - g_p[lv][r] for lv in levels for r in range(nu)]
+        predicted = [0.0] * len(dg)
+        for m in range(nu):
+            column = [jac[lv][r, m] for lv in levels for r in range(nu)]
+            for i, j in enumerate(column):
+                predicted[i] += j * du[m]
+        norm = max(abs(p) for p in predicted)
+        miss = max(abs(d - p) for d, p in zip(dg, predicted))
+        self.mispredicted = math.isnan(miss) or miss > 0.2 * norm
+        if self.mispredicted:
+            return
+        # Schubert's sparse update, row by row on the pattern (off it the
+        # entries stay exact zeros).
+        row_du2 = [0.0] * nu
+        for m in range(nu):
+            for r in range(nu):
+                if pattern[r][m]:
+                    row_du2[r] += du[m] * du[m]
+        for m in range(nu):
+            for li, lv in enumerate(levels):
+                for r in range(nu):
+                    i = li * nu + r
+                    if pattern[r][m] and row_du2[r] > 0.0:
+                        jac[lv][r, m] += (dg[i] - predicted[i]) * (du[m] / row_du2[r])

@@ -93,6 +93,11 @@ class System:
     epsilon: float = 1e-5
     max_condition: float = 1e12
     divergence_factor: float = 1e6
+    iterations: int = 1
+    iteration_tol: float = 1e-10
+    jacobian: str = "every_step"
+    jacobian_max_age: int = 20
+    step_control: dict | None = None  # rtol, atol, h_min, h_max, h_initial (None: default)
     instances: list = field(default_factory=list)
     constraints: list = field(default_factory=list)
     joints: list = field(default_factory=list)
@@ -201,7 +206,17 @@ def _from_document(doc):
     system.epsilon = coupling.take("epsilon", "number", 1e-5)
     system.max_condition = coupling.take("max_condition", "number", 1e12)
     system.divergence_factor = coupling.take("divergence_factor", "number", 1e6)
+    system.iterations = coupling.take("iterations", "integer", 1)
+    system.iteration_tol = coupling.take("iteration_tol", "number", 1e-10)
+    system.jacobian = coupling.take("jacobian", "string", "every_step")
+    system.jacobian_max_age = coupling.take("jacobian_max_age", "integer", 20)
     coupling.done()
+    if "step_control" in top.table:
+        control = _Table("[step_control]", top.take("step_control", "table"))
+        system.step_control = {key: control.take(key, "number", default)
+                               for key, default in [("rtol", 1e-4), ("atol", 1e-6), ("h_min", None),
+                                                    ("h_max", None), ("h_initial", None)]}
+        control.done()
     for i, raw in enumerate(top.take("instance", "array", required=True)):
         t = _Table(f"[[instance]] {i + 1}", raw)
         inst = Instance(t.take("name", "string", required=True), t.take("fmu", "string", required=True))
@@ -313,6 +328,23 @@ def check(system):
         raise invalid("max_condition", system.max_condition, "a finite number > 1")
     if not finite(system.divergence_factor) or system.divergence_factor <= 1:
         raise invalid("divergence_factor", system.divergence_factor, "a finite number > 1")
+    if not 1 <= system.iterations <= 1000:
+        raise invalid("iterations", system.iterations, "a number of corrections per step from 1 to 1000")
+    if not finite(system.iteration_tol) or system.iteration_tol <= 0:
+        raise invalid("iteration_tol", system.iteration_tol, "a finite number > 0")
+    if system.jacobian not in ("every_step", "reuse"):
+        raise RunError(f"unknown jacobian mode '{system.jacobian}': expected every_step or reuse")
+    if system.jacobian_max_age < 1:
+        raise invalid("jacobian_max_age", 0, "at least 1 step")
+    if system.step_control is not None:
+        c = system.step_control
+        for key in ("rtol", "atol"):
+            if not finite(c[key]) or c[key] < 0:
+                raise invalid(f"step_control.{key}", c[key], "a finite tolerance >= 0")
+        if c["rtol"] == 0 and c["atol"] == 0:
+            raise invalid("step_control.rtol", 0, "rtol > 0 or atol > 0")
+        if m.kind == "explicit":
+            raise RunError("invalid step_control: the explicit method has no error estimate")
     if m.kind == "explicit" and system.order != 0:
         raise invalid("order", system.order, "0: the explicit method holds the multipliers constant over a step")
     if not system.instances:

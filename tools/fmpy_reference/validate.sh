@@ -89,6 +89,23 @@ variant slider_crank sc-m1-index1-k1 completes 1e-9 0 -- "${i1m1[@]}" --order 1 
 variant pendulum_paper pp-m1-index1-k0 completes 1e-9 0 -- "${i1m1[@]}" --order 0
 variant pendulum_paper pp-m2-index1-k1 completes 1e-9 0 -- "${i1m2[@]}" --order 1
 variant pendulum_paper pp-explicit completes 1e-9 0 -- --method explicit --mu 1e-2
+# Beyond the paper (docs/algorithm.md): iterated correction, adaptive macro
+# steps (the same error estimate and PI controller, so the same time grid) and
+# Jacobian reuse (the same rule and sparse Broyden updates).
+variant oscillator m1-index1-k0-iter3 completes 1e-9 0 -- "${i1m1[@]}" --order 0 --iterations 3
+variant oscillator m1-index3-k0-iter5 completes 1e-9 0 -- "${i3m1[@]}" --order 0 --iterations 5
+variant oscillator m1-index2-k0-adaptive completes 1e-9 0 -- "${i2m1[@]}" --order 0 --step-rtol 1e-4 --step-atol 1e-4
+variant oscillator m2-index1-k1-adaptive completes 1e-9 0 -- "${i1m2[@]}" --order 1 --step-rtol 1e-5 --step-atol 1e-5
+variant oscillator m1-index1-k2-adaptive completes 1e-9 0 -- "${i1m1[@]}" --order 2 --step-rtol 1e-4 --step-atol 1e-4
+variant oscillator m1-index1-k0-reuse completes 1e-9 0 -- "${i1m1[@]}" --order 0 --jacobian reuse
+variant double_pendulum dp-adaptive-reuse-iter2 completes 1e-9 0 -- "${i1m1[@]}" --order 1 --stop 0.2 --step-rtol 1e-5 --step-atol 1e-5 --jacobian reuse --iterations 2
+variant slider_crank sc-adaptive-reuse completes 1e-9 0 -- "${i2m1[@]}" --gamma 0 --order 0 --stop 0.2 --step-rtol 1e-4 --step-atol 1e-4 --jacobian reuse
+variant slider_crank sc-reuse completes 1e-9 0 -- "${i2m1[@]}" --gamma 0 --order 0 --stop 0.2 --jacobian reuse
+# A sparse Jacobian pattern (links a and c share no instance): the sparse
+# Broyden update on the stored entries only.
+variant chain4 chain4-reuse completes 1e-9 0 -- "${i2m1[@]}" --order 0 --jacobian reuse
+variant chain4 chain4-adaptive-reuse completes 1e-9 0 -- "${i2m1[@]}" --order 0 --stop 0.2 --step-rtol 1e-4 --step-atol 1e-4 --jacobian reuse
+
 # Every 3D joint kind but the two elementary ones alone (body3d FMUs; each
 # example's own method, Method 1 index 2).
 for kind in revolute universal cylindrical translational planar inline orientation; do

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use tether_master::{CsvRecorder, MemoryRecorder, Observer, Simulation};
+use tether_master::{CsvRecorder, MemoryRecorder, Observer, Simulation, SystemSpec};
 
 use crate::settings::Settings;
 
@@ -137,7 +137,7 @@ pub fn main(args: Args) -> Result<()> {
             "{name}: {} with k = {}, H = {}, t = {} … {}",
             spec.method,
             spec.coupling.order,
-            spec.experiment.step,
+            step_text(&spec),
             spec.experiment.start,
             last
         );
@@ -148,7 +148,9 @@ pub fn main(args: Args) -> Result<()> {
         let table = tether_study::Table::from_recorder(&name, &memory);
         let title = format!(
             "{name}: {}, k = {}, H = {}",
-            spec.method, spec.coupling.order, spec.experiment.step
+            spec.method,
+            spec.coupling.order,
+            step_text(&spec)
         );
         crate::plot::draw(&[table], &plot_columns, &sim.units(), &title, path)?;
         if !args.quiet {
@@ -177,5 +179,13 @@ pub fn main(args: Args) -> Result<()> {
             "run stopped; results up to t = {last} kept in {} (marked incomplete)",
             out.display()
         ))),
+    }
+}
+
+/// The macro step for the summary: the fixed H, or the adaptive tolerances.
+fn step_text(spec: &SystemSpec) -> String {
+    match &spec.step_control {
+        None => spec.experiment.step.to_string(),
+        Some(c) => format!("adaptive (rtol = {:e}, atol = {:e})", c.rtol, c.atol),
     }
 }

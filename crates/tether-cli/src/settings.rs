@@ -41,6 +41,27 @@ pub struct Settings {
     /// (overrides [coupling] parallel).
     #[arg(long, value_parser = ["auto", "on", "off"])]
     parallel: Option<String>,
+    /// Corrections per macro step, 1 = the paper's single correction
+    /// (overrides [coupling] iterations).
+    #[arg(long)]
+    iterations: Option<usize>,
+    /// An iterated correction stops when every update is below this times
+    /// max(1, |u|) (overrides [coupling] iteration_tol).
+    #[arg(long)]
+    iteration_tol: Option<f64>,
+    /// When the interface Jacobian is made from perturbed runs: every_step
+    /// (the paper) or reuse (when due, Broyden updates in between; overrides
+    /// [coupling] jacobian).
+    #[arg(long, value_parser = ["every_step", "reuse"])]
+    jacobian: Option<String>,
+    /// Adaptive macro steps with this relative tolerance of the local error
+    /// estimate (sets [step_control] rtol; the step starts at --step).
+    #[arg(long)]
+    step_rtol: Option<f64>,
+    /// Adaptive macro steps with this absolute tolerance (sets
+    /// [step_control] atol).
+    #[arg(long)]
+    step_atol: Option<f64>,
     /// Set an FMU start value for every run: INSTANCE.PARAMETER=VALUE (repeatable).
     #[arg(long = "set", value_name = "INSTANCE.PARAMETER=VALUE")]
     set: Vec<String>,
@@ -63,12 +84,12 @@ impl Settings {
             stop: self.stop,
             epsilon: self.epsilon,
             divergence_factor: None,
-            parallel: self
-                .parallel
-                .as_deref()
-                .map(str::parse)
-                .transpose()
-                .map_err(anyhow::Error::msg)?,
+            parallel: parse(&self.parallel)?,
+            iterations: self.iterations,
+            iteration_tol: self.iteration_tol,
+            jacobian: parse(&self.jacobian)?,
+            step_rtol: self.step_rtol,
+            step_atol: self.step_atol,
             parameters: Default::default(),
         };
         for setting in &self.set {
@@ -76,6 +97,14 @@ impl Settings {
         }
         Ok(overrides)
     }
+}
+
+/// A flag's word parsed into its setting (the words were checked by clap).
+fn parse<T: std::str::FromStr<Err = String>>(word: &Option<String>) -> Result<Option<T>> {
+    word.as_deref()
+        .map(str::parse)
+        .transpose()
+        .map_err(anyhow::Error::msg)
 }
 
 /// Apply overrides made from these flags; errors name the flags.

@@ -505,6 +505,57 @@ fn rollback_without_can_get_and_set_fmu_state() {
 }
 
 #[test]
+fn adaptive_steps_without_variable_step_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = edited_oscillator(dir.path(), "fixedstep", |xml| {
+        xml.replace(
+            r#"canHandleVariableCommunicationStepSize="true""#,
+            r#"canHandleVariableCommunicationStepSize="false""#,
+        )
+    });
+    let sys = system_with(dir.path(), Some(&fmu), |t| t);
+    // Fixed steps run; adaptive ones are refused naming the instance.
+    let out = tether(&["run", sys.to_str().unwrap(), "--quiet"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    let sys = sys.to_str().unwrap();
+    let out = tether(&["run", sys, "--step-rtol", "1e-4"], dir.path());
+    cli_error(
+        &out,
+        &[
+            "'mass2'",
+            "canHandleVariableCommunicationStepSize",
+            "adaptive",
+        ],
+    );
+    let nostate = edited_oscillator(dir.path(), "nostate", |xml| {
+        xml.replace(
+            r#"canGetAndSetFMUstate="true""#,
+            r#"canGetAndSetFMUstate="false""#,
+        )
+    });
+    let sys = system_with(dir.path(), Some(&nostate), |t| {
+        swap(t, "[coupling]", "[step_control]\nrtol = 1e-4\n\n[coupling]")
+    });
+    run_error(&sys, &["'mass2'", "canGetAndSetFMUstate"]);
+    // The explicit method has no error estimate.
+    let sys = system_with(dir.path(), None, |t| t);
+    let out = tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--method",
+            "explicit",
+            "--mu",
+            "1e-2",
+            "--step-atol",
+            "1e-6",
+        ],
+        dir.path(),
+    );
+    cli_error(&out, &["step_control", "explicit"]);
+}
+
+#[test]
 fn input_polynomials_without_can_interpolate_inputs() {
     let dir = tempfile::tempdir().unwrap();
     let fmu = edited_oscillator(dir.path(), "nointerp", |xml| {

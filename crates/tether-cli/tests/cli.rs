@@ -350,3 +350,59 @@ fn a_multiplier_that_cannot_move_its_constraint_is_a_singular_jacobian() {
         "{text}"
     );
 }
+
+/// Adaptive steps with every instance isolated (`--isolate`): the rollback
+/// of a rejected try goes through the host processes, and the results are
+/// those of the in-process run byte for byte. Each try saves the states
+/// once, so more saves than accepted steps means tries were rejected.
+#[test]
+fn adaptive_steps_run_isolated_as_in_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, isolate: bool| {
+        let (csv, json) = (
+            dir.path().join(name),
+            dir.path().join(format!("{name}.json")),
+        );
+        let mut args = vec![
+            "run",
+            "examples/oscillator.toml",
+            "--stop",
+            "0.2",
+            "--step-rtol",
+            "1e-6",
+            "--step-atol",
+            "1e-6",
+            "--quiet",
+            "--out",
+            csv.to_str().unwrap(),
+            "--summary-json",
+            json.to_str().unwrap(),
+        ];
+        if isolate {
+            args.push("--isolate");
+        }
+        let out = tether(&args, &root());
+        assert!(out.status.success(), "{}", stderr(&out));
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+        (std::fs::read_to_string(csv).unwrap(), summary)
+    };
+    let (in_process, _) = run("in_process.csv", false);
+    let (isolated, summary) = run("isolated.csv", true);
+    assert_eq!(in_process, isolated);
+    let steps = summary["macro_steps"].as_u64().unwrap();
+    let mass1 = &summary["instances"]["mass1"];
+    let (saves, restores) = (
+        mass1["get_fmu_state"].as_u64().unwrap(),
+        mass1["set_fmu_state"].as_u64().unwrap(),
+    );
+    assert!(
+        saves > steps,
+        "rejected tries: {saves} saves, {steps} steps"
+    );
+    assert_eq!(
+        restores,
+        2 * saves + (saves - steps),
+        "two reruns a try, one rollback a rejection"
+    );
+}

@@ -162,6 +162,17 @@ pub enum MasterError {
         /// The bound it crossed.
         limit: f64,
     },
+    /// Adaptive steps: a step at the smallest allowed size still misses the
+    /// tolerances.
+    #[error("adaptive macro steps: at t = {time} the local error estimate is {error:.2} times the tolerance even at h_min = {h_min:e}; loosen [step_control] rtol/atol or lower h_min")]
+    StepSizeTooSmall {
+        /// Start of the step.
+        time: f64,
+        /// The error norm at h_min (> 1).
+        error: f64,
+        /// The smallest step size.
+        h_min: f64,
+    },
     /// An observer asked the run to stop (e.g. the user pressed Ctrl-C).
     #[error("interrupted ({reason}) at t = {time}")]
     Interrupted {

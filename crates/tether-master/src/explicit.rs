@@ -32,7 +32,7 @@ impl MacroStep for Explicit {
         at: StepAt,
         stats: &mut RunStats,
         lap: &mut Lap,
-    ) -> Result<(), MasterError> {
+    ) -> Result<Option<f64>, MasterError> {
         // Every instance steps with u_N held as its inputs.
         for slave in system.slaves.iter_mut().filter(|s| !s.stepped_ahead) {
             slave.do_step(at.t, at.h)?;
@@ -46,6 +46,6 @@ impl MacroStep for Explicit {
             .update_all(system, level, at.t_next, stats)?;
         system.read_accepted(Run::Explicit)?;
         lap.split_into(&mut stats.times.solve);
-        Ok(())
+        Ok(None)
     }
 }

@@ -23,9 +23,11 @@ mod arrays;
 mod backend;
 mod coupling;
 mod error;
+mod error_estimate;
 mod explicit;
 pub mod expr;
 mod feedthrough;
+mod jacobian_reuse;
 mod joints;
 mod method;
 mod names;
@@ -44,11 +46,13 @@ mod sparse_lu;
 pub mod spec;
 mod start;
 mod stats;
+mod step_control;
 mod system;
 mod threads;
 mod touched;
 
 pub use error::MasterError;
+pub use jacobian_reuse::JacobianMode;
 pub use method::Method;
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
@@ -59,7 +63,10 @@ pub use spec::{
     SignalSettings, StartValue, SystemSpec,
 };
 pub use start::{apply_start_value, Settable};
-pub use stats::{InstanceCounters, PhaseTimes, RunStats, Termination, SUMMARY_SCHEMA};
+pub use stats::{
+    AdaptiveStats, InstanceCounters, PhaseTimes, RunStats, Termination, SUMMARY_SCHEMA,
+};
+pub use step_control::StepControl;
 pub use threads::{Parallel, ParallelInfo};
 
 /// Timings for the benchmarks (not a stable interface).

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Deserializer};
 
-use crate::{Method, Parallel, StartValue, SystemSpec};
+use crate::{JacobianMode, Method, Parallel, StartValue, SystemSpec};
 
 /// Settings that replace those of a system file. `None` (and an empty
 /// [`MethodChange`]) keeps the file's value.
@@ -40,6 +40,23 @@ pub struct Overrides {
     /// Perturbed runs on other threads (`[coupling] parallel`).
     #[serde(default)]
     pub parallel: Option<Parallel>,
+    /// Corrections per macro step (`[coupling] iterations`).
+    #[serde(default)]
+    pub iterations: Option<usize>,
+    /// Tolerance of the iterated correction (`[coupling] iteration_tol`).
+    #[serde(default)]
+    pub iteration_tol: Option<f64>,
+    /// When the interface Jacobian is recomputed (`[coupling] jacobian`).
+    #[serde(default)]
+    pub jacobian: Option<JacobianMode>,
+    /// Relative tolerance of adaptive macro steps (`[step_control] rtol`);
+    /// turns them on.
+    #[serde(default)]
+    pub step_rtol: Option<f64>,
+    /// Absolute tolerance of adaptive macro steps (`[step_control] atol`);
+    /// turns them on.
+    #[serde(default)]
+    pub step_atol: Option<f64>,
     /// FMU start values by target `instance.parameter`.
     #[serde(default)]
     pub parameters: BTreeMap<String, StartValue>,
@@ -152,6 +169,11 @@ impl Overrides {
             epsilon: over.epsilon.or(self.epsilon),
             divergence_factor: over.divergence_factor.or(self.divergence_factor),
             parallel: over.parallel.or(self.parallel),
+            iterations: over.iterations.or(self.iterations),
+            iteration_tol: over.iteration_tol.or(self.iteration_tol),
+            jacobian: over.jacobian.or(self.jacobian),
+            step_rtol: over.step_rtol.or(self.step_rtol),
+            step_atol: over.step_atol.or(self.step_atol),
             parameters,
         }
     }
@@ -178,6 +200,21 @@ impl Overrides {
         }
         if let Some(parallel) = self.parallel {
             spec.coupling.parallel = parallel;
+        }
+        if let Some(iterations) = self.iterations {
+            spec.coupling.iterations = iterations;
+        }
+        if let Some(tol) = self.iteration_tol {
+            spec.coupling.iteration_tol = tol;
+        }
+        if let Some(mode) = self.jacobian {
+            spec.coupling.jacobian = mode;
+        }
+        if let Some(rtol) = self.step_rtol {
+            spec.step_control.get_or_insert_with(Default::default).rtol = rtol;
+        }
+        if let Some(atol) = self.step_atol {
+            spec.step_control.get_or_insert_with(Default::default).atol = atol;
         }
         spec.method = self.method.apply(spec.method)?;
         for (target, value) in &self.parameters {
@@ -444,6 +481,10 @@ mod tests {
             epsilon: Some(1e-6),
             divergence_factor: Some(1e3),
             parallel: Some(Parallel::Off),
+            iterations: Some(3),
+            iteration_tol: Some(1e-8),
+            step_atol: Some(1e-7),
+            jacobian: Some(JacobianMode::Reuse),
             ..Overrides::default()
         };
         o.set("mass1.c=2e3").unwrap();
@@ -454,6 +495,11 @@ mod tests {
         assert_eq!(spec.coupling.epsilon, 1e-6);
         assert_eq!(spec.coupling.divergence_factor, 1e3);
         assert_eq!(spec.coupling.parallel, Parallel::Off);
+        assert_eq!(spec.coupling.iterations, 3);
+        assert_eq!(spec.coupling.iteration_tol, 1e-8);
+        assert_eq!(spec.coupling.jacobian, JacobianMode::Reuse);
+        let control = spec.step_control.unwrap();
+        assert_eq!((control.rtol, control.atol), (1e-4, 1e-7));
         assert_eq!(spec.method, Method::Weighted { a: 0.5, b: 2.0 });
         assert_eq!(spec.instances[0].parameters["c"], StartValue::Real(2e3));
         assert_eq!(spec.instances[1].parameters["m"], StartValue::Integer(3));

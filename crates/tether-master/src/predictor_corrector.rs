@@ -3,12 +3,16 @@
 //! Method 1 (Baumgarte, eqs. 65–68) and Method 2 (weighted multipliers,
 //! eqs. 71–76) differ only in the solve.
 
-use crate::polynomial::{extrapolation, interpolation, Taylor};
+use crate::error_estimate::ErrorEstimate;
+use crate::jacobian_reuse::{JacobianMode, Reuse};
+use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::rows::{Column, RowLevel, View};
 use crate::runs::PerturbedRuns;
-use crate::slave::Run;
+use crate::slave::{Run, Slave};
 use crate::solve::{Jacobians, Solver};
+use crate::spec::CouplingSettings;
 use crate::stats::{Lap, RunStats};
+use crate::step_control::StepControl;
 use crate::system::{MacroStep, StepAt, System};
 use crate::{MasterError, Method};
 
@@ -48,13 +52,27 @@ pub(crate) struct PredictorCorrector {
     solver: Solver,
     /// u_{N+1}.
     corrected: Vec<f64>,
+    /// Corrections per macro step (`[coupling] iterations`, 1 = the paper).
+    iterations: usize,
+    /// Relative size of an update below which iterating stops.
+    iteration_tol: f64,
+    /// The point an iterated correction starts from (the last corrected u).
+    iterate_from: Vec<f64>,
+    /// Adaptive steps: the local error estimate (None: fixed steps).
+    estimate: Option<ErrorEstimate>,
+    /// Jacobian reuse (None: a Jacobian every step).
+    reuse: Option<Reuse>,
+    /// With reuse: g^p kept (iterating overwrites `g`), and g at the
+    /// corrected point.
+    g_predicted: Vec<f64>,
+    g_corrected: Vec<f64>,
 }
 
 impl PredictorCorrector {
     pub fn new(
         system: &System,
         method: Method,
-        order: usize,
+        settings: &CouplingSettings,
         runs: Box<dyn PerturbedRuns>,
     ) -> Self {
         let nu = system.coupling.len();
@@ -68,7 +86,15 @@ impl PredictorCorrector {
         let outputs = &system.outputs;
         PredictorCorrector {
             method,
-            order,
+            order: settings.order,
+            iterations: settings.iterations,
+            iteration_tol: settings.iteration_tol,
+            iterate_from: vec![0.0; nu],
+            estimate: None,
+            reuse: (settings.jacobian == JacobianMode::Reuse)
+                .then(|| Reuse::new(settings.jacobian_max_age, nu, levels.len() * nu)),
+            g_predicted: vec![0.0; levels.len() * nu],
+            g_corrected: vec![0.0; levels.len() * nu],
             algebraic_rows: (0..nu)
                 .map(|r| system.coupling.unknowns[r].is_algebraic())
                 .collect(),
@@ -90,9 +116,12 @@ impl PredictorCorrector {
     }
 
     /// Step 1: save the state of every instance some unknown drives
-    /// (`fmi2GetFMUstate`).
+    /// (`fmi2GetFMUstate`); with adaptive steps, of every instance (those
+    /// the signals' Gauss–Seidel sweep has stepped were saved before it).
     fn save(&mut self, system: &mut System) -> Result<(), MasterError> {
-        for slave in system.slaves.iter_mut().filter(|s| s.is_coupled()) {
+        let all = self.estimate.is_some();
+        let saved = |s: &&mut Slave| s.is_coupled() || (all && !s.stepped_ahead);
+        for slave in system.slaves.iter_mut().filter(saved) {
             slave.save_state()?;
         }
         Ok(())
@@ -109,7 +138,7 @@ impl PredictorCorrector {
         degree: usize,
     ) -> Result<(), MasterError> {
         for (m, history) in system.history.iter().enumerate() {
-            self.polys[m] = extrapolation(history, degree, at.h);
+            self.polys[m] = extrapolate(history, degree, at.h, at.past);
             self.u_pred[m] = self.polys[m].at(at.h);
         }
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
@@ -143,7 +172,7 @@ impl PredictorCorrector {
             for &m in group {
                 self.delta[m] = system.delta(m);
                 let u = self.u_pred[m] + self.delta[m];
-                polys[m] = interpolation(u, &system.history[m], degree, at.h);
+                polys[m] = interpolate(u, &system.history[m], degree, at.h, at.past);
             }
         }
         let slaves = &mut system.slaves;
@@ -235,8 +264,8 @@ impl PredictorCorrector {
     }
 
     /// Step 5, corrector: every driven instance repeats the step from its
-    /// saved state with the interpolation polynomials through u_{N+1}; the
-    /// result is accepted and the history shifts.
+    /// saved state with the interpolation polynomials through u_{N+1}, and
+    /// the outputs at T_{N+1} are read.
     fn correct(
         &mut self,
         system: &mut System,
@@ -244,15 +273,111 @@ impl PredictorCorrector {
         degree: usize,
     ) -> Result<(), MasterError> {
         for (m, history) in system.history.iter().enumerate() {
-            self.polys[m] = interpolation(self.corrected[m], history, degree, at.h);
+            self.polys[m] = interpolate(self.corrected[m], history, degree, at.h, at.past);
         }
         for slave in system.slaves.iter_mut().filter(|s| s.is_coupled()) {
             slave.rerun(&self.polys, at.t, at.h, None)?;
         }
+        system.read_accepted(Run::Corrector)
+    }
+
+    /// Iterated correction (`[coupling] iterations`, beyond the paper): g
+    /// (ġ, g̈) at the corrected point, another solve with the same interface
+    /// Jacobian from there, another corrector run; until every update is
+    /// below `iteration_tol·max(1, |u|)` or `iterations` corrections were
+    /// made. Returns the number of corrections, the first included.
+    fn iterate(
+        &mut self,
+        system: &mut System,
+        at: StepAt,
+        degree: usize,
+        stats: &mut RunStats,
+    ) -> Result<u64, MasterError> {
+        let mut corrections: usize = 1;
+        while corrections < self.iterations {
+            let nu = system.coupling.len();
+            let view = View::at(&system.outputs, &self.corrected);
+            for (&level, g) in self.levels.iter().zip(self.g.chunks_exact_mut(nu)) {
+                system.coupling.eval(level, &view, g);
+            }
+            // The solve starts from `u_pred`: let it start from the last
+            // corrected point, and keep the prediction for afterwards.
+            self.iterate_from.copy_from_slice(&self.corrected);
+            std::mem::swap(&mut self.u_pred, &mut self.iterate_from);
+            let solved = self.solve(system, at.t_next, stats);
+            std::mem::swap(&mut self.u_pred, &mut self.iterate_from);
+            solved?;
+            self.correct(system, at, degree)?;
+            corrections += 1;
+            let tol = self.iteration_tol;
+            let small = self
+                .corrected
+                .iter()
+                .zip(&self.iterate_from)
+                .all(|(u, from)| (u - from).abs() <= tol * u.abs().max(1.0));
+            if small {
+                break;
+            }
+        }
+        Ok(corrections as u64)
+    }
+
+    /// Adaptive steps: the step's error norm (docs/algorithm.md, Milne's
+    /// device on the coupled states of the predictor and corrector runs);
+    /// a step above 1 is rolled back, every instance to its saved state.
+    fn estimate_error(
+        &mut self,
+        system: &mut System,
+        degree: usize,
+    ) -> Result<Option<f64>, MasterError> {
+        let Some(estimate) = &mut self.estimate else {
+            return Ok(None);
+        };
+        let norm = estimate.norm(&self.predicted, &system.outputs, degree);
+        if norm <= 1.0 {
+            estimate.accept(&system.outputs);
+        } else {
+            for slave in &mut system.slaves {
+                slave.restore_state()?;
+            }
+        }
+        Ok(Some(norm))
+    }
+
+    /// Jacobian reuse: whether this step makes the perturbed runs.
+    fn jacobian_due(&self, at: StepAt) -> bool {
+        let growing = at.n <= self.order as u64;
+        self.reuse.as_ref().is_none_or(|r| r.due(at.h, growing))
+    }
+
+    /// Jacobian reuse, after an accepted step: g at the corrected point, the
+    /// Jacobian's prediction checked and the Broyden update made
+    /// ([`Reuse::after_step`]).
+    fn update_jacobian(&mut self, system: &System) {
+        let Some(reuse) = &mut self.reuse else {
+            return;
+        };
+        let nu = system.coupling.len();
+        let view = View::at(&system.outputs, &self.corrected);
+        for (&level, g) in self
+            .levels
+            .iter()
+            .zip(self.g_corrected.chunks_exact_mut(nu))
+        {
+            system.coupling.eval(level, &view, g);
+        }
+        reuse.after_step(
+            &mut self.jac,
+            (&self.u_pred, &self.corrected),
+            (&self.g_predicted, &self.g_corrected),
+        );
+    }
+
+    /// Accept the step: u_{N+1} goes to the head of the history.
+    fn accept(&mut self, system: &mut System) {
         for (history, &u) in system.history.iter_mut().zip(&self.corrected) {
             *history = [u, history[0], history[1]];
         }
-        system.read_accepted(Run::Corrector)
     }
 }
 
@@ -263,7 +388,7 @@ impl MacroStep for PredictorCorrector {
         at: StepAt,
         stats: &mut RunStats,
         lap: &mut Lap,
-    ) -> Result<(), MasterError> {
+    ) -> Result<Option<f64>, MasterError> {
         // Start-up: only N+1 points of history exist at T_N (docs/algorithm.md).
         let n = usize::try_from(at.n).unwrap_or(usize::MAX);
         let (predictor_degree, corrector_degree) = (self.order.min(n), self.order.min(n + 1));
@@ -273,22 +398,51 @@ impl MacroStep for PredictorCorrector {
             for slave in system.slaves.iter_mut().filter(|s| !s.stepped_ahead) {
                 slave.do_step(at.t, at.h)?;
             }
-            return system.read_accepted(Run::Corrector);
+            system.read_accepted(Run::Corrector)?;
+            return Ok(None);
         }
         self.save(system)?;
         self.predict(system, at, predictor_degree)?;
         lap.split_into(&mut stats.times.predictor);
-        self.perturb(system, at, corrector_degree)?;
+        // Beyond the paper: with Jacobian reuse, perturbed runs only when due.
+        if self.jacobian_due(at) {
+            self.perturb(system, at, corrector_degree)?;
+            stats.jacobians += 1;
+            if let Some(reuse) = &mut self.reuse {
+                reuse.made(at.h);
+            }
+        } else {
+            stats.jacobians_reused += 1;
+        }
+        if self.reuse.is_some() {
+            self.g_predicted.copy_from_slice(&self.g);
+        }
         lap.split_into(&mut stats.times.jacobian);
         self.solve(system, at.t_next, stats)?;
         lap.split_into(&mut stats.times.solve);
         self.correct(system, at, corrector_degree)?;
+        // Beyond the paper: repeat the correction (1 = none).
+        let corrections = self.iterate(system, at, corrector_degree, stats)?;
         lap.split_into(&mut stats.times.corrector);
-        Ok(())
+        // Beyond the paper: adaptive steps judge the step first.
+        let error = self.estimate_error(system, corrector_degree)?;
+        if error.is_some_and(|e| e.is_nan() || e > 1.0) {
+            return Ok(error);
+        }
+        stats.corrections += corrections;
+        stats.max_corrections = stats.max_corrections.max(corrections);
+        self.update_jacobian(system);
+        self.accept(system);
+        Ok(error)
     }
 
     fn report(&self, stats: &mut RunStats) {
         self.runs.report(stats);
+    }
+
+    fn control_steps(&mut self, system: &System, control: &StepControl) -> bool {
+        self.estimate = Some(ErrorEstimate::new(system, &self.levels, control));
+        true
     }
 
     fn terminate(&mut self) -> Result<(), MasterError> {

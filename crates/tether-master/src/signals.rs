@@ -1,6 +1,7 @@
 //! Signal connections `[[connection]] from = "a.y" to = "b.u"`: an output's
 //! value handed to an input at macro points, without a solve and without
-//! rollback (docs/algorithm.md, "Signal connections").
+//! rollback (docs/algorithm.md, "Signal connections"; adaptive steps roll
+//! back a rejected try, signal-only instances included).
 //!
 //! Around the method's macro step: [`Signals::send`] sets every receiving
 //! input for the step T_N → T_{N+1} (before `save`, so that repeated runs of
@@ -13,7 +14,7 @@
 use tether_fmi::{BaseType, Causality, ScalarVariable};
 
 use crate::names::{describe, find_instance};
-use crate::polynomial::{extrapolation, interpolation, Taylor};
+use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::{ConnectionSpec, SignalScheme, SystemSpec};
 use crate::start::Settable;
@@ -59,6 +60,9 @@ pub(crate) struct Signals {
     sequence: Vec<usize>,
     /// Per instance: stepped already in the current macro step.
     fresh: Vec<bool>,
+    /// Adaptive steps: the Gauss–Seidel sweep saves each instance before
+    /// stepping it, so that a rejected step rolls it back with the others.
+    save: bool,
 }
 
 impl Signals {
@@ -115,7 +119,17 @@ impl Signals {
             order: spec.coupling.order,
             sequence,
             fresh: vec![false; slaves.len()],
+            save: false,
         })
+    }
+
+    /// Adaptive steps: a rejected step restores every instance to its state
+    /// at T_N (the method restores what was saved), and the retry sends
+    /// again. The instances the Gauss–Seidel sweep steps before the method's
+    /// save are saved here first. The histories only shift on
+    /// [`receive`](Self::receive), after an accepted step.
+    pub fn roll_back_with_retries(&mut self) {
+        self.save = true;
     }
 
     /// Values at T_0: read the senders and set the receivers until nothing
@@ -157,6 +171,9 @@ impl Signals {
                     self.set(slaves, l, poly)?;
                 }
             }
+            if self.save {
+                slaves[s].save_state()?;
+            }
             slaves[s].do_step(at.t, at.h)?;
             self.fresh[s] = true;
             for l in 0..self.links.len() {
@@ -197,9 +214,9 @@ impl Signals {
         let k = if link.interpolate { self.order } else { 0 };
         let history = &self.history[l];
         if self.fresh[link.from] {
-            interpolation(self.next[l], history, k.min(n + 1), at.h)
+            interpolate(self.next[l], history, k.min(n + 1), at.h, at.past)
         } else {
-            extrapolation(history, k.min(n), at.h)
+            extrapolate(history, k.min(n), at.h, at.past)
         }
     }
 

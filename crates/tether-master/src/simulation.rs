@@ -15,7 +15,8 @@ use crate::rows::RowLevel;
 use crate::signals::Signals;
 use crate::slave::Run;
 use crate::spec::{CheckRollback, SystemSpec};
-use crate::stats::{Lap, RunStats, Termination};
+use crate::stats::{AdaptiveStats, Lap, RunStats, Termination};
+use crate::step_control::Controller;
 use crate::system::{MacroStep, StepAt, System};
 use crate::threads;
 use crate::{Experiment, MasterError, Method};
@@ -65,6 +66,28 @@ pub struct Simulation {
     step_end: Option<Instant>,
     /// `[coupling] residual_warning`, for the summary.
     residual_warning: f64,
+    /// Adaptive macro steps (`[step_control]`); `None`: the uniform grid.
+    adaptive: Option<Adaptive>,
+}
+
+/// The variable time grid of adaptive macro steps.
+struct Adaptive {
+    controller: Controller,
+    /// T_N.
+    t: f64,
+    /// The stop time, the last point.
+    stop: f64,
+    /// The next step size to try.
+    h: f64,
+    /// T_N − T_{N−1} and T_{N−1} − T_{N−2}.
+    past: [f64; 2],
+    /// `[output] interval`: steps land on its grid points T_0 + j·interval.
+    grid: Option<f64>,
+    /// j of the next grid point.
+    next_output: u64,
+    /// Whether T_N is a grid point.
+    on_grid: bool,
+    stats: AdaptiveStats,
 }
 
 impl Simulation {
@@ -84,7 +107,12 @@ impl Simulation {
         }
         let exp = spec.experiment;
         let steps = spec.macro_steps();
-        let stop = exp.start + steps as f64 * exp.step;
+        // Adaptive steps end exactly at `stop`, fixed ones on the grid.
+        let stop = if spec.step_control.is_some() {
+            exp.stop
+        } else {
+            exp.start + steps as f64 * exp.step
+        };
         let mut system = System::new(spec, &method, stop)?;
         let mut signals = Signals::build(spec, &mut system.slaves)?;
         let (step, initial_level): (Box<dyn MacroStep>, _) = match method {
@@ -101,8 +129,63 @@ impl Simulation {
                     system.coupling.len(),
                     (exp.start, stop, exp.tolerance),
                 )?;
-                let pc = PredictorCorrector::new(&system, method, settings.order, runs);
+                let pc = PredictorCorrector::new(&system, method, &settings, runs);
                 (Box::new(pc), RowLevel::Acceleration)
+            }
+        };
+        let mut step = step;
+        let adaptive = match &spec.step_control {
+            None => None,
+            Some(control) => {
+                if matches!(method, Method::Explicit { .. }) {
+                    return Err(MasterError::InvalidParameter {
+                        name: "step_control".into(),
+                        value: control.rtol,
+                        expected: "the predictor/corrector methods (baumgarte, weighted): \
+                                   the explicit method has no error estimate"
+                            .into(),
+                    });
+                }
+                if system.coupling.len() == 0 {
+                    return Err(MasterError::InvalidParameter {
+                        name: "step_control".into(),
+                        value: control.rtol,
+                        expected: "a system with constraints, joints or coupling variables: \
+                                   the error estimate is on the coupled quantities"
+                            .into(),
+                    });
+                }
+                // A rejected step rolls back every instance, signal-only
+                // ones too: each must restore its state and vary its step.
+                let lacking: Vec<_> = system
+                    .slaves
+                    .iter()
+                    .filter_map(|s| s.cannot_vary_steps().map(|c| (s, c)))
+                    .collect();
+                if let Some(&(slave, capability)) = lacking.first() {
+                    let others: Vec<_> = lacking[1..]
+                        .iter()
+                        .map(|(s, c)| format!("'{}' ({c})", s.name))
+                        .collect();
+                    let role = if slave.is_coupled() {
+                        ""
+                    } else {
+                        "; a rejected step rolls back signal-only instances too"
+                    };
+                    let also = if others.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; also lacking it: {}", others.join(", "))
+                    };
+                    return Err(MasterError::MissingCapability {
+                        instance: slave.name.clone(),
+                        model: slave.model_name.clone(),
+                        capability,
+                        needed_by: format!("adaptive macro steps ([step_control]{role}{also})"),
+                    });
+                }
+                let limits = control.limits(exp.start, exp.stop, exp.step)?;
+                Some((control, limits))
             }
         };
         let mut stats = RunStats::default();
@@ -115,7 +198,44 @@ impl Simulation {
         if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
             system.check_rollback(exp.start, exp.step)?;
         }
-        let every = spec.output.every(exp.step)?;
+        // Fixed steps record every `every`-th point; adaptive ones land on
+        // the output grid, when there is one, and record exactly its points.
+        let every = match adaptive {
+            None => spec.output.every(exp.step)?,
+            Some(_) => 1,
+        };
+        let adaptive = match adaptive {
+            None => None,
+            Some((control, limits)) => {
+                step.control_steps(&system, control);
+                signals.roll_back_with_retries();
+                let grid = match spec.output.interval {
+                    Some(dt) if !(dt.is_finite() && dt > 0.0) => {
+                        return Err(MasterError::InvalidParameter {
+                            name: "output interval".into(),
+                            value: dt,
+                            expected: "a positive time".into(),
+                        })
+                    }
+                    grid => grid,
+                };
+                let h = limits.h_initial.min(limits.h_max).max(limits.h_min);
+                Some(Adaptive {
+                    controller: Controller::new(limits, settings.order),
+                    t: exp.start,
+                    stop: exp.stop,
+                    h,
+                    past: [h, h],
+                    grid,
+                    next_output: 1,
+                    on_grid: false,
+                    stats: AdaptiveStats {
+                        h_smallest: f64::INFINITY,
+                        ..AdaptiveStats::default()
+                    },
+                })
+            }
+        };
         let mut columns = Vec::new();
         for slave in &system.slaves {
             columns.extend(slave.recorded_names().iter().cloned());
@@ -135,7 +255,10 @@ impl Simulation {
         stats.start = exp.start;
         stats.step = exp.step;
         stats.stop = stop;
-        stats.output_interval = every as f64 * exp.step;
+        stats.output_interval = match &adaptive {
+            Some(a) => a.grid.unwrap_or(0.0),
+            None => every as f64 * exp.step,
+        };
         let mut sim = Simulation {
             experiment: exp,
             system,
@@ -160,6 +283,7 @@ impl Simulation {
             residual_warning: settings.residual_warning,
             time_phases: false,
             step_end: None,
+            adaptive,
         };
         sim.fill_row();
         // Finite limits (the factor is finite, > 1), so that ±∞ is always
@@ -223,9 +347,20 @@ impl Simulation {
         units
     }
 
-    /// The current macro time T_N = T_0 + N·H.
+    /// The current macro time T_N (T_0 + N·H on the uniform grid).
     pub fn time(&self) -> f64 {
-        self.time_at(self.n)
+        match &self.adaptive {
+            Some(a) => a.t,
+            None => self.time_at(self.n),
+        }
+    }
+
+    /// Whether the run has reached its last point.
+    pub fn finished(&self) -> bool {
+        match &self.adaptive {
+            Some(a) => a.t >= a.stop,
+            None => self.n >= self.steps,
+        }
     }
 
     fn time_at(&self, n: u64) -> f64 {
@@ -240,7 +375,8 @@ impl Simulation {
         self.last_recorded
     }
 
-    /// Number of macro steps the experiment asks for.
+    /// Number of macro steps the experiment asks for (with adaptive steps:
+    /// how many steps of `[experiment] step` the run spans, for progress).
     pub fn total_steps(&self) -> u64 {
         self.steps
     }
@@ -267,7 +403,7 @@ impl Simulation {
         stats.times.measured = self.time_phases;
         stats.end_time = self.last_recorded;
         stats.completed =
-            self.failure.is_none() && (self.n >= self.steps || stats.termination.is_some());
+            self.failure.is_none() && (self.finished() || stats.termination.is_some());
         stats.stop_reason = match (&self.failure, &stats.termination) {
             (Some(e), _) => e.clone(),
             (None, Some(end)) => format!(
@@ -283,6 +419,7 @@ impl Simulation {
             .zip(self.max_residuals.iter().copied())
             .collect();
         stats.residual_warning = self.residual_warning;
+        stats.adaptive = self.adaptive.as_ref().map(|a| a.stats);
         stats.instances = self
             .system
             .slaves
@@ -293,23 +430,24 @@ impl Simulation {
         stats
     }
 
-    /// Advance one macro step with the configured method.
+    /// Advance one macro step with the configured method (with adaptive
+    /// steps: one accepted step, after as many rejected tries as it takes).
     pub fn step(&mut self) -> Result<(), MasterError> {
-        let at = StepAt {
-            n: self.n,
-            t: self.time(),
-            h: self.experiment.step,
-            t_next: self.time_at(self.n + 1),
-        };
         let mut lap = Lap::start(self.time_phases);
-        let stepped = self
-            .signals
-            .send(&mut self.system.slaves, at)
-            .and_then(|()| {
-                self.method
-                    .step(&mut self.system, at, &mut self.stats, &mut lap)
-            })
-            .and_then(|()| self.signals.receive(&mut self.system.slaves));
+        let stepped = match &self.adaptive {
+            None => {
+                let at = StepAt {
+                    n: self.n,
+                    t: self.time(),
+                    h: self.experiment.step,
+                    t_next: self.time_at(self.n + 1),
+                    past: None,
+                };
+                let parts = (&mut self.signals, &mut self.method, &mut self.system);
+                step_at(parts, at, &mut self.stats, &mut lap).map(|_| ())
+            }
+            Some(_) => self.adaptive_step(&mut lap),
+        };
         if let Err(e) = stepped {
             if !matches!(e, MasterError::TerminationRequested { .. }) {
                 self.failure = Some(e.to_string());
@@ -331,6 +469,90 @@ impl Simulation {
         observers: &mut [&mut dyn Observer],
     ) -> Result<RunStats, MasterError> {
         self.run(observers, &mut |_, _| {})
+    }
+
+    /// One accepted step of adaptive size: try the controller's step
+    /// (clipped to land on the next output grid point and on the stop time),
+    /// roll back and retry smaller while the error estimate exceeds the
+    /// tolerances.
+    fn adaptive_step(&mut self, lap: &mut Lap) -> Result<(), MasterError> {
+        let a = self.adaptive.as_mut().expect("adaptive steps");
+        let start = self.experiment.start;
+        // The point the step must not pass: the next output grid point (a
+        // point within 1e-9 intervals of the stop time is the stop time).
+        let target = match a.grid {
+            Some(dt) => {
+                let point = start + a.next_output as f64 * dt;
+                if point >= a.stop - 1e-9 * dt {
+                    a.stop
+                } else {
+                    point
+                }
+            }
+            None => a.stop,
+        };
+        loop {
+            let remaining = target - a.t;
+            // A clipped step ends exactly at the target; no sliver is left.
+            let clipped = a.h >= remaining || remaining - a.h < 1e-3 * a.h;
+            let h = if clipped { remaining } else { a.h };
+            let at = StepAt {
+                n: self.n,
+                t: a.t,
+                h,
+                t_next: if clipped { target } else { a.t + h },
+                past: Some(a.past),
+            };
+            let parts = (&mut self.signals, &mut self.method, &mut self.system);
+            let error = step_at(parts, at, &mut self.stats, lap)?
+                .expect("the predictor/corrector step estimates its error");
+            let (next, accepted) = a.controller.next(h, error);
+            if accepted {
+                a.t = at.t_next;
+                a.past = [h, a.past[0]];
+                // A clipped step does not shrink the next proposal.
+                a.h = if clipped { a.h.max(next) } else { next };
+                a.on_grid = clipped && a.grid.is_some();
+                if a.on_grid {
+                    a.next_output += 1;
+                }
+                a.stats.accepted += 1;
+                a.stats.last_error = error;
+                a.stats.h_smallest = a.stats.h_smallest.min(h);
+                a.stats.h_largest = a.stats.h_largest.max(h);
+                return Ok(());
+            }
+            a.stats.rejected += 1;
+            if h <= a.controller.limits.h_min {
+                return Err(MasterError::StepSizeTooSmall {
+                    time: a.t,
+                    error,
+                    h_min: a.controller.limits.h_min,
+                });
+            }
+            a.h = next;
+        }
+    }
+
+    /// Macro steps done, for progress: with adaptive steps, how many steps
+    /// of `[experiment] step` the time reached spans (never beyond the total).
+    fn progress(&self) -> u64 {
+        match &self.adaptive {
+            Some(a) => {
+                let spanned = (a.t - self.experiment.start) / self.experiment.step;
+                (spanned.round() as u64).min(self.steps)
+            }
+            None => self.n,
+        }
+    }
+
+    /// Whether the current point goes to the observers: on the output grid,
+    /// or the last one.
+    fn recorded(&self) -> bool {
+        match &self.adaptive {
+            Some(a) => a.grid.is_none() || a.on_grid || self.finished(),
+            None => self.n.is_multiple_of(self.every) || self.n == self.steps,
+        }
     }
 
     /// Run to the stop time, feeding the accepted points on the output grid
@@ -355,7 +577,7 @@ impl Simulation {
         }
         self.notify(observers)?;
         let outcome = (|| {
-            while self.n < self.steps {
+            while !self.finished() {
                 if let Some(reason) = observers.iter_mut().find_map(|o| o.interrupt()) {
                     let time = self.time();
                     return Err(MasterError::Interrupted { time, reason });
@@ -372,12 +594,12 @@ impl Simulation {
                     }
                     Err(e) => return Err(e),
                 }
-                if self.n.is_multiple_of(self.every) || self.n == self.steps {
+                if self.recorded() {
                     self.notify(observers)?;
                 } else {
                     self.hold();
                 }
-                progress(self.n, self.steps);
+                progress(self.progress(), self.steps);
             }
             // A normal end: fmi2Terminate before the instances are freed.
             self.system.terminate()?;
@@ -502,4 +724,21 @@ impl Simulation {
             }),
         }
     }
+}
+
+/// One try of the step T_N → T_N + h: the signals sent, the method's step,
+/// and, when the step is accepted (fixed steps, or an error norm ≤ 1), the
+/// signals received. Returns the error norm of adaptive steps.
+fn step_at(
+    (signals, method, system): (&mut Signals, &mut Box<dyn MacroStep>, &mut System),
+    at: StepAt,
+    stats: &mut RunStats,
+    lap: &mut Lap,
+) -> Result<Option<f64>, MasterError> {
+    signals.send(&mut system.slaves, at)?;
+    let error = method.step(system, at, stats, lap)?;
+    if error.is_none_or(|e| e <= 1.0) {
+        signals.receive(&mut system.slaves)?;
+    }
+    Ok(error)
 }

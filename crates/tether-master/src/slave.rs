@@ -160,6 +160,19 @@ impl Slave {
         Ok(extra)
     }
 
+    /// The capability adaptive macro steps need that the FMU does not
+    /// declare: rollback of a rejected step, and steps of varying size.
+    pub(crate) fn cannot_vary_steps(&self) -> Option<&'static str> {
+        let cs = &self.fmu.model_description().co_simulation;
+        if !cs.can_get_and_set_fmu_state {
+            Some("canGetAndSetFMUstate")
+        } else if !cs.can_handle_variable_communication_step_size {
+            Some("canHandleVariableCommunicationStepSize")
+        } else {
+            None
+        }
+    }
+
     /// Whether perturbed runs may go to other instances of the FMU: its state
     /// can be serialised and it may be instantiated more than once.
     pub(crate) fn can_run_in_parallel(&self) -> bool {

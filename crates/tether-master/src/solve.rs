@@ -54,6 +54,24 @@ impl Jacobians {
         }
     }
 
+    /// Zero Jacobians on the pattern `columns` (column m's rows, sorted; tests).
+    #[cfg(test)]
+    pub fn pattern(columns: &[&[usize]], levels: usize) -> Jacobians {
+        let mut ptr = vec![0];
+        let mut rows = Vec::new();
+        for column in columns {
+            rows.extend_from_slice(column);
+            ptr.push(rows.len());
+        }
+        Jacobians {
+            n: columns.len(),
+            levels,
+            data: vec![0.0; rows.len() * levels],
+            ptr,
+            rows,
+        }
+    }
+
     /// The rows of column `m`, and its values of every level, level after level.
     #[inline]
     pub fn column_mut(&mut self, m: usize) -> (&[usize], &mut [f64]) {

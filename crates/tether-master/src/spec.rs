@@ -9,6 +9,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::jacobian_reuse::JacobianMode;
+use crate::step_control::StepControl;
 use crate::{MasterError, Method, Parallel};
 
 /// A whole system file.
@@ -26,6 +28,9 @@ pub struct SystemSpec {
     /// Settings shared by all methods.
     #[serde(default)]
     pub coupling: CouplingSettings,
+    /// Adaptive macro steps (absent: the fixed `[experiment] step`).
+    #[serde(default)]
+    pub step_control: Option<StepControl>,
     /// The FMU instances, in the order their columns appear in the results.
     #[serde(rename = "instance")]
     pub instances: Vec<InstanceSpec>,
@@ -235,6 +240,18 @@ pub struct CouplingSettings {
     /// The run summary warns when the largest |g| of a constraint or joint
     /// condition over the run exceeds this (in the condition's units).
     pub residual_warning: f64,
+    /// Corrections per macro step (1 = the paper): after the corrector run,
+    /// g is evaluated again and corrected with the same Jacobian, up to this
+    /// many corrections in all (docs/algorithm.md, iterated correction).
+    pub iterations: usize,
+    /// An iterated correction stops when every update |Δu_m| is below
+    /// `iteration_tol·max(1, |u_m|)`.
+    pub iteration_tol: f64,
+    /// When the interface Jacobian is made from perturbed runs: every step
+    /// (the paper) or only when due, with Broyden updates in between.
+    pub jacobian: JacobianMode,
+    /// With `jacobian = "reuse"`: the most steps a Jacobian is kept.
+    pub jacobian_max_age: u64,
 }
 
 /// When the master checks that `fmi2SetFMUstate` restores an instance
@@ -265,6 +282,10 @@ impl Default for CouplingSettings {
             parallel: Parallel::Auto,
             check_rollback: CheckRollback::Setup,
             residual_warning: 1e-3,
+            iterations: 1,
+            iteration_tol: 1e-10,
+            jacobian: JacobianMode::EveryStep,
+            jacobian_max_age: 20,
         }
     }
 }
@@ -620,6 +641,23 @@ impl SystemSpec {
                 ));
             }
         }
+        if c.iterations == 0 || c.iterations > 1000 {
+            return Err(param(
+                "iterations",
+                c.iterations as f64,
+                "a number of corrections per step from 1 to 1000",
+            ));
+        }
+        if !c.iteration_tol.is_finite() || c.iteration_tol <= 0.0 {
+            return Err(param(
+                "iteration_tol",
+                c.iteration_tol,
+                "a finite number > 0",
+            ));
+        }
+        if c.jacobian_max_age == 0 {
+            return Err(param("jacobian_max_age", 0.0, "at least 1 step"));
+        }
         if self.instances.is_empty() {
             return Err(MasterError::SystemFile {
                 path: self.source_name(),
@@ -715,6 +753,9 @@ impl SystemSpec {
     /// from `stop` when `stop` is not on the macro grid.
     pub fn end_time(&self) -> f64 {
         let e = &self.experiment;
+        if self.step_control.is_some() {
+            return e.stop;
+        }
         e.start + self.macro_steps() as f64 * e.step
     }
 
@@ -722,6 +763,9 @@ impl SystemSpec {
     /// of a step): the run ends at the nearest grid point instead.
     pub fn grid_warning(&self) -> Option<String> {
         let e = &self.experiment;
+        if self.step_control.is_some() {
+            return None;
+        }
         let end = self.end_time();
         ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
             format!(

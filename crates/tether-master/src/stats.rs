@@ -83,6 +83,19 @@ pub struct RunStats {
     pub macro_steps: u64,
     /// Linear solves of the interface Jacobian (one per matrix factorised).
     pub jacobian_solves: u64,
+    /// Corrections made (corrector runs), over all accepted macro steps:
+    /// one per step unless the correction is iterated (`[coupling] iterations`).
+    pub corrections: u64,
+    /// The most corrections made in one macro step.
+    pub max_corrections: u64,
+    /// Macro steps (tries, with adaptive steps) that made the interface
+    /// Jacobian from perturbed runs.
+    pub jacobians: u64,
+    /// Macro steps (tries) that reused the Jacobian with a Broyden update
+    /// (`[coupling] jacobian = "reuse"`).
+    pub jacobians_reused: u64,
+    /// Adaptive macro steps (`[step_control]`): what the controller did.
+    pub adaptive: Option<AdaptiveStats>,
     /// Per-instance FMI call counts.
     pub instances: Vec<InstanceCounters>,
     /// Where the time went.
@@ -100,6 +113,22 @@ pub struct RunStats {
     /// The threshold above which the summary warns about a residual
     /// (`[coupling] residual_warning`).
     pub residual_warning: f64,
+}
+
+/// What the step-size controller of adaptive macro steps did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct AdaptiveStats {
+    /// Accepted macro steps.
+    pub accepted: u64,
+    /// Rejected (rolled back and retried smaller) macro steps.
+    pub rejected: u64,
+    /// The smallest accepted step size.
+    pub h_smallest: f64,
+    /// The largest accepted step size.
+    pub h_largest: f64,
+    /// The error norm of the last accepted step (≤ 1: its estimated local
+    /// error over the tolerances).
+    pub last_error: f64,
 }
 
 /// An instance's request to end the simulation, and where the run ended.
@@ -124,6 +153,28 @@ impl fmt::Display for RunStats {
             self.jacobian_solves,
             self.wall.as_secs_f64()
         )?;
+        if let Some(a) = &self.adaptive {
+            writeln!(
+                f,
+                "  adaptive steps: {} accepted, {} rejected   H from {:.3e} to {:.3e}",
+                a.accepted, a.rejected, a.h_smallest, a.h_largest
+            )?;
+        }
+        if self.jacobians_reused > 0 {
+            writeln!(
+                f,
+                "  interface Jacobian: recomputed in {} steps, reused in {}",
+                self.jacobians, self.jacobians_reused
+            )?;
+        }
+        if self.max_corrections > 1 {
+            writeln!(
+                f,
+                "  corrections per step: {:.2} on average, {} at most",
+                self.corrections as f64 / self.macro_steps.max(1) as f64,
+                self.max_corrections
+            )?;
+        }
         for c in &self.instances {
             writeln!(
                 f,
@@ -315,6 +366,11 @@ struct Summary<'a> {
     termination: Option<&'a Termination>,
     macro_steps: u64,
     jacobian_solves: u64,
+    corrections: u64,
+    max_corrections: u64,
+    jacobians: u64,
+    jacobians_reused: u64,
+    adaptive: Option<&'a AdaptiveStats>,
     wall_time: f64,
     max_abs_g: Ordered<'a, Option<f64>>,
     residual_warning: f64,
@@ -341,6 +397,11 @@ impl Serialize for RunStats {
             termination: self.termination.as_ref(),
             macro_steps: self.macro_steps,
             jacobian_solves: self.jacobian_solves,
+            corrections: self.corrections,
+            max_corrections: self.max_corrections,
+            jacobians: self.jacobians,
+            jacobians_reused: self.jacobians_reused,
+            adaptive: self.adaptive.as_ref(),
             wall_time: secs(self.wall),
             // NaN (a residual that was not finite) as null.
             max_abs_g: Ordered(

@@ -3,10 +3,11 @@
 //! unknown drives — and [`MacroStep`], a coupling method's step on it.
 
 use crate::coupling::Coupling;
-use crate::polynomial::Taylor;
+use crate::polynomial::{Past, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, InitialMultiplier, SystemSpec};
 use crate::stats::{Lap, RunStats};
+use crate::step_control::StepControl;
 use crate::touched::Touched;
 use crate::{MasterError, Method};
 
@@ -157,22 +158,36 @@ pub(crate) struct StepAt {
     pub t: f64,
     /// H.
     pub h: f64,
-    /// T_{N+1} (from N + 1, not T_N + H).
+    /// T_{N+1} (from N + 1, not T_N + H, on the uniform grid).
     pub t_next: f64,
+    /// The two step sizes before this one on a variable grid (adaptive
+    /// steps); `None` on the uniform grid.
+    pub past: Past,
 }
 
 /// One macro step of a coupling method: predictor/corrector or explicit.
 pub(crate) trait MacroStep: Send {
     /// Advance every instance and the unknowns from T_N to T_{N+1}, leave
     /// u_{N+1} at the head of the history and the accepted outputs read;
-    /// count solves in `stats`, split the phases on `lap`.
+    /// count solves in `stats`, split the phases on `lap`. With adaptive
+    /// steps it returns the step's error norm; a step whose norm exceeds 1
+    /// is rolled back instead (every instance restored to T_N, the history
+    /// unchanged).
     fn step(
         &mut self,
         system: &mut System,
         at: StepAt,
         stats: &mut RunStats,
         lap: &mut Lap,
-    ) -> Result<(), MasterError>;
+    ) -> Result<Option<f64>, MasterError>;
+
+    /// Turn on adaptive steps: the error estimate with these tolerances,
+    /// every instance saved each step so a rejected step can be rolled back.
+    /// Called once the initial outputs are read. Only the predictor/corrector
+    /// method estimates errors.
+    fn control_steps(&mut self, _system: &System, _control: &StepControl) -> bool {
+        false
+    }
 
     /// Add what the method's helpers did (FMI calls made on worker threads,
     /// the parallel decision) to `stats`.

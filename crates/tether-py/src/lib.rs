@@ -259,6 +259,22 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
             "step" => o.step = real(&value)?,
             "epsilon" => o.epsilon = real(&value)?,
             "divergence_factor" => o.divergence_factor = real(&value)?,
+            "iteration_tol" => o.iteration_tol = real(&value)?,
+            "step_rtol" => o.step_rtol = real(&value)?,
+            "jacobian" => {
+                if !value.is_none() {
+                    let name: String = value.extract()?;
+                    o.jacobian = Some(name.parse().map_err(|e: String| {
+                        failure("settings", format!("jacobian: {e}"), None)
+                    })?);
+                }
+            }
+            "step_atol" => o.step_atol = real(&value)?,
+            "iterations" => {
+                if !value.is_none() {
+                    o.iterations = Some(value.extract()?);
+                }
+            }
             "beta" => method.beta = real(&value)?,
             "gamma" => method.gamma = real(&value)?,
             "a" => method.a = real(&value)?,
@@ -310,7 +326,8 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
             other => {
                 return Err(PyTypeError::new_err(format!(
                 "unexpected override '{other}'; expected stop, step, method, beta, gamma, a, b, \
-                     mu, order, epsilon, parallel, divergence_factor or parameters"
+                     mu, order, epsilon, parallel, divergence_factor, iterations, iteration_tol, step_rtol, step_atol, jacobian or \
+                     parameters"
             )))
             }
         }

@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use tether_master::{
     ConstraintSpec, CouplingSettings, CouplingVariableSpec, JointSpec, MasterError, Method,
-    SignalSettings,
+    SignalSettings, StepControl,
 };
 
 pub use read::{read, Loaded};
@@ -46,6 +46,9 @@ pub struct Annotation {
     pub coupling: Option<CouplingSettings>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub signals: Option<SignalSettings>,
+    /// Adaptive macro steps (`[step_control]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step_control: Option<StepControl>,
     #[serde(rename = "constraint", default, skip_serializing_if = "Vec::is_empty")]
     pub constraints: Vec<ConstraintSpec>,
     #[serde(rename = "joint", default, skip_serializing_if = "Vec::is_empty")]

@@ -262,6 +262,7 @@ impl Reader {
             coupling_variables: annotation.coupling_variables,
             connections,
             signals: annotation.signals.unwrap_or_default(),
+            step_control: annotation.step_control,
             output: Default::default(),
             source: None,
         };

@@ -193,6 +193,7 @@ fn ssd(
         method: Some(spec.method),
         coupling: Some(spec.coupling),
         signals: Some(spec.signals),
+        step_control: spec.step_control,
         constraints: spec.constraints.clone(),
         joints: spec.joints.clone(),
         coupling_variables: spec.coupling_variables.clone(),

@@ -137,6 +137,7 @@ pub fn plot_convergence(
     let figure = ConvergencePlot {
         title: title.to_string(),
         error_label: format!("global error max|{}|", study.columns.join("|, |")),
+        x_label: "macro-step size H".into(),
         curves,
         slopes: vec![1, 2],
     };

@@ -12,6 +12,8 @@ pub struct ConvergencePlot<'a> {
     pub title: String,
     /// What the error measures (y-axis title).
     pub error_label: String,
+    /// The x-axis title: the macro-step size H, or the work it took.
+    pub x_label: String,
     /// The curves.
     pub curves: &'a [ConvergenceCurve],
     /// Orders of the dashed reference slopes (e.g. `[1, 2]`).
@@ -58,7 +60,7 @@ impl Figure for ConvergencePlot<'_> {
             .map_err(text_error)?;
         chart
             .configure_mesh()
-            .x_desc("macro-step size H")
+            .x_desc(self.x_label.as_str())
             .y_desc(self.error_label.as_str())
             .x_label_formatter(&tick)
             .y_label_formatter(&tick)
