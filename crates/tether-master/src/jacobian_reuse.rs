@@ -4,37 +4,7 @@
 //! step's own secant, the predicted and the corrected point
 //! (docs/algorithm.md, "Jacobian reuse").
 
-use serde::{Deserialize, Serialize};
-
 use crate::solve::Jacobians;
-
-/// `[coupling] jacobian`: when the perturbed runs are made.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum JacobianMode {
-    /// Every macro step (the paper).
-    #[default]
-    EveryStep,
-    /// Only when due: the last correction changed g otherwise than the
-    /// Jacobian predicted, the Jacobian is older than `jacobian_max_age`
-    /// steps, the step size changed by more than a factor 1.25 since it was
-    /// made, or the polynomials' degree is still growing (start-up).
-    Reuse,
-}
-
-impl std::str::FromStr for JacobianMode {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "every_step" => Ok(JacobianMode::EveryStep),
-            "reuse" => Ok(JacobianMode::Reuse),
-            other => Err(format!(
-                "unknown jacobian mode '{other}': expected every_step or reuse"
-            )),
-        }
-    }
-}
 
 /// A Jacobian predicts a step well when the actual change of g differs from
 /// the predicted one by at most this fraction of the predicted change.

@@ -52,15 +52,14 @@ mod threads;
 mod touched;
 
 pub use error::MasterError;
-pub use jacobian_reuse::JacobianMode;
 pub use method::Method;
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::Simulation;
 pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
-    Experiment, InitialMultiplier, InstanceSpec, JointInitial, JointSpec, OutputSpec, SignalScheme,
-    SignalSettings, StartValue, SystemSpec,
+    Experiment, InitialMultiplier, InstanceSpec, JacobianMode, JointInitial, JointSpec, OutputSpec,
+    SignalScheme, SignalSettings, StartValue, SystemSpec,
 };
 pub use start::{apply_start_value, Settable};
 pub use stats::{

@@ -4,13 +4,14 @@
 //! eqs. 71–76) differ only in the solve.
 
 use crate::error_estimate::ErrorEstimate;
-use crate::jacobian_reuse::{JacobianMode, Reuse};
+use crate::jacobian_reuse::Reuse;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::rows::{Column, RowLevel, View};
 use crate::runs::PerturbedRuns;
 use crate::slave::{Run, Slave};
 use crate::solve::{Jacobians, Solver};
 use crate::spec::CouplingSettings;
+use crate::spec::JacobianMode;
 use crate::stats::{Lap, RunStats};
 use crate::step_control::StepControl;
 use crate::system::{MacroStep, StepAt, System};

@@ -9,7 +9,6 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::jacobian_reuse::JacobianMode;
 use crate::step_control::StepControl;
 use crate::{MasterError, Method, Parallel};
 
@@ -779,6 +778,34 @@ impl SystemSpec {
         let e = &self.experiment;
         let n = ((e.stop - e.start) / e.step).round();
         (n.max(1.0)) as u64
+    }
+}
+
+/// `[coupling] jacobian`: when the perturbed runs are made.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JacobianMode {
+    /// Every macro step (the paper).
+    #[default]
+    EveryStep,
+    /// Only when due: the last correction changed g otherwise than the
+    /// Jacobian predicted, the Jacobian is older than `jacobian_max_age`
+    /// steps, the step size changed by more than a factor 1.25 since it was
+    /// made, or the polynomials' degree is still growing (start-up).
+    Reuse,
+}
+
+impl std::str::FromStr for JacobianMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "every_step" => Ok(JacobianMode::EveryStep),
+            "reuse" => Ok(JacobianMode::Reuse),
+            other => Err(format!(
+                "unknown jacobian mode '{other}': expected every_step or reuse"
+            )),
+        }
     }
 }
 

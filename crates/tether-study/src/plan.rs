@@ -11,7 +11,7 @@
 //! A plan travels as TOML ([`Plan::to_toml`]): the variants' systems fully
 //! resolved (absolute FMU paths, every setting applied) and the study.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rayon::prelude::*;
@@ -23,7 +23,7 @@ use crate::convergence::{
 use crate::runner::RunResult;
 use crate::series::{series_finish, series_run};
 use crate::stability::{stability_cell, stability_check, stability_jobs, stability_maps, Cell};
-use crate::study::StudyResults;
+use crate::study::{create_dir, StudyReport, StudyResults};
 use crate::{runner, Kind, Study, StudyError, Variant};
 
 /// A study's variants and what to do with them, ready to be cut into jobs.
@@ -211,4 +211,22 @@ impl Plan {
 
 fn wrong_kind() -> StudyError {
     StudyError::Invalid("a job of another kind of study".into())
+}
+
+impl Study {
+    /// Run the study in parallel and write `<output>.csv`, `<output>.txt` and
+    /// the plots into `out_dir`. `progress` is called once per finished run.
+    pub fn run(
+        &self,
+        out_dir: &Path,
+        progress: &(dyn Fn() + Sync),
+    ) -> Result<StudyReport, StudyError> {
+        let variants = self.variants()?;
+        create_dir(out_dir)?;
+        let results = Plan::new(self, variants).run_all(&|| {
+            progress();
+            true
+        })?;
+        self.report(&results, Some(out_dir))
+    }
 }

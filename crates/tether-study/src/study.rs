@@ -8,7 +8,6 @@ use tether_master::SystemSpec;
 
 use crate::convergence::{Convergence, ConvergenceCurve};
 use crate::output;
-use crate::plan::Plan;
 use crate::runner::RunResult;
 use crate::series::Series;
 use crate::stability::{Stability, StabilityMap};
@@ -239,22 +238,6 @@ impl Study {
         Ok((n * per) as u64)
     }
 
-    /// Run the study in parallel and write `<output>.csv`, `<output>.txt` and
-    /// the plots into `out_dir`. `progress` is called once per finished run.
-    pub fn run(
-        &self,
-        out_dir: &Path,
-        progress: &(dyn Fn() + Sync),
-    ) -> Result<StudyReport, StudyError> {
-        let variants = self.variants()?;
-        create_dir(out_dir)?;
-        let results = Plan::new(self, variants).run_all(&|| {
-            progress();
-            true
-        })?;
-        self.report(&results, Some(out_dir))
-    }
-
     /// The text summary of a study's results and, with `out_dir`, the files
     /// `<output>.csv`, `<output>.txt` and the plots written into it.
     pub fn report(
@@ -340,7 +323,7 @@ impl Study {
     }
 }
 
-fn create_dir(dir: &Path) -> Result<(), StudyError> {
+pub(crate) fn create_dir(dir: &Path) -> Result<(), StudyError> {
     std::fs::create_dir_all(dir).map_err(|e| StudyError::Io {
         path: dir.to_path_buf(),
         source: e,
