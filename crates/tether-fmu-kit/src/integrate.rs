@@ -10,7 +10,7 @@
 
 use std::cell::RefCell;
 
-use ode_solvers::{DVector, Dop853, OutputType, System};
+use ode_solvers::{DVector, Dop853, OutputType, SVector, System};
 
 use crate::input::{eval_all, InputJet};
 use crate::model::Model;
@@ -22,20 +22,28 @@ struct Rhs<'a, M> {
     u: RefCell<Vec<f64>>,
 }
 
-impl<M: Model> System<f64, DVector<f64>> for Rhs<'_, M> {
+impl<M: Model> Rhs<'_, M> {
     /// `y = [x…, τ]`.
-    fn system(&self, _t: f64, y: &DVector<f64>, dy: &mut DVector<f64>) {
+    fn eval(&self, y: &[f64], dy: &mut [f64]) {
         let n = y.len() - 1;
         let tau = y[n];
         let mut u = self.u.borrow_mut();
         eval_all(self.inputs, tau, &mut u);
-        self.model.derivatives(
-            self.t_c + tau,
-            &y.as_slice()[..n],
-            &u,
-            &mut dy.as_mut_slice()[..n],
-        );
+        self.model
+            .derivatives(self.t_c + tau, &y[..n], &u, &mut dy[..n]);
         dy[n] = 1.0;
+    }
+}
+
+impl<M: Model> System<f64, DVector<f64>> for Rhs<'_, M> {
+    fn system(&self, _t: f64, y: &DVector<f64>, dy: &mut DVector<f64>) {
+        self.eval(y.as_slice(), dy.as_mut_slice());
+    }
+}
+
+impl<M: Model, const N: usize> System<f64, SVector<f64, N>> for Rhs<'_, M> {
+    fn system(&self, _t: f64, y: &SVector<f64, N>, dy: &mut SVector<f64, N>) {
+        self.eval(y.as_slice(), dy.as_mut_slice());
     }
 }
 
@@ -56,11 +64,19 @@ pub fn step<M: Model>(
     if model.exact_step(t_c, h, x, inputs) {
         return check_finite(x, t_c + h).map(|()| "exact step");
     }
-    dop853(model, t_c, h, x, inputs, tolerance)
+    dop853(model, t_c, h, x, inputs, tolerance, false)
 }
 
 /// [`step`] with Dop853: a separate, never inlined function, so that a model's
 /// exact step does not carry the integrator's set-up in its path.
+///
+/// `x` holds the model's states. Models with up to 15 states integrate
+/// `[x…, τ]` as a fixed-size vector on the stack; larger ones as a heap
+/// vector, which ode_solvers allocates anew for every intermediate result
+/// (hundreds of allocations per step: slower, and slower still in a process
+/// with more than one thread, where every allocation takes a lock). Both run
+/// the same arithmetic; `heap` forces the heap vector (for the test that
+/// shows it).
 #[inline(never)]
 fn dop853<M: Model>(
     model: &M,
@@ -69,6 +85,7 @@ fn dop853<M: Model>(
     x: &mut [f64],
     inputs: &[InputJet],
     tolerance: f64,
+    heap: bool,
 ) -> Result<&'static str, String> {
     let rhs = Rhs {
         model,
@@ -76,36 +93,59 @@ fn dop853<M: Model>(
         inputs,
         u: RefCell::new(vec![0.0; inputs.len()]),
     };
-    let y0 = DVector::from_iterator(x.len() + 1, x.iter().copied().chain([0.0]));
-    let mut solver = match model.max_step().filter(|&max| max > 0.0 && max < h) {
-        // Dop853's defaults (safety 0.9, β 0, step factors 1/3..6, automatic first
-        // step, 100 000 steps, stiffness check every 1000), but at most `max` per step.
-        Some(max) => Dop853::from_param(
-            rhs,
-            0.0,
-            h,
-            h,
-            y0,
-            tolerance,
-            tolerance,
-            0.9,
-            0.0,
-            0.333,
-            6.0,
-            max,
-            0.0,
-            100_000,
-            1000,
-            OutputType::Sparse,
-        ),
-        None => Dop853::new(rhs, 0.0, h, h, y0, tolerance, tolerance),
+    let end = |end: Option<&[f64]>, x: &mut [f64]| -> Result<(), String> {
+        let end = end.ok_or("Dop853 returned no solution")?;
+        x.copy_from_slice(&end[..x.len()]);
+        Ok(())
     };
-    solver.set_output(OutputType::Sparse);
-    solver
-        .integrate()
-        .map_err(|e| format!("Dop853 failed between t = {t_c} and t = {}: {e}", t_c + h))?;
-    let end = solver.y_out().last().ok_or("Dop853 returned no solution")?;
-    x.copy_from_slice(&end.as_slice()[..x.len()]);
+    macro_rules! integrate {
+        ($y0:expr) => {{
+            let mut solver = match model.max_step().filter(|&max| max > 0.0 && max < h) {
+                // Dop853's defaults (safety 0.9, β 0, step factors 1/3..6, automatic
+                // first step, 100 000 steps, stiffness check every 1000), but at most
+                // `max` per step.
+                Some(max) => Dop853::from_param(
+                    rhs,
+                    0.0,
+                    h,
+                    h,
+                    $y0,
+                    tolerance,
+                    tolerance,
+                    0.9,
+                    0.0,
+                    0.333,
+                    6.0,
+                    max,
+                    0.0,
+                    100_000,
+                    1000,
+                    OutputType::Sparse,
+                ),
+                None => Dop853::new(rhs, 0.0, h, h, $y0, tolerance, tolerance),
+            };
+            solver.set_output(OutputType::Sparse);
+            solver
+                .integrate()
+                .map_err(|e| format!("Dop853 failed between t = {t_c} and t = {}: {e}", t_c + h))?;
+            end(solver.y_out().last().map(|y| y.as_slice()), x)?;
+        }};
+    }
+    macro_rules! fixed {
+        ($($n:literal)*) => {
+            // The model's own state count, a constant: only its arm is compiled.
+            match const { M::DECLARATION.states.len() + 1 } {
+                $($n if !heap && x.len() + 1 == $n => integrate!(SVector::<f64, $n>::from_iterator(
+                    x.iter().copied().chain([0.0])
+                )),)*
+                _ => integrate!(DVector::from_iterator(
+                    x.len() + 1,
+                    x.iter().copied().chain([0.0])
+                )),
+            }
+        };
+    }
+    fixed!(2 3 4 5 6 7 8 9 10 11 12 13 14 15 16);
     check_finite(x, t_c + h).map(|()| "Dop853")
 }
 
@@ -123,5 +163,81 @@ fn not_finite(x: &[f64], t: f64) -> Result<(), String> {
     match x.iter().position(|v| !v.is_finite()) {
         Some(i) => Err(format!("state {i} is not finite ({}) at t = {t}", x[i])),
         None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+
+    use super::*;
+    use crate::tests::Decay;
+    use crate::Parameters;
+
+    /// Counts the allocations of the calling thread.
+    struct Counting;
+
+    thread_local! {
+        static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+    }
+
+    // SAFETY: forwards every call unchanged to the system allocator.
+    unsafe impl GlobalAlloc for Counting {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            ALLOCATIONS.with(|n| n.set(n.get() + 1));
+            // SAFETY: the caller's contract is passed on unchanged.
+            unsafe { System.alloc(layout) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            // SAFETY: the caller's contract is passed on unchanged.
+            unsafe { System.dealloc(ptr, layout) }
+        }
+    }
+
+    #[global_allocator]
+    static COUNTING: Counting = Counting;
+
+    /// One Dop853 step of ẋ = u − k·x under a ramp input: the state and the
+    /// number of allocations it took.
+    fn step_decay(heap: bool) -> (f64, u64) {
+        let model =
+            Decay::new(&Parameters::new(&Decay::DECLARATION, &[1.0, 1.0], &[], &[])).unwrap();
+        let inputs = [InputJet {
+            value: 0.5,
+            d1: 2.0,
+            d2: -1.0,
+        }];
+        let mut x = [1.0];
+        let before = ALLOCATIONS.with(Cell::get);
+        dop853(&model, 0.3, 0.25, &mut x, &inputs, 1e-10, heap).unwrap();
+        (x[0], ALLOCATIONS.with(Cell::get) - before)
+    }
+
+    /// Small models integrate on the stack: a handful of allocations a step
+    /// (ode_solvers' stage and output lists) instead of one for every
+    /// intermediate vector, with the same arithmetic, bit for bit.
+    #[test]
+    fn small_models_step_on_the_stack_with_the_same_result() {
+        let (on_stack, stack_allocations) = step_decay(false);
+        let (on_heap, heap_allocations) = step_decay(true);
+        println!("allocations in one step: {stack_allocations} on the stack, {heap_allocations} on the heap");
+        assert_eq!(on_stack.to_bits(), on_heap.to_bits());
+        // The closed form of x(0.55) from x(0.3) = 1, k = 1, u = 0.5 + 2s − s²/2.
+        let exact = {
+            let (h, k) = (0.25_f64, 1.0_f64);
+            // x(h) = e^{−kh}x0 + ∫₀ʰ e^{−k(h−s)} u(s) ds, u(s) = a + b s + c s²
+            let (a, b, c) = (0.5, 2.0, -0.5);
+            let e = (-k * h).exp();
+            let int0 = (1.0 - e) / k;
+            let int1 = h / k - (1.0 - e) / (k * k);
+            let int2 = h * h / k - 2.0 * h / (k * k) + 2.0 * (1.0 - e) / (k * k * k);
+            e + a * int0 + b * int1 + c * int2
+        };
+        assert!((on_stack - exact).abs() < 1e-9, "{on_stack} vs {exact}");
+        assert!(
+            stack_allocations <= 8 && heap_allocations > 50,
+            "allocations: stack {stack_allocations}, heap {heap_allocations}"
+        );
     }
 }
