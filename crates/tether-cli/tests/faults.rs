@@ -814,6 +814,10 @@ fn an_isolated_host_killed_from_outside_is_an_error() {
             "--out",
             "out.csv",
             "--isolate",
+            // One host per instance: "auto" may give workers their own copies
+            // (and hosts) when the isolated runs look expensive.
+            "--parallel",
+            "off",
         ])
         .stderr(std::process::Stdio::piped())
         .spawn()
