@@ -406,8 +406,8 @@ fn jacobian_reuse_saves_fmu_calls_at_the_same_accuracy() {
                 max_error(&rec, columns, |k, name| reference[k].column(name).unwrap())
             };
             println!(
-                "{label}, {mode:?}: {calls} fmi2DoStep, max error {error:.4e}, Jacobian made in {} steps, reused in {}",
-                stats.jacobians, stats.jacobians_reused
+                "{label}, {mode:?}: {calls} fmi2DoStep, max error {error:.4e}, Jacobian made in {} steps ({} after a misprediction), reused in {}",
+                stats.jacobians, stats.jacobians_remade, stats.jacobians_reused
             );
             found.push((calls as f64, error));
         }
@@ -417,8 +417,8 @@ fn jacobian_reuse_saves_fmu_calls_at_the_same_accuracy() {
             100.0 * (1.0 - reuse.0 / every.0),
             100.0 * (reuse.1 / every.1 - 1.0)
         );
-        // Measured (H = 1e-3, 1 s): double pendulum 47.5 % fewer calls, error
-        // unchanged; slider-crank 52.2 % fewer, error 5.1 % smaller.
+        // Measured (H = 1e-3, 1 s): double pendulum 47.3 % fewer calls, error
+        // unchanged; slider-crank 51.1 % fewer, error 5.1 % smaller.
         assert!(reuse.0 <= 0.7 * every.0, "{label}: {found:?}");
         assert!(reuse.1 <= 1.1 * every.1, "{label}: {found:?}");
     }
@@ -436,6 +436,59 @@ fn slider_crank_work(spec: &SystemSpec) -> Option<(u64, f64)> {
         reference[k].column(name).expect("reference column")
     });
     Some((calls, error))
+}
+
+/// Adaptive steps with Jacobian reuse at loose tolerances, on the
+/// slider-crank over 2 s through its dead centres. A correction the reused
+/// Jacobian mispredicted is made again with a fresh one before the step is
+/// judged: accepted as it was, it would leave a constraint residual whose
+/// removal the next step's error estimate counts at any H, and the run would
+/// stop at h_min. Each run completes, with a max angle error within 10× the
+/// tolerance (atol + rtol·max|φ|) and at most 10 % above the same run's
+/// without reuse.
+#[test]
+fn adaptive_steps_with_reuse_run_through_loose_tolerances() {
+    use tether_master::{JacobianMode, StepControl};
+    for rtol in [1e-2, 3e-3] {
+        let mut found = Vec::new();
+        for mode in [JacobianMode::EveryStep, JacobianMode::Reuse] {
+            let mut spec = with(example("slider_crank.toml"), BAUMGARTE_INDEX2, 0, 1e-3, 2.0);
+            spec.coupling.jacobian = mode;
+            spec.step_control = Some(StepControl {
+                rtol,
+                atol: rtol,
+                ..StepControl::default()
+            });
+            let mut sim = Simulation::new(&spec).unwrap();
+            let mut rec = MemoryRecorder::default();
+            let stats = sim
+                .run(&mut [&mut rec], &mut |_, _| {})
+                .expect("the run completes");
+            let calls: u64 = stats.instances.iter().map(|c| c.do_steps).sum();
+            let columns = ["crank.phi", "rocker.phi"];
+            let reference = slider_crank::reference(&rec.times);
+            let error = max_error(&rec, &columns, |k, name| {
+                reference[k].column(name).expect("reference column")
+            });
+            let peak = columns
+                .iter()
+                .flat_map(|c| rec.series(c).unwrap())
+                .fold(0.0, |m: f64, y| m.max(y.abs()));
+            let ratio = error / (rtol + rtol * peak);
+            println!(
+                "rtol = atol = {rtol:e}, {mode:?}: {calls} fmi2DoStep, max angle error {error:.3e} ({ratio:.2} of the tolerance), Jacobian made in {} tries ({} after a misprediction), reused in {}",
+                stats.jacobians, stats.jacobians_remade, stats.jacobians_reused
+            );
+            found.push((error, ratio));
+        }
+        // Measured: 792 and 866 calls, 0.369 and 0.335 rad (1e-2); 1341 and
+        // 1341 calls, 0.180 and 0.138 rad (3e-3). At these tolerances most
+        // reused Jacobians mispredict (51 of 80 made after one at 1e-2), so
+        // reuse saves no calls; it does from 1e-3 on (work_precision).
+        let ((every, _), (reuse, ratio)) = (found[0], found[1]);
+        assert!(ratio <= 10.0, "rtol {rtol}: {found:?}");
+        assert!(reuse <= 1.1 * every, "rtol {rtol}: {found:?}");
+    }
 }
 
 /// Work–precision on the slider-crank over 2 s (its fast swing through the

@@ -370,32 +370,68 @@ class Master:
         g = {lv: np.array([self._value(r, lv, u_pred, output=out) for r in self.rows]) for lv in self.levels}
 
         # Perturbed predictors: column m of each level's Jacobian (eq. 59-64);
-        # with Jacobian reuse only when due.
-        if self.reuse is None or self.reuse.due(h, n <= k):
-            jac = {lv: np.zeros((nu, nu)) for lv in self.levels}
-            eps = self.system.epsilon
-            for m in range(nu):
-                delta = eps * max(abs(self.past[m][0]), 1.0)
-                perturbed = list(jets)
-                perturbed[m] = poly.through(u_pred[m] + delta, self.past[m], degree_corr, h, steps)
-                up = list(u_pred)
-                up[m] = u_pred[m] + delta
-                live = set(self.owners[m])
-                for s in sorted(live):
-                    host = self.hosts[s]
-                    host.restore_state()
-                    host.apply(perturbed, k)
-                    host.do_step(t, h)
-                    host.read()
-                out = self._output(live, base)
-                for lv in self.levels:
-                    for r, row in enumerate(self.rows):
-                        jac[lv][r, m] = (self._value(row, lv, up, output=out) - g[lv][r]) / delta
-            self.jac = jac
-            if self.reuse is not None:
-                self.reuse.made(h)
-        jac = self.jac
+        # with Jacobian reuse only when due, and again when the reused one
+        # mispredicted the correction (then the correction is made again).
+        fresh = self.reuse is None or self.reuse.due(h, n <= k)
+        while True:
+            if fresh:
+                self._jacobian(t, h, steps, jets, u_pred, base, g, degree_corr)
+            corrected = self._correction(t, h, steps, u_pred, g, t_next, degree_corr)
+            if self.reuse is None:
+                break
+            out = self._output()
+            gc = {lv: [self._value(r, lv, corrected, output=out) for r in self.rows] for lv in self.levels}
+            if self.pattern is None:
+                self.pattern = self._pattern()
+            missed = self.reuse.check(self.jac, self.levels, u_pred, corrected, g, gc)
+            if fresh or not missed:
+                break
+            fresh = True
 
+        error = None
+        if adaptive:
+            error = self._error_norm(base, degree_corr)
+            if not error <= 1.0:
+                for host in self.hosts:
+                    host.restore_state()
+                return error
+            self._note_peaks()
+        if self.reuse is not None:
+            self.reuse.accepted(self.jac, self.pattern, self.levels)
+        self.past = [[corrected[m], p[0], p[1]] for m, p in enumerate(self.past)]
+        self.n += 1
+        self._accept()
+        return error
+
+    def _jacobian(self, t, h, steps, jets, u_pred, base, g, degree_corr):
+        """The interface Jacobians from one perturbed run per unknown."""
+        nu = len(self.unknowns)
+        jac = {lv: np.zeros((nu, nu)) for lv in self.levels}
+        eps = self.system.epsilon
+        for m in range(nu):
+            delta = eps * max(abs(self.past[m][0]), 1.0)
+            perturbed = list(jets)
+            perturbed[m] = poly.through(u_pred[m] + delta, self.past[m], degree_corr, h, steps)
+            up = list(u_pred)
+            up[m] = u_pred[m] + delta
+            live = set(self.owners[m])
+            for s in sorted(live):
+                host = self.hosts[s]
+                host.restore_state()
+                host.apply(perturbed, self.k)
+                host.do_step(t, h)
+                host.read()
+            out = self._output(live, base)
+            for lv in self.levels:
+                for r, row in enumerate(self.rows):
+                    jac[lv][r, m] = (self._value(row, lv, up, output=out) - g[lv][r]) / delta
+        self.jac = jac
+        if self.reuse is not None:
+            self.reuse.made(h)
+
+    def _correction(self, t, h, steps, u_pred, g, t_next, degree_corr):
+        """The corrected unknowns and the corrector run, iterated as set."""
+        jac = self.jac
         corrected = self._corrected(u_pred, g, jac, t_next)
         self._corrector(corrected, degree_corr, t, h, steps)
         # Iterated correction: g at the corrected point, the same Jacobian.
@@ -409,25 +445,7 @@ class Master:
             tol = self.system.iteration_tol
             if all(abs(u - f) <= tol * max(abs(u), 1.0) for u, f in zip(corrected, start)):
                 break
-
-        error = None
-        if adaptive:
-            error = self._error_norm(base, degree_corr)
-            if not error <= 1.0:
-                for host in self.hosts:
-                    host.restore_state()
-                return error
-            self._note_peaks()
-        if self.reuse is not None:
-            out = self._output()
-            gc = {lv: [self._value(r, lv, corrected, output=out) for r in self.rows] for lv in self.levels}
-            if self.pattern is None:
-                self.pattern = self._pattern()
-            self.reuse.after_step(self.jac, self.pattern, self.levels, u_pred, corrected, g, gc)
-        self.past = [[corrected[m], p[0], p[1]] for m, p in enumerate(self.past)]
-        self.n += 1
-        self._accept()
-        return error
+        return corrected
 
     def _corrector(self, corrected, degree, t, h, steps):
         """Repeat the step with interpolation polynomials; read the outputs."""
@@ -606,25 +624,30 @@ class Reuse:
     def made(self, h):
         self.age, self.h = 0, h
 
-    def after_step(self, jac, pattern, levels, u_p, u_c, g_p, g_c):
-        """Check the Jacobian's prediction of g^c - g^p; Broyden-update it if good (Schubert)."""
-        if self.age is not None:
-            self.age += 1
+    def check(self, jac, levels, u_p, u_c, g_p, g_c):
+        """Whether the Jacobian mispredicted g^c - g^p: on some row and level
+        by more than 20 % of the larger of the predicted change and |g^p|."""
         nu = len(u_p)
-        du = [c - p for c, p in zip(u_c, u_p)]
-        dg = [g_c[lv][r] - g_p[lv][r] for lv in levels for r in range(nu)]
-        predicted = [0.0] * len(dg)
+        self.du = [c - p for c, p in zip(u_c, u_p)]
+        self.dg = [g_c[lv][r] - g_p[lv][r] for lv in levels for r in range(nu)]
+        self.predicted = [0.0] * len(self.dg)
         for m in range(nu):
             column = [jac[lv][r, m] for lv in levels for r in range(nu)]
             for i, j in enumerate(column):
-                predicted[i] += j * du[m]
-        norm = max(abs(p) for p in predicted)
-        miss = max(abs(d - p) for d, p in zip(dg, predicted))
-        self.mispredicted = math.isnan(miss) or miss > 0.2 * norm
+                self.predicted[i] += j * self.du[m]
+        gp = [g_p[lv][r] for lv in levels for r in range(nu)]
+        self.mispredicted = any(math.isnan(abs(d - p)) or abs(d - p) > 0.2 * max(abs(p), abs(q))
+                                for d, p, q in zip(self.dg, self.predicted, gp))
+        return self.mispredicted
+
+    def accepted(self, jac, pattern, levels):
+        """The step is accepted: the Jacobian ages, and unless it mispredicted
+        takes the secant in by Schubert's sparse update, row by row on the
+        pattern (off it the entries stay exact zeros)."""
+        self.age += 1
         if self.mispredicted:
             return
-        # Schubert's sparse update, row by row on the pattern (off it the
-        # entries stay exact zeros).
+        nu, du, dg, predicted = len(self.du), self.du, self.dg, self.predicted
         row_du2 = [0.0] * nu
         for m in range(nu):
             for r in range(nu):

@@ -1,13 +1,15 @@
 //! Jacobian reuse (`[coupling] jacobian = "reuse"`, beyond the paper): the
 //! perturbed runs are made only when the interface Jacobian is due; in
 //! between it is kept and corrected by Broyden rank-one updates from each
-//! step's own secant, the predicted and the corrected point
+//! step's own secant, the predicted and the corrected point. A correction
+//! the reused Jacobian mispredicted is made again with a fresh one
 //! (docs/algorithm.md, "Jacobian reuse").
 
 use crate::solve::Jacobians;
 
-/// A Jacobian predicts a step well when the actual change of g differs from
-/// the predicted one by at most this fraction of the predicted change.
+/// A Jacobian predicts a correction well when on every row the actual change
+/// of g differs from the predicted one by at most this fraction of the larger
+/// of the predicted change and the row's residual before the correction.
 const MISMATCH: f64 = 0.2;
 
 /// When the Jacobian is due, and its Broyden updates.
@@ -58,24 +60,22 @@ impl Reuse {
         self.h = h;
     }
 
-    /// After an accepted step: compare the change of g from the predicted
-    /// to the corrected point (`g_p`, `g_c`, every level the method uses)
-    /// with the Jacobian's prediction `J·(u_c − u_p)`; a mismatch above 20 %
-    /// makes the next step recompute the Jacobian, otherwise Schubert's
-    /// sparse Broyden update takes the secant in, row by row on the
-    /// Jacobian's pattern: `J[r,m] += (Δg − J·Δu)_r · Δu_m / Σ Δu_m'²`, the
-    /// sum over the unknowns m' on row r's pattern. Off the pattern the
-    /// entries stay structural zeros, and `J·Δu = Δg` holds afterwards on
-    /// every row with some Δu on its pattern.
-    pub fn after_step(
+    /// After a correction: compare the change of g from the predicted to
+    /// the corrected point (`g_p`, `g_c`, every level the method uses) with
+    /// the Jacobian's prediction `J·(u_c − u_p)`, row by row. Whether the
+    /// Jacobian mispredicted it: on some row and level the actual change
+    /// differs from the predicted one by more than 20 % of the larger of
+    /// the predicted change and the residual |g_p| the correction started
+    /// from. Row by row, because the rows of one level differ in units and
+    /// scale (a joint's position condition in metres beside a force port's
+    /// balance in newtons): over all rows, a constraint row's miss would
+    /// hide below a port row's predicted change.
+    pub fn mispredicted(
         &mut self,
         jac: &mut Jacobians,
         (u_p, u_c): (&[f64], &[f64]),
         (g_p, g_c): (&[f64], &[f64]),
-    ) {
-        if let Some(age) = &mut self.age {
-            *age += 1;
-        }
+    ) -> bool {
         let nu = self.du.len();
         for ((d, c), p) in self.du.iter_mut().zip(u_c).zip(u_p) {
             *d = c - p;
@@ -97,13 +97,30 @@ impl Reuse {
                 self.row_du2[r] += du * du;
             }
         }
-        let norm = |v: &mut dyn Iterator<Item = f64>| v.fold(0.0, |m: f64, x| m.max(x.abs()));
-        let predicted = norm(&mut self.predicted.iter().copied());
-        let miss = norm(&mut self.dg.iter().zip(&self.predicted).map(|(d, p)| d - p));
-        self.mispredicted = miss.is_nan() || miss > MISMATCH * predicted;
+        let rows = self.dg.iter().zip(&self.predicted).zip(g_p);
+        self.mispredicted = rows.into_iter().any(|((dg, predicted), gp)| {
+            let miss = (dg - predicted).abs();
+            miss.is_nan() || miss > MISMATCH * predicted.abs().max(gp.abs())
+        });
+        self.mispredicted
+    }
+
+    /// The step is accepted: the Jacobian ages by one step and, unless it
+    /// mispredicted the step's correction ([`Self::mispredicted`], which
+    /// makes the next step recompute it), takes the step's secant in by
+    /// Schubert's sparse Broyden update, row by row on its pattern:
+    /// `J[r,m] += (Δg − J·Δu)_r · Δu_m / Σ Δu_m'²`, the sum over the
+    /// unknowns m' on row r's pattern. Off the pattern the entries stay
+    /// structural zeros, and `J·Δu = Δg` holds afterwards on every row with
+    /// some Δu on its pattern.
+    pub fn accepted(&mut self, jac: &mut Jacobians) {
+        if let Some(age) = &mut self.age {
+            *age += 1;
+        }
         if self.mispredicted {
             return;
         }
+        let nu = self.du.len();
         for (m, &du) in self.du.iter().enumerate() {
             let (rows, values) = jac.column_mut(m);
             let levels = values.chunks_exact_mut(rows.len().max(1));
@@ -171,13 +188,15 @@ mod tests {
                 g_p[1] + truth[1][0] * (u[0] - u_p[0]) + truth[1][1] * (u[1] - u_p[1]),
             ]
         };
-        reuse.after_step(&mut jac, (&u_p, &u_c), (&g_p, &g(u_c)));
+        reuse.mispredicted(&mut jac, (&u_p, &u_c), (&g_p, &g(u_c)));
+        reuse.accepted(&mut jac);
         assert!(!reuse.mispredicted && !reuse.due(1e-3, false));
         assert!(reuse.due(2e-3, false), "H doubled");
         // A Jacobian off by 5 % predicts well enough: the update makes it
         // exact along Δu.
         scale(&mut jac, 2, 1.05);
-        reuse.after_step(&mut jac, (&u_p, &u_c), (&g_p, &g(u_c)));
+        reuse.mispredicted(&mut jac, (&u_p, &u_c), (&g_p, &g(u_c)));
+        reuse.accepted(&mut jac);
         assert!(!reuse.mispredicted);
         let (du, dg) = ([0.5, -1.0], [g(u_c)[0] - g_p[0], g(u_c)[1] - g_p[1]]);
         for (jdu, dg) in times(&mut jac, &du, 1).iter().zip(dg) {
@@ -185,7 +204,8 @@ mod tests {
         }
         // Off by a factor 2: a misprediction, the next step recomputes.
         scale(&mut jac, 2, 2.0);
-        reuse.after_step(&mut jac, (&u_p, &u_c), (&g_p, &g(u_c)));
+        reuse.mispredicted(&mut jac, (&u_p, &u_c), (&g_p, &g(u_c)));
+        reuse.accepted(&mut jac);
         assert!(reuse.mispredicted && reuse.due(1e-3, false));
         assert!(reuse.due(1e-3, true), "start-up always recomputes");
     }
@@ -223,7 +243,8 @@ mod tests {
         }
         let mut reuse = Reuse::new(10, 3, 6);
         reuse.made(1e-3);
-        reuse.after_step(&mut jac, (&u_p, &u_c), (&g_p, &g_c));
+        reuse.mispredicted(&mut jac, (&u_p, &u_c), (&g_p, &g_c));
+        reuse.accepted(&mut jac);
         assert!(!reuse.mispredicted);
         for (r, (jdu, dg)) in times(&mut jac, &du, 2)
             .iter()
@@ -235,5 +256,31 @@ mod tests {
         for (m, rows) in pattern.iter().enumerate() {
             assert_eq!(jac.column_mut(m).0, *rows, "the pattern is unchanged");
         }
+    }
+
+    /// Rows of different units on one level: a port row whose change the
+    /// Jacobian predicts exactly does not hide a constraint row whose change
+    /// it gets wrong by half, though the constraint row's miss is a millionth
+    /// of the port row's change.
+    #[test]
+    fn a_misprediction_counts_row_by_row() {
+        let mut jac = Jacobians::dense(2, 1);
+        // Row 0: a constraint in metres, 1e-6 per unit of u0; row 1: a force
+        // balance in newtons, 1 per unit of u1.
+        jac.column_mut(0).1.copy_from_slice(&[1e-6, 0.0]);
+        jac.column_mut(1).1.copy_from_slice(&[0.0, 1.0]);
+        let mut reuse = Reuse::new(10, 2, 2);
+        reuse.made(1e-3);
+        let (u_p, u_c) = ([0.0, 0.0], [1.0, 1.0]);
+        let g_p = [-1e-6, -1.0];
+        // The constraint moved by half what was predicted, the port exactly.
+        let g_c = [-0.5e-6, 0.0];
+        assert!(reuse.mispredicted(&mut jac, (&u_p, &u_c), (&g_p, &g_c)));
+        // Within 20 % on both rows: predicted well, and the secant goes in.
+        let g_c = [-0.1e-6, 0.0];
+        assert!(!reuse.mispredicted(&mut jac, (&u_p, &u_c), (&g_p, &g_c)));
+        reuse.accepted(&mut jac);
+        assert!((jac.column_mut(0).1[0] - 1.0e-6 + 0.05e-6).abs() < 1e-18);
+        assert!(!reuse.due(1e-3, false));
     }
 }

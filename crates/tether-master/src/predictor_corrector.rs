@@ -138,10 +138,7 @@ impl PredictorCorrector {
         at: StepAt,
         degree: usize,
     ) -> Result<(), MasterError> {
-        for (m, history) in system.history.iter().enumerate() {
-            self.polys[m] = extrapolate(history, degree, at.h, at.past);
-            self.u_pred[m] = self.polys[m].at(at.h);
-        }
+        self.extrapolate(system, at, degree);
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
             if !slave.stepped_ahead {
                 slave.apply_inputs(&self.polys)?;
@@ -155,6 +152,14 @@ impl PredictorCorrector {
             system.coupling.eval(level, &view, g);
         }
         Ok(())
+    }
+
+    /// The unknowns' polynomials extrapolated from their history, and u^p.
+    fn extrapolate(&mut self, system: &System, at: StepAt, degree: usize) {
+        for (m, history) in system.history.iter().enumerate() {
+            self.polys[m] = extrapolate(history, degree, at.h, at.past);
+            self.u_pred[m] = self.polys[m].at(at.h);
+        }
     }
 
     /// Step 3, perturbed predictors (eqs. 59–64): per group of unknowns, one
@@ -335,9 +340,7 @@ impl PredictorCorrector {
             return Ok(None);
         };
         let norm = estimate.norm(&self.predicted, &system.outputs, degree);
-        if norm <= 1.0 {
-            estimate.accept(&system.outputs);
-        } else {
+        if norm.is_nan() || norm > 1.0 {
             for slave in &mut system.slaves {
                 slave.restore_state()?;
             }
@@ -351,12 +354,11 @@ impl PredictorCorrector {
         self.reuse.as_ref().is_none_or(|r| r.due(at.h, growing))
     }
 
-    /// Jacobian reuse, after an accepted step: g at the corrected point, the
-    /// Jacobian's prediction checked and the Broyden update made
-    /// ([`Reuse::after_step`]).
-    fn update_jacobian(&mut self, system: &System) {
+    /// Jacobian reuse: g at the corrected point, and whether the Jacobian
+    /// mispredicted the correction ([`Reuse::mispredicted`]).
+    fn mispredicted(&mut self, system: &System) -> bool {
         let Some(reuse) = &mut self.reuse else {
-            return;
+            return false;
         };
         let nu = system.coupling.len();
         let view = View::at(&system.outputs, &self.corrected);
@@ -367,17 +369,21 @@ impl PredictorCorrector {
         {
             system.coupling.eval(level, &view, g);
         }
-        reuse.after_step(
+        reuse.mispredicted(
             &mut self.jac,
             (&self.u_pred, &self.corrected),
             (&self.g_predicted, &self.g_corrected),
-        );
+        )
     }
 
-    /// Accept the step: u_{N+1} goes to the head of the history.
+    /// Accept the step: u_{N+1} goes to the head of the history, the
+    /// accepted states to the error estimate's peaks.
     fn accept(&mut self, system: &mut System) {
         for (history, &u) in system.history.iter_mut().zip(&self.corrected) {
             *history = [u, history[0], history[1]];
+        }
+        if let Some(estimate) = &mut self.estimate {
+            estimate.accept(&system.outputs);
         }
     }
 }
@@ -405,26 +411,41 @@ impl MacroStep for PredictorCorrector {
         self.save(system)?;
         self.predict(system, at, predictor_degree)?;
         lap.split_into(&mut stats.times.predictor);
-        // Beyond the paper: with Jacobian reuse, perturbed runs only when due.
-        if self.jacobian_due(at) {
-            self.perturb(system, at, corrector_degree)?;
-            stats.jacobians += 1;
-            if let Some(reuse) = &mut self.reuse {
-                reuse.made(at.h);
-            }
-        } else {
-            stats.jacobians_reused += 1;
-        }
+        // Beyond the paper: with Jacobian reuse, perturbed runs only when
+        // due, and when the reused Jacobian mispredicted the correction: then
+        // the correction is made again from g^p with a fresh one.
         if self.reuse.is_some() {
             self.g_predicted.copy_from_slice(&self.g);
         }
-        lap.split_into(&mut stats.times.jacobian);
-        self.solve(system, at.t_next, stats)?;
-        lap.split_into(&mut stats.times.solve);
-        self.correct(system, at, corrector_degree)?;
-        // Beyond the paper: repeat the correction (1 = none).
-        let corrections = self.iterate(system, at, corrector_degree, stats)?;
-        lap.split_into(&mut stats.times.corrector);
+        let mut fresh = self.jacobian_due(at);
+        let corrections = loop {
+            if fresh {
+                self.perturb(system, at, corrector_degree)?;
+                stats.jacobians += 1;
+                if let Some(reuse) = &mut self.reuse {
+                    reuse.made(at.h);
+                }
+            }
+            lap.split_into(&mut stats.times.jacobian);
+            self.solve(system, at.t_next, stats)?;
+            lap.split_into(&mut stats.times.solve);
+            self.correct(system, at, corrector_degree)?;
+            // Beyond the paper: repeat the correction (1 = none).
+            let corrections = self.iterate(system, at, corrector_degree, stats)?;
+            lap.split_into(&mut stats.times.corrector);
+            let missed = self.mispredicted(system);
+            if fresh || !missed {
+                break corrections;
+            }
+            fresh = true;
+            stats.jacobians_remade += 1;
+            // Back to the predictor's polynomials and g^p.
+            self.extrapolate(system, at, predictor_degree);
+            self.g.copy_from_slice(&self.g_predicted);
+        };
+        if !fresh {
+            stats.jacobians_reused += 1;
+        }
         // Beyond the paper: adaptive steps judge the step first.
         let error = self.estimate_error(system, corrector_degree)?;
         if error.is_some_and(|e| e.is_nan() || e > 1.0) {
@@ -432,7 +453,9 @@ impl MacroStep for PredictorCorrector {
         }
         stats.corrections += corrections;
         stats.max_corrections = stats.max_corrections.max(corrections);
-        self.update_jacobian(system);
+        if let Some(reuse) = &mut self.reuse {
+            reuse.accepted(&mut self.jac);
+        }
         self.accept(system);
         Ok(error)
     }

@@ -94,6 +94,9 @@ pub struct RunStats {
     /// Macro steps (tries) that reused the Jacobian with a Broyden update
     /// (`[coupling] jacobian = "reuse"`).
     pub jacobians_reused: u64,
+    /// Of `jacobians`: tries whose reused Jacobian mispredicted the
+    /// correction, so that it was made afresh and the correction repeated.
+    pub jacobians_remade: u64,
     /// Adaptive macro steps (`[step_control]`): what the controller did.
     pub adaptive: Option<AdaptiveStats>,
     /// Per-instance FMI call counts.
@@ -163,8 +166,8 @@ impl fmt::Display for RunStats {
         if self.jacobians_reused > 0 {
             writeln!(
                 f,
-                "  interface Jacobian: recomputed in {} steps, reused in {}",
-                self.jacobians, self.jacobians_reused
+                "  interface Jacobian: recomputed in {} steps ({} after the reused one mispredicted the correction), reused in {}",
+                self.jacobians, self.jacobians_remade, self.jacobians_reused
             )?;
         }
         if self.max_corrections > 1 {
@@ -370,6 +373,7 @@ struct Summary<'a> {
     max_corrections: u64,
     jacobians: u64,
     jacobians_reused: u64,
+    jacobians_remade: u64,
     adaptive: Option<&'a AdaptiveStats>,
     wall_time: f64,
     max_abs_g: Ordered<'a, Option<f64>>,
@@ -401,6 +405,7 @@ impl Serialize for RunStats {
             max_corrections: self.max_corrections,
             jacobians: self.jacobians,
             jacobians_reused: self.jacobians_reused,
+            jacobians_remade: self.jacobians_remade,
             adaptive: self.adaptive.as_ref(),
             wall_time: secs(self.wall),
             // NaN (a residual that was not finite) as null.
