@@ -164,7 +164,7 @@ pub enum MasterError {
     },
     /// Adaptive steps: a step at the smallest allowed size still misses the
     /// tolerances.
-    #[error("adaptive macro steps: at t = {time} the local error estimate is {error:.2} times the tolerance even at h_min = {h_min:e}; loosen [step_control] rtol/atol or lower h_min")]
+    #[error("adaptive macro steps: at t = {time} the local error estimate is {error:.2} times the tolerance even at h_min = {h_min:e}; loosen [step_control] rtol/atol or lower h_min, or, if smaller steps do not lower the estimate, choose a method, index and k stable for this system (docs/paper-reproduction.md)")]
     StepSizeTooSmall {
         /// Start of the step.
         time: f64,
