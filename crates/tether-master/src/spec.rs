@@ -788,10 +788,11 @@ pub enum JacobianMode {
     /// Every macro step (the paper).
     #[default]
     EveryStep,
-    /// Only when due: the last correction changed g otherwise than the
-    /// Jacobian predicted, the Jacobian is older than `jacobian_max_age`
-    /// steps, the step size changed by more than a factor 1.25 since it was
-    /// made, or the polynomials' degree is still growing (start-up).
+    /// Only when due: the Jacobian mispredicted the last correction (then it
+    /// is made again at once and the correction repeated), it is older than
+    /// `jacobian_max_age` steps, the step size changed by more than a factor
+    /// 1.25 since it was made, or the polynomials' degree is still growing
+    /// (start-up).
     Reuse,
 }
 

@@ -124,6 +124,15 @@ def test_system_from_file_runs_the_same(oscillator_toml):
     assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))
 
 
+# The rigid link of the two-mass oscillator (examples/oscillator.toml).
+LINK = dict(
+    position="mass2.x - mass1.x",
+    velocity="mass2.v - mass1.v",
+    acceleration="mass2.a - mass1.a",
+    drives="mass1.F - mass2.F",
+)
+
+
 def test_system_built_in_code_runs_like_the_file(tmp_path, oscillator_toml, oscillator_fmu):
     system = (
         tether.System("two-mass oscillator")
@@ -132,14 +141,7 @@ def test_system_built_in_code_runs_like_the_file(tmp_path, oscillator_toml, osci
         .coupling(order=0, epsilon=1e-5)
         .add_instance("mass1", oscillator_fmu, {"m": 1.0, "c": 1000.0, "d": 10.0, "x0": 0.0, "v0": 100.0})
         .add_instance("mass2", oscillator_fmu, {"m": 2.0, "c": 1000.0, "d": 10.0, "x0": 0.0, "v0": 100.0})
-        .add_constraint(
-            "link",
-            position="mass2.x - mass1.x",
-            velocity="mass2.v - mass1.v",
-            acceleration="mass2.a - mass1.a",
-            drives="mass1.F - mass2.F",
-            initial="consistent",
-        )
+        .add_constraint("link", **LINK, initial="consistent")
     )
     a = tether.run(oscillator_toml, stop=0.2)
     b = tether.run(system)
@@ -190,13 +192,7 @@ def test_signal_connections_built_in_code_run_like_the_file(root):
         .add_instance("ctrl", fmus / "controller.fmu", {"kp": 1000.0, "ki": 10000.0, "r": 0.1})
         .add_instance("mass1", fmus / "oscillator.fmu", {"m": 1.0, **masses})
         .add_instance("mass2", fmus / "oscillator.fmu", {"m": 2.0, **masses})
-        .add_constraint(
-            "link",
-            position="mass2.x - mass1.x",
-            velocity="mass2.v - mass1.v",
-            acceleration="mass2.a - mass1.a",
-            drives="mass1.F - mass2.F",
-        )
+        .add_constraint("link", **LINK)
         .add_connection("mass1.x", "ctrl.y")
         .add_connection("ctrl.u", "mass1.F_ext")
     )
