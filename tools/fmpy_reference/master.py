@@ -327,14 +327,16 @@ class Master:
         while True:
             remaining = c.stop - c.t
             last = c.h >= remaining or remaining - c.h < 1e-3 * c.h
-            h = remaining if last else c.h
+            # A stop within two steps is reached in two equal ones (no sliver).
+            halved = not last and remaining < 2.0 * c.h
+            h = remaining if last else 0.5 * remaining if halved else c.h
             t_next = c.stop if last else c.t + h
             error = self._try_step(c.t, h, tuple(c.past), t_next)
             nxt, accepted = c.next(h, error)
             if accepted:
                 c.t = t_next
                 c.past = [h, c.past[0]]
-                c.h = max(c.h, nxt) if last else nxt
+                c.h = max(c.h, nxt) if last or halved else nxt
                 c.accepted += 1
                 return
             c.rejected += 1

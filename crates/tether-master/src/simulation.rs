@@ -472,7 +472,8 @@ impl Simulation {
     }
 
     /// One accepted step of adaptive size: try the controller's step
-    /// (clipped to land on the next output grid point and on the stop time),
+    /// (clipped to land on the next output grid point and on the stop time,
+    /// halved when that target is within two steps),
     /// roll back and retry smaller while the error estimate exceeds the
     /// tolerances.
     fn adaptive_step(&mut self, lap: &mut Lap) -> Result<(), MasterError> {
@@ -495,7 +496,16 @@ impl Simulation {
             let remaining = target - a.t;
             // A clipped step ends exactly at the target; no sliver is left.
             let clipped = a.h >= remaining || remaining - a.h < 1e-3 * a.h;
-            let h = if clipped { remaining } else { a.h };
+            // A target within two steps is reached in two equal ones: a
+            // sliver step next to full ones would put nearby points into the
+            // polynomials through the past points (k ≥ 1), whose slope then
+            // amplifies the multipliers' noise by H over the sliver.
+            let halved = !clipped && remaining < 2.0 * a.h;
+            let h = match (clipped, halved) {
+                (true, _) => remaining,
+                (false, true) => 0.5 * remaining,
+                (false, false) => a.h,
+            };
             let at = StepAt {
                 n: self.n,
                 t: a.t,
@@ -510,8 +520,12 @@ impl Simulation {
             if accepted {
                 a.t = at.t_next;
                 a.past = [h, a.past[0]];
-                // A clipped step does not shrink the next proposal.
-                a.h = if clipped { a.h.max(next) } else { next };
+                // A clipped or halved step does not shrink the next proposal.
+                a.h = if clipped || halved {
+                    a.h.max(next)
+                } else {
+                    next
+                };
                 a.on_grid = clipped && a.grid.is_some();
                 if a.on_grid {
                     a.next_output += 1;
