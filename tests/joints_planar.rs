@@ -330,6 +330,7 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
         ("M1 index 1", BAUMGARTE_INDEX1, 0),
         ("M1 index 1", BAUMGARTE_INDEX1, 1),
         ("M2 index 1", WEIGHTED_INDEX1, 1),
+        ("M1 index 1", BAUMGARTE_INDEX1, 2),
     ] {
         for rtol in [1e-4, 1e-6] {
             let mut spec = with(example("double_pendulum.toml"), method, order, 1e-4, 1.0);
@@ -360,12 +361,14 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
                 a.accepted, a.rejected, a.h_smallest, a.h_largest
             );
             // Measured: 0.34, 5.5 (M1, k = 0), 0.40, 0.099 (M1, k = 1), 0.075,
-            // 0.065 (M2, k = 1). The goal is [0.1, 10]: k = 1 is more
+            // 0.065 (M2, k = 1), 0.95, 0.35 (M1, k = 2; M2 with k = 2 is
+            // unstable at small H and stops with a singular Jacobian at
+            // t = 0.18 at rtol 1e-4). The goal is [0.1, 10]: k = 1 is more
             // accurate than asked, since its estimate is 4 to 140 times the
             // local error (error_estimate_with_k1_is_above_the_true_local_error
             // in master_oscillator.rs), and its largest errors are isolated
             // ones after a jump of H (start-up, a rejection).
-            let lowest = if order == 0 { 0.1 } else { 0.05 };
+            let lowest = if order == 1 { 0.05 } else { 0.1 };
             assert!(
                 (lowest..10.0).contains(&worst),
                 "{label} k = {order} rtol {rtol}: {worst}"
