@@ -623,7 +623,13 @@ fn a_singular_interface_jacobian() {
         matches!(err, MasterError::SingularJacobian { .. }),
         "{err:?}"
     );
-    let csv = failed_run(&sys, &["singular interface Jacobian", "t = 0.001"]);
+    let csv = failed_run(
+        &sys,
+        &[
+            "singular interface Jacobian",
+            "t = 0.001 (macro step H = 1e-3)",
+        ],
+    );
     assert!(csv.trailer.starts_with("# incomplete: singular"));
 }
 

@@ -139,7 +139,7 @@ pub enum MasterError {
         reason: String,
     },
     /// The interface Jacobian cannot be solved reliably.
-    #[error("singular interface Jacobian ({level} level) at t = {time}: condition estimate {condition:.3e} exceeds {limit:.1e}")]
+    #[error("singular interface Jacobian ({level} level) at t = {time}{}: condition estimate {condition:.3e} exceeds {limit:.1e}", step.map(|h| format!(" (macro step H = {h:e})")).unwrap_or_default())]
     SingularJacobian {
         /// Time of the macro point T_{N+1} being solved for.
         time: f64,
@@ -149,6 +149,10 @@ pub enum MasterError {
         condition: f64,
         /// The accepted maximum.
         limit: f64,
+        /// The macro step H being corrected, if any (not for the initial
+        /// multipliers). With adaptive steps a tiny H here is a step that
+        /// shrank until the position level's sensitivities (∝ H²) vanished.
+        step: Option<f64>,
     },
     /// A state, output or multiplier became non-finite or exploded.
     #[error("coupling diverged at t = {time}: {quantity} = {value:e} (limit {limit:.1e})")]
@@ -257,6 +261,29 @@ pub enum MasterError {
     /// A worker thread panicked during perturbed runs.
     #[error("a worker thread panicked during parallel perturbed runs")]
     Worker,
+}
+
+impl MasterError {
+    /// A singular Jacobian met while correcting a macro step of size `h`
+    /// names H in its message; other errors pass unchanged.
+    pub(crate) fn in_step(self, h: f64) -> MasterError {
+        match self {
+            MasterError::SingularJacobian {
+                time,
+                level,
+                condition,
+                limit,
+                ..
+            } => MasterError::SingularJacobian {
+                time,
+                level,
+                condition,
+                limit,
+                step: Some(h),
+            },
+            e => e,
+        }
+    }
 }
 
 impl From<std::io::Error> for MasterError {

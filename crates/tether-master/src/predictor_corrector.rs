@@ -217,10 +217,11 @@ impl PredictorCorrector {
     fn solve(
         &mut self,
         system: &System,
-        time: f64,
+        at: StepAt,
         stats: &mut RunStats,
     ) -> Result<(), MasterError> {
-        let limit = system.max_condition;
+        let (time, limit) = (at.t_next, system.max_condition);
+        let in_step = |e: MasterError| e.in_step(at.h);
         let level = |kind: RowLevel| self.levels.iter().position(|&l| l == kind);
         match self.method {
             Method::Baumgarte { beta, gamma } => {
@@ -237,7 +238,7 @@ impl PredictorCorrector {
                     "baumgarte"
                 };
                 stats.jacobian_solves += 1;
-                let step = self.solver.solve(time, name, limit)?;
+                let step = self.solver.solve(time, name, limit).map_err(in_step)?;
                 for ((c, p), s) in self.corrected.iter_mut().zip(&self.u_pred).zip(step) {
                     *c = p - s;
                 }
@@ -254,7 +255,7 @@ impl PredictorCorrector {
                     };
                     stats.jacobian_solves += 1;
                     self.jac.load_level(&mut self.solver, &self.g, l);
-                    let step = self.solver.solve(time, name, limit)?;
+                    let step = self.solver.solve(time, name, limit).map_err(in_step)?;
                     for ((c, p), s) in self.corrected.iter_mut().zip(&self.u_pred).zip(step) {
                         *c += weight * (p - s);
                     }
@@ -310,7 +311,7 @@ impl PredictorCorrector {
             // corrected point, and keep the prediction for afterwards.
             self.iterate_from.copy_from_slice(&self.corrected);
             std::mem::swap(&mut self.u_pred, &mut self.iterate_from);
-            let solved = self.solve(system, at.t_next, stats);
+            let solved = self.solve(system, at, stats);
             std::mem::swap(&mut self.u_pred, &mut self.iterate_from);
             solved?;
             self.correct(system, at, degree)?;
@@ -427,7 +428,7 @@ impl MacroStep for PredictorCorrector {
                 }
             }
             lap.split_into(&mut stats.times.jacobian);
-            self.solve(system, at.t_next, stats)?;
+            self.solve(system, at, stats)?;
             lap.split_into(&mut stats.times.solve);
             self.correct(system, at, corrector_degree)?;
             // Beyond the paper: repeat the correction (1 = none).

@@ -259,6 +259,7 @@ impl Solver {
             level,
             condition,
             limit,
+            step: None,
         };
         if let Some(sparse) = &mut self.sparse {
             let condition = sparse.solve().map_err(|Singular(c)| singular(c))?;
