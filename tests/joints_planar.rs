@@ -384,10 +384,9 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
 /// Measured before the halving (Method 2 index 1, k = 1): at rtol 1e-5 the
 /// last step was 1.1e-4 s after steps of 5.4e-3 s and the angular velocities'
 /// error jumped to 7.1e-5 at t = 1 (6e-8 for link 1 a step before); at
-/// rtol 1e-6 with
-/// `[output] interval = 0.1` a 2.2e-5 s step landed on t = 0.7, the next one
-/// was rejected down to 1.3e-6 s and the run stopped with a singular
-/// Jacobian at t = 0.70004.
+/// rtol 1e-6 with `[output] interval = 0.1` a 2.2e-5 s step landed on
+/// t = 0.7, the next steps (2.3e-3 s before) were rejected and shrank to
+/// 1e-6 s, and the run stopped with a singular Jacobian at t = 0.70004.
 #[test]
 fn adaptive_steps_land_without_a_sliver_step() {
     use tether_master::StepControl;
