@@ -380,7 +380,8 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
 /// Adaptive steps land on the stop time and on the output grid without a
 /// sliver step: a target within two steps is reached in two equal ones. With
 /// k = 1 a sliver puts two nearby points into the next step's extrapolation,
-/// whose slope then amplifies the multipliers' noise by H over the sliver.
+/// whose slope then amplifies the multipliers' noise by the ratio of H to
+/// the sliver.
 /// Measured before the halving (Method 2 index 1, k = 1): at rtol 1e-5 the
 /// last step was 1.1e-4 s after steps of 5.4e-3 s and the angular velocities'
 /// error jumped to 7.1e-5 at t = 1 (6e-8 for link 1 a step before); at

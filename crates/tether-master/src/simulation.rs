@@ -499,7 +499,7 @@ impl Simulation {
             // A target within two steps is reached in two equal ones: a
             // sliver step next to full ones would put nearby points into the
             // polynomials through the past points (k ≥ 1), whose slope then
-            // amplifies the multipliers' noise by H over the sliver.
+            // amplifies the multipliers' noise by the ratio of H to the sliver.
             let halved = !clipped && remaining < 2.0 * a.h;
             let h = match (clipped, halved) {
                 (true, _) => remaining,
