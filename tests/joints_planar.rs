@@ -376,8 +376,7 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
             // accurate than asked. Its steps at rtol 1e-6 (2 ms on average)
             // exceed √γ = 1 ms, where the estimate is several times the local
             // error (error_estimate_against_the_local_error_of_the_stabilised_system
-            // in master_oscillator.rs, Method 1), and its largest errors are
-            // isolated ones (start-up, t ≈ 0.22 at rtol 1e-4).
+            // in master_oscillator.rs, Method 1).
             let lowest = if order == 1 { 0.05 } else { 0.1 };
             assert!(
                 (lowest..10.0).contains(&worst),
