@@ -371,8 +371,8 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
             );
             // Measured: 0.34, 5.5 (M1, k = 0), 0.40, 0.099 (M1, k = 1), 0.075,
             // 0.065 (M2, k = 1), 0.95, 0.35 (M1, k = 2; M2 with k = 2 is
-            // unstable at small H and stops with a singular Jacobian at
-            // t = 0.18 at rtol 1e-4). The goal is [0.1, 10]: k = 1 is more
+            // unstable at small H: an_unstable_method_stops_with_the_collapsed_step_named
+            // in master_oscillator.rs). The goal is [0.1, 10]: k = 1 is more
             // accurate than asked. Its steps at rtol 1e-6 (2 ms on average)
             // exceed √γ = 1 ms, where the estimate is several times the local
             // error (error_estimate_against_the_local_error_of_the_stabilised_system

@@ -621,9 +621,8 @@ fn error_estimate_against_the_local_error_of_the_stabilised_system() {
 /// over atol + rtol·max|y|, for x1 and v1, with atol = rtol. (Index 2 with
 /// k = 1 is unstable at every H, docs/paper-reproduction.md: the controller
 /// shrinks the step to h_min and stops the run, so it is not among these;
-/// nor is Method 2 index 1 with k = 2, unstable at small H: at rtol 1e-6
-/// the step shrinks to 8e-7 s until the position-level Jacobian is singular
-/// at t = 0.047.)
+/// nor is Method 2 index 1 with k = 2, unstable at small H:
+/// an_unstable_method_stops_with_the_collapsed_step_named.)
 #[test]
 fn adaptive_steps_honour_the_tolerance() {
     for (name, method, order) in [
@@ -675,6 +674,34 @@ fn adaptive_steps_honour_the_tolerance() {
                 );
             }
         }
+    }
+}
+
+/// Method 2 index 1 with k = 2 is unstable at small H
+/// (docs/paper-reproduction.md). With adaptive steps at rtol 1e-6 the
+/// controller shrinks the step until the position level's sensitivities
+/// (∝ H²) vanish, and the run stops with a singular Jacobian whose message
+/// names that macro step, instead of crawling on.
+#[test]
+fn an_unstable_method_stops_with_the_collapsed_step_named() {
+    let control = StepControl {
+        rtol: 1e-6,
+        atol: 1e-6,
+        ..StepControl::default()
+    };
+    let mut sim = Simulation::new(&adaptive(VARIANTS[3].1, 2, control)).unwrap();
+    let err = sim.run(&mut [], &mut |_, _| {}).unwrap_err();
+    let text = err.to_string();
+    eprintln!("{text}");
+    // Measured: t = 0.0469, H = 7.9e-7.
+    assert!(text.contains("(macro step H = "), "{text}");
+    match err {
+        MasterError::SingularJacobian {
+            time,
+            step: Some(h),
+            ..
+        } => assert!(time < 0.1 && h < 1e-5, "{time} {h}"),
+        e => panic!("{e}"),
     }
 }
 
