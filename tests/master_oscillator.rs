@@ -484,6 +484,12 @@ fn iterated_correction_against_one_correction() {
     }
 }
 
+/// The current value of one result column of `sim`.
+fn column_value(sim: &Simulation, name: &str) -> f64 {
+    let i = sim.columns().iter().position(|c| c == name).unwrap();
+    sim.values()[i]
+}
+
 /// The oscillator with adaptive macro steps.
 fn adaptive(method: &str, order: usize, control: StepControl) -> SystemSpec {
     let mut spec = system(method, order, 1e-4, 1.0);
@@ -508,10 +514,7 @@ fn error_estimate_matches_the_true_local_error() {
             sim.step().unwrap();
             let estimate = sim.stats().adaptive.unwrap().last_error;
             let (x, v, _) = reference(sim.time());
-            let value = |name: &str| {
-                let i = sim.columns().iter().position(|c| c == name).unwrap();
-                sim.values()[i]
-            };
+            let value = |name: &str| column_value(&sim, name);
             let true_error = [
                 ("mass1.x", x),
                 ("mass1.v", v),
@@ -581,10 +584,7 @@ fn error_estimate_against_the_local_error_of_the_stabilised_system() {
             };
             let mut sim = Simulation::new(&adaptive(VARIANTS[0].1, order, control)).unwrap();
             let state = |sim: &Simulation| {
-                ["mass1.x", "mass1.v", "mass2.x", "mass2.v"].map(|name| {
-                    let i = sim.columns().iter().position(|c| c == name).unwrap();
-                    sim.values()[i]
-                })
+                ["mass1.x", "mass1.v", "mass2.x", "mass2.v"].map(|name| column_value(sim, name))
             };
             let mut ratios = Vec::new();
             for _ in 1..=12 {

@@ -150,8 +150,9 @@ pub enum MasterError {
         /// The accepted maximum.
         limit: f64,
         /// The macro step H being corrected, if any (not for the initial
-        /// multipliers). With adaptive steps a tiny H here is a step that
-        /// shrank until the position level's sensitivities (∝ H²) vanished.
+        /// multipliers). With adaptive steps a tiny H here can be a step
+        /// that shrank until the position level's sensitivities (∝ H²)
+        /// vanished, as with an unstable method.
         step: Option<f64>,
     },
     /// A state, output or multiplier became non-finite or exploded.
