@@ -352,31 +352,37 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
             let spec = with(example("double_pendulum.toml"), method, order, 1e-4, 1.0);
             let (rec, stats) = run_adaptive(spec, rtol);
             let reference = double_pendulum::reference(&rec.times);
-            let mut worst: f64 = 0.0;
+            // The largest error over tolerance: its value, time and column.
+            let mut worst = (0.0, 0.0, "");
             for name in columns {
-                let error = max_error(&rec, &[name], |k, name| {
-                    reference[k].column(name).expect("reference column")
-                });
-                let peak = rec
-                    .series(name)
-                    .unwrap()
-                    .iter()
-                    .fold(0.0, |m: f64, y| m.max(y.abs()));
-                worst = worst.max(error / (rtol + rtol * peak));
+                let series = rec.series(name).unwrap();
+                let peak = series.iter().fold(0.0, |m: f64, y| m.max(y.abs()));
+                for (k, y) in series.iter().enumerate() {
+                    let error = (y - reference[k].column(name).unwrap()).abs();
+                    let ratio = error / (rtol + rtol * peak);
+                    if ratio > worst.0 {
+                        worst = (ratio, rec.times[k], name);
+                    }
+                }
             }
+            let (worst, at, column) = worst;
             let a = stats.adaptive.unwrap();
             println!(
-                "double pendulum {label}, k = {order}, rtol = atol = {rtol:e}: max error / tolerance {worst:.3}; {} accepted, {} rejected, H {:.2e} … {:.2e}",
+                "double pendulum {label}, k = {order}, rtol = atol = {rtol:e}: max error / tolerance {worst:.3} (t = {at:.4}, {column}); {} accepted, {} rejected, H {:.2e} … {:.2e}",
                 a.accepted, a.rejected, a.h_smallest, a.h_largest
             );
             // Measured: 0.34, 5.5 (M1, k = 0), 0.40, 0.099 (M1, k = 1), 0.075,
             // 0.065 (M2, k = 1), 0.95, 0.35 (M1, k = 2; M2 with k = 2 is
             // unstable at small H: an_unstable_method_stops_with_the_collapsed_step_named
-            // in master_oscillator.rs). The goal is [0.1, 10]: k = 1 is more
-            // accurate than asked. Its steps at rtol 1e-6 (2 ms on average)
-            // exceed √γ = 1 ms, where the estimate is several times the local
-            // error (error_estimate_against_the_local_error_of_the_stabilised_system
-            // in master_oscillator.rs, Method 1).
+            // in master_oscillator.rs), all in link 1's angular velocity but
+            // the last. The goal is [0.1, 10]: k = 1 is more accurate than
+            // asked. The estimate is 500 to 2000 times the corrected run's
+            // local error in these coordinates with k = 1
+            // (error_estimate_against_the_local_error_on_the_double_pendulum);
+            // the largest errors sit at the start-up (M1, rtol 1e-6: t = 0.0026;
+            // 0.028 after t = 0.05) and the landing on t = 1 (M2), and
+            // k = 0 has its 5.5 at the start-up too (t = 0.0008; 0.22 after
+            // t = 0.05).
             let lowest = if order == 1 { 0.05 } else { 0.1 };
             assert!(
                 (lowest..10.0).contains(&worst),
@@ -622,5 +628,90 @@ fn work_precision_on_the_slider_crank() {
             slopes: vec![],
         };
         tether_study::plot::save(&dir.join("work_precision.svg"), &figure).unwrap();
+    }
+}
+
+/// The local error estimate against the local error in the physical
+/// coordinates: the link angles' flow (the monolithic reference's minimal
+/// coordinates φ1, φ2, φ̇1, φ̇2) from each step's start over H, compared with
+/// the step's result on link 1's end B (position, velocity: the coupled
+/// outputs the estimate covers) and both angular velocities. H is held
+/// (`h_initial = h_max`; atol = 1, rtol = 0: the raw estimate, never
+/// rejected); the last 10 steps before t = 0.3 s are compared. On these
+/// stabilised index-1 conditions the corrected run is far more accurate than
+/// Milne's relation assumes (the multiplier that satisfies the condition at
+/// T_{N+1} also makes up for the interpolation error of the step's
+/// polynomial), so the estimate bounds the predicted run's error rather than
+/// the corrected one's: 80 to 2000 times the local error (docs/algorithm.md).
+/// Near the stability limit of the extrapolation it is not safe: with k = 2
+/// at H = 2e-3 (Method 1; 4e-3 diverges) the local error is larger than the
+/// estimate.
+#[test]
+fn error_estimate_against_the_local_error_on_the_double_pendulum() {
+    let value = |sim: &Simulation, name: &str| {
+        let i = sim.columns().iter().position(|c| c == name).unwrap();
+        sim.values()[i]
+    };
+    let compared = [
+        "link1.B.r[1]",
+        "link1.B.r[2]",
+        "link1.B.v[1]",
+        "link1.B.v[2]",
+        "link1.omega",
+        "link2.omega",
+    ];
+    let mut found = Vec::new();
+    for (label, method, order, h) in [
+        ("M1 index 1", BAUMGARTE_INDEX1, 0, 4e-3),
+        ("M1 index 1", BAUMGARTE_INDEX1, 0, 2e-3),
+        ("M2 index 1", WEIGHTED_INDEX1, 0, 2e-3),
+        ("M1 index 1", BAUMGARTE_INDEX1, 1, 2e-3),
+        ("M2 index 1", WEIGHTED_INDEX1, 1, 4e-3),
+        ("M2 index 1", WEIGHTED_INDEX1, 1, 2e-3),
+        ("M1 index 1", BAUMGARTE_INDEX1, 2, 2e-3),
+    ] {
+        let mut spec = with(example("double_pendulum.toml"), method, order, h, 1.0);
+        spec.step_control = Some(tether_master::StepControl {
+            rtol: 0.0,
+            atol: 1.0,
+            h_initial: Some(h),
+            h_max: Some(h),
+            ..Default::default()
+        });
+        let mut sim = Simulation::new(&spec).unwrap();
+        let steps = (0.3 / h).round() as usize;
+        let mut ratios = Vec::new();
+        for n in 1..=steps {
+            let start = ["link1.phi", "link2.phi", "link1.omega", "link2.omega"]
+                .map(|name| value(&sim, name));
+            sim.step().unwrap();
+            if n + 10 <= steps {
+                continue;
+            }
+            let mut from_start = double_pendulum::PAPER;
+            from_start.phi0 = [start[0], start[1]];
+            from_start.omega0 = [start[2], start[3]];
+            let flow = from_start.solve(&[h])[0];
+            let local = compared
+                .iter()
+                .map(|&c| (value(&sim, c) - flow.column(c).unwrap()).abs())
+                .fold(0.0, f64::max);
+            ratios.push(sim.stats().adaptive.unwrap().last_error / local);
+        }
+        let (low, high) = ratios
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(l, u), &r| (l.min(r), u.max(r)));
+        println!("double pendulum {label}, k = {order}, H = {h:e}: estimate / local error {low:.2} … {high:.2}");
+        found.push((order, low, high));
+    }
+    // Measured: k = 0: 81 … 121 (H = 4e-3), 192 … 247 (2e-3, both
+    // methods); k = 1: 1718 … 2023 (Method 1, 2e-3), 466 … 649 and
+    // 1766 … 2045 (Method 2, 4e-3 and 2e-3); k = 2: 0.58 … 0.62.
+    for &(order, low, high) in &found {
+        if order < 2 {
+            assert!(low > 50.0, "{found:?}");
+        } else {
+            assert!(low > 0.5 && high < 2.0, "{found:?}");
+        }
     }
 }
