@@ -639,10 +639,8 @@ fn work_precision_on_the_slider_crank() {
 /// (`h_initial = h_max`; atol = 1, rtol = 0: the raw estimate, never
 /// rejected); the last 10 steps before t = 0.3 s are compared. On these
 /// stabilised index-1 conditions the corrected run is far more accurate than
-/// Milne's relation assumes (the multiplier that satisfies the condition at
-/// T_{N+1} also makes up for the interpolation error of the step's
-/// polynomial), so the estimate bounds the predicted run's error rather than
-/// the corrected one's: 80 to 2000 times the local error (docs/algorithm.md).
+/// Milne's relation assumes, so y^p − y^c is mostly the predicted run's
+/// error: the estimate is 80 to 2000 times the local error (docs/algorithm.md).
 /// Near the stability limit of the extrapolation it is not safe: with k = 2
 /// at H = 2e-3 (Method 1; 4e-3 diverges) the local error is larger than the
 /// estimate.
