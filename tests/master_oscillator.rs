@@ -6,6 +6,7 @@
 //! the coupling error.
 
 use tether_master::{MasterError, MemoryRecorder, Simulation, StepControl, SystemSpec};
+use tether_tests::column_value;
 
 const M1: f64 = 1.0;
 const M2: f64 = 2.0;
@@ -482,12 +483,6 @@ fn iterated_correction_against_one_correction() {
             }
         }
     }
-}
-
-/// The current value of one result column of `sim`.
-fn column_value(sim: &Simulation, name: &str) -> f64 {
-    let i = sim.columns().iter().position(|c| c == name).unwrap();
-    sim.values()[i]
 }
 
 /// The oscillator with adaptive macro steps.
