@@ -20,6 +20,14 @@
 //! the corrector has almost no error in them at T_{N+1} and they are left
 //! out; so are the multipliers, whose error is one order lower than the
 //! states' and reaches the states only through the FMUs' integration.
+//!
+//! The relation takes u_{N+1} for a sample of λ(T_{N+1}). Measured on the
+//! double pendulum, the corrected multipliers are instead the values that
+//! close the condition (k = 0: λ at the step's midpoint; k = 1:
+//! λ(T_{N+1}) − λ̈H²/12), which makes the corrected run one order more
+//! accurate than assumed: there the estimate is mostly the predicted run's
+//! error and on the safe side, away from the extrapolation's stability
+//! limit (docs/algorithm.md).
 
 use crate::rows::{RowLevel, View};
 use crate::step_control::StepControl;
