@@ -24,10 +24,10 @@
 //! The relation takes u_{N+1} for a sample of λ(T_{N+1}). Measured on the
 //! double pendulum, the corrected multipliers are instead the values that
 //! close the condition (k = 0: λ at the step's midpoint; k = 1:
-//! λ(T_{N+1}) − λ̈H²/12), which makes the corrected run one order more
-//! accurate than assumed: there the estimate is mostly the predicted run's
-//! error and on the safe side, away from the extrapolation's stability
-//! limit (docs/algorithm.md).
+//! λ(T_{N+1}) − λ̈H²/12), with which the joint's impulse over the step is
+//! one order more accurate than assumed: there the estimate is 80 to 2000
+//! times the corrected run's local error, mostly the predicted run's error
+//! (docs/algorithm.md).
 
 use crate::rows::{RowLevel, View};
 use crate::step_control::StepControl;
