@@ -267,23 +267,11 @@ pub enum MasterError {
 impl MasterError {
     /// A singular Jacobian met while correcting a macro step of size `h`
     /// names H in its message; other errors pass unchanged.
-    pub(crate) fn in_step(self, h: f64) -> MasterError {
-        match self {
-            MasterError::SingularJacobian {
-                time,
-                level,
-                condition,
-                limit,
-                ..
-            } => MasterError::SingularJacobian {
-                time,
-                level,
-                condition,
-                limit,
-                step: Some(h),
-            },
-            e => e,
+    pub(crate) fn in_step(mut self, h: f64) -> MasterError {
+        if let MasterError::SingularJacobian { step, .. } = &mut self {
+            *step = Some(h);
         }
+        self
     }
 }
 
