@@ -382,7 +382,7 @@ fn adaptive_steps_honour_the_tolerance_on_the_double_pendulum() {
             // unstable at small H: an_unstable_method_stops_with_the_collapsed_step_named
             // in master_oscillator.rs), all in link 1's angular velocity but
             // the last. The goal is [0.1, 10]: k = 1 is more accurate than
-            // asked. The estimate is 500 to 2000 times the corrected run's
+            // asked. The estimate is 466 to 2054 times the corrected run's
             // local error in these coordinates with k = 1
             // (error_estimate_against_the_local_error_on_the_double_pendulum);
             // the largest errors sit at the start-up (M1, rtol 1e-6: t = 0.0026;
@@ -646,7 +646,7 @@ fn work_precision_on_the_slider_crank() {
 /// rejected); the last 10 steps before t = 0.3 s are compared. On these
 /// stabilised index-1 conditions the corrected run is far more accurate than
 /// Milne's relation assumes, so y^p − y^c is mostly the predicted run's
-/// error: the estimate is 80 to 2000 times the local error (docs/algorithm.md;
+/// error: the estimate is 81 to 2054 times the local error (docs/algorithm.md;
 /// the cause: corrected_multipliers_close_the_condition_rather_than_sample_lambda).
 /// Near the stability limit of the extrapolation it is not safe: with k = 2
 /// at H = 2e-3 (Method 1; 4e-3 diverges) the local error is larger than the
@@ -707,7 +707,7 @@ fn error_estimate_against_the_local_error_on_the_double_pendulum() {
     }
     // Measured: k = 0: 81 … 121 (H = 4e-3), 192 … 247 (2e-3, both
     // methods); k = 1: 1718 … 2023 (Method 1, 2e-3), 466 … 649 and
-    // 1766 … 2045 (Method 2, 4e-3 and 2e-3); k = 2: 0.58 … 0.62.
+    // 1766 … 2054 (Method 2, 4e-3 and 2e-3); k = 2: 0.58 … 0.62.
     for &(order, low, high) in &found {
         if order < 2 {
             assert!(low > 50.0, "{found:?}");
@@ -727,7 +727,7 @@ fn error_estimate_against_the_local_error_on_the_double_pendulum() {
 /// λ(T_{N+1}) − λ̈(T_{N+1})·H²/12: the line through such values has the
 /// impulse of λ up to O(H⁴), the trapezoidal rule's error −λ̈H³/12 cancelled.
 /// With them the corrected run is more accurate than the relation assumes:
-/// the estimate is 80 to 2000 times its local error there
+/// the estimate is 81 to 2054 times its local error there
 /// (error_estimate_against_the_local_error_on_the_double_pendulum).
 #[test]
 fn corrected_multipliers_close_the_condition_rather_than_sample_lambda() {

@@ -25,7 +25,7 @@
 //! double pendulum, the corrected multipliers are instead the values that
 //! close the condition (k = 0: λ at the step's midpoint; k = 1:
 //! λ(T_{N+1}) − λ̈H²/12), with which the joint's impulse over the step is
-//! one order more accurate than assumed: there the estimate is 80 to 2000
+//! one order more accurate than assumed: there the estimate is 81 to 2054
 //! times the corrected run's local error, mostly the predicted run's error
 //! (docs/algorithm.md).
 
