@@ -230,6 +230,17 @@ pub enum Error {
         messages: FmuMessages,
     },
 
+    /// The FMU asked to end the simulation: its step returned Discard and it
+    /// reports that it terminated (FMI 2.0: `fmi2GetBooleanStatus(fmi2Terminated)`).
+    #[error("instance '{instance}' requested the end of the simulation at t = {time} (fmi2DoStep returned fmi2Discard with fmi2Terminated = true)")]
+    TerminationRequested {
+        /// The instance name.
+        instance: String,
+        /// The last time the instance reached (its `fmi2LastSuccessfulTime`,
+        /// or the step's end if it does not say).
+        time: f64,
+    },
+
     /// A function returned `fmi2Error`.
     #[error("{function} returned fmi2Error on instance '{instance}' at t={time}{messages}")]
     Failed {
@@ -472,4 +483,20 @@ mod tests {
             "cannot load FMU library '/a.so': first second"
         );
     }
+}
+
+/// The error of a failed FMI 2.0 step of `instance` to `end`: a request to end
+/// the simulation (fmi2Discard with `fmi2Terminated`) becomes
+/// [`Error::TerminationRequested`], any other error stays as it is.
+#[cold]
+#[inline(never)]
+pub(crate) fn step_failure(e: Error, instance: &mut crate::Instance, end: f64) -> Error {
+    if matches!(e, Error::Discard { .. }) && matches!(instance.terminated(), Ok(true)) {
+        let time = instance.last_successful_time().unwrap_or(end);
+        return Error::TerminationRequested {
+            instance: instance.name().to_string(),
+            time,
+        };
+    }
+    e
 }

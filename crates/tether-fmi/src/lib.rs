@@ -51,6 +51,7 @@ mod current;
 mod error;
 mod fmu;
 mod instance;
+mod interface;
 mod library;
 mod logger;
 pub mod model_description;
@@ -66,6 +67,9 @@ pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
 pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};
+pub use interface::{
+    instantiate, FmuInstance, Inputs, LocalInstance, Placement, RunRequest, Slot, SLOTS,
+};
 pub use library::PLATFORM;
 pub use model_description::{
     BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,

@@ -615,3 +615,115 @@ impl Drop for RemoteInstance {
         }
     }
 }
+
+impl crate::interface::FmuInstance for RemoteInstance {
+    fn name(&self) -> &str {
+        self.name.as_str()
+    }
+    fn model_description(&self) -> &ModelDescription {
+        self.fmu.model_description()
+    }
+    fn time(&self) -> f64 {
+        self.time
+    }
+    fn is_fatal(&self) -> bool {
+        self.fatal
+    }
+    fn set_debug_logging(&mut self, _on: bool, _categories: &[&str]) -> Result<()> {
+        // The host sets the FMU's logging itself, from the levels the master
+        // sent at its start.
+        Ok(())
+    }
+    fn setup(&mut self, tolerance: Option<f64>, start: f64, stop: Option<f64>) -> Result<()> {
+        self.setup_experiment(tolerance, start, stop)
+    }
+    fn enter_initialization(&mut self) -> Result<()> {
+        self.enter_initialization_mode()
+    }
+    fn exit_initialization(&mut self) -> Result<()> {
+        self.exit_initialization_mode()
+    }
+    fn get_reals(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
+        self.get_real(vrs, out)
+    }
+    fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
+        self.set_real(vrs, values)
+    }
+    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+        self.get_integer(vrs, out)
+    }
+    fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
+        self.set_integer(vrs, values)
+    }
+    fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
+        self.get_boolean(vrs, out)
+    }
+    fn set_booleans(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
+        self.set_boolean(vrs, values)
+    }
+    fn get_strings(&mut self, _vrs: &[ValueReference], _out: &mut [String]) -> Result<()> {
+        Err(Error::InvalidArgument {
+            function: "fmi2GetString",
+            instance: self.name.to_string(),
+            message: "String values are not read from isolated instances".into(),
+        })
+    }
+    fn set_strings(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
+        self.set_string(vrs, values)
+    }
+    fn set_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) -> Result<()> {
+        self.set_real(inputs.vrs, inputs.values)?;
+        if !inputs.derivative_vrs.is_empty() {
+            self.set_real_input_derivatives(
+                inputs.derivative_vrs,
+                inputs.orders,
+                inputs.derivatives,
+            )?;
+        }
+        Ok(())
+    }
+    fn get_output_derivatives(
+        &mut self,
+        vrs: &[ValueReference],
+        orders: &[i32],
+        out: &mut [f64],
+    ) -> Result<()> {
+        self.get_real_output_derivatives(vrs, orders, out)
+    }
+    fn step(&mut self, t: f64, h: f64) -> Result<()> {
+        match self.do_step(t, h, true) {
+            Ok(()) => Ok(()),
+            Err(e)
+                if matches!(e, Error::Discard { .. }) && matches!(self.terminated(), Ok(true)) =>
+            {
+                let time = self.last_successful_time().unwrap_or(t + h);
+                Err(Error::TerminationRequested {
+                    instance: self.name.to_string(),
+                    time,
+                })
+            }
+            Err(e) => Err(e),
+        }
+    }
+    fn save(&mut self, slot: crate::interface::Slot) -> Result<()> {
+        self.save_state(slot as u32)
+    }
+    fn restore(&mut self, slot: crate::interface::Slot) -> Result<()> {
+        self.restore_state(slot as u32)
+    }
+    fn free(&mut self, slot: crate::interface::Slot) -> Result<()> {
+        self.free_state(slot as u32)
+    }
+    fn serialize(&mut self, slot: crate::interface::Slot, out: &mut Vec<u8>) -> Result<()> {
+        self.serialize_state(slot as u32, out)
+    }
+    fn deserialize(&mut self, slot: crate::interface::Slot, bytes: &[u8]) -> Result<()> {
+        self.deserialize_state(slot as u32, bytes)
+    }
+    fn reset(&mut self) -> Result<()> {
+        RemoteInstance::reset(self)
+    }
+    fn terminate(&mut self) -> Result<()> {
+        RemoteInstance::terminate(self)
+    }
+}

@@ -1,0 +1,364 @@
+//! [`FmuInstance`]: the one interface between a master and an FMU instance.
+//!
+//! The master speaks this interface only, in its own words (save, restore,
+//! step, inputs' polynomial); the implementations speak FMI. There is one
+//! implementation per place and standard: [`LocalInstance`] for an FMI 2.0
+//! instance loaded in this process and
+//! [`RemoteInstance`](crate::remote::RemoteInstance) for one in a host process
+//! of its own. The master holds a `Box<dyn FmuInstance>`: a new kind of
+//! instance (FMI 3.0, an instance on another machine) is one more
+//! implementation, and the macro step does not change.
+//!
+//! # Runs
+//!
+//! A macro step is made of *runs*: restore the saved state, set the inputs
+//! (or their polynomial over the step), step, read the coupled outputs, save
+//! the state where due. [`FmuInstance::run`] takes one run as one unit, a
+//! [`RunRequest`], so that an implementation that crosses a process or a
+//! network can send it in one message. Its provided body makes the calls one
+//! by one, in the order the request lists them.
+//!
+//! # Deferred calls
+//!
+//! The methods that return nothing but a status ([`restore`](FmuInstance::restore),
+//! [`set_reals`](FmuInstance::set_reals), [`set_inputs`](FmuInstance::set_inputs),
+//! [`step`](FmuInstance::step), [`save`](FmuInstance::save), …) may be deferred by an
+//! implementation to the next call that needs an answer. The error of a
+//! deferred call is then returned by that later call, and still names the FMI
+//! function that failed ([`Error::function`]).
+
+use std::fmt::Debug;
+use std::time::Duration;
+
+use crate::error::{Error, Result};
+use crate::fmu::{Fmu, InstanceOptions};
+use crate::instance::Instance;
+use crate::model_description::{ModelDescription, ValueReference};
+use crate::state::FmuState;
+
+/// A numbered place for a saved FMU state. An instance keeps its states on
+/// its own side (in its host process, for an isolated one); the master names
+/// them by slot.
+pub type Slot = usize;
+
+/// The number of state slots an instance offers (0 … `SLOTS` − 1).
+pub const SLOTS: usize = 4;
+
+/// Where an instance runs.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Placement {
+    /// The FMU's library is loaded in this process.
+    #[default]
+    InProcess,
+    /// A host process of its own; each call waits at most `timeout`.
+    Process {
+        /// The longest a call may take before the host is killed.
+        timeout: Option<Duration>,
+    },
+}
+
+/// The coupled inputs of a run: their values at the start of the step and,
+/// for a polynomial input of degree k > 0, their time derivatives there.
+#[derive(Debug, Clone, Copy)]
+pub struct Inputs<'a> {
+    /// The inputs (Real).
+    pub vrs: &'a [ValueReference],
+    /// Their values at the start of the step.
+    pub values: &'a [f64],
+    /// The inputs whose derivatives are given, once per order.
+    pub derivative_vrs: &'a [ValueReference],
+    /// The order of each derivative (1, 2, …).
+    pub orders: &'a [i32],
+    /// The derivatives themselves.
+    pub derivatives: &'a [f64],
+}
+
+/// One run of a macro step, handed to an instance as one unit: each part is
+/// done in the order listed here, every part optional.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RunRequest<'a> {
+    /// Roll back to the state in this slot first.
+    pub restore: Option<Slot>,
+    /// Set the coupled inputs.
+    pub inputs: Option<Inputs<'a>>,
+    /// Step from `t` over `h`.
+    pub step: Option<(f64, f64)>,
+    /// Read these Real values into the run's output (`outputs[..len]`).
+    pub outputs: &'a [ValueReference],
+    /// Then read these output derivatives `(variable, order)`, one call each,
+    /// into the rest of the run's output.
+    pub output_derivatives: &'a [(ValueReference, i32)],
+    /// Save the state into this slot last.
+    pub save: Option<Slot>,
+}
+
+/// An FMU instance as a master drives it: the life cycle, values, the
+/// inputs' polynomial over a step, the step, saved states, and runs.
+pub trait FmuInstance: Debug + Send {
+    /// The instance name.
+    fn name(&self) -> &str;
+
+    /// The FMU's model description.
+    fn model_description(&self) -> &ModelDescription;
+
+    /// The communication time as tracked by the instance.
+    fn time(&self) -> f64;
+
+    /// Whether the FMU reported a fatal error (no call is made after it).
+    fn is_fatal(&self) -> bool;
+
+    /// Switch the FMU's debug logging on or off for `categories` (all when empty).
+    fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Result<()>;
+
+    /// Tell the FMU the experiment: tolerance, start and stop time.
+    fn setup(&mut self, tolerance: Option<f64>, start: f64, stop: Option<f64>) -> Result<()>;
+
+    /// Enter initialization mode, in which values can be set and read.
+    fn enter_initialization(&mut self) -> Result<()>;
+
+    /// Leave initialization mode: the instance is ready to step.
+    fn exit_initialization(&mut self) -> Result<()>;
+
+    /// Real values into `out`.
+    fn get_reals(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()>;
+    /// Set Real values.
+    fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()>;
+    /// Integer (and Enumeration) values into `out`.
+    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()>;
+    /// Set Integer (and Enumeration) values.
+    fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()>;
+    /// Boolean values into `out`.
+    fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()>;
+    /// Set Boolean values.
+    fn set_booleans(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()>;
+    /// String values into `out`.
+    fn get_strings(&mut self, vrs: &[ValueReference], out: &mut [String]) -> Result<()>;
+    /// Set String values.
+    fn set_strings(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()>;
+
+    /// Set the coupled inputs for the coming step: their values and, for a
+    /// polynomial of degree k > 0, its derivatives at the step's start (FMI
+    /// 2.0: `fmi2SetReal`, then `fmi2SetRealInputDerivatives` when derivatives
+    /// are given).
+    fn set_inputs(&mut self, inputs: &Inputs<'_>) -> Result<()>;
+
+    /// Output derivatives of the given orders into `out`.
+    fn get_output_derivatives(
+        &mut self,
+        vrs: &[ValueReference],
+        orders: &[i32],
+        out: &mut [f64],
+    ) -> Result<()>;
+
+    /// Step from `t` over `h`. A request of the FMU to end the simulation is
+    /// [`Error::TerminationRequested`], with the time it reached.
+    fn step(&mut self, t: f64, h: f64) -> Result<()>;
+
+    /// Save the current state into `slot` (reusing what is there).
+    fn save(&mut self, slot: Slot) -> Result<()>;
+    /// Roll back to the state in `slot`, which [`save`](Self::save) filled.
+    fn restore(&mut self, slot: Slot) -> Result<()>;
+    /// Free the state in `slot`, if any.
+    fn free(&mut self, slot: Slot) -> Result<()>;
+    /// The state in `slot` as bytes into `out` (its capacity is reused).
+    fn serialize(&mut self, slot: Slot, out: &mut Vec<u8>) -> Result<()>;
+    /// A state from bytes of [`serialize`](Self::serialize) (of this or
+    /// another instance of the same FMU) into `slot`.
+    fn deserialize(&mut self, slot: Slot, bytes: &[u8]) -> Result<()>;
+
+    /// Back to the instantiated state.
+    fn reset(&mut self) -> Result<()>;
+    /// End the simulation (the instance is freed when dropped).
+    fn terminate(&mut self) -> Result<()>;
+
+    /// One run of a macro step (see [`RunRequest`]); the Real outputs and
+    /// then the output derivatives go to `out`, which has their number.
+    fn run(&mut self, run: &RunRequest<'_>, out: &mut [f64]) -> Result<()> {
+        if let Some(slot) = run.restore {
+            self.restore(slot)?;
+        }
+        if let Some(inputs) = &run.inputs {
+            self.set_inputs(inputs)?;
+        }
+        if let Some((t, h)) = run.step {
+            self.step(t, h)?;
+        }
+        let (values, derivatives) = out.split_at_mut(run.outputs.len());
+        if !run.outputs.is_empty() {
+            self.get_reals(run.outputs, values)?;
+        }
+        for (&(vr, order), out) in run.output_derivatives.iter().zip(derivatives) {
+            self.get_output_derivatives(&[vr], &[order], std::slice::from_mut(out))?;
+        }
+        if let Some(slot) = run.save {
+            self.save(slot)?;
+        }
+        Ok(())
+    }
+}
+
+/// Instantiates `fmu` as `name` where `placement` says.
+pub fn instantiate(
+    fmu: &Fmu,
+    name: &str,
+    options: InstanceOptions,
+    placement: Placement,
+) -> Result<Box<dyn FmuInstance>> {
+    Ok(match placement {
+        Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
+        Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(
+            fmu, name, options, timeout,
+        )?),
+    })
+}
+
+/// An FMI 2.0 instance in this process, with its saved states.
+#[derive(Debug)]
+pub struct LocalInstance {
+    instance: Instance,
+    states: [Option<FmuState>; SLOTS],
+}
+
+impl LocalInstance {
+    /// Wraps an instance.
+    pub fn new(instance: Instance) -> LocalInstance {
+        LocalInstance {
+            instance,
+            states: Default::default(),
+        }
+    }
+
+    /// The FMI 2.0 instance itself.
+    pub fn instance(&mut self) -> &mut Instance {
+        &mut self.instance
+    }
+}
+
+impl FmuInstance for LocalInstance {
+    fn name(&self) -> &str {
+        self.instance.name()
+    }
+    fn model_description(&self) -> &ModelDescription {
+        self.instance.model_description()
+    }
+    fn time(&self) -> f64 {
+        self.instance.time()
+    }
+    fn is_fatal(&self) -> bool {
+        self.instance.is_fatal()
+    }
+    fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Result<()> {
+        self.instance.set_debug_logging(on, categories)
+    }
+    fn setup(&mut self, tolerance: Option<f64>, start: f64, stop: Option<f64>) -> Result<()> {
+        self.instance.setup_experiment(tolerance, start, stop)
+    }
+    fn enter_initialization(&mut self) -> Result<()> {
+        self.instance.enter_initialization_mode()
+    }
+    fn exit_initialization(&mut self) -> Result<()> {
+        self.instance.exit_initialization_mode()
+    }
+    #[inline]
+    fn get_reals(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
+        self.instance.get_real(vrs, out)
+    }
+    #[inline]
+    fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
+        self.instance.set_real(vrs, values)
+    }
+    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+        self.instance.get_integer(vrs, out)
+    }
+    fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
+        self.instance.set_integer(vrs, values)
+    }
+    fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
+        self.instance.get_boolean(vrs, out)
+    }
+    fn set_booleans(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
+        self.instance.set_boolean(vrs, values)
+    }
+    fn get_strings(&mut self, vrs: &[ValueReference], out: &mut [String]) -> Result<()> {
+        self.instance.get_string(vrs, out)
+    }
+    fn set_strings(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
+        self.instance.set_string(vrs, values)
+    }
+    #[inline]
+    fn set_inputs(&mut self, inputs: &Inputs<'_>) -> Result<()> {
+        self.instance.set_real(inputs.vrs, inputs.values)?;
+        if !inputs.derivative_vrs.is_empty() {
+            self.instance.set_real_input_derivatives(
+                inputs.derivative_vrs,
+                inputs.orders,
+                inputs.derivatives,
+            )?;
+        }
+        Ok(())
+    }
+    fn get_output_derivatives(
+        &mut self,
+        vrs: &[ValueReference],
+        orders: &[i32],
+        out: &mut [f64],
+    ) -> Result<()> {
+        self.instance.get_real_output_derivatives(vrs, orders, out)
+    }
+    #[inline]
+    fn step(&mut self, t: f64, h: f64) -> Result<()> {
+        match self.instance.do_step(t, h, true) {
+            Ok(()) => Ok(()),
+            Err(e) => Err(crate::error::step_failure(e, &mut self.instance, t + h)),
+        }
+    }
+    fn save(&mut self, slot: Slot) -> Result<()> {
+        match &mut self.states[slot] {
+            Some(s) => self.instance.update_fmu_state(s),
+            empty => {
+                *empty = Some(self.instance.get_fmu_state()?);
+                Ok(())
+            }
+        }
+    }
+    fn restore(&mut self, slot: Slot) -> Result<()> {
+        let state = slot_state(&self.states, slot, &self.instance, "fmi2SetFMUstate")?;
+        self.instance.set_fmu_state(state)
+    }
+    fn free(&mut self, slot: Slot) -> Result<()> {
+        self.states[slot] = None;
+        Ok(())
+    }
+    fn serialize(&mut self, slot: Slot, out: &mut Vec<u8>) -> Result<()> {
+        let state = slot_state(&self.states, slot, &self.instance, "fmi2SerializeFMUstate")?;
+        self.instance.serialize_fmu_state_into(state, out)
+    }
+    fn deserialize(&mut self, slot: Slot, bytes: &[u8]) -> Result<()> {
+        // The previous state is freed (fmi2FreeFMUstate) when replaced.
+        self.states[slot] = Some(self.instance.deserialize_fmu_state(bytes)?);
+        Ok(())
+    }
+    fn reset(&mut self) -> Result<()> {
+        self.instance.reset()
+    }
+    fn terminate(&mut self) -> Result<()> {
+        self.instance.terminate()
+    }
+}
+
+/// The state saved in `slot`, or an error naming `function` and the slot.
+fn slot_state<'a>(
+    states: &'a [Option<FmuState>],
+    slot: Slot,
+    instance: &Instance,
+    function: &'static str,
+) -> Result<&'a FmuState> {
+    states
+        .get(slot)
+        .and_then(Option::as_ref)
+        .ok_or_else(|| Error::InvalidArgument {
+            function,
+            instance: instance.name().to_string(),
+            message: format!("no FMU state saved in slot {slot}"),
+        })
+}
