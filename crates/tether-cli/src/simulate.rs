@@ -69,18 +69,19 @@ pub fn main(args: Args) -> Result<()> {
     let boolean: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Boolean);
 
     let name = md.co_simulation.model_identifier.clone();
-    let mut instance = fmu.instantiate(&name, Default::default())?;
+    let mut local = tether_fmi::LocalInstance::new(fmu.instantiate(&name, Default::default())?);
     for assignment in &args.set {
         let (var, value) = assignment
             .split_once('=')
             .with_context(|| format!("--set {assignment}: expected NAME=VALUE"))?;
         apply_start_value(
-            &mut instance,
+            &mut local,
             &md,
             var.trim(),
             &StartValue::parse_cli(value.trim()),
         )?;
     }
+    let instance = local.instance();
     instance.setup_experiment(tolerance, start, Some(stop))?;
     instance.enter_initialization_mode()?;
     instance.exit_initialization_mode()?;
@@ -140,7 +141,7 @@ pub fn main(args: Args) -> Result<()> {
         Ok(())
     };
     // Every failure after the header, the FMU's or ours, ends the CSV with its trailer.
-    let mut outcome = record(&mut instance, 0, start);
+    let mut outcome = record(&mut *instance, 0, start);
     // Set when the FMU asks to end the simulation: the time it reached.
     let mut terminated_at = None;
     for n in 1..=steps {
@@ -157,14 +158,14 @@ pub fn main(args: Args) -> Result<()> {
         }
         let time = start + n as f64 * step;
         outcome = match instance.do_step(start + (n - 1) as f64 * step, step, true) {
-            Ok(()) => record(&mut instance, n, time),
+            Ok(()) => record(&mut *instance, n, time),
             // fmi2Discard with fmi2Terminated: the FMU ends the simulation; the
             // point it reached is the last row (as fmpy records it).
             Err(e @ tether_fmi::Error::Discard { .. }) => match instance.terminated() {
                 Ok(true) => {
                     let at = instance.last_successful_time().unwrap_or(time);
                     terminated_at = Some(at);
-                    let recorded = record(&mut instance, n, at);
+                    let recorded = record(&mut *instance, n, at);
                     if recorded.is_ok() {
                         break;
                     }

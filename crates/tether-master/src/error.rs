@@ -224,7 +224,7 @@ pub enum MasterError {
     },
     /// An FMI call or FMU load failed.
     #[error(transparent)]
-    Fmi(#[from] tether_fmi::Error),
+    Fmi(tether_fmi::Error),
     /// An instance's FMU cannot be opened (its path, as resolved against the
     /// system file's folder, is in the error).
     #[error("instance '{instance}': {error}")]
@@ -278,5 +278,18 @@ impl MasterError {
 impl From<std::io::Error> for MasterError {
     fn from(e: std::io::Error) -> Self {
         MasterError::Recording(e)
+    }
+}
+
+impl From<tether_fmi::Error> for MasterError {
+    /// An FMU's request to end the simulation is not a failure of the call:
+    /// it becomes [`MasterError::TerminationRequested`].
+    fn from(error: tether_fmi::Error) -> MasterError {
+        match error {
+            tether_fmi::Error::TerminationRequested { instance, time } => {
+                MasterError::TerminationRequested { instance, time }
+            }
+            error => MasterError::Fmi(error),
+        }
     }
 }

@@ -20,7 +20,6 @@
 //! The algorithm as implemented is described in `docs/algorithm.md`.
 
 mod arrays;
-mod backend;
 mod coupling;
 mod error;
 mod error_estimate;
@@ -61,7 +60,7 @@ pub use spec::{
     Experiment, InitialMultiplier, InstanceSpec, JacobianMode, JointInitial, JointSpec, OutputSpec,
     SignalScheme, SignalSettings, StartValue, SystemSpec,
 };
-pub use start::{apply_start_value, Settable};
+pub use start::apply_start_value;
 pub use stats::{
     AdaptiveStats, InstanceCounters, PhaseTimes, RunStats, Termination, SUMMARY_SCHEMA,
 };

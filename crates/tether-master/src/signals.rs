@@ -17,9 +17,9 @@ use crate::names::{describe, find_instance};
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::{ConnectionSpec, SignalScheme, SystemSpec};
-use crate::start::Settable;
 use crate::system::StepAt;
 use crate::MasterError;
+use tether_fmi::Inputs;
 
 /// The FMI type a connection carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -227,17 +227,17 @@ impl Signals {
         let value = match link.kind {
             Kind::Real => {
                 let mut v = [0.0];
-                slave.backend.get_real(&[link.from_vr], &mut v)?;
+                slave.backend.get_reals(&[link.from_vr], &mut v)?;
                 v[0]
             }
             Kind::Integer => {
                 let mut v = [0];
-                slave.backend.get_integer(&[link.from_vr], &mut v)?;
+                slave.backend.get_integers(&[link.from_vr], &mut v)?;
                 f64::from(v[0])
             }
             Kind::Boolean => {
                 let mut v = [false];
-                slave.backend.get_boolean(&[link.from_vr], &mut v)?;
+                slave.backend.get_booleans(&[link.from_vr], &mut v)?;
                 f64::from(u8::from(v[0]))
             }
         };
@@ -257,22 +257,27 @@ impl Signals {
         match link.kind {
             Kind::Real => {
                 let value = link.gain * p.value + link.offset;
-                slave.backend.set_real(&vr, &[value])?;
-                if link.interpolate && self.order > 0 {
-                    let orders = [1, 2];
-                    let d = [link.gain * p.d1, link.gain * p.d2];
-                    let n = self.order.min(2);
-                    slave.backend.set_real_input_derivatives(
-                        &[vr[0]; 2][..n],
-                        &orders[..n],
-                        &d[..n],
-                    )?;
+                let orders = [1, 2];
+                let d = [link.gain * p.d1, link.gain * p.d2];
+                let n = if link.interpolate {
+                    self.order.min(2)
+                } else {
+                    0
+                };
+                slave.backend.set_inputs(&Inputs {
+                    vrs: &vr,
+                    values: &[value],
+                    derivative_vrs: &[vr[0]; 2][..n],
+                    orders: &orders[..n],
+                    derivatives: &d[..n],
+                })?;
+                if n > 0 {
                     slave.counters.set_input_derivatives += 1;
                 }
             }
             // Values read from an Integer output: exact in f64.
-            Kind::Integer => slave.backend.set_integer(&vr, &[p.value as i32])?,
-            Kind::Boolean => slave.backend.set_boolean(&vr, &[p.value != 0.0])?,
+            Kind::Integer => slave.backend.set_integers(&vr, &[p.value as i32])?,
+            Kind::Boolean => slave.backend.set_booleans(&vr, &[p.value != 0.0])?,
         }
         slave.counters.set_reals += 1;
         Ok(())

@@ -2,15 +2,19 @@
 //! polynomials, coupled outputs read after each run, a saved state to roll back
 //! to, and the outputs recorded at accepted steps.
 
-use tether_fmi::{BaseType, Causality, Fmu};
+use tether_fmi::{BaseType, Causality, Fmu, FmuInstance, Inputs, Placement, RunRequest, Slot};
 
-use crate::backend::{Backend, Slot};
 use crate::spec::Isolation;
 
 use crate::polynomial::Taylor;
 use crate::spec::InstanceSpec;
 use crate::stats::InstanceCounters;
 use crate::MasterError;
+
+/// The state slot of the state saved at the start of the macro step.
+const SAVED: Slot = 0;
+/// The state slot of the rollback self-check's own state.
+const CHECK: Slot = 1;
 
 /// A coupled input: `value = Σ coefficient · u[unknown]`.
 #[derive(Debug, Clone)]
@@ -70,24 +74,26 @@ impl Run {
 pub struct Slave {
     pub(crate) name: String,
     pub(crate) model_name: String,
-    /// The FMU instance, in this process or in a host process.
-    pub(crate) backend: Backend,
+    /// The FMU instance, in this process or in a host process: the master
+    /// reaches it only through [`FmuInstance`].
+    pub(crate) backend: Box<dyn FmuInstance>,
     pub(crate) fmu: Fmu,
-    /// Whether [`Slot::Saved`] holds a state.
+    /// Whether [`SAVED`] holds a state.
     saved: bool,
     pub(crate) inputs: Vec<CoupledInput>,
-    input_vrs: Vec<u32>,
-    input_values: Vec<f64>,
-    input_d_vrs: Vec<u32>,
-    input_d_orders: Vec<i32>,
-    input_d_values: Vec<f64>,
+    /// The coupled inputs' values and derivatives as the instance takes them.
+    input: InputBuffers,
     /// The degree k of the unknowns' polynomials (`finalize`).
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
     value_vrs: Vec<u32>,
     value_slots: Vec<usize>,
+    /// The output derivatives read, `(variable, order)`, and their slots.
+    derivative_reads: Vec<(u32, i32)>,
+    derivative_slots: Vec<usize>,
+    /// A run's outputs as the instance returns them: the values
+    /// (`value_vrs`), then the derivatives (`derivative_reads`).
     value_buf: Vec<f64>,
-    derivative_reads: Vec<(u32, i32, usize)>,
     pub(crate) recorded_names: Vec<String>,
     recorded_vrs: Vec<u32>,
     /// Integer and Enumeration outputs, recorded after the Real ones.
@@ -189,14 +195,14 @@ impl Slave {
             self.saved,
             "serialize_saved is only called after save_state"
         );
-        self.backend.serialize(Slot::Saved, out)?;
+        self.backend.serialize(SAVED, out)?;
         Ok(())
     }
 
     /// Set the state from bytes of [`serialize_saved`](Self::serialize_saved)
     /// (of another instance of the same FMU) and keep it as the saved state.
     pub(crate) fn load_serialized(&mut self, bytes: &[u8]) -> Result<(), MasterError> {
-        self.backend.deserialize(Slot::Saved, bytes)?;
+        self.backend.deserialize(SAVED, bytes)?;
         self.saved = true;
         Ok(())
     }
@@ -231,8 +237,11 @@ impl Slave {
             }
         }
         let timeout = spec.call_timeout.map(std::time::Duration::from_secs_f64);
-        let isolated = spec.isolation == Isolation::Process;
-        let backend = Backend::new(&fmu, name, isolated, timeout)?;
+        let placement = match spec.isolation {
+            Isolation::Process => Placement::Process { timeout },
+            Isolation::None => Placement::InProcess,
+        };
+        let backend = tether_fmi::instantiate(&fmu, name, Default::default(), placement)?;
         let mut slave = Slave {
             name: name.to_string(),
             model_name,
@@ -240,17 +249,14 @@ impl Slave {
             fmu,
             saved: false,
             inputs: Vec::new(),
-            input_vrs: Vec::new(),
-            input_values: Vec::new(),
-            input_d_vrs: Vec::new(),
-            input_d_orders: Vec::new(),
-            input_d_values: Vec::new(),
+            input: InputBuffers::default(),
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
             value_slots: Vec::new(),
-            value_buf: Vec::new(),
             derivative_reads: Vec::new(),
+            derivative_slots: Vec::new(),
+            value_buf: Vec::new(),
             recorded_values: vec![0.0; recorded_names.len()],
             recorded_names,
             recorded_vrs,
@@ -272,7 +278,7 @@ impl Slave {
         };
         for (name, value) in &spec.parameters {
             crate::start::apply_start_value(
-                &mut slave.backend,
+                slave.backend.as_mut(),
                 slave.fmu.model_description(),
                 name,
                 value,
@@ -307,29 +313,31 @@ impl Slave {
     /// derivatives up to order min(k, 2) go to the FMU.
     pub(crate) fn finalize(&mut self, order: usize) {
         self.order = order;
-        self.input_vrs = self.inputs.iter().map(|i| i.vr).collect();
-        self.input_values = vec![0.0; self.inputs.len()];
-        self.input_d_vrs.clear();
-        self.input_d_orders.clear();
+        self.input.vrs = self.inputs.iter().map(|i| i.vr).collect();
+        self.input.values = vec![0.0; self.inputs.len()];
+        self.input.derivative_vrs.clear();
+        self.input.orders.clear();
         for d in 1..=order.min(2) as i32 {
             for i in &self.inputs {
-                self.input_d_vrs.push(i.vr);
-                self.input_d_orders.push(d);
+                self.input.derivative_vrs.push(i.vr);
+                self.input.orders.push(d);
             }
         }
-        self.input_d_values = vec![0.0; self.input_d_vrs.len()];
+        self.input.derivatives = vec![0.0; self.input.derivative_vrs.len()];
         self.value_vrs.clear();
         self.value_slots.clear();
         self.derivative_reads.clear();
+        self.derivative_slots.clear();
         for (slot, o) in self.coupled_outputs.iter().enumerate() {
             if o.order == 0 {
                 self.value_vrs.push(o.vr);
                 self.value_slots.push(slot);
             } else {
-                self.derivative_reads.push((o.vr, o.order as i32, slot));
+                self.derivative_reads.push((o.vr, o.order as i32));
+                self.derivative_slots.push(slot);
             }
         }
-        self.value_buf = vec![0.0; self.value_vrs.len()];
+        self.value_buf = vec![0.0; self.coupled_outputs.len()];
         self.at_save = vec![0.0; self.coupled_outputs.len()];
         self.readback = vec![0.0; self.coupled_outputs.len()];
     }
@@ -351,16 +359,15 @@ impl Slave {
         stop: f64,
         tolerance: Option<f64>,
     ) -> Result<(), MasterError> {
-        self.backend
-            .setup_experiment(tolerance, start, Some(stop))?;
-        self.backend.enter_initialization_mode()?;
-        self.backend.exit_initialization_mode()?;
+        self.backend.setup(tolerance, start, Some(stop))?;
+        self.backend.enter_initialization()?;
+        self.backend.exit_initialization()?;
         Ok(())
     }
 
     /// Save the current state (`fmi2GetFMUstate`, reusing the previous handle).
     pub(crate) fn save_state(&mut self) -> Result<(), MasterError> {
-        self.backend.save(Slot::Saved)?;
+        self.backend.save(SAVED)?;
         self.saved = true;
         self.counters.state_gets += 1;
         if self.verify_restore {
@@ -377,7 +384,7 @@ impl Slave {
     /// the save.
     pub(crate) fn restore_state(&mut self) -> Result<(), MasterError> {
         assert!(self.saved, "restore_state is only called after save_state");
-        self.backend.restore(Slot::Saved)?;
+        self.backend.restore(SAVED)?;
         self.counters.state_sets += 1;
         if self.verify_restore {
             let mut readback = std::mem::take(&mut self.readback);
@@ -407,12 +414,12 @@ impl Slave {
         let n = self.coupled_len();
         let (mut at_save, mut first, mut back, mut second) =
             (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        self.backend.save(Slot::Check)?;
+        self.backend.save(CHECK)?;
         self.read_coupled(&mut at_save, Run::Rollback)?;
         self.apply_inputs(polys)?;
         self.do_step(t, h)?;
         self.read_coupled(&mut first, Run::Rollback)?;
-        self.backend.restore(Slot::Check)?;
+        self.backend.restore(CHECK)?;
         self.read_coupled(&mut back, Run::Rollback)?;
         self.compare_restored(&at_save, &back, t)?;
         self.apply_inputs(polys)?;
@@ -433,8 +440,8 @@ impl Slave {
                 variable,
             });
         }
-        self.backend.restore(Slot::Check)?;
-        self.backend.free(Slot::Check)?;
+        self.backend.restore(CHECK)?;
+        self.backend.free(CHECK)?;
         self.counters = counters;
         Ok(())
     }
@@ -484,20 +491,20 @@ impl Slave {
         combine_inputs(
             &self.inputs,
             polys,
-            &mut self.input_values,
-            &mut self.input_d_values,
+            &mut self.input.values,
+            &mut self.input.derivatives,
         );
-        self.backend.set_real(&self.input_vrs, &self.input_values)?;
+        self.backend.set_inputs(&self.input.as_inputs())?;
+        self.count_inputs();
+        Ok(())
+    }
+
+    /// Counts the calls that set the coupled inputs.
+    fn count_inputs(&mut self) {
         self.counters.set_reals += 1;
-        if !self.input_d_vrs.is_empty() {
-            self.backend.set_real_input_derivatives(
-                &self.input_d_vrs,
-                &self.input_d_orders,
-                &self.input_d_values,
-            )?;
+        if !self.input.derivative_vrs.is_empty() {
             self.counters.set_input_derivatives += 1;
         }
-        Ok(())
     }
 
     /// One `fmi2DoStep` from `t` over `h`.
@@ -505,27 +512,8 @@ impl Slave {
     /// [`MasterError::TerminationRequested`].
     pub(crate) fn do_step(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
         self.counters.do_steps += 1;
-        match self.backend.do_step(t, h) {
-            Ok(()) => Ok(()),
-            Err(e) => Err(self.step_failure(e, t + h)),
-        }
-    }
-
-    /// The error of a failed `fmi2DoStep` to `end`: a request to end the
-    /// simulation (fmi2Discard with `fmi2Terminated`), else the FMI error.
-    #[cold]
-    #[inline(never)]
-    fn step_failure(&mut self, e: tether_fmi::Error, end: f64) -> MasterError {
-        if matches!(e, tether_fmi::Error::Discard { .. })
-            && matches!(self.backend.terminated(), Ok(true))
-        {
-            let time = self.backend.last_successful_time().unwrap_or(end);
-            return MasterError::TerminationRequested {
-                instance: self.name.clone(),
-                time,
-            };
-        }
-        e.into()
+        self.backend.step(t, h)?;
+        Ok(())
     }
 
     /// `fmi2Terminate`, at a normal end of the run (not after a fatal error:
@@ -541,20 +529,30 @@ impl Slave {
     /// Every value must be finite: otherwise the error names this instance,
     /// the output, the call `run` and the time.
     pub(crate) fn read_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
-        if !self.value_vrs.is_empty() {
+        let nv = self.value_vrs.len();
+        if nv > 0 {
             self.backend
-                .get_real(&self.value_vrs, &mut self.value_buf)?;
-            self.counters.get_reals += 1;
-            for (&value, &slot) in self.value_buf.iter().zip(&self.value_slots) {
-                out[slot] = value;
-            }
+                .get_reals(&self.value_vrs, &mut self.value_buf[..nv])?;
         }
-        for &(vr, order, slot) in &self.derivative_reads {
-            let mut value = [0.0];
+        for (&(vr, order), value) in self.derivative_reads.iter().zip(&mut self.value_buf[nv..]) {
             self.backend
-                .get_real_output_derivatives(&[vr], &[order], &mut value)?;
-            self.counters.get_output_derivatives += 1;
-            out[slot] = value[0];
+                .get_output_derivatives(&[vr], &[order], std::slice::from_mut(value))?;
+        }
+        self.take_coupled(out, run)
+    }
+
+    /// The coupled outputs of the last read (`value_buf`) into their slots
+    /// of `out`, counted, and checked to be finite.
+    #[inline]
+    fn take_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
+        let nv = self.value_vrs.len();
+        if nv > 0 {
+            self.counters.get_reals += 1;
+        }
+        self.counters.get_output_derivatives += self.derivative_reads.len() as u64;
+        let slots = self.value_slots.iter().chain(&self.derivative_slots);
+        for (&value, &slot) in self.value_buf.iter().zip(slots) {
+            out[slot] = value;
         }
         match out.iter().position(|v| !v.is_finite()) {
             None => Ok(()),
@@ -585,11 +583,45 @@ impl Slave {
         h: f64,
         out: Option<&mut [f64]>,
     ) -> Result<(), MasterError> {
-        self.restore_state()?;
-        self.apply_inputs(polys)?;
-        self.do_step(t, h)?;
+        if self.verify_restore {
+            self.restore_state()?;
+            self.apply_inputs(polys)?;
+            self.do_step(t, h)?;
+            return match out {
+                Some(out) => self.read_coupled(out, Run::Perturbed),
+                None => Ok(()),
+            };
+        }
+        // One run, handed to the instance as one unit.
+        assert!(self.saved, "rerun is only called after save_state");
+        let driven = !self.inputs.is_empty();
+        if driven {
+            combine_inputs(
+                &self.inputs,
+                polys,
+                &mut self.input.values,
+                &mut self.input.derivatives,
+            );
+        }
+        let read = out.is_some();
+        let input = &self.input;
+        let request = RunRequest {
+            restore: Some(SAVED),
+            inputs: driven.then(|| input.as_inputs()),
+            step: Some((t, h)),
+            outputs: if read { &self.value_vrs } else { &[] },
+            output_derivatives: if read { &self.derivative_reads } else { &[] },
+            save: None,
+        };
+        let ran = self.backend.run(&request, &mut self.value_buf);
+        self.counters.state_sets += 1;
+        if driven {
+            self.count_inputs();
+        }
+        self.counters.do_steps += 1;
+        ran?;
         match out {
-            Some(out) => self.read_coupled(out, Run::Perturbed),
+            Some(out) => self.take_coupled(out, Run::Perturbed),
             None => Ok(()),
         }
     }
@@ -600,12 +632,12 @@ impl Slave {
         let reals = self.recorded_vrs.len();
         if reals > 0 {
             self.backend
-                .get_real(&self.recorded_vrs, &mut self.recorded_values[..reals])?;
+                .get_reals(&self.recorded_vrs, &mut self.recorded_values[..reals])?;
             self.counters.get_reals += 1;
         }
         if !self.recorded_ints.is_empty() {
             self.backend
-                .get_integer(&self.recorded_ints, &mut self.int_buf)?;
+                .get_integers(&self.recorded_ints, &mut self.int_buf)?;
             self.counters.get_integers += 1;
             for (slot, &v) in self.recorded_values[reals..].iter_mut().zip(&self.int_buf) {
                 *slot = f64::from(v);
@@ -613,7 +645,7 @@ impl Slave {
         }
         if !self.recorded_bools.is_empty() {
             self.backend
-                .get_boolean(&self.recorded_bools, &mut self.bool_buf)?;
+                .get_booleans(&self.recorded_bools, &mut self.bool_buf)?;
             self.counters.get_booleans += 1;
             let first = reals + self.recorded_ints.len();
             for (slot, &v) in self.recorded_values[first..].iter_mut().zip(&self.bool_buf) {
@@ -647,6 +679,30 @@ impl Slave {
     /// Call counters.
     pub fn counters(&self) -> &InstanceCounters {
         &self.counters
+    }
+}
+
+/// The coupled inputs' values and their derivatives (the first derivatives
+/// of every input, then the second, as far as min(k, 2) asks).
+#[derive(Debug, Default)]
+struct InputBuffers {
+    vrs: Vec<u32>,
+    values: Vec<f64>,
+    derivative_vrs: Vec<u32>,
+    orders: Vec<i32>,
+    derivatives: Vec<f64>,
+}
+
+impl InputBuffers {
+    /// The inputs as last combined.
+    fn as_inputs(&self) -> Inputs<'_> {
+        Inputs {
+            vrs: &self.vrs,
+            values: &self.values,
+            derivative_vrs: &self.derivative_vrs,
+            orders: &self.orders,
+            derivatives: &self.derivatives,
+        }
     }
 }
 

@@ -1,51 +1,17 @@
 //! Applying start values (parameters, input starts) to an instance by name.
 
 use tether_fmi::{
-    BaseType, Causality, Instance, ModelDescription, ScalarVariable, ValueReference, Variability,
-    VariableKind,
+    BaseType, Causality, FmuInstance, ModelDescription, ScalarVariable, Variability, VariableKind,
 };
 
 use crate::names::describe;
 use crate::spec::StartValue;
 use crate::MasterError;
 
-/// What start values are applied to: an [`Instance`], or an instance of a
-/// system in this process or in a host process of its own.
-pub trait Settable {
-    /// The instance name.
-    fn name(&self) -> &str;
-    /// `fmi2SetReal`.
-    fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> tether_fmi::Result<()>;
-    /// `fmi2SetInteger`.
-    fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> tether_fmi::Result<()>;
-    /// `fmi2SetBoolean`.
-    fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> tether_fmi::Result<()>;
-    /// `fmi2SetString`.
-    fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> tether_fmi::Result<()>;
-}
-
-impl Settable for Instance {
-    fn name(&self) -> &str {
-        Instance::name(self)
-    }
-    fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> tether_fmi::Result<()> {
-        Instance::set_real(self, vrs, values)
-    }
-    fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> tether_fmi::Result<()> {
-        Instance::set_integer(self, vrs, values)
-    }
-    fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> tether_fmi::Result<()> {
-        Instance::set_boolean(self, vrs, values)
-    }
-    fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> tether_fmi::Result<()> {
-        Instance::set_string(self, vrs, values)
-    }
-}
-
 /// Set `name = value` on `instance` before initialization. Refuses outputs,
 /// locals, constants and type mismatches with a message naming the variable.
 pub fn apply_start_value(
-    instance: &mut impl Settable,
+    instance: &mut dyn FmuInstance,
     md: &ModelDescription,
     name: &str,
     value: &StartValue,
@@ -76,7 +42,7 @@ pub fn apply_start_value(
 /// references), or a tunable parameter. Refuses fixed parameters and
 /// everything else with a message naming the variable.
 pub(crate) fn set_between_steps(
-    instance: &mut impl Settable,
+    instance: &mut dyn FmuInstance,
     md: &ModelDescription,
     name: &str,
     value: &StartValue,
@@ -116,7 +82,7 @@ pub(crate) fn set_between_steps(
 
 /// Check `value` against the variable's type and range, then set it.
 fn set_value(
-    instance: &mut impl Settable,
+    instance: &mut dyn FmuInstance,
     var: &ScalarVariable,
     value: &StartValue,
     fail: impl Fn(String) -> MasterError,
@@ -124,15 +90,15 @@ fn set_value(
     let vr = [var.value_reference];
     check_range(&var.kind, value).map_err(&fail)?;
     match (var.base_type(), value) {
-        (BaseType::Real, StartValue::Real(x)) => instance.set_real(&vr, &[*x])?,
-        (BaseType::Real, StartValue::Integer(i)) => instance.set_real(&vr, &[*i as f64])?,
+        (BaseType::Real, StartValue::Real(x)) => instance.set_reals(&vr, &[*x])?,
+        (BaseType::Real, StartValue::Integer(i)) => instance.set_reals(&vr, &[*i as f64])?,
         (BaseType::Integer | BaseType::Enumeration, StartValue::Integer(i)) => {
             let i =
                 i32::try_from(*i).map_err(|_| fail("out of the 32-bit integer range".into()))?;
-            instance.set_integer(&vr, &[i])?
+            instance.set_integers(&vr, &[i])?
         }
-        (BaseType::Boolean, StartValue::Boolean(b)) => instance.set_boolean(&vr, &[*b])?,
-        (BaseType::String, StartValue::String(s)) => instance.set_string(&vr, &[s.as_str()])?,
+        (BaseType::Boolean, StartValue::Boolean(b)) => instance.set_booleans(&vr, &[*b])?,
+        (BaseType::String, StartValue::String(s)) => instance.set_strings(&vr, &[s.as_str()])?,
         _ => return Err(fail(format!("the variable is {}", describe(var)))),
     }
     Ok(())

@@ -943,12 +943,14 @@ fn simulate_one(
     let bool_vrs: Vec<u32> = boolean.iter().map(|x| x.1).collect();
 
     let name = md.co_simulation.model_identifier.clone();
-    let mut instance = fmu
-        .instantiate(&name, Default::default())
-        .map_err(|e| early(e.into()))?;
+    let mut local = tether_fmi::LocalInstance::new(
+        fmu.instantiate(&name, Default::default())
+            .map_err(|e| early(e.into()))?,
+    );
     for (var, value) in parameters {
-        apply_start_value(&mut instance, &md, var, value).map_err(|e| early(e.into()))?;
+        apply_start_value(&mut local, &md, var, value).map_err(|e| early(e.into()))?;
     }
+    let instance = local.instance();
     let init = (|| -> Result<(), tether_fmi::Error> {
         instance.setup_experiment(tolerance, start, Some(stop))?;
         instance.enter_initialization_mode()?;
@@ -989,8 +991,7 @@ fn simulate_one(
         Ok(())
     };
     let mut signals = Signals::new(None);
-    let mut outcome: Result<(), SimulateError> =
-        record(&mut instance, &mut rows, 0).map_err(Into::into);
+    let mut outcome: Result<(), SimulateError> = record(instance, &mut rows, 0).map_err(Into::into);
     let mut made = 0;
     for n in 1..=steps {
         if outcome.is_err() {
@@ -1006,7 +1007,7 @@ fn simulate_one(
         }
         outcome = instance
             .do_step(start + (n - 1) as f64 * step, step, true)
-            .and_then(|()| record(&mut instance, &mut rows, n))
+            .and_then(|()| record(instance, &mut rows, n))
             .map_err(Into::into);
         if outcome.is_ok() {
             made = n;

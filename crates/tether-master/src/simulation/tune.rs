@@ -47,7 +47,7 @@ impl Simulation {
         let slave = &mut self.system.slaves[s];
         let coupled: Vec<u32> = slave.inputs.iter().map(|i| i.vr).collect();
         let kind = set_between_steps(
-            &mut slave.backend,
+            slave.backend.as_mut(),
             slave.fmu.model_description(),
             variable,
             value,
