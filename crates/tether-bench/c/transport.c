@@ -2,8 +2,8 @@
  * isolated FMU instances (docs/performance.md, "Isolation"): a request of
  * `size` bytes from the parent, the same bytes back from a forked child, `n`
  * times; returns microseconds per round trip, or a negative number on error.
- *   kind 0: two pipes (one each way)
- *   kind 1: a Unix stream socket pair (what Tether uses)
+ *   kind 0: two pipes (one each way; what Tether uses)
+ *   kind 1: a Unix stream socket pair
  *   kind 2: shared memory, futex wait/wake on a sequence word (no spinning)
  *   kind 3: shared memory, both sides spinning (keeps two cores busy: a
  *           reference, not a candidate)

@@ -150,9 +150,9 @@ pub fn host_probe() -> HostProbe {
 /// A transport between two processes (c/transport.c).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Transport {
-    /// Two pipes, one each way.
+    /// Two pipes, one each way (what isolated instances use).
     Pipes,
-    /// A Unix stream socket pair (what isolated instances use).
+    /// A Unix stream socket pair.
     SocketPair,
     /// Shared memory with a futex wait/wake handshake.
     SharedMemoryFutex,

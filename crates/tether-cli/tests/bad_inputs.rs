@@ -12,7 +12,8 @@
 //! Every FMU is real: archives are written here, binaries are the workspace oscillator
 //! or the faulty oscillator compiled from C at test time (tests/support/faulty.rs).
 //!
-//! Unknown *markers* (joints) are not covered yet: they arrive with the [[joint]] tables.
+//! Joints: an unknown marker, an unknown kind and a spatial joint on a planar marker
+//! without the port it needs.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

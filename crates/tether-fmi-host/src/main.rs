@@ -1,5 +1,6 @@
 //! `tether-fmi-host`: runs one FMU instance for a master in another process,
-//! which started it with a socket as standard input (docs/reliability.md).
+//! which started it with pipes as standard input and output
+//! (docs/reliability.md).
 
 fn main() -> std::process::ExitCode {
     tether_fmi_host::serve_stdin()

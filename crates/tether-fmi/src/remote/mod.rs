@@ -601,7 +601,7 @@ fn wait_readable(reader: &BufReader<ChildStdout>, timeout: Option<Duration>) -> 
 impl Drop for RemoteInstance {
     fn drop(&mut self) {
         if self.ended.is_none() {
-            // fmi2FreeInstance in the host, then it ends on the closed socket;
+            // fmi2FreeInstance in the host, then it ends on the closed request pipe;
             // a host that does not answer within the time-out (or 10 s) is killed.
             self.timeout = Some(self.timeout.unwrap_or(Duration::from_secs(10)));
             self.out.start(op::FREE_INSTANCE);

@@ -54,7 +54,8 @@ pub(crate) struct Frames {
 
 impl Frames {
     /// Orthonormal frames from the z axis and a reference x axis of each side;
-    /// `None` if an axis is zero or the reference is parallel to it.
+    /// an error naming the side if an axis is zero or the reference is
+    /// parallel to it.
     pub fn new(
         axis_i: Vector3<f64>,
         ref_i: Vector3<f64>,
