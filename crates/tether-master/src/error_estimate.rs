@@ -48,6 +48,18 @@ pub(crate) struct ErrorEstimate {
 }
 
 impl ErrorEstimate {
+    /// The scales of the relative tolerance so far (the master's state).
+    pub fn peaks(&self) -> Vec<Vec<f64>> {
+        self.peaks.clone()
+    }
+
+    /// Back to scales of [`peaks`](Self::peaks).
+    pub fn set_peaks(&mut self, peaks: &[Vec<f64>]) {
+        for (mine, saved) in self.peaks.iter_mut().zip(peaks) {
+            mine.copy_from_slice(saved);
+        }
+    }
+
     /// Find the outputs that the position and velocity levels of the rows
     /// read: those whose change (relative 1e-6) changes some row at these
     /// levels, at the current outputs and unknowns of `system`.

@@ -13,6 +13,7 @@ use crate::solve::Jacobians;
 const MISMATCH: f64 = 0.2;
 
 /// When the Jacobian is due, and its Broyden updates.
+#[derive(Debug, Clone)]
 pub(crate) struct Reuse {
     max_age: u64,
     /// Steps since the Jacobian was made from perturbed runs (None: never).

@@ -54,7 +54,7 @@ pub use error::MasterError;
 pub use method::Method;
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
-pub use simulation::Simulation;
+pub use simulation::{MasterState, Simulation, SystemState};
 pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
     Experiment, InitialMultiplier, InstanceSpec, JacobianMode, JointInitial, JointSpec, OutputSpec,

@@ -14,7 +14,7 @@ use crate::spec::CouplingSettings;
 use crate::spec::JacobianMode;
 use crate::stats::{Lap, RunStats};
 use crate::step_control::StepControl;
-use crate::system::{MacroStep, StepAt, System};
+use crate::system::{MacroStep, MethodState, StepAt, System};
 use crate::{MasterError, Method};
 
 /// The predictor/corrector method with the buffers its steps reuse (sized
@@ -459,6 +459,23 @@ impl MacroStep for PredictorCorrector {
         }
         self.accept(system);
         Ok(error)
+    }
+
+    fn save(&self) -> MethodState {
+        let peaks = self.estimate.as_ref().map(ErrorEstimate::peaks);
+        Box::new((self.jac.clone(), self.reuse.clone(), peaks))
+    }
+
+    fn restore(&mut self, state: &MethodState) {
+        type Saved = (Jacobians, Option<Reuse>, Option<Vec<Vec<f64>>>);
+        let (jac, reuse, peaks) = state
+            .downcast_ref::<Saved>()
+            .expect("a state saved by this method");
+        self.jac.clone_from(jac);
+        self.reuse.clone_from(reuse);
+        if let (Some(estimate), Some(peaks)) = (&mut self.estimate, peaks) {
+            estimate.set_peaks(peaks);
+        }
     }
 
     fn report(&self, stats: &mut RunStats) {

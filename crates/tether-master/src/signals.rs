@@ -66,6 +66,18 @@ pub(crate) struct Signals {
 }
 
 impl Signals {
+    /// The signal values carried between steps: each link's sender values
+    /// `[y_N, y_{N-1}, y_{N-2}]` and its value at T_{N+1} once read.
+    pub fn values(&self) -> (Vec<[f64; 3]>, Vec<f64>) {
+        (self.history.clone(), self.next.clone())
+    }
+
+    /// Back to values of [`values`](Self::values).
+    pub fn set_values(&mut self, (history, next): &(Vec<[f64; 3]>, Vec<f64>)) {
+        self.history.clone_from(history);
+        self.next.clone_from(next);
+    }
+
     /// Resolve the system file's connections against the instances (after
     /// the coupling: an input an unknown drives cannot also be a receiver).
     pub fn build(spec: &SystemSpec, slaves: &mut [Slave]) -> Result<Signals, MasterError> {

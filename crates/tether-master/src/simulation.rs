@@ -5,89 +5,58 @@
 
 use std::time::Instant;
 
+mod grid;
+mod health;
+mod row;
+mod state;
 mod tune;
+
+pub use state::{MasterState, SystemState};
 
 use crate::explicit::Explicit;
 use crate::feedthrough::Feedthrough;
-use crate::observer::{Observer, Sample};
+use crate::observer::Observer;
 use crate::predictor_corrector::PredictorCorrector;
 use crate::rows::RowLevel;
 use crate::signals::Signals;
 use crate::slave::Run;
 use crate::spec::{CheckRollback, SystemSpec};
-use crate::stats::{AdaptiveStats, Lap, RunStats, Termination};
+use crate::stats::{Lap, RunStats, Termination};
 use crate::step_control::Controller;
 use crate::system::{MacroStep, StepAt, System};
 use crate::threads;
-use crate::{Experiment, MasterError, Method};
+use crate::{MasterError, Method};
+use grid::Grid;
+use health::Health;
+use row::Row;
 
-/// A coupled system, ready to run.
+/// A coupled system, ready to run: the instances and the coupling, the
+/// method's macro step, the signal connections, the time grid, the recorded
+/// row, the run's health, its counters and the phase timing.
 pub struct Simulation {
-    experiment: Experiment,
     system: System,
     /// The coupling method's macro step.
     method: Box<dyn MacroStep>,
     /// Signal connections, passed around the method's step.
     signals: Signals,
-    /// Current macro point index N.
-    n: u64,
-    steps: u64,
-    /// Every column, recorded or not.
-    all_columns: Vec<String>,
-    /// The values of every column at the current point.
-    row: Vec<f64>,
-    /// The columns the observers receive (`[output] variables`) …
-    columns: Vec<String>,
-    /// … their indices in `row`, when not all of them …
-    keep: Option<Vec<usize>>,
-    /// … and their values at the current point.
-    selected: Vec<f64>,
-    /// Macro steps between recorded points (`[output] interval`).
-    every: u64,
-    /// The last accepted point when it was not recorded (off the output
-    /// grid): its time and values, written at the end of the run.
-    held: Option<(u64, f64)>,
-    held_values: Vec<f64>,
-    /// The error that stopped the run, if any.
-    failure: Option<String>,
-    /// Per column, the magnitude beyond which the run has diverged.
-    limits: Vec<f64>,
-    /// Per residual column, the largest |g| over the points so far.
-    max_residuals: Vec<f64>,
-    /// The first residual column's index in `row`.
-    first_residual: usize,
-    /// Time of the last point handed to the observers.
-    last_recorded: Option<f64>,
+    /// The time grid: uniform or adaptive.
+    grid: Grid,
+    /// The current point's values and what of them is recorded.
+    row: Row,
+    /// Divergence, residuals, the failure.
+    health: Health,
     stats: RunStats,
-    /// Whether the phases of each macro step are timed (off by default).
-    time_phases: bool,
-    /// The clock reading that ended the last macro step's phases, for the
-    /// recording phase that follows it in [`Simulation::run`].
-    step_end: Option<Instant>,
-    /// `[coupling] residual_warning`, for the summary.
-    residual_warning: f64,
-    /// Adaptive macro steps (`[step_control]`); `None`: the uniform grid.
-    adaptive: Option<Adaptive>,
+    /// Whether the phases of each macro step are timed (off by default),
+    /// and the clock reading that ended the last macro step's phases, for
+    /// the recording phase that follows it in [`Simulation::run`].
+    timing: Timing,
 }
 
-/// The variable time grid of adaptive macro steps.
-struct Adaptive {
-    controller: Controller,
-    /// T_N.
-    t: f64,
-    /// The stop time, the last point.
-    stop: f64,
-    /// The next step size to try.
-    h: f64,
-    /// T_N − T_{N−1} and T_{N−1} − T_{N−2}.
-    past: [f64; 2],
-    /// `[output] interval`: steps land on its grid points T_0 + j·interval.
-    grid: Option<f64>,
-    /// j of the next grid point.
-    next_output: u64,
-    /// Whether T_N is a grid point.
-    on_grid: bool,
-    stats: AdaptiveStats,
+/// Phase timing of the macro steps.
+#[derive(Default)]
+struct Timing {
+    on: bool,
+    step_end: Option<Instant>,
 }
 
 impl Simulation {
@@ -200,16 +169,16 @@ impl Simulation {
         }
         // Fixed steps record every `every`-th point; adaptive ones land on
         // the output grid, when there is one, and record exactly its points.
-        let every = match adaptive {
-            None => spec.output.every(exp.step)?,
-            Some(_) => 1,
-        };
-        let adaptive = match adaptive {
-            None => None,
+        let grid = match adaptive {
+            None => {
+                let every = spec.output.every(exp.step)?;
+                stats.output_interval = every as f64 * exp.step;
+                Grid::uniform(exp.start, exp.step, steps, every)
+            }
             Some((control, limits)) => {
                 step.control_steps(&system, control);
                 signals.roll_back_with_retries();
-                let grid = match spec.output.interval {
+                let output = match spec.output.interval {
                     Some(dt) if !(dt.is_finite() && dt > 0.0) => {
                         return Err(MasterError::InvalidParameter {
                             name: "output interval".into(),
@@ -217,23 +186,17 @@ impl Simulation {
                             expected: "a positive time".into(),
                         })
                     }
-                    grid => grid,
+                    output => output,
                 };
+                stats.output_interval = output.unwrap_or(0.0);
                 let h = limits.h_initial.min(limits.h_max).max(limits.h_min);
-                Some(Adaptive {
-                    controller: Controller::new(limits, settings.order),
-                    t: exp.start,
-                    stop: exp.stop,
+                let controller = Controller::new(limits, settings.order);
+                Grid::adaptive(
+                    controller,
+                    (exp.start, exp.stop, exp.step, steps),
                     h,
-                    past: [h, h],
-                    grid,
-                    next_output: 1,
-                    on_grid: false,
-                    stats: AdaptiveStats {
-                        h_smallest: f64::INFINITY,
-                        ..AdaptiveStats::default()
-                    },
-                })
+                    output,
+                )
             }
         };
         let mut columns = Vec::new();
@@ -245,58 +208,31 @@ impl Simulation {
         let first_residual = columns.len();
         columns.extend(unknowns.iter().filter_map(|u| u.residual.clone()));
         let keep = spec.output.select(&columns)?;
-        let keep = (keep.len() < columns.len()).then_some(keep);
-        let selected: Vec<String> = match &keep {
-            Some(keep) => keep.iter().map(|&i| columns[i].clone()).collect(),
-            None => columns.clone(),
-        };
+        let mut row = Row::new(columns, keep);
+        row.fill(&system);
+        let mut health = Health::new(
+            row.all_values(),
+            first_residual,
+            settings.divergence_factor,
+            settings.residual_warning,
+        );
+        health.check(row.all_values(), row.all_columns(), exp.start)?;
         stats.method = method;
         stats.order = settings.order;
         stats.start = exp.start;
         stats.step = exp.step;
         stats.stop = stop;
-        stats.output_interval = match &adaptive {
-            Some(a) => a.grid.unwrap_or(0.0),
-            None => every as f64 * exp.step,
-        };
-        let mut sim = Simulation {
-            experiment: exp,
+        stats.times.setup = clock.elapsed();
+        Ok(Simulation {
             system,
             method: step,
             signals,
-            n: 0,
-            steps,
-            row: vec![0.0; columns.len()],
-            limits: vec![f64::INFINITY; columns.len()],
-            max_residuals: vec![0.0; columns.len() - first_residual],
-            first_residual,
-            last_recorded: None,
-            selected: vec![0.0; selected.len()],
-            held_values: vec![0.0; selected.len()],
-            columns: selected,
-            all_columns: columns,
-            keep,
-            every,
-            held: None,
-            failure: None,
+            grid,
+            row,
+            health,
             stats,
-            residual_warning: settings.residual_warning,
-            time_phases: false,
-            step_end: None,
-            adaptive,
-        };
-        sim.fill_row();
-        // Finite limits (the factor is finite, > 1), so that ±∞ is always
-        // beyond them.
-        let factor = settings.divergence_factor;
-        sim.limits = sim
-            .row
-            .iter()
-            .map(|v| (factor * v.abs().max(1.0)).min(f64::MAX))
-            .collect();
-        sim.check_divergence()?;
-        sim.stats.times.setup = clock.elapsed();
-        Ok(sim)
+            timing: Timing::default(),
+        })
     }
 
     /// Number of perturbed runs per macro step of the predictor/corrector
@@ -310,27 +246,25 @@ impl Simulation {
     /// `<constraint>.lambda`, then `<constraint>.g`; only those selected by
     /// `[output] variables` when it is given.
     pub fn columns(&self) -> &[String] {
-        &self.columns
+        self.row.columns()
     }
 
     /// The recorded values of the current point (the last accepted one), in
     /// the order of [`Simulation::columns`]: what observers receive as
-    /// [`Sample::values`].
+    /// [`Sample::values`](crate::Sample::values).
     pub fn values(&self) -> &[f64] {
-        match self.keep {
-            Some(_) => &self.selected,
-            None => &self.row,
-        }
+        self.row.values()
     }
 
     /// The units the FMUs declare for the recorded outputs among
     /// [`columns`](Self::columns): `(column, unit)` pairs.
     pub fn units(&self) -> Vec<(String, String)> {
         let mut units = Vec::new();
+        let columns = self.row.columns();
         for slave in &self.system.slaves {
             let md = slave.fmu.model_description();
             for column in slave.recorded_names() {
-                if !self.columns.contains(column) {
+                if !columns.contains(column) {
                     continue;
                 }
                 let variable = &column[slave.name.len() + 1..];
@@ -349,22 +283,12 @@ impl Simulation {
 
     /// The current macro time T_N (T_0 + N·H on the uniform grid).
     pub fn time(&self) -> f64 {
-        match &self.adaptive {
-            Some(a) => a.t,
-            None => self.time_at(self.n),
-        }
+        self.grid.time()
     }
 
     /// Whether the run has reached its last point.
     pub fn finished(&self) -> bool {
-        match &self.adaptive {
-            Some(a) => a.t >= a.stop,
-            None => self.n >= self.steps,
-        }
-    }
-
-    fn time_at(&self, n: u64) -> f64 {
-        self.experiment.start + n as f64 * self.experiment.step
+        self.grid.finished()
     }
 
     /// The time of the last point handed to the observers by
@@ -372,13 +296,13 @@ impl Simulation {
     /// failure it is the time up to which results are kept; the failing
     /// step's time may be later.
     pub fn last_recorded_time(&self) -> Option<f64> {
-        self.last_recorded
+        self.row.last_recorded()
     }
 
     /// Number of macro steps the experiment asks for (with adaptive steps:
     /// how many steps of `[experiment] step` the run spans, for progress).
     pub fn total_steps(&self) -> u64 {
-        self.steps
+        self.grid.total_steps()
     }
 
     /// The current coupling unknowns u_N, in column order (multipliers of
@@ -393,19 +317,18 @@ impl Simulation {
     /// machine of docs/performance.md, which is a noticeable part of a step of
     /// cheap FMUs. The setup and the whole run are always timed.
     pub fn time_phases(&mut self, on: bool) {
-        self.time_phases = on;
-        self.step_end = None;
+        self.timing = Timing { on, step_end: None };
     }
 
     /// Counters so far, and how the run ended (or that it is still running).
     pub fn stats(&self) -> RunStats {
         let mut stats = self.stats.clone();
-        stats.times.measured = self.time_phases;
-        stats.end_time = self.last_recorded;
-        stats.completed =
-            self.failure.is_none() && (self.finished() || stats.termination.is_some());
-        stats.stop_reason = match (&self.failure, &stats.termination) {
-            (Some(e), _) => e.clone(),
+        stats.times.measured = self.timing.on;
+        stats.end_time = self.row.last_recorded();
+        let failure = self.health.failure();
+        stats.completed = failure.is_none() && (self.finished() || stats.termination.is_some());
+        stats.stop_reason = match (failure, &stats.termination) {
+            (Some(e), _) => e.to_string(),
             (None, Some(end)) => format!(
                 "instance '{}' requested the end of the simulation at t = {}",
                 end.instance, end.requested_at
@@ -413,13 +336,9 @@ impl Simulation {
             (None, None) if stats.completed => "completed".into(),
             (None, None) => "running".into(),
         };
-        stats.residuals = self.all_columns[self.first_residual..]
-            .iter()
-            .cloned()
-            .zip(self.max_residuals.iter().copied())
-            .collect();
-        stats.residual_warning = self.residual_warning;
-        stats.adaptive = self.adaptive.as_ref().map(|a| a.stats);
+        stats.residuals = self.health.residuals(self.row.all_columns()).collect();
+        stats.residual_warning = self.health.residual_warning();
+        stats.adaptive = self.grid.adaptive_stats();
         stats.instances = self
             .system
             .slaves
@@ -433,34 +352,30 @@ impl Simulation {
     /// Advance one macro step with the configured method (with adaptive
     /// steps: one accepted step, after as many rejected tries as it takes).
     pub fn step(&mut self) -> Result<(), MasterError> {
-        let mut lap = Lap::start(self.time_phases);
-        let stepped = match &self.adaptive {
-            None => {
-                let at = StepAt {
-                    n: self.n,
-                    t: self.time(),
-                    h: self.experiment.step,
-                    t_next: self.time_at(self.n + 1),
-                    past: None,
-                };
-                let parts = (&mut self.signals, &mut self.method, &mut self.system);
-                step_at(parts, at, &mut self.stats, &mut lap).map(|_| ())
-            }
-            Some(_) => self.adaptive_step(&mut lap),
-        };
+        let mut lap = Lap::start(self.timing.on);
+        let (signals, method, system) = (&mut self.signals, &mut self.method, &mut self.system);
+        let stats = &mut self.stats;
+        let stepped = self.grid.advance(|at| {
+            step_at(
+                (&mut *signals, &mut *method, &mut *system),
+                at,
+                stats,
+                &mut lap,
+            )
+        });
         if let Err(e) = stepped {
             if !matches!(e, MasterError::TerminationRequested { .. }) {
-                self.failure = Some(e.to_string());
+                self.health.fail(&e);
             }
             return Err(e);
         }
-        self.n += 1;
-        self.step_end = lap.last();
+        self.timing.step_end = lap.last();
         self.stats.macro_steps += 1;
-        self.fill_row();
-        self.check_divergence().inspect_err(|e| {
-            self.failure = Some(e.to_string());
-        })
+        self.row.fill(&self.system);
+        let (row, columns) = (self.row.all_values(), self.row.all_columns());
+        self.health
+            .check(row, columns, self.grid.time())
+            .inspect_err(|e| self.health.fail(e))
     }
 
     /// [`run`](Self::run) without a progress callback.
@@ -469,104 +384,6 @@ impl Simulation {
         observers: &mut [&mut dyn Observer],
     ) -> Result<RunStats, MasterError> {
         self.run(observers, &mut |_, _| {})
-    }
-
-    /// One accepted step of adaptive size: try the controller's step
-    /// (clipped to land on the next output grid point and on the stop time,
-    /// halved when that target is within two steps),
-    /// roll back and retry smaller while the error estimate exceeds the
-    /// tolerances.
-    fn adaptive_step(&mut self, lap: &mut Lap) -> Result<(), MasterError> {
-        let a = self.adaptive.as_mut().expect("adaptive steps");
-        let start = self.experiment.start;
-        // The point the step must not pass: the next output grid point (a
-        // point within 1e-9 intervals of the stop time is the stop time).
-        let target = match a.grid {
-            Some(dt) => {
-                let point = start + a.next_output as f64 * dt;
-                if point >= a.stop - 1e-9 * dt {
-                    a.stop
-                } else {
-                    point
-                }
-            }
-            None => a.stop,
-        };
-        loop {
-            let remaining = target - a.t;
-            // A clipped step ends exactly at the target; no sliver is left.
-            let clipped = a.h >= remaining || remaining - a.h < 1e-3 * a.h;
-            // A target within two steps is reached in two equal ones: a
-            // sliver step next to full ones would put nearby points into the
-            // polynomials through the past points (k ≥ 1), whose slope then
-            // amplifies the multipliers' noise by the ratio of H to the sliver.
-            let halved = !clipped && remaining < 2.0 * a.h;
-            let h = match (clipped, halved) {
-                (true, _) => remaining,
-                (false, true) => 0.5 * remaining,
-                (false, false) => a.h,
-            };
-            let at = StepAt {
-                n: self.n,
-                t: a.t,
-                h,
-                t_next: if clipped { target } else { a.t + h },
-                past: Some(a.past),
-            };
-            let parts = (&mut self.signals, &mut self.method, &mut self.system);
-            let error = step_at(parts, at, &mut self.stats, lap)?
-                .expect("the predictor/corrector step estimates its error");
-            let (next, accepted) = a.controller.next(h, error);
-            if accepted {
-                a.t = at.t_next;
-                a.past = [h, a.past[0]];
-                // A clipped or halved step does not shrink the next proposal.
-                a.h = if clipped || halved {
-                    a.h.max(next)
-                } else {
-                    next
-                };
-                a.on_grid = clipped && a.grid.is_some();
-                if a.on_grid {
-                    a.next_output += 1;
-                }
-                a.stats.accepted += 1;
-                a.stats.last_error = error;
-                a.stats.h_smallest = a.stats.h_smallest.min(h);
-                a.stats.h_largest = a.stats.h_largest.max(h);
-                return Ok(());
-            }
-            a.stats.rejected += 1;
-            if h <= a.controller.limits.h_min {
-                return Err(MasterError::StepSizeTooSmall {
-                    time: a.t,
-                    error,
-                    h_min: a.controller.limits.h_min,
-                });
-            }
-            a.h = next;
-        }
-    }
-
-    /// Macro steps done, for progress: with adaptive steps, how many steps
-    /// of `[experiment] step` the time reached spans (never beyond the total).
-    fn progress(&self) -> u64 {
-        match &self.adaptive {
-            Some(a) => {
-                let spanned = (a.t - self.experiment.start) / self.experiment.step;
-                (spanned.round() as u64).min(self.steps)
-            }
-            None => self.n,
-        }
-    }
-
-    /// Whether the current point goes to the observers: on the output grid,
-    /// or the last one.
-    fn recorded(&self) -> bool {
-        match &self.adaptive {
-            Some(a) => a.grid.is_none() || a.on_grid || self.finished(),
-            None => self.n.is_multiple_of(self.every) || self.n == self.steps,
-        }
     }
 
     /// Run to the stop time, feeding the accepted points on the output grid
@@ -585,9 +402,9 @@ impl Simulation {
         progress: &mut dyn FnMut(u64, u64),
     ) -> Result<RunStats, MasterError> {
         let clock = Instant::now();
-        self.step_end = None;
+        self.timing.step_end = None;
         for o in observers.iter_mut() {
-            o.start(&self.columns)?;
+            o.start(self.row.columns())?;
         }
         self.notify(observers)?;
         let outcome = (|| {
@@ -608,12 +425,12 @@ impl Simulation {
                     }
                     Err(e) => return Err(e),
                 }
-                if self.recorded() {
+                if self.grid.recorded() {
                     self.notify(observers)?;
                 } else {
-                    self.hold();
+                    self.row.hold(self.grid.n(), self.grid.time());
                 }
-                progress(self.progress(), self.steps);
+                progress(self.grid.progress(), self.grid.total_steps());
             }
             // A normal end: fmi2Terminate before the instances are freed.
             self.system.terminate()?;
@@ -623,11 +440,11 @@ impl Simulation {
         // grid (unless recording itself failed).
         let outcome = match outcome {
             Err(e @ MasterError::Recording(_)) => Err(e),
-            outcome => self.release_held(observers).and(outcome),
+            outcome => self.row.release_held(observers).and(outcome),
         };
         let message = outcome.as_ref().err().map(|e: &MasterError| e.to_string());
-        if self.failure.is_none() {
-            self.failure = message.clone();
+        if let (None, Err(e)) = (self.health.failure(), &outcome) {
+            self.health.fail(e);
         }
         // Every observer is finished, even after another one failed; the
         // run's own error comes first, then the first observer's.
@@ -644,6 +461,7 @@ impl Simulation {
         Ok(self.stats())
     }
 
+    /// Hand the current point to the observers (timed as the recording phase).
     fn notify(&mut self, observers: &mut [&mut dyn Observer]) -> Result<(), MasterError> {
         if observers.is_empty() {
             return Ok(());
@@ -651,92 +469,16 @@ impl Simulation {
         // The recording phase starts where the step's last phase ended (it
         // includes assembling and checking the row): one clock read fewer.
         let clock = self
+            .timing
             .step_end
             .take()
-            .or_else(|| self.time_phases.then(Instant::now));
-        let sample = Sample {
-            step: self.n,
-            time: self.time(),
-            values: match self.keep {
-                Some(_) => &self.selected,
-                None => &self.row,
-            },
-        };
-        for o in observers.iter_mut() {
-            o.sample(sample)?;
-        }
-        self.last_recorded = Some(sample.time);
-        self.held = None;
+            .or_else(|| self.timing.on.then(Instant::now));
+        self.row
+            .notify(observers, self.grid.n(), self.grid.time())?;
         if let Some(clock) = clock {
             self.stats.times.recording += clock.elapsed();
         }
         Ok(())
-    }
-
-    /// Keep the current point, not on the output grid, for the end.
-    fn hold(&mut self) {
-        let values = match self.keep {
-            Some(_) => &self.selected,
-            None => &self.row,
-        };
-        self.held_values.copy_from_slice(values);
-        self.held = Some((self.n, self.time()));
-    }
-
-    /// Record the held point, if it is the last accepted one not yet recorded.
-    fn release_held(&mut self, observers: &mut [&mut dyn Observer]) -> Result<(), MasterError> {
-        let Some((step, time)) = self.held.take() else {
-            return Ok(());
-        };
-        let sample = Sample {
-            step,
-            time,
-            values: &self.held_values,
-        };
-        for o in observers.iter_mut() {
-            o.sample(sample)?;
-        }
-        self.last_recorded = Some(time);
-        Ok(())
-    }
-
-    fn fill_row(&mut self) {
-        let mut i = 0;
-        for slave in &self.system.slaves {
-            let values = slave.recorded_values();
-            self.row[i..i + values.len()].copy_from_slice(values);
-            i += values.len();
-        }
-        for h in &self.system.history {
-            self.row[i] = h[0];
-            i += 1;
-        }
-        let residuals = self.system.coupling.residuals(&self.system.outputs);
-        for (residual, max) in residuals.zip(&mut self.max_residuals) {
-            self.row[i] = residual;
-            *max = max.max(residual.abs());
-            i += 1;
-        }
-        if let Some(keep) = &self.keep {
-            for (value, &k) in self.selected.iter_mut().zip(keep) {
-                *value = self.row[k];
-            }
-        }
-    }
-
-    /// An error naming the first recorded value that is not finite or beyond
-    /// its limit.
-    fn check_divergence(&self) -> Result<(), MasterError> {
-        let beyond = |(&value, &limit): (&f64, &f64)| value.is_nan() || value.abs() > limit;
-        match self.row.iter().zip(&self.limits).position(beyond) {
-            None => Ok(()),
-            Some(i) => Err(MasterError::Diverged {
-                time: self.time(),
-                quantity: self.all_columns[i].clone(),
-                value: self.row[i],
-                limit: self.limits[i],
-            }),
-        }
     }
 }
 

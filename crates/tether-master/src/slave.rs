@@ -15,6 +15,8 @@ use crate::MasterError;
 const SAVED: Slot = 0;
 /// The state slot of the rollback self-check's own state.
 const CHECK: Slot = 1;
+/// The state slot of the whole system's saved state (`Simulation::save_state`).
+const SNAPSHOT: Slot = 2;
 
 /// A coupled input: `value = Σ coefficient · u[unknown]`.
 #[derive(Debug, Clone)]
@@ -204,6 +206,45 @@ impl Slave {
     pub(crate) fn load_serialized(&mut self, bytes: &[u8]) -> Result<(), MasterError> {
         self.backend.deserialize(SAVED, bytes)?;
         self.saved = true;
+        Ok(())
+    }
+
+    /// Save the current state as bytes into `out`, for the whole system's
+    /// saved state (needs `canGetAndSetFMUstate` and `canSerializeFMUstate`).
+    pub(crate) fn snapshot(&mut self, out: &mut Vec<u8>) -> Result<(), MasterError> {
+        let cs = &self.fmu.model_description().co_simulation;
+        let lacking = if !cs.can_get_and_set_fmu_state {
+            Some("canGetAndSetFMUstate")
+        } else if !cs.can_serialize_fmu_state {
+            Some("canSerializeFMUstate")
+        } else {
+            None
+        };
+        if let Some(capability) = lacking {
+            return Err(MasterError::MissingCapability {
+                instance: self.name.clone(),
+                model: self.model_name.clone(),
+                capability,
+                needed_by: "the system's saved state".into(),
+            });
+        }
+        self.backend.save(SNAPSHOT)?;
+        self.backend.serialize(SNAPSHOT, out)?;
+        self.backend.free(SNAPSHOT)?;
+        Ok(())
+    }
+
+    /// Back to a state of [`snapshot`](Self::snapshot), with the recorded
+    /// outputs read then.
+    pub(crate) fn load_snapshot(
+        &mut self,
+        bytes: &[u8],
+        recorded: &[f64],
+    ) -> Result<(), MasterError> {
+        self.backend.deserialize(SNAPSHOT, bytes)?;
+        self.backend.restore(SNAPSHOT)?;
+        self.backend.free(SNAPSHOT)?;
+        self.recorded_values.copy_from_slice(recorded);
         Ok(())
     }
 

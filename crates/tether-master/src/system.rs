@@ -165,6 +165,9 @@ pub(crate) struct StepAt {
     pub past: Past,
 }
 
+/// A method's own state between steps, as [`MacroStep::save`] made it.
+pub(crate) type MethodState = Box<dyn std::any::Any + Send + Sync>;
+
 /// One macro step of a coupling method: predictor/corrector or explicit.
 pub(crate) trait MacroStep: Send {
     /// Advance every instance and the unknowns from T_N to T_{N+1}, leave
@@ -188,6 +191,15 @@ pub(crate) trait MacroStep: Send {
     fn control_steps(&mut self, _system: &System, _control: &StepControl) -> bool {
         false
     }
+
+    /// The method's own state carried from one step to the next (Jacobian
+    /// reuse, the error estimate's scales), for the master's saved state.
+    fn save(&self) -> MethodState {
+        Box::new(())
+    }
+
+    /// Back to a state of [`save`](Self::save).
+    fn restore(&mut self, _state: &MethodState) {}
 
     /// Add what the method's helpers did (FMI calls made on worker threads,
     /// the parallel decision) to `stats`.

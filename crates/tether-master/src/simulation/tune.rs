@@ -13,10 +13,10 @@ impl Simulation {
     /// The value of column `name` (see [`Simulation::columns`]) at the
     /// current point, or `None` if there is no such column.
     pub fn value(&self, name: &str) -> Option<f64> {
-        self.columns
+        self.columns()
             .iter()
             .position(|c| c == name)
-            .map(|i| self.row[i])
+            .map(|i| self.values()[i])
     }
 
     /// Set `target = value` (`instance.variable`) before the next macro

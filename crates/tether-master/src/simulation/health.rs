@@ -1,0 +1,94 @@
+//! The run's health: divergence limits on every column, the largest
+//! residuals so far, and the error that stopped the run.
+
+use crate::MasterError;
+
+/// What is checked at every accepted point, and how the run failed.
+#[derive(Debug, Clone)]
+pub(crate) struct Health {
+    /// Per column, the magnitude beyond which the run has diverged.
+    limits: Vec<f64>,
+    /// The first residual column's index in the row.
+    first_residual: usize,
+    /// Per residual column, the largest |g| over the points so far.
+    max_residuals: Vec<f64>,
+    /// `[coupling] residual_warning`, for the summary.
+    residual_warning: f64,
+    /// The error that stopped the run, if any.
+    failure: Option<String>,
+}
+
+impl Health {
+    /// Limits `factor`·max(|v|, 1) around the initial row `initial` (finite:
+    /// the factor is finite and > 1, so that ±∞ is always beyond them).
+    pub(crate) fn new(
+        initial: &[f64],
+        first_residual: usize,
+        factor: f64,
+        residual_warning: f64,
+    ) -> Health {
+        Health {
+            limits: initial
+                .iter()
+                .map(|v| (factor * v.abs().max(1.0)).min(f64::MAX))
+                .collect(),
+            first_residual,
+            max_residuals: vec![0.0; initial.len() - first_residual],
+            residual_warning,
+            failure: None,
+        }
+    }
+
+    /// Take in an accepted point's row: track the residuals, and an error
+    /// naming the first value that is not finite or beyond its limit.
+    pub(crate) fn check(
+        &mut self,
+        row: &[f64],
+        columns: &[String],
+        time: f64,
+    ) -> Result<(), MasterError> {
+        for (max, residual) in self
+            .max_residuals
+            .iter_mut()
+            .zip(&row[self.first_residual..])
+        {
+            *max = max.max(residual.abs());
+        }
+        let beyond = |(&value, &limit): (&f64, &f64)| value.is_nan() || value.abs() > limit;
+        match row.iter().zip(&self.limits).position(beyond) {
+            None => Ok(()),
+            Some(i) => Err(MasterError::Diverged {
+                time,
+                quantity: columns[i].clone(),
+                value: row[i],
+                limit: self.limits[i],
+            }),
+        }
+    }
+
+    /// The largest |g| of each residual column so far.
+    pub(crate) fn residuals<'a>(
+        &'a self,
+        columns: &'a [String],
+    ) -> impl Iterator<Item = (String, f64)> + 'a {
+        columns[self.first_residual..]
+            .iter()
+            .cloned()
+            .zip(self.max_residuals.iter().copied())
+    }
+
+    /// `[coupling] residual_warning`.
+    pub(crate) fn residual_warning(&self) -> f64 {
+        self.residual_warning
+    }
+
+    /// The error that stopped the run, if any.
+    pub(crate) fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+
+    /// Note the error that stopped the run.
+    pub(crate) fn fail(&mut self, error: &MasterError) {
+        self.failure = Some(error.to_string());
+    }
+}

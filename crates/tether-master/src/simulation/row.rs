@@ -1,0 +1,152 @@
+//! The recorded row: every column's value at the current point, the
+//! columns the observers receive (`[output] variables`), and the last
+//! accepted point held back when it is off the output grid.
+
+use crate::observer::{Observer, Sample};
+use crate::system::System;
+use crate::MasterError;
+
+/// The values of the current point and what is recorded of them.
+pub(crate) struct Row {
+    /// Every column, recorded or not.
+    all_columns: Vec<String>,
+    /// The values of every column at the current point.
+    values: Vec<f64>,
+    /// The columns the observers receive …
+    columns: Vec<String>,
+    /// … their indices in `values`, when not all of them …
+    keep: Option<Vec<usize>>,
+    /// … and their values at the current point.
+    selected: Vec<f64>,
+    /// The last accepted point when it was not recorded (off the output
+    /// grid): its step, time and values, written at the end of the run.
+    held: Option<(u64, f64, Vec<f64>)>,
+    /// Time of the last point handed to the observers.
+    last_recorded: Option<f64>,
+}
+
+impl Row {
+    /// A row of `columns`, of which the observers receive those at `keep`.
+    pub(crate) fn new(columns: Vec<String>, keep: Vec<usize>) -> Row {
+        let keep = (keep.len() < columns.len()).then_some(keep);
+        let selected: Vec<String> = match &keep {
+            Some(keep) => keep.iter().map(|&i| columns[i].clone()).collect(),
+            None => columns.clone(),
+        };
+        Row {
+            values: vec![0.0; columns.len()],
+            selected: vec![0.0; selected.len()],
+            columns: selected,
+            all_columns: columns,
+            keep,
+            held: None,
+            last_recorded: None,
+        }
+    }
+
+    /// Every column's name.
+    pub(crate) fn all_columns(&self) -> &[String] {
+        &self.all_columns
+    }
+
+    /// Every column's value at the current point.
+    pub(crate) fn all_values(&self) -> &[f64] {
+        &self.values
+    }
+
+    /// The recorded columns.
+    pub(crate) fn columns(&self) -> &[String] {
+        &self.columns
+    }
+
+    /// The recorded values of the current point.
+    pub(crate) fn values(&self) -> &[f64] {
+        match self.keep {
+            Some(_) => &self.selected,
+            None => &self.values,
+        }
+    }
+
+    /// The time of the last point handed to the observers.
+    pub(crate) fn last_recorded(&self) -> Option<f64> {
+        self.last_recorded
+    }
+
+    /// The current point's values: every instance's recorded outputs, the
+    /// unknowns, the residuals (the values from `first_residual` on).
+    pub(crate) fn fill(&mut self, system: &System) {
+        let mut i = 0;
+        for slave in &system.slaves {
+            let values = slave.recorded_values();
+            self.values[i..i + values.len()].copy_from_slice(values);
+            i += values.len();
+        }
+        for h in &system.history {
+            self.values[i] = h[0];
+            i += 1;
+        }
+        for residual in system.coupling.residuals(&system.outputs) {
+            self.values[i] = residual;
+            i += 1;
+        }
+        if let Some(keep) = &self.keep {
+            for (value, &k) in self.selected.iter_mut().zip(keep) {
+                *value = self.values[k];
+            }
+        }
+    }
+
+    /// Hand the current point (`step`, `time`) to the observers.
+    pub(crate) fn notify(
+        &mut self,
+        observers: &mut [&mut dyn Observer],
+        step: u64,
+        time: f64,
+    ) -> Result<(), MasterError> {
+        let sample = Sample {
+            step,
+            time,
+            values: match self.keep {
+                Some(_) => &self.selected,
+                None => &self.values,
+            },
+        };
+        for o in observers.iter_mut() {
+            o.sample(sample)?;
+        }
+        self.last_recorded = Some(time);
+        self.held = None;
+        Ok(())
+    }
+
+    /// Keep the current point, not on the output grid, for the end.
+    pub(crate) fn hold(&mut self, step: u64, time: f64) {
+        let mut held = match self.held.take() {
+            Some((_, _, values)) => values,
+            None => Vec::with_capacity(self.columns.len()),
+        };
+        held.clear();
+        held.extend_from_slice(self.values());
+        self.held = Some((step, time, held));
+    }
+
+    /// Record the held point, if it is the last accepted one not yet recorded.
+    pub(crate) fn release_held(
+        &mut self,
+        observers: &mut [&mut dyn Observer],
+    ) -> Result<(), MasterError> {
+        let Some((step, time, values)) = self.held.take() else {
+            return Ok(());
+        };
+        let sample = Sample {
+            step,
+            time,
+            values: &values,
+        };
+        for o in observers.iter_mut() {
+            o.sample(sample)?;
+        }
+        self.last_recorded = Some(time);
+        Ok(())
+    }
+}

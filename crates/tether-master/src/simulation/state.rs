@@ -1,0 +1,108 @@
+//! The run's state as one value: the master's own state (the unknowns'
+//! history, the coupled and recorded outputs, the time grid with its step
+//! control, the signal values, the method's Jacobian reuse and error scales,
+//! the residuals so far) and, for the whole system, every instance's FMU
+//! state. Restoring it and repeating a step gives the same results bit for
+//! bit (tests/master_state.rs).
+
+use super::{grid::Grid, health::Health, Simulation};
+use crate::system::MethodState;
+use crate::MasterError;
+
+/// The master's own state at an accepted point ([`Simulation::save_master`]).
+pub struct MasterState {
+    history: Vec<[f64; 3]>,
+    outputs: Vec<Vec<f64>>,
+    recorded: Vec<Vec<f64>>,
+    grid: Grid,
+    health: Health,
+    signals: (Vec<[f64; 3]>, Vec<f64>),
+    method: MethodState,
+}
+
+/// The whole system's state at an accepted point: the master's and every
+/// instance's serialized FMU state ([`Simulation::save_state`]).
+pub struct SystemState {
+    master: MasterState,
+    instances: Vec<Vec<u8>>,
+}
+
+impl SystemState {
+    /// The master's part.
+    pub fn master(&self) -> &MasterState {
+        &self.master
+    }
+
+    /// Each instance's serialized FMU state, in the order of the system file.
+    pub fn instances(&self) -> &[Vec<u8>] {
+        &self.instances
+    }
+}
+
+impl Simulation {
+    /// The master's own state at the current point (no FMI call).
+    pub fn save_master(&self) -> MasterState {
+        let system = &self.system;
+        MasterState {
+            history: system.history.clone(),
+            outputs: system.outputs.clone(),
+            recorded: system
+                .slaves
+                .iter()
+                .map(|s| s.recorded_values().to_vec())
+                .collect(),
+            grid: self.grid.clone(),
+            health: self.health.clone(),
+            signals: self.signals.values(),
+            method: self.method.save(),
+        }
+    }
+
+    /// Back to a state of [`save_master`](Self::save_master) of this
+    /// simulation (the instances are not touched).
+    pub fn restore_master(&mut self, state: &MasterState) {
+        let system = &mut self.system;
+        system.history.clone_from(&state.history);
+        system.outputs.clone_from(&state.outputs);
+        for (slave, recorded) in system.slaves.iter_mut().zip(&state.recorded) {
+            slave.recorded_values.copy_from_slice(recorded);
+        }
+        self.grid.clone_from(&state.grid);
+        self.health.clone_from(&state.health);
+        self.signals.set_values(&state.signals);
+        self.method.restore(&state.method);
+        self.row.fill(&self.system);
+    }
+
+    /// The whole system's state at the current point: every instance's FMU
+    /// state (`fmi2GetFMUstate`, `fmi2SerializeFMUstate`) and the master's.
+    /// Every instance must declare `canGetAndSetFMUstate` and
+    /// `canSerializeFMUstate`.
+    pub fn save_state(&mut self) -> Result<SystemState, MasterError> {
+        let mut instances = Vec::with_capacity(self.system.slaves.len());
+        for slave in &mut self.system.slaves {
+            let mut bytes = Vec::new();
+            slave.snapshot(&mut bytes)?;
+            instances.push(bytes);
+        }
+        Ok(SystemState {
+            master: self.save_master(),
+            instances,
+        })
+    }
+
+    /// Back to a state of [`save_state`](Self::save_state) of this
+    /// simulation: every instance's FMU state, then the master's.
+    pub fn restore_state(&mut self, state: &SystemState) -> Result<(), MasterError> {
+        let slaves = &mut self.system.slaves;
+        for ((slave, bytes), recorded) in slaves
+            .iter_mut()
+            .zip(&state.instances)
+            .zip(&state.master.recorded)
+        {
+            slave.load_snapshot(bytes, recorded)?;
+        }
+        self.restore_master(&state.master);
+        Ok(())
+    }
+}
