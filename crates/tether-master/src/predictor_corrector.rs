@@ -132,13 +132,8 @@ impl PredictorCorrector {
     /// from its history, every instance stepped with it (but those the
     /// signals' Gauss–Seidel sweep has stepped already), g^p (ġ^p, g̈^p)
     /// evaluated from the outputs at T_{N+1}.
-    fn predict(
-        &mut self,
-        system: &mut System,
-        at: StepAt,
-        degree: usize,
-    ) -> Result<(), MasterError> {
-        self.extrapolate(system, at, degree);
+    fn predict(&mut self, system: &mut System, at: StepAt) -> Result<(), MasterError> {
+        self.extrapolate(system, at);
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
             if !slave.stepped_ahead {
                 slave.apply_inputs(&self.polys)?;
@@ -155,9 +150,9 @@ impl PredictorCorrector {
     }
 
     /// The unknowns' polynomials extrapolated from their history, and u^p.
-    fn extrapolate(&mut self, system: &System, at: StepAt, degree: usize) {
+    fn extrapolate(&mut self, system: &System, at: StepAt) {
         for (m, history) in system.history.iter().enumerate() {
-            self.polys[m] = extrapolate(history, degree, at.h, at.past);
+            self.polys[m] = extrapolate(history, at.degree.predictor, at.h, at.past);
             self.u_pred[m] = self.polys[m].at(at.h);
         }
     }
@@ -167,18 +162,13 @@ impl PredictorCorrector {
     /// polynomial of each unknown m of the group; column m of the interface
     /// Jacobian is (g^{pp_m} − g^p)/Δu_m, with only m's own instances read
     /// as perturbed and only the rows they touch evaluated.
-    fn perturb(
-        &mut self,
-        system: &mut System,
-        at: StepAt,
-        degree: usize,
-    ) -> Result<(), MasterError> {
+    fn perturb(&mut self, system: &mut System, at: StepAt) -> Result<(), MasterError> {
         for (group, polys) in system.groups.iter().zip(&mut self.perturbed) {
             polys.copy_from_slice(&self.polys);
             for &m in group {
                 self.delta[m] = system.delta(m);
                 let u = self.u_pred[m] + self.delta[m];
-                polys[m] = interpolate(u, &system.history[m], degree, at.h, at.past);
+                polys[m] = interpolate(u, &system.history[m], at.degree.corrector, at.h, at.past);
             }
         }
         let slaves = &mut system.slaves;
@@ -273,14 +263,15 @@ impl PredictorCorrector {
     /// Step 5, corrector: every driven instance repeats the step from its
     /// saved state with the interpolation polynomials through u_{N+1}, and
     /// the outputs at T_{N+1} are read.
-    fn correct(
-        &mut self,
-        system: &mut System,
-        at: StepAt,
-        degree: usize,
-    ) -> Result<(), MasterError> {
+    fn correct(&mut self, system: &mut System, at: StepAt) -> Result<(), MasterError> {
         for (m, history) in system.history.iter().enumerate() {
-            self.polys[m] = interpolate(self.corrected[m], history, degree, at.h, at.past);
+            self.polys[m] = interpolate(
+                self.corrected[m],
+                history,
+                at.degree.corrector,
+                at.h,
+                at.past,
+            );
         }
         for slave in system.slaves.iter_mut().filter(|s| s.is_coupled()) {
             slave.rerun(&self.polys, at.t, at.h, None)?;
@@ -297,7 +288,6 @@ impl PredictorCorrector {
         &mut self,
         system: &mut System,
         at: StepAt,
-        degree: usize,
         stats: &mut RunStats,
     ) -> Result<u64, MasterError> {
         let mut corrections: usize = 1;
@@ -314,7 +304,7 @@ impl PredictorCorrector {
             let solved = self.solve(system, at, stats);
             std::mem::swap(&mut self.u_pred, &mut self.iterate_from);
             solved?;
-            self.correct(system, at, degree)?;
+            self.correct(system, at)?;
             corrections += 1;
             let tol = self.iteration_tol;
             let small = self
@@ -335,12 +325,12 @@ impl PredictorCorrector {
     fn estimate_error(
         &mut self,
         system: &mut System,
-        degree: usize,
+        at: StepAt,
     ) -> Result<Option<f64>, MasterError> {
         let Some(estimate) = &mut self.estimate else {
             return Ok(None);
         };
-        let norm = estimate.norm(&self.predicted, &system.outputs, degree);
+        let norm = estimate.norm(&self.predicted, &system.outputs, at.degree.corrector);
         if norm.is_nan() || norm > 1.0 {
             for slave in &mut system.slaves {
                 slave.restore_state()?;
@@ -397,9 +387,6 @@ impl MacroStep for PredictorCorrector {
         stats: &mut RunStats,
         lap: &mut Lap,
     ) -> Result<Option<f64>, MasterError> {
-        // Start-up: only N+1 points of history exist at T_N (docs/algorithm.md).
-        let n = usize::try_from(at.n).unwrap_or(usize::MAX);
-        let (predictor_degree, corrector_degree) = (self.order.min(n), self.order.min(n + 1));
         if self.u_pred.is_empty() {
             // Nothing to solve for (signal connections only): every
             // instance steps once, and that is the accepted point.
@@ -410,7 +397,7 @@ impl MacroStep for PredictorCorrector {
             return Ok(None);
         }
         self.save(system)?;
-        self.predict(system, at, predictor_degree)?;
+        self.predict(system, at)?;
         lap.split_into(&mut stats.times.predictor);
         // Beyond the paper: with Jacobian reuse, perturbed runs only when
         // due, and when the reused Jacobian mispredicted the correction: then
@@ -421,7 +408,7 @@ impl MacroStep for PredictorCorrector {
         let mut fresh = self.jacobian_due(at);
         let corrections = loop {
             if fresh {
-                self.perturb(system, at, corrector_degree)?;
+                self.perturb(system, at)?;
                 stats.jacobians += 1;
                 if let Some(reuse) = &mut self.reuse {
                     reuse.made(at.h);
@@ -430,9 +417,9 @@ impl MacroStep for PredictorCorrector {
             lap.split_into(&mut stats.times.jacobian);
             self.solve(system, at, stats)?;
             lap.split_into(&mut stats.times.solve);
-            self.correct(system, at, corrector_degree)?;
+            self.correct(system, at)?;
             // Beyond the paper: repeat the correction (1 = none).
-            let corrections = self.iterate(system, at, corrector_degree, stats)?;
+            let corrections = self.iterate(system, at, stats)?;
             lap.split_into(&mut stats.times.corrector);
             let missed = self.mispredicted(system);
             if fresh || !missed {
@@ -441,14 +428,14 @@ impl MacroStep for PredictorCorrector {
             fresh = true;
             stats.jacobians_remade += 1;
             // Back to the predictor's polynomials and g^p.
-            self.extrapolate(system, at, predictor_degree);
+            self.extrapolate(system, at);
             self.g.copy_from_slice(&self.g_predicted);
         };
         if !fresh {
             stats.jacobians_reused += 1;
         }
         // Beyond the paper: adaptive steps judge the step first.
-        let error = self.estimate_error(system, corrector_degree)?;
+        let error = self.estimate_error(system, at)?;
         if error.is_some_and(|e| e.is_nan() || e > 1.0) {
             return Ok(error);
         }

@@ -66,14 +66,6 @@ impl Simulation {
         spec.validate()?;
         let method = spec.method;
         let settings = spec.coupling;
-        if matches!(method, Method::Explicit { .. }) && settings.order != 0 {
-            return Err(MasterError::InvalidParameter {
-                name: "order".into(),
-                value: settings.order as f64,
-                expected: "0: the explicit method holds the multipliers constant over a step"
-                    .into(),
-            });
-        }
         let exp = spec.experiment;
         let steps = spec.macro_steps();
         // Adaptive steps end exactly at `stop`, fixed ones on the grid.
@@ -106,15 +98,6 @@ impl Simulation {
         let adaptive = match &spec.step_control {
             None => None,
             Some(control) => {
-                if matches!(method, Method::Explicit { .. }) {
-                    return Err(MasterError::InvalidParameter {
-                        name: "step_control".into(),
-                        value: control.rtol,
-                        expected: "the predictor/corrector methods (baumgarte, weighted): \
-                                   the explicit method has no error estimate"
-                            .into(),
-                    });
-                }
                 if system.coupling.len() == 0 {
                     return Err(MasterError::InvalidParameter {
                         name: "step_control".into(),
@@ -173,7 +156,7 @@ impl Simulation {
             None => {
                 let every = spec.output.every(exp.step)?;
                 stats.output_interval = every as f64 * exp.step;
-                Grid::uniform(exp.start, exp.step, steps, every)
+                Grid::uniform(exp.start, exp.step, steps, every, settings.order)
             }
             Some((control, limits)) => {
                 step.control_steps(&system, control);
@@ -196,6 +179,7 @@ impl Simulation {
                     (exp.start, exp.stop, exp.step, steps),
                     h,
                     output,
+                    settings.order,
                 )
             }
         };

@@ -657,6 +657,24 @@ impl SystemSpec {
         if c.jacobian_max_age == 0 {
             return Err(param("jacobian_max_age", 0.0, "at least 1 step"));
         }
+        if matches!(self.method, Method::Explicit { .. }) && c.order != 0 {
+            return Err(param(
+                "order",
+                c.order as f64,
+                "0: the explicit method holds the multipliers constant over a step",
+            ));
+        }
+        if let Some(control) = &self.step_control {
+            if matches!(self.method, Method::Explicit { .. }) {
+                return Err(param(
+                    "step_control",
+                    control.rtol,
+                    "the predictor/corrector methods (baumgarte, weighted): \
+                     the explicit method has no error estimate",
+                ));
+            }
+            control.limits(e.start, e.stop, e.step)?;
+        }
         if self.instances.is_empty() {
             return Err(MasterError::SystemFile {
                 path: self.source_name(),

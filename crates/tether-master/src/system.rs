@@ -163,6 +163,29 @@ pub(crate) struct StepAt {
     /// The two step sizes before this one on a variable grid (adaptive
     /// steps); `None` on the uniform grid.
     pub past: Past,
+    /// The degrees of the step's polynomials.
+    pub degree: Degree,
+}
+
+/// The degrees of a step's polynomials: k, or fewer in start-up, where only
+/// N + 1 points of history exist at T_N (docs/algorithm.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Degree {
+    /// The predictor's extrapolation through u_N, u_{N−1}, …: min(k, N).
+    pub predictor: usize,
+    /// The corrector's interpolation through u_{N+1}, u_N, …: min(k, N + 1).
+    pub corrector: usize,
+}
+
+impl Degree {
+    /// The degrees of step N with polynomials of degree `k`.
+    pub fn at(n: u64, k: usize) -> Degree {
+        let n = usize::try_from(n).unwrap_or(usize::MAX);
+        Degree {
+            predictor: k.min(n),
+            corrector: k.min(n.saturating_add(1)),
+        }
+    }
 }
 
 /// A method's own state between steps, as [`MacroStep::save`] made it.

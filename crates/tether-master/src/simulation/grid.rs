@@ -6,7 +6,7 @@
 
 use crate::stats::AdaptiveStats;
 use crate::step_control::Controller;
-use crate::system::StepAt;
+use crate::system::{Degree, StepAt};
 use crate::MasterError;
 
 /// Where the run is in time, and how it steps.
@@ -20,6 +20,8 @@ pub(crate) struct Grid {
     n: u64,
     /// The number of steps of H the experiment spans.
     steps: u64,
+    /// k, the degree of the coupling polynomials.
+    order: usize,
     kind: Kind,
 }
 
@@ -54,13 +56,14 @@ struct Adaptive {
 
 impl Grid {
     /// The uniform grid from `start` in `steps` steps of `step`, recording
-    /// every `every`-th point.
-    pub(crate) fn uniform(start: f64, step: f64, steps: u64, every: u64) -> Grid {
+    /// every `every`-th point, for polynomials of degree `order`.
+    pub(crate) fn uniform(start: f64, step: f64, steps: u64, every: u64, order: usize) -> Grid {
         Grid {
             start,
             step,
             n: 0,
             steps,
+            order,
             kind: Kind::Uniform { every },
         }
     }
@@ -73,12 +76,14 @@ impl Grid {
         (start, stop, step, steps): (f64, f64, f64, u64),
         h: f64,
         output: Option<f64>,
+        order: usize,
     ) -> Grid {
         Grid {
             start,
             step,
             n: 0,
             steps,
+            order,
             kind: Kind::Adaptive(Adaptive {
                 controller,
                 t: start,
@@ -173,11 +178,15 @@ impl Grid {
                     h: self.step,
                     t_next: self.time_at(self.n + 1),
                     past: None,
+                    degree: Degree::at(self.n, self.order),
                 };
                 try_step(at)?;
                 at
             }
-            Kind::Adaptive(a) => a.advance(self.n, self.start, &mut try_step)?,
+            Kind::Adaptive(a) => {
+                let degree = Degree::at(self.n, self.order);
+                a.advance((self.n, degree), self.start, &mut try_step)?
+            }
         };
         self.n += 1;
         Ok(at)
@@ -187,7 +196,7 @@ impl Grid {
 impl Adaptive {
     fn advance(
         &mut self,
-        n: u64,
+        (n, degree): (u64, Degree),
         start: f64,
         try_step: &mut impl FnMut(StepAt) -> Result<Option<f64>, MasterError>,
     ) -> Result<StepAt, MasterError> {
@@ -224,6 +233,7 @@ impl Adaptive {
                 h,
                 t_next: if clipped { target } else { self.t + h },
                 past: Some(self.past),
+                degree,
             };
             let error = try_step(at)?.expect("the predictor/corrector step estimates its error");
             let (next, accepted) = self.controller.next(h, error);
