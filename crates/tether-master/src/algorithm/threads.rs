@@ -21,8 +21,8 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
+use crate::algorithm::runs::{PerturbedRuns, Sequential};
 use crate::polynomial::Taylor;
-use crate::runs::{PerturbedRuns, Sequential};
 use crate::slave::Slave;
 use crate::spec::InstanceSpec;
 use crate::stats::{InstanceCounters, RunStats};

@@ -11,8 +11,8 @@
 #[cfg(test)]
 use nalgebra::{DMatrix, DVector};
 
-use crate::sparse_lu::{Singular, SparseLu};
-use crate::touched::Touched;
+use crate::coupling::touched::Touched;
+use crate::linalg::sparse_lu::{Singular, SparseLu};
 use crate::MasterError;
 
 /// The interface Jacobians ∂g/∂u of every level a method evaluates
@@ -246,7 +246,7 @@ impl Solver {
     /// (position, velocity and acceleration rows have very different
     /// magnitudes), then the 1-norm condition number of the scaled matrix is
     /// taken from its inverse (dense path) or estimated from its LU factors
-    /// (sparse path, [`crate::sparse_lu`]). A condition above `limit` or an
+    /// (sparse path, [`crate::linalg::sparse_lu`]). A condition above `limit` or an
     /// exactly singular matrix is an error naming the time and the level.
     pub fn solve(
         &mut self,

@@ -7,18 +7,18 @@ use std::time::Instant;
 
 mod tune;
 
-use crate::explicit::Explicit;
-use crate::feedthrough::Feedthrough;
+use crate::algorithm::explicit::Explicit;
+use crate::algorithm::predictor_corrector::PredictorCorrector;
+use crate::algorithm::signals::Signals;
+use crate::algorithm::threads;
+use crate::build::feedthrough::Feedthrough;
+use crate::build::system::{MacroStep, StepAt, System};
+use crate::coupling::rows::RowLevel;
 use crate::observer::{Observer, Sample};
-use crate::predictor_corrector::PredictorCorrector;
-use crate::rows::RowLevel;
-use crate::signals::Signals;
 use crate::slave::Run;
 use crate::spec::{CheckRollback, SystemSpec};
 use crate::stats::{AdaptiveStats, Lap, RunStats, Termination};
 use crate::step_control::Controller;
-use crate::system::{MacroStep, StepAt, System};
-use crate::threads;
 use crate::{Experiment, MasterError, Method};
 
 /// A coupled system, ready to run.

@@ -4,6 +4,10 @@
 //! only reads and checks the file's own consistency; names of FMU variables are
 //! checked against the FMUs when the [`crate::Simulation`] is built.
 
+mod arrays;
+pub(crate) mod names;
+pub(crate) mod overrides;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -117,7 +121,7 @@ impl OutputSpec {
         }
         for pattern in &self.variables {
             if !columns.iter().any(|c| matches_pattern(pattern, c)) {
-                let hint = crate::names::suggest(pattern, columns.iter().map(String::as_str));
+                let hint = crate::spec::names::suggest(pattern, columns.iter().map(String::as_str));
                 return Err(MasterError::InvalidOutput(format!(
                     "output variable pattern '{pattern}' matches no column{hint}"
                 )));
@@ -554,10 +558,10 @@ impl SystemSpec {
             path: PathBuf::from("<text>"),
             reason: reason.replace('\n', " ").trim().to_string(),
         };
-        // Array blocks (`count = N`) are expanded first (crate::arrays).
+        // Array blocks (`count = N`) are expanded first (crate::spec::arrays).
         if let Ok(mut table) = text.parse::<toml::Table>() {
-            if crate::arrays::has_arrays(&table) {
-                crate::arrays::expand(&mut table).map_err(error)?;
+            if crate::spec::arrays::has_arrays(&table) {
+                crate::spec::arrays::expand(&mut table).map_err(error)?;
                 return SystemSpec::deserialize(table).map_err(|e| error(e.to_string()));
             }
         }
