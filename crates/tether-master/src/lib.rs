@@ -19,42 +19,28 @@
 //!
 //! The algorithm as implemented is described in `docs/algorithm.md`.
 
-mod arrays;
+mod algorithm;
+mod build;
 mod coupling;
 mod error;
-mod error_estimate;
-mod explicit;
 pub mod expr;
-mod feedthrough;
-mod jacobian_reuse;
-mod joints;
+mod linalg;
 mod method;
-mod names;
 mod observer;
-mod overrides;
 pub mod polynomial;
-mod predictor_corrector;
-mod resolve;
-mod rows;
-mod runs;
-mod signals;
 mod simulation;
 mod slave;
-mod solve;
-mod sparse_lu;
 pub mod spec;
 mod start;
 mod stats;
 mod step_control;
-mod system;
-mod threads;
-mod touched;
 
 pub use error::MasterError;
 pub use method::Method;
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
-pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::{MasterState, Simulation, SystemState};
+pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};
+pub use spec::Parallel;
 pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
     Experiment, InitialMultiplier, InstanceSpec, JacobianMode, JointInitial, JointSpec, OutputSpec,
@@ -62,13 +48,13 @@ pub use spec::{
 };
 pub use start::apply_start_value;
 pub use stats::{
-    AdaptiveStats, InstanceCounters, PhaseTimes, RunStats, Termination, SUMMARY_SCHEMA,
+    AdaptiveStats, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, Termination,
+    SUMMARY_SCHEMA,
 };
 pub use step_control::StepControl;
-pub use threads::{Parallel, ParallelInfo};
 
 /// Timings for the benchmarks (not a stable interface).
 #[doc(hidden)]
 pub mod bench_hooks {
-    pub use crate::solve::solve_times;
+    pub use crate::linalg::solve::solve_times;
 }

@@ -4,7 +4,7 @@ use tether_fmi::{
     BaseType, Causality, FmuInstance, ModelDescription, ScalarVariable, Variability, VariableKind,
 };
 
-use crate::names::describe;
+use crate::spec::names::describe;
 use crate::spec::StartValue;
 use crate::MasterError;
 

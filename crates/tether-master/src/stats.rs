@@ -456,3 +456,22 @@ impl Serialize for RunStats {
         .serialize(s)
     }
 }
+
+/// What the parallel strategy did in a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ParallelInfo {
+    /// Worker threads used (0: the runs stayed on the main thread).
+    pub workers: usize,
+    /// Measured cost of one hand-off: serialising the states, waking the
+    /// worker, deserialising, waking the main thread ("auto" only; zero when
+    /// the run costs alone ruled the workers out and none was started).
+    pub handoff: Duration,
+    /// Predicted time of one step's perturbed runs, sequential.
+    pub sequential: Duration,
+    /// Predicted time of the same runs in parallel, hand-off included.
+    pub parallel: Duration,
+    /// "auto": shortest measured perturbed-run phase of the sequential steps.
+    pub trial_sequential: Duration,
+    /// "auto": shortest measured perturbed-run phase of the parallel trial steps.
+    pub trial_parallel: Duration,
+}

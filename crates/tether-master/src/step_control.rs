@@ -1,7 +1,7 @@
 //! Adaptive macro steps (`[step_control]`, beyond the paper): the settings and
 //! the PI step-size controller (Hairer & Wanner, Solving ODEs II, Sect. IV.2;
 //! Gustafsson's PI form). The error norm it is fed comes from
-//! [`crate::error_estimate`].
+//! [`crate::algorithm::error_estimate`].
 
 use serde::{Deserialize, Serialize};
 

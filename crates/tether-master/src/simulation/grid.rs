@@ -4,9 +4,9 @@
 //! with a given try of the method and reports the step it took, as
 //! libcosim's `algorithm::do_step` does.
 
+use crate::build::system::{Degree, StepAt};
 use crate::stats::AdaptiveStats;
 use crate::step_control::Controller;
-use crate::system::{Degree, StepAt};
 use crate::MasterError;
 
 /// Where the run is in time, and how it steps.

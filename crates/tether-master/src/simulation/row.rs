@@ -2,8 +2,8 @@
 //! columns the observers receive (`[output] variables`), and the last
 //! accepted point held back when it is off the output grid.
 
+use crate::build::system::System;
 use crate::observer::{Observer, Sample};
-use crate::system::System;
 use crate::MasterError;
 
 /// The values of the current point and what is recorded of them.

@@ -6,7 +6,7 @@
 //! bit (tests/master_state.rs).
 
 use super::{grid::Grid, health::Health, Simulation};
-use crate::system::MethodState;
+use crate::build::system::MethodState;
 use crate::MasterError;
 
 /// The master's own state at an accepted point ([`Simulation::save_master`]).

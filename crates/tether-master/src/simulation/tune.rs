@@ -4,7 +4,7 @@
 use tether_fmi::BaseType;
 
 use super::Simulation;
-use crate::names::find_instance;
+use crate::spec::names::find_instance;
 use crate::spec::StartValue;
 use crate::start::set_between_steps;
 use crate::MasterError;

@@ -2,13 +2,13 @@
 //! coupling rows and unknowns, the unknowns' history, which instances each
 //! unknown drives — and [`MacroStep`], a coupling method's step on it.
 
+use crate::coupling::touched::Touched;
 use crate::coupling::Coupling;
 use crate::polynomial::{Past, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, InitialMultiplier, SystemSpec};
 use crate::stats::{Lap, RunStats};
 use crate::step_control::StepControl;
-use crate::touched::Touched;
 use crate::{MasterError, Method};
 
 /// The instances and their coupling, as every method sees them.

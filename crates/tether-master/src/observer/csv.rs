@@ -1,4 +1,6 @@
-//! Observers see every accepted macro point; recording results is one of them.
+//! The CSV recorder: [`CsvRecorder`] formatting on the caller's thread or on a
+//! writer thread, and [`Emergency`], which ends a background recording from
+//! outside the run.
 
 use std::collections::VecDeque;
 use std::io::Write;
@@ -6,31 +8,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
-/// The values at one accepted macro point, in column order.
-#[derive(Debug, Clone, Copy)]
-pub struct Sample<'a> {
-    /// Macro point index n (time = start + n·H).
-    pub step: u64,
-    /// T_n.
-    pub time: f64,
-    /// All values after `time`, in the order of [`crate::Simulation::columns`].
-    pub values: &'a [f64],
-}
-
-/// Receives the results of a run as they are produced.
-pub trait Observer {
-    /// Called once before the first sample with the column names (without `time`).
-    fn start(&mut self, columns: &[String]) -> std::io::Result<()>;
-    /// Called at T_0 and after every accepted macro step.
-    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()>;
-    /// Called once at the end; `failure` is the error that stopped the run, if any.
-    fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()>;
-    /// Asked before every macro step: `Some(reason)` stops the run there with
-    /// [`crate::MasterError::Interrupted`] (results so far are kept). Default: never.
-    fn interrupt(&mut self) -> Option<String> {
-        None
-    }
-}
+use crate::observer::{Observer, Sample};
 
 /// Writes CSV: a `time` column, then one column per value. Numbers are written
 /// in the shortest form that parses back to the same `f64` (through the `zmij`
@@ -586,50 +564,6 @@ impl Emergency {
                 .0;
         }
         true
-    }
-}
-
-/// Keeps every sample in memory (for library users and tests).
-#[derive(Debug, Default, Clone)]
-pub struct MemoryRecorder {
-    /// Column names after `time`.
-    pub columns: Vec<String>,
-    /// T_n of each sample.
-    pub times: Vec<f64>,
-    /// One row per sample.
-    pub rows: Vec<Vec<f64>>,
-    /// The failure that ended the run, if any.
-    pub failure: Option<String>,
-}
-
-impl MemoryRecorder {
-    /// Index of a column by name.
-    pub fn column(&self, name: &str) -> Option<usize> {
-        self.columns.iter().position(|c| c == name)
-    }
-
-    /// All values of one column.
-    pub fn series(&self, name: &str) -> Option<Vec<f64>> {
-        let i = self.column(name)?;
-        Some(self.rows.iter().map(|r| r[i]).collect())
-    }
-}
-
-impl Observer for MemoryRecorder {
-    fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
-        self.columns = columns.to_vec();
-        Ok(())
-    }
-
-    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
-        self.times.push(sample.time);
-        self.rows.push(sample.values.to_vec());
-        Ok(())
-    }
-
-    fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()> {
-        self.failure = failure.map(str::to_string);
-        Ok(())
     }
 }
 

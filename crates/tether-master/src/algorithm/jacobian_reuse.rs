@@ -5,7 +5,7 @@
 //! the reused Jacobian mispredicted is made again with a fresh one
 //! (docs/algorithm.md, "Jacobian reuse").
 
-use crate::solve::Jacobians;
+use crate::linalg::solve::Jacobians;
 
 /// A Jacobian predicts a correction well when on every row the actual change
 /// of g differs from the predicted one by at most this fraction of the larger

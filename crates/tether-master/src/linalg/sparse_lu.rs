@@ -1,5 +1,5 @@
 //! The sparse path of the interface solve: the row-scaled Jacobian in
-//! compressed columns on the pattern known at setup ([`crate::touched`]),
+//! compressed columns on the pattern known at setup ([`crate::coupling::touched`]),
 //! factorised by faer's sparse LU (fill-reducing column order computed once,
 //! partial pivoting every solve), and a 1-norm condition estimate from the
 //! factors (Hager/Higham, as LAPACK's `dlacn2`/`dgecon`) instead of the

@@ -1,10 +1,14 @@
 //! The coupling conditions as the master evaluates them: the unknowns (one per
 //! row), and the rows — linear constraints between outputs, joint conditions
 //! between marker ports, additional coupling variables and force-port rows.
-//! [`crate::resolve`] builds them from the system file.
+//! [`crate::build::resolve`] builds them from the system file.
 
-use crate::joints::Joint;
-use crate::rows::{Level, RowLevel, View};
+pub(crate) mod joints;
+pub(crate) mod rows;
+pub(crate) mod touched;
+
+use crate::coupling::joints::Joint;
+use crate::coupling::rows::{Level, RowLevel, View};
 use crate::spec::InitialMultiplier;
 
 /// A linear constraint with its multiplier.

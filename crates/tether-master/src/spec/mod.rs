@@ -4,13 +4,21 @@
 //! only reads and checks the file's own consistency; names of FMU variables are
 //! checked against the FMUs when the [`crate::Simulation`] is built.
 
+mod arrays;
+pub(crate) mod names;
+mod output;
+pub(crate) mod overrides;
+mod validate;
+
+pub use output::{matches_pattern, OutputSpec};
+
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
 use crate::step_control::StepControl;
-use crate::{MasterError, Method, Parallel};
+use crate::Method;
 
 /// A whole system file.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -57,101 +65,6 @@ pub struct SystemSpec {
     /// [`SystemSpec::from_file`]), named in its error messages.
     #[serde(skip)]
     pub source: Option<PathBuf>,
-}
-
-/// `x` without the last digits of rounding (`0.8999999999999999` is `0.9`),
-/// for messages: twelve significant digits.
-pub(crate) fn tidy(x: f64) -> f64 {
-    format!("{x:.11e}").parse().unwrap_or(x)
-}
-
-/// `[output]`: which points and which columns reach the observers (the
-/// results file). The run itself, its divergence checks and the summary's
-/// max |g| still see every macro point and every column.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct OutputSpec {
-    /// Record every `interval / step`-th macro point (a whole multiple of the
-    /// step), plus the last point of the run. Default: every macro point.
-    #[serde(default)]
-    pub interval: Option<f64>,
-    /// Column patterns: `*` matches any characters, everything else is taken
-    /// literally (`body.R[1,2]`, `link.*`). Default (empty): every column.
-    #[serde(default)]
-    pub variables: Vec<String>,
-}
-
-impl OutputSpec {
-    /// Every point and every column (an `[output]` that changes nothing).
-    pub fn is_default(&self) -> bool {
-        *self == OutputSpec::default()
-    }
-
-    /// The macro steps between two recorded points: `interval / step`, which
-    /// must be a whole number ≥ 1 (to a relative 1e-9).
-    pub fn every(&self, step: f64) -> Result<u64, MasterError> {
-        let Some(interval) = self.interval else {
-            return Ok(1);
-        };
-        let ratio = interval / step;
-        let whole = ratio.round();
-        if !interval.is_finite() || whole < 1.0 || (ratio - whole).abs() > 1e-9 * whole {
-            return Err(MasterError::InvalidParameter {
-                name: "output interval".into(),
-                value: interval,
-                expected: format!(
-                    "a whole multiple of the step H = {step} (the nearest is {}·H)",
-                    whole.max(1.0)
-                ),
-            });
-        }
-        Ok(whole as u64)
-    }
-
-    /// The indices of the `columns` the patterns select, in column order;
-    /// every column without patterns. A pattern that matches no column is an
-    /// error naming it.
-    pub fn select(&self, columns: &[String]) -> Result<Vec<usize>, MasterError> {
-        if self.variables.is_empty() {
-            return Ok((0..columns.len()).collect());
-        }
-        for pattern in &self.variables {
-            if !columns.iter().any(|c| matches_pattern(pattern, c)) {
-                let hint = crate::names::suggest(pattern, columns.iter().map(String::as_str));
-                return Err(MasterError::InvalidOutput(format!(
-                    "output variable pattern '{pattern}' matches no column{hint}"
-                )));
-            }
-        }
-        Ok((0..columns.len())
-            .filter(|&i| {
-                self.variables
-                    .iter()
-                    .any(|p| matches_pattern(p, &columns[i]))
-            })
-            .collect())
-    }
-}
-
-/// Whether `name` matches `pattern`: `*` matches any run of characters
-/// (also none), every other character only itself.
-pub fn matches_pattern(pattern: &str, name: &str) -> bool {
-    let mut parts = pattern.split('*');
-    let first = parts.next().unwrap_or("");
-    let Some(mut rest) = name.strip_prefix(first) else {
-        return false;
-    };
-    let parts: Vec<&str> = parts.collect();
-    let Some((last, middle)) = parts.split_last() else {
-        return rest.is_empty(); // no '*': the whole name
-    };
-    for part in middle {
-        match rest.find(part) {
-            Some(i) => rest = &rest[i + part.len()..],
-            None => return false,
-        }
-    }
-    rest.len() >= last.len() && rest.ends_with(last)
 }
 
 /// A signal connection: the receiving input takes `gain·value + offset` of
@@ -524,281 +437,6 @@ impl<'de> Deserialize<'de> for InitialMultiplier {
     }
 }
 
-impl SystemSpec {
-    /// Read a system file; relative FMU paths are resolved against its folder.
-    pub fn from_file(path: &Path) -> Result<SystemSpec, MasterError> {
-        let text = std::fs::read_to_string(path).map_err(|e| MasterError::SystemFile {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
-        let mut spec = SystemSpec::from_toml(&text).map_err(|e| match e {
-            MasterError::SystemFile { reason, .. } => MasterError::SystemFile {
-                path: path.to_path_buf(),
-                reason,
-            },
-            other => other,
-        })?;
-        spec.source = Some(path.to_path_buf());
-        let base = path.parent().unwrap_or(Path::new("."));
-        for inst in &mut spec.instances {
-            if inst.fmu.is_relative() {
-                inst.fmu = base.join(&inst.fmu);
-            }
-        }
-        Ok(spec)
-    }
-
-    /// Read a system description from TOML text (paths are left as written).
-    pub fn from_toml(text: &str) -> Result<SystemSpec, MasterError> {
-        let error = |reason: String| MasterError::SystemFile {
-            path: PathBuf::from("<text>"),
-            reason: reason.replace('\n', " ").trim().to_string(),
-        };
-        // Array blocks (`count = N`) are expanded first (crate::arrays).
-        if let Ok(mut table) = text.parse::<toml::Table>() {
-            if crate::arrays::has_arrays(&table) {
-                crate::arrays::expand(&mut table).map_err(error)?;
-                return SystemSpec::deserialize(table).map_err(|e| error(e.to_string()));
-            }
-        }
-        toml::from_str(text).map_err(|e| error(e.to_string()))
-    }
-
-    /// The file named in errors: [`source`](Self::source), else `<system>`.
-    fn source_name(&self) -> PathBuf {
-        self.source
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("<system>"))
-    }
-
-    /// Check what can be checked without the FMUs: times, settings, names.
-    pub fn validate(&self) -> Result<(), MasterError> {
-        let e = &self.experiment;
-        let param = |name: &str, value: f64, expected: &str| MasterError::InvalidParameter {
-            name: name.into(),
-            value,
-            expected: expected.into(),
-        };
-        if !e.start.is_finite() {
-            return Err(param("start", e.start, "a finite start time"));
-        }
-        if !e.step.is_finite() || e.step <= 0.0 {
-            return Err(param("step", e.step, "a finite macro-step size > 0"));
-        }
-        if !e.stop.is_finite() || e.stop <= e.start {
-            return Err(param(
-                "stop",
-                e.stop,
-                "a finite stop time after the start time",
-            ));
-        }
-        if let Some(tol) = e.tolerance {
-            if !tol.is_finite() || tol <= 0.0 {
-                return Err(param("tolerance", tol, "a finite tolerance > 0"));
-            }
-        }
-        self.method.validate()?;
-        self.output.every(e.step)?;
-        let c = &self.coupling;
-        if c.order > 2 {
-            return Err(param(
-                "order",
-                c.order as f64,
-                "a polynomial degree k of 0, 1 or 2",
-            ));
-        }
-        if !c.epsilon.is_finite() || c.epsilon <= 0.0 || c.epsilon >= 1.0 {
-            return Err(param("epsilon", c.epsilon, "a finite increment in (0, 1)"));
-        }
-        if !c.max_condition.is_finite() || c.max_condition <= 1.0 {
-            return Err(param(
-                "max_condition",
-                c.max_condition,
-                "a finite number > 1",
-            ));
-        }
-        if !c.divergence_factor.is_finite() || c.divergence_factor <= 1.0 {
-            return Err(param(
-                "divergence_factor",
-                c.divergence_factor,
-                "a finite number > 1",
-            ));
-        }
-        if !c.residual_warning.is_finite() || c.residual_warning <= 0.0 {
-            return Err(param(
-                "residual_warning",
-                c.residual_warning,
-                "a finite number > 0",
-            ));
-        }
-        for i in &self.instances {
-            if let Some(t) = i.call_timeout.filter(|t| !t.is_finite() || *t <= 0.0) {
-                return Err(param(
-                    &format!("{}.call_timeout", i.name),
-                    t,
-                    "a finite time in seconds > 0",
-                ));
-            }
-        }
-        if c.iterations == 0 || c.iterations > 1000 {
-            return Err(param(
-                "iterations",
-                c.iterations as f64,
-                "a number of corrections per step from 1 to 1000",
-            ));
-        }
-        if !c.iteration_tol.is_finite() || c.iteration_tol <= 0.0 {
-            return Err(param(
-                "iteration_tol",
-                c.iteration_tol,
-                "a finite number > 0",
-            ));
-        }
-        if c.jacobian_max_age == 0 {
-            return Err(param("jacobian_max_age", 0.0, "at least 1 step"));
-        }
-        if matches!(self.method, Method::Explicit { .. }) && c.order != 0 {
-            return Err(param(
-                "order",
-                c.order as f64,
-                "0: the explicit method holds the multipliers constant over a step",
-            ));
-        }
-        if let Some(control) = &self.step_control {
-            if matches!(self.method, Method::Explicit { .. }) {
-                return Err(param(
-                    "step_control",
-                    control.rtol,
-                    "the predictor/corrector methods (baumgarte, weighted): \
-                     the explicit method has no error estimate",
-                ));
-            }
-            control.limits(e.start, e.stop, e.step)?;
-        }
-        if self.instances.is_empty() {
-            return Err(MasterError::SystemFile {
-                path: self.source_name(),
-                reason: "no [[instance]] given".into(),
-            });
-        }
-        let mut seen = std::collections::HashSet::new();
-        for name in self
-            .instances
-            .iter()
-            .map(|i| &i.name)
-            .chain(self.constraints.iter().map(|c| &c.name))
-            .chain(self.joints.iter().map(|j| &j.name))
-            .chain(self.coupling_variables.iter().map(|v| &v.name))
-        {
-            let valid = name
-                .chars()
-                .next()
-                .is_some_and(|c| c.is_alphabetic() || c == '_')
-                && name.chars().all(|c| c.is_alphanumeric() || c == '_');
-            if !valid {
-                return Err(MasterError::SystemFile {
-                    path: self.source_name(),
-                    reason: format!(
-                        "name '{name}' must start with a letter and contain only letters, digits and '_'"
-                    ),
-                });
-            }
-            if !seen.insert(name.clone()) {
-                return Err(MasterError::SystemFile {
-                    path: self.source_name(),
-                    reason: format!("name '{name}' is used twice"),
-                });
-            }
-        }
-        for c in &self.connections {
-            for (what, v) in [("gain", c.gain), ("offset", c.offset)] {
-                if let Some(v) = v.filter(|v| !v.is_finite()) {
-                    return Err(param(
-                        &format!("{what} of the connection to {}", c.to),
-                        v,
-                        "a finite number",
-                    ));
-                }
-            }
-        }
-        for joint in &self.joints {
-            for (side, v) in [
-                ("axis_i", joint.axis_i),
-                ("ref_i", joint.ref_i),
-                ("axis_j", joint.axis_j),
-                ("ref_j", joint.ref_j),
-                ("offset_i", joint.offset_i),
-                ("offset_j", joint.offset_j),
-            ] {
-                if let Some(v) = v {
-                    if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
-                        return Err(param(
-                            &format!("{}.{side}", joint.name),
-                            *bad,
-                            "finite vector components",
-                        ));
-                    }
-                }
-            }
-            if let JointInitial::Values(values) = &joint.initial {
-                if let Some(bad) = values.iter().find(|x| !x.is_finite()) {
-                    return Err(param(
-                        &format!("{}.initial", joint.name),
-                        *bad,
-                        "finite multipliers",
-                    ));
-                }
-            }
-        }
-        let initials = self
-            .constraints
-            .iter()
-            .map(|c| (&c.name, c.initial))
-            .chain(self.coupling_variables.iter().map(|c| (&c.name, c.initial)));
-        for (name, initial) in initials {
-            if let InitialMultiplier::Value(v) = initial {
-                if !v.is_finite() {
-                    return Err(param(&format!("{name}.initial"), v, "a finite number"));
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// Number of macro steps: the stop time rounded to the grid `start + n·step`.
-    /// The time the run ends at: `start + macro_steps()·step`, which differs
-    /// from `stop` when `stop` is not on the macro grid.
-    pub fn end_time(&self) -> f64 {
-        let e = &self.experiment;
-        if self.step_control.is_some() {
-            return e.stop;
-        }
-        e.start + self.macro_steps() as f64 * e.step
-    }
-
-    /// A warning when `stop` is not on the macro grid (beyond a relative 1e-9
-    /// of a step): the run ends at the nearest grid point instead.
-    pub fn grid_warning(&self) -> Option<String> {
-        let e = &self.experiment;
-        if self.step_control.is_some() {
-            return None;
-        }
-        let end = self.end_time();
-        ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
-            format!(
-                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {}",
-                e.stop, e.start, e.step, tidy(end)
-            )
-        })
-    }
-
-    pub fn macro_steps(&self) -> u64 {
-        let e = &self.experiment;
-        let n = ((e.stop - e.start) / e.step).round();
-        (n.max(1.0)) as u64
-    }
-}
-
 /// `[coupling] jacobian`: when the perturbed runs are made.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -989,5 +627,30 @@ mod tests {
         let text = OSC.replace("name = \"mass2\"", "name = \"mass1\"");
         assert!(SystemSpec::from_toml(&text).unwrap().validate().is_err());
         assert!(SystemSpec::from_toml("[experiment]\nstop = 1\nstep = 0.1\nbogus = 1\n").is_err());
+    }
+}
+
+/// Whether perturbed runs go to other threads (`[coupling] parallel`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Parallel {
+    /// Measure during the first macro steps, then parallel only if it pays.
+    #[default]
+    Auto,
+    /// Always, for every instance whose FMU allows it.
+    On,
+    /// Never: every run on the main thread.
+    Off,
+}
+
+impl std::str::FromStr for Parallel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(Parallel::Auto),
+            "on" => Ok(Parallel::On),
+            "off" => Ok(Parallel::Off),
+            _ => Err(format!("'{s}' is not one of auto, on, off")),
+        }
     }
 }

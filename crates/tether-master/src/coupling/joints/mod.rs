@@ -25,7 +25,7 @@ mod universal;
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::rows::{RowLevel, View};
+use crate::coupling::rows::{RowLevel, View};
 
 /// The joint kinds a system file may name.
 pub(crate) const KINDS: [&str; 10] = [

@@ -1,7 +1,7 @@
 //! How the perturbed runs of a macro step are executed (Step 3 of
 //! docs/algorithm.md): one strategy behind [`PerturbedRuns`], chosen at setup
 //! from `[coupling] parallel` — all on the calling thread ([`Sequential`]), or
-//! shared with worker threads ([`crate::threads::Threads`]).
+//! shared with worker threads ([`crate::algorithm::threads::Threads`]).
 
 use crate::polynomial::Taylor;
 use crate::slave::Slave;

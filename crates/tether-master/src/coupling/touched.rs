@@ -9,8 +9,8 @@
 //! O(non-zeros), not O(N²). Every other row would evaluate to exactly its
 //! unperturbed value, so its entry is an exact zero either way.
 
+use crate::coupling::rows::{RowLevel, View};
 use crate::coupling::{Coupling, Row};
-use crate::rows::{RowLevel, View};
 
 /// The rows (and joints) each unknown's perturbation touches, compressed by
 /// column; the rows of a column are sorted.

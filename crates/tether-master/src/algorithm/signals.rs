@@ -13,11 +13,11 @@
 
 use tether_fmi::{BaseType, Causality, ScalarVariable};
 
-use crate::names::{describe, find_instance};
+use crate::build::system::StepAt;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
+use crate::spec::names::{describe, find_instance};
 use crate::spec::{ConnectionSpec, SignalScheme, SystemSpec};
-use crate::system::StepAt;
 use crate::MasterError;
 use tether_fmi::Inputs;
 

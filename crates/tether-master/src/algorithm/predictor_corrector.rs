@@ -3,18 +3,18 @@
 //! Method 1 (Baumgarte, eqs. 65–68) and Method 2 (weighted multipliers,
 //! eqs. 71–76) differ only in the solve.
 
-use crate::error_estimate::ErrorEstimate;
-use crate::jacobian_reuse::Reuse;
+use crate::algorithm::error_estimate::ErrorEstimate;
+use crate::algorithm::jacobian_reuse::Reuse;
+use crate::algorithm::runs::PerturbedRuns;
+use crate::build::system::{MacroStep, MethodState, StepAt, System};
+use crate::coupling::rows::{Column, RowLevel, View};
+use crate::linalg::solve::{Jacobians, Solver};
 use crate::polynomial::{extrapolate, interpolate, Taylor};
-use crate::rows::{Column, RowLevel, View};
-use crate::runs::PerturbedRuns;
 use crate::slave::{Run, Slave};
-use crate::solve::{Jacobians, Solver};
 use crate::spec::CouplingSettings;
 use crate::spec::JacobianMode;
 use crate::stats::{Lap, RunStats};
 use crate::step_control::StepControl;
-use crate::system::{MacroStep, MethodState, StepAt, System};
 use crate::{MasterError, Method};
 
 /// The predictor/corrector method with the buffers its steps reuse (sized

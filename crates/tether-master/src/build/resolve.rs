@@ -5,12 +5,12 @@
 use nalgebra::Vector3;
 use tether_fmi::{BaseType, Causality};
 
+use crate::coupling::joints::{self, Condition, Frames, Joint, Side, MARKER_OUTPUTS};
+use crate::coupling::rows::Level;
 use crate::coupling::{Constraint, Coupling, Port, Row, Unknown, Variable};
 use crate::expr::LinearExpr;
-use crate::joints::{self, Condition, Frames, Joint, Side, MARKER_OUTPUTS};
-use crate::names::{describe, find_instance};
-use crate::rows::Level;
 use crate::slave::{CoupledOutput, Slave};
+use crate::spec::names::{describe, find_instance};
 use crate::spec::{ConstraintSpec, InitialMultiplier, JointInitial, JointSpec, SystemSpec};
 use crate::{MasterError, Method};
 

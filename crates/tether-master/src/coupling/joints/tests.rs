@@ -5,7 +5,7 @@
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use super::*;
-use crate::rows::RowLevel;
+use crate::coupling::rows::RowLevel;
 
 /// A rigid motion with constant angular acceleration about a fixed axis and a
 /// quadratic path: r(t), R(t) and their derivatives in closed form.

@@ -19,58 +19,12 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use serde::{Deserialize, Serialize};
-
+use crate::algorithm::runs::{PerturbedRuns, Sequential};
 use crate::polynomial::Taylor;
-use crate::runs::{PerturbedRuns, Sequential};
 use crate::slave::Slave;
-use crate::spec::InstanceSpec;
-use crate::stats::{InstanceCounters, RunStats};
+use crate::spec::{InstanceSpec, Parallel};
+use crate::stats::{InstanceCounters, ParallelInfo, RunStats};
 use crate::MasterError;
-
-/// Whether perturbed runs go to other threads (`[coupling] parallel`).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Parallel {
-    /// Measure during the first macro steps, then parallel only if it pays.
-    #[default]
-    Auto,
-    /// Always, for every instance whose FMU allows it.
-    On,
-    /// Never: every run on the main thread.
-    Off,
-}
-
-impl std::str::FromStr for Parallel {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "auto" => Ok(Parallel::Auto),
-            "on" => Ok(Parallel::On),
-            "off" => Ok(Parallel::Off),
-            _ => Err(format!("'{s}' is not one of auto, on, off")),
-        }
-    }
-}
-
-/// What the parallel strategy did in a run.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct ParallelInfo {
-    /// Worker threads used (0: the runs stayed on the main thread).
-    pub workers: usize,
-    /// Measured cost of one hand-off: serialising the states, waking the
-    /// worker, deserialising, waking the main thread ("auto" only; zero when
-    /// the run costs alone ruled the workers out and none was started).
-    pub handoff: Duration,
-    /// Predicted time of one step's perturbed runs, sequential.
-    pub sequential: Duration,
-    /// Predicted time of the same runs in parallel, hand-off included.
-    pub parallel: Duration,
-    /// "auto": shortest measured perturbed-run phase of the sequential steps.
-    pub trial_sequential: Duration,
-    /// "auto": shortest measured perturbed-run phase of the parallel trial steps.
-    pub trial_parallel: Duration,
-}
 
 /// Macro steps whose runs "auto" makes sequentially (and times) first.
 const CALIBRATION_STEPS: u32 = 3;

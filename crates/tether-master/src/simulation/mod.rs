@@ -13,18 +13,18 @@ mod tune;
 
 pub use state::{MasterState, SystemState};
 
-use crate::explicit::Explicit;
-use crate::feedthrough::Feedthrough;
+use crate::algorithm::explicit::Explicit;
+use crate::algorithm::predictor_corrector::PredictorCorrector;
+use crate::algorithm::signals::Signals;
+use crate::algorithm::threads;
+use crate::build::feedthrough::Feedthrough;
+use crate::build::system::{MacroStep, StepAt, System};
+use crate::coupling::rows::RowLevel;
 use crate::observer::Observer;
-use crate::predictor_corrector::PredictorCorrector;
-use crate::rows::RowLevel;
-use crate::signals::Signals;
 use crate::slave::Run;
 use crate::spec::{CheckRollback, SystemSpec};
 use crate::stats::{Lap, RunStats, Termination};
 use crate::step_control::Controller;
-use crate::system::{MacroStep, StepAt, System};
-use crate::threads;
 use crate::{MasterError, Method};
 use grid::Grid;
 use health::Health;

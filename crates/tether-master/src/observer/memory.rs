@@ -1,0 +1,47 @@
+//! [`MemoryRecorder`]: every sample kept in memory.
+
+use crate::observer::{Observer, Sample};
+
+/// Keeps every sample in memory (for library users and tests).
+#[derive(Debug, Default, Clone)]
+pub struct MemoryRecorder {
+    /// Column names after `time`.
+    pub columns: Vec<String>,
+    /// T_n of each sample.
+    pub times: Vec<f64>,
+    /// One row per sample.
+    pub rows: Vec<Vec<f64>>,
+    /// The failure that ended the run, if any.
+    pub failure: Option<String>,
+}
+
+impl MemoryRecorder {
+    /// Index of a column by name.
+    pub fn column(&self, name: &str) -> Option<usize> {
+        self.columns.iter().position(|c| c == name)
+    }
+
+    /// All values of one column.
+    pub fn series(&self, name: &str) -> Option<Vec<f64>> {
+        let i = self.column(name)?;
+        Some(self.rows.iter().map(|r| r[i]).collect())
+    }
+}
+
+impl Observer for MemoryRecorder {
+    fn start(&mut self, columns: &[String]) -> std::io::Result<()> {
+        self.columns = columns.to_vec();
+        Ok(())
+    }
+
+    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
+        self.times.push(sample.time);
+        self.rows.push(sample.values.to_vec());
+        Ok(())
+    }
+
+    fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()> {
+        self.failure = failure.map(str::to_string);
+        Ok(())
+    }
+}

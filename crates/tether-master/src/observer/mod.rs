@@ -1,0 +1,33 @@
+//! Observers see every accepted macro point; recording results is one of them.
+
+mod csv;
+mod memory;
+
+pub use csv::{CsvRecorder, Emergency, FLUSH_INTERVAL};
+pub use memory::MemoryRecorder;
+
+/// The values at one accepted macro point, in column order.
+#[derive(Debug, Clone, Copy)]
+pub struct Sample<'a> {
+    /// Macro point index n (time = start + n·H).
+    pub step: u64,
+    /// T_n.
+    pub time: f64,
+    /// All values after `time`, in the order of [`crate::Simulation::columns`].
+    pub values: &'a [f64],
+}
+
+/// Receives the results of a run as they are produced.
+pub trait Observer {
+    /// Called once before the first sample with the column names (without `time`).
+    fn start(&mut self, columns: &[String]) -> std::io::Result<()>;
+    /// Called at T_0 and after every accepted macro step.
+    fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()>;
+    /// Called once at the end; `failure` is the error that stopped the run, if any.
+    fn finish(&mut self, failure: Option<&str>) -> std::io::Result<()>;
+    /// Asked before every macro step: `Some(reason)` stops the run there with
+    /// [`crate::MasterError::Interrupted`] (results so far are kept). Default: never.
+    fn interrupt(&mut self) -> Option<String> {
+        None
+    }
+}

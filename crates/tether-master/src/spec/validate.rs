@@ -1,0 +1,290 @@
+//! Reading a system file and checking its own consistency, and the macro grid
+//! it asks for.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::spec::{InitialMultiplier, JointInitial, SystemSpec};
+use crate::{MasterError, Method};
+
+impl SystemSpec {
+    /// Read a system file; relative FMU paths are resolved against its folder.
+    pub fn from_file(path: &Path) -> Result<SystemSpec, MasterError> {
+        let text = std::fs::read_to_string(path).map_err(|e| MasterError::SystemFile {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+        let mut spec = SystemSpec::from_toml(&text).map_err(|e| match e {
+            MasterError::SystemFile { reason, .. } => MasterError::SystemFile {
+                path: path.to_path_buf(),
+                reason,
+            },
+            other => other,
+        })?;
+        spec.source = Some(path.to_path_buf());
+        let base = path.parent().unwrap_or(Path::new("."));
+        for inst in &mut spec.instances {
+            if inst.fmu.is_relative() {
+                inst.fmu = base.join(&inst.fmu);
+            }
+        }
+        Ok(spec)
+    }
+
+    /// Read a system description from TOML text (paths are left as written).
+    pub fn from_toml(text: &str) -> Result<SystemSpec, MasterError> {
+        let error = |reason: String| MasterError::SystemFile {
+            path: PathBuf::from("<text>"),
+            reason: reason.replace('\n', " ").trim().to_string(),
+        };
+        // Array blocks (`count = N`) are expanded first (crate::spec::arrays).
+        if let Ok(mut table) = text.parse::<toml::Table>() {
+            if crate::spec::arrays::has_arrays(&table) {
+                crate::spec::arrays::expand(&mut table).map_err(error)?;
+                return SystemSpec::deserialize(table).map_err(|e| error(e.to_string()));
+            }
+        }
+        toml::from_str(text).map_err(|e| error(e.to_string()))
+    }
+
+    /// The file named in errors: [`source`](Self::source), else `<system>`.
+    fn source_name(&self) -> PathBuf {
+        self.source
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("<system>"))
+    }
+
+    /// Check what can be checked without the FMUs: times, settings, names.
+    pub fn validate(&self) -> Result<(), MasterError> {
+        let e = &self.experiment;
+        let param = |name: &str, value: f64, expected: &str| MasterError::InvalidParameter {
+            name: name.into(),
+            value,
+            expected: expected.into(),
+        };
+        if !e.start.is_finite() {
+            return Err(param("start", e.start, "a finite start time"));
+        }
+        if !e.step.is_finite() || e.step <= 0.0 {
+            return Err(param("step", e.step, "a finite macro-step size > 0"));
+        }
+        if !e.stop.is_finite() || e.stop <= e.start {
+            return Err(param(
+                "stop",
+                e.stop,
+                "a finite stop time after the start time",
+            ));
+        }
+        if let Some(tol) = e.tolerance {
+            if !tol.is_finite() || tol <= 0.0 {
+                return Err(param("tolerance", tol, "a finite tolerance > 0"));
+            }
+        }
+        self.method.validate()?;
+        self.output.every(e.step)?;
+        let c = &self.coupling;
+        if c.order > 2 {
+            return Err(param(
+                "order",
+                c.order as f64,
+                "a polynomial degree k of 0, 1 or 2",
+            ));
+        }
+        if !c.epsilon.is_finite() || c.epsilon <= 0.0 || c.epsilon >= 1.0 {
+            return Err(param("epsilon", c.epsilon, "a finite increment in (0, 1)"));
+        }
+        if !c.max_condition.is_finite() || c.max_condition <= 1.0 {
+            return Err(param(
+                "max_condition",
+                c.max_condition,
+                "a finite number > 1",
+            ));
+        }
+        if !c.divergence_factor.is_finite() || c.divergence_factor <= 1.0 {
+            return Err(param(
+                "divergence_factor",
+                c.divergence_factor,
+                "a finite number > 1",
+            ));
+        }
+        if !c.residual_warning.is_finite() || c.residual_warning <= 0.0 {
+            return Err(param(
+                "residual_warning",
+                c.residual_warning,
+                "a finite number > 0",
+            ));
+        }
+        for i in &self.instances {
+            if let Some(t) = i.call_timeout.filter(|t| !t.is_finite() || *t <= 0.0) {
+                return Err(param(
+                    &format!("{}.call_timeout", i.name),
+                    t,
+                    "a finite time in seconds > 0",
+                ));
+            }
+        }
+        if c.iterations == 0 || c.iterations > 1000 {
+            return Err(param(
+                "iterations",
+                c.iterations as f64,
+                "a number of corrections per step from 1 to 1000",
+            ));
+        }
+        if !c.iteration_tol.is_finite() || c.iteration_tol <= 0.0 {
+            return Err(param(
+                "iteration_tol",
+                c.iteration_tol,
+                "a finite number > 0",
+            ));
+        }
+        if c.jacobian_max_age == 0 {
+            return Err(param("jacobian_max_age", 0.0, "at least 1 step"));
+        }
+        if matches!(self.method, Method::Explicit { .. }) && c.order != 0 {
+            return Err(param(
+                "order",
+                c.order as f64,
+                "0: the explicit method holds the multipliers constant over a step",
+            ));
+        }
+        if let Some(control) = &self.step_control {
+            if matches!(self.method, Method::Explicit { .. }) {
+                return Err(param(
+                    "step_control",
+                    control.rtol,
+                    "the predictor/corrector methods (baumgarte, weighted): \
+                     the explicit method has no error estimate",
+                ));
+            }
+            control.limits(e.start, e.stop, e.step)?;
+        }
+        if self.instances.is_empty() {
+            return Err(MasterError::SystemFile {
+                path: self.source_name(),
+                reason: "no [[instance]] given".into(),
+            });
+        }
+        let mut seen = std::collections::HashSet::new();
+        for name in self
+            .instances
+            .iter()
+            .map(|i| &i.name)
+            .chain(self.constraints.iter().map(|c| &c.name))
+            .chain(self.joints.iter().map(|j| &j.name))
+            .chain(self.coupling_variables.iter().map(|v| &v.name))
+        {
+            let valid = name
+                .chars()
+                .next()
+                .is_some_and(|c| c.is_alphabetic() || c == '_')
+                && name.chars().all(|c| c.is_alphanumeric() || c == '_');
+            if !valid {
+                return Err(MasterError::SystemFile {
+                    path: self.source_name(),
+                    reason: format!(
+                        "name '{name}' must start with a letter and contain only letters, digits and '_'"
+                    ),
+                });
+            }
+            if !seen.insert(name.clone()) {
+                return Err(MasterError::SystemFile {
+                    path: self.source_name(),
+                    reason: format!("name '{name}' is used twice"),
+                });
+            }
+        }
+        for c in &self.connections {
+            for (what, v) in [("gain", c.gain), ("offset", c.offset)] {
+                if let Some(v) = v.filter(|v| !v.is_finite()) {
+                    return Err(param(
+                        &format!("{what} of the connection to {}", c.to),
+                        v,
+                        "a finite number",
+                    ));
+                }
+            }
+        }
+        for joint in &self.joints {
+            for (side, v) in [
+                ("axis_i", joint.axis_i),
+                ("ref_i", joint.ref_i),
+                ("axis_j", joint.axis_j),
+                ("ref_j", joint.ref_j),
+                ("offset_i", joint.offset_i),
+                ("offset_j", joint.offset_j),
+            ] {
+                if let Some(v) = v {
+                    if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+                        return Err(param(
+                            &format!("{}.{side}", joint.name),
+                            *bad,
+                            "finite vector components",
+                        ));
+                    }
+                }
+            }
+            if let JointInitial::Values(values) = &joint.initial {
+                if let Some(bad) = values.iter().find(|x| !x.is_finite()) {
+                    return Err(param(
+                        &format!("{}.initial", joint.name),
+                        *bad,
+                        "finite multipliers",
+                    ));
+                }
+            }
+        }
+        let initials = self
+            .constraints
+            .iter()
+            .map(|c| (&c.name, c.initial))
+            .chain(self.coupling_variables.iter().map(|c| (&c.name, c.initial)));
+        for (name, initial) in initials {
+            if let InitialMultiplier::Value(v) = initial {
+                if !v.is_finite() {
+                    return Err(param(&format!("{name}.initial"), v, "a finite number"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of macro steps: the stop time rounded to the grid `start + n·step`.
+    /// The time the run ends at: `start + macro_steps()·step`, which differs
+    /// from `stop` when `stop` is not on the macro grid.
+    pub fn end_time(&self) -> f64 {
+        let e = &self.experiment;
+        if self.step_control.is_some() {
+            return e.stop;
+        }
+        e.start + self.macro_steps() as f64 * e.step
+    }
+
+    /// A warning when `stop` is not on the macro grid (beyond a relative 1e-9
+    /// of a step): the run ends at the nearest grid point instead.
+    pub fn grid_warning(&self) -> Option<String> {
+        let e = &self.experiment;
+        if self.step_control.is_some() {
+            return None;
+        }
+        let end = self.end_time();
+        ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
+            format!(
+                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {}",
+                e.stop, e.start, e.step, tidy(end)
+            )
+        })
+    }
+
+    pub fn macro_steps(&self) -> u64 {
+        let e = &self.experiment;
+        let n = ((e.stop - e.start) / e.step).round();
+        (n.max(1.0)) as u64
+    }
+}
+
+/// `x` without the last digits of rounding (`0.8999999999999999` is `0.9`),
+/// for messages: twelve significant digits.
+pub(crate) fn tidy(x: f64) -> f64 {
+    format!("{x:.11e}").parse().unwrap_or(x)
+}
