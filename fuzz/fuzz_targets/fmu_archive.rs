@@ -31,6 +31,7 @@ fuzz_target!(|data: &[u8]| {
         limits: ExtractLimits {
             max_total_bytes: 8 << 20,
             max_entries: 1000,
+            ..ExtractLimits::default()
         },
     };
     match Fmu::open_with(&path, &options) {

@@ -258,6 +258,219 @@ fn a_binary_that_is_not_a_shared_library() {
     info_error(&path, &["cannot load FMU library", "stub.so"]);
 }
 
+/// The model description: nested 200 000 levels deep (1.4 MB), refused at the first
+/// element past the XML reader's depth limit.
+#[test]
+fn a_deeply_nested_model_description() {
+    let dir = tempfile::tempdir().unwrap();
+    let depth = 200_000;
+    let xml = cs_description().replace(
+        "<ModelVariables>",
+        &format!(
+            "<VendorAnnotations><Tool name=\"t\">{}{}</Tool></VendorAnnotations><ModelVariables>",
+            "<x>".repeat(depth),
+            "</x>".repeat(depth)
+        ),
+    );
+    // Stored: deflated, the file's compression ratio (about 200) is over the
+    // archive limit, which refuses it before the XML is read.
+    let path = dir.path().join("deep.fmu");
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&path).unwrap());
+    let stored =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    zip.start_file("modelDescription.xml", stored).unwrap();
+    std::io::Write::write_all(&mut zip, xml.as_bytes()).unwrap();
+    zip.finish().unwrap();
+    info_error(
+        &path,
+        &[
+            &format!("XML file '{}/modelDescription.xml'", shown(&path)),
+            "nested more than 256 deep",
+        ],
+    );
+    let deflated = with_description(dir.path(), "deflated.fmu", &xml);
+    info_error(
+        &deflated,
+        &[
+            &format!("FMU archive '{}'", shown(&deflated)),
+            "entry 'modelDescription.xml'",
+            "compression ratio over the limit of 100",
+        ],
+    );
+}
+
+// ---------------------------------------------------------------- SSP archives and files
+
+// The library's refusal of each hostile SSP input is tested in
+// crates/tether-ssp/tests/hostile_inputs.rs. Here `tether run` and `tether ssp import`
+// exit with 1 and one line naming the archive and the entry (or the file and the
+// position), with `TMPDIR` empty afterwards: nothing was extracted, or it was removed.
+
+/// A system with one component whose `source` is `source`; `inner` inside the
+/// root system.
+fn ssd(source: &str, inner: &str) -> String {
+    format!(
+        r#"<?xml version="1.0"?>
+<ssd:SystemStructureDescription version="1.0" name="t"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription">
+  <ssd:System name="s">
+    <ssd:Elements><ssd:Component name="a" source="{source}"/></ssd:Elements>
+    {inner}
+  </ssd:System>
+  <ssd:DefaultExperiment stopTime="1"/>
+</ssd:SystemStructureDescription>"#
+    )
+}
+
+/// Runs `tether run SSP` and `tether ssp import SSP` with an empty `TMPDIR` of their
+/// own; both must fail with one line holding every fragment and leave `TMPDIR` empty.
+fn ssp_error(ssp: &Path, fragments: &[&str]) {
+    let dir = ssp.parent().unwrap();
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let ssp = ssp.to_str().unwrap();
+    for args in [
+        vec!["run", ssp, "--step", "1e-3", "--out", "out.csv"],
+        vec![
+            "ssp",
+            "import",
+            ssp,
+            "--step",
+            "1e-3",
+            "-o",
+            "imported/system.toml",
+        ],
+    ] {
+        let out = tether_env(&args, dir, Some(&tmp));
+        cli_error(&out, fragments);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(stderr.lines().count(), 1, "{args:?}: {stderr}");
+        let leftovers: Vec<_> = std::fs::read_dir(&tmp).unwrap().collect();
+        assert!(
+            leftovers.is_empty(),
+            "{args:?} left in TMPDIR: {leftovers:?}"
+        );
+    }
+}
+
+/// Overwrites the declared uncompressed size of the entries called `name` (local and
+/// central headers).
+fn declare_size(path: &Path, name: &str, size: u32) {
+    let mut bytes = std::fs::read(path).unwrap();
+    for i in 0..bytes.len() - 46 {
+        let (at, name_at) = match &bytes[i..i + 4] {
+            [0x50, 0x4b, 0x03, 0x04] => (22, 30),
+            [0x50, 0x4b, 0x01, 0x02] => (24, 46),
+            _ => continue,
+        };
+        if bytes[i + name_at..].starts_with(name.as_bytes()) {
+            bytes[i + at..i + at + 4].copy_from_slice(&size.to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A 4.7 KB archive declaring an unused 3 GiB entry: refused before anything is
+/// written.
+#[test]
+fn an_ssp_with_a_3_gib_entry() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bomb.ssp");
+    let text = ssd("resources/a.fmu", "");
+    write_zip(
+        &path,
+        &[
+            Entry::File("SystemStructure.ssd", text.as_bytes()),
+            Entry::File("resources/a.fmu", b""),
+            Entry::File("resources/unused.bin", &[7; 4096]),
+        ],
+    );
+    declare_size(&path, "resources/unused.bin", 3 << 30);
+    ssp_error(
+        &path,
+        &[
+            &format!("SSP archive '{}'", shown(&path)),
+            "entry 'resources/unused.bin'",
+            "limit 1073741824",
+        ],
+    );
+}
+
+/// Two `SystemStructure.ssd` entries: refused, not the last one read.
+#[test]
+fn an_ssp_with_two_system_structures() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("twice.ssp");
+    let (first, second) = (ssd("resources/a.fmu", ""), ssd("resources/b.fmu", ""));
+    write_zip(
+        &path,
+        &[
+            Entry::File("SystemStructure.ssd", first.as_bytes()),
+            Entry::File("SystemStructure.ssX", second.as_bytes()),
+        ],
+    );
+    // The zip writer refuses equal names: make them equal afterwards.
+    let mut bytes = std::fs::read(&path).unwrap();
+    let from = b"SystemStructure.ssX";
+    for i in 0..bytes.len() - from.len() {
+        if &bytes[i..i + from.len()] == from {
+            bytes[i..i + from.len()].copy_from_slice(b"SystemStructure.ssd");
+        }
+    }
+    std::fs::write(&path, bytes).unwrap();
+    ssp_error(
+        &path,
+        &[
+            &shown(&path),
+            "entry 'SystemStructure.ssd'",
+            "duplicate entry",
+        ],
+    );
+}
+
+/// A component whose source climbs out of the archive.
+#[test]
+fn an_ssp_component_outside_the_archive() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("outside.ssp");
+    let source = "../../../../etc/passwd";
+    let text = ssd(source, "");
+    write_zip(
+        &path,
+        &[Entry::File("SystemStructure.ssd", text.as_bytes())],
+    );
+    ssp_error(
+        &path,
+        &[
+            "SystemStructure.ssd:5:",
+            &format!("source=\"{source}\" leaves the archive"),
+            &shown(&path),
+        ],
+    );
+}
+
+/// An SSD nested 200 000 levels deep (1.4 MB), in an unpacked folder.
+#[test]
+fn a_deeply_nested_ssd() {
+    let dir = tempfile::tempdir().unwrap();
+    let system = dir.path().join("system");
+    std::fs::create_dir(&system).unwrap();
+    let depth = 200_000;
+    let text = ssd(
+        "a.fmu",
+        &format!("{}{}", "<x>".repeat(depth), "</x>".repeat(depth)),
+    );
+    std::fs::write(system.join("SystemStructure.ssd"), text).unwrap();
+    std::fs::write(system.join("a.fmu"), b"").unwrap();
+    ssp_error(
+        &system,
+        &[
+            "SystemStructure.ssd:6:",
+            "elements nested more than 256 deep",
+        ],
+    );
+}
+
 // ---------------------------------------------------------------- system files
 
 #[test]

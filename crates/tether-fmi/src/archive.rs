@@ -1,12 +1,14 @@
-//! Unpacking `.fmu` archives safely.
+//! Unpacking `.fmu` archives (and tether-ssp's `.ssp` archives) safely.
 //!
 //! Every entry is validated before anything is written: no absolute paths, no path that
-//! leaves the target directory, no symbolic links, only stored or deflated data, and a
-//! total size budget (checked against the declared sizes first and the bytes actually
+//! leaves the target directory, no symbolic links, no two entries for one path, only
+//! stored or deflated data, and a size budget ([`ExtractLimits`]: total, per entry,
+//! compression ratio, checked against the declared sizes first and the bytes actually
 //! written second) so that a decompression bomb cannot fill the disk.
 
+use std::collections::HashMap;
 use std::fs;
-use std::io::{self, Read, Write};
+use std::io::{self, BufReader, Read, Seek, SeekFrom, Write};
 use std::path::{Component, Path, PathBuf};
 
 use zip::CompressionMethod;
@@ -25,19 +27,60 @@ pub struct ExtractLimits {
     pub max_total_bytes: u64,
     /// Maximum number of entries in the archive (default 100 000).
     pub max_entries: usize,
+    /// Maximum uncompressed size of one entry (default 512 MiB).
+    pub max_entry_bytes: u64,
+    /// Maximum compression ratio (uncompressed / compressed size) of an entry larger
+    /// than [`RATIO_FREE_BYTES`] (default 100).
+    pub max_ratio: u64,
 }
+
+/// Entries up to this uncompressed size (1 MiB) may have any compression ratio.
+pub const RATIO_FREE_BYTES: u64 = 1 << 20;
 
 impl Default for ExtractLimits {
     fn default() -> Self {
         ExtractLimits {
             max_total_bytes: 1 << 30,
             max_entries: 100_000,
+            max_entry_bytes: 512 << 20,
+            max_ratio: 100,
         }
     }
 }
 
-/// The directory an FMU lives in: either a temporary extraction (removed when the last
-/// holder drops it) or a directory the user unpacked and owns.
+/// What an archive holds: named in errors, and it names the extraction folder
+/// (`$TMPDIR/tether-fmu-*` or `$TMPDIR/tether-ssp-*`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ArchiveKind {
+    /// An FMU (`.fmu`).
+    Fmu,
+    /// An SSP system (`.ssp`).
+    Ssp,
+}
+
+impl ArchiveKind {
+    const ALL: [ArchiveKind; 2] = [ArchiveKind::Fmu, ArchiveKind::Ssp];
+
+    /// Prefix of the extraction folders in `$TMPDIR`.
+    fn prefix(self) -> &'static str {
+        match self {
+            ArchiveKind::Fmu => "tether-fmu-",
+            ArchiveKind::Ssp => "tether-ssp-",
+        }
+    }
+}
+
+impl std::fmt::Display for ArchiveKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ArchiveKind::Fmu => "FMU",
+            ArchiveKind::Ssp => "SSP",
+        })
+    }
+}
+
+/// The directory an FMU (or an SSP system) lives in: either a temporary extraction
+/// (removed when the last holder drops it) or a directory the user unpacked and owns.
 #[derive(Debug)]
 pub struct FmuDir {
     root: PathBuf,
@@ -46,9 +89,6 @@ pub struct FmuDir {
     /// it is in use, so that a later run can tell a leftover from a folder in use.
     _lock: Option<fs::File>,
 }
-
-/// Prefix of the extraction folders in `$TMPDIR`.
-const PREFIX: &str = "tether-fmu-";
 
 /// Written into an extraction folder once it is locked: a folder with the marker
 /// and a free lock belongs to a process that is gone. (Its process may also have
@@ -85,8 +125,9 @@ pub fn remove_extractions_now() -> usize {
 }
 
 /// Removes the extraction folders that killed runs left in the temporary
-/// directory: `tether-fmu-*` folders whose lock no process holds. Runs once per
-/// process, before its first extraction; returns how many were removed.
+/// directory: `tether-fmu-*` and `tether-ssp-*` folders whose lock no process
+/// holds. Runs once per process, before its first extraction; returns how many
+/// were removed.
 pub fn sweep_leftovers() -> usize {
     static SWEPT: std::sync::Once = std::sync::Once::new();
     let mut removed = 0;
@@ -101,7 +142,11 @@ fn sweep(temp: &Path) -> usize {
     let mut removed = 0;
     for entry in entries.flatten() {
         let name = entry.file_name();
-        if !name.to_string_lossy().starts_with(PREFIX) {
+        let name = name.to_string_lossy();
+        if !ArchiveKind::ALL
+            .iter()
+            .any(|k| name.starts_with(k.prefix()))
+        {
             continue;
         }
         let dir = entry.path();
@@ -126,10 +171,10 @@ fn sweep(temp: &Path) -> usize {
 }
 
 /// Creates a private (0700) extraction folder, locks it and marks it.
-fn locked_temp_dir() -> io::Result<(tempfile::TempDir, fs::File)> {
+fn locked_temp_dir(kind: ArchiveKind) -> io::Result<(tempfile::TempDir, fs::File)> {
     sweep_leftovers();
     let mut builder = tempfile::Builder::new();
-    builder.prefix(PREFIX);
+    builder.prefix(kind.prefix());
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
@@ -167,8 +212,44 @@ impl FmuDir {
     }
 }
 
-/// Extracts `archive` into a new temporary directory.
+/// Extracts the FMU `archive` into a new temporary directory.
 pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> {
+    extract_archive(archive, ArchiveKind::Fmu, limits)
+}
+
+/// One entry to write, checked.
+struct Planned {
+    index: usize,
+    name: String,
+    relative: PathBuf,
+    is_dir: bool,
+    declared: u64,
+}
+
+/// The entry's name for an error when the zip reader cannot give its data: as
+/// listed in the central directory, else its position.
+fn listed_name<R: Read + Seek>(zip: &zip::ZipArchive<R>, index: usize) -> String {
+    match zip.name_for_index(index) {
+        Some(Ok(name)) => name.into_owned(),
+        _ => format!("#{} in the central directory", index + 1),
+    }
+}
+
+/// Extracts `archive` into a new private temporary directory (`$TMPDIR/tether-fmu-*`
+/// or `$TMPDIR/tether-ssp-*`, mode 0700, locked while in use and swept by a later
+/// process when its owner was killed; see [`sweep_leftovers`]), removed when the
+/// returned [`FmuDir`] is dropped.
+///
+/// Every entry is checked before anything is written: its name (no absolute path, no
+/// `..` leaving the folder, no control character, no second entry for the same path),
+/// its type (no symbolic link, no encryption, stored or deflate only) and its declared
+/// size against `limits`; the bytes inflated are counted as they are written. Every
+/// error names the archive and the entry.
+pub fn extract_archive(
+    archive: &Path,
+    kind: ArchiveKind,
+    limits: &ExtractLimits,
+) -> Result<FmuDir> {
     let io_err = |path: &Path| {
         let path = path.to_owned();
         move |source| Error::Io { path, source }
@@ -176,67 +257,142 @@ pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> 
     let file = fs::File::open(archive).map_err(io_err(archive))?;
     let mut zip =
         zip::ZipArchive::new(io::BufReader::new(file)).map_err(|e| Error::NotAnArchive {
+            kind,
             path: archive.to_owned(),
             reason: crate::error::one_line(&e.to_string()),
         })?;
+    let too_large = |entry: &str, reason: String| Error::ArchiveTooLarge {
+        kind,
+        archive: archive.to_owned(),
+        entry: entry.to_owned(),
+        reason,
+    };
+    let unsupported = |entry: &str, reason: &str| Error::UnsupportedEntry {
+        kind,
+        archive: archive.to_owned(),
+        entry: entry.to_owned(),
+        reason: reason.to_owned(),
+    };
     if zip.len() > limits.max_entries {
-        return Err(Error::ArchiveTooLarge {
-            archive: archive.to_owned(),
-            entry: String::new(),
-            reason: format!("{} entries, limit {}", zip.len(), limits.max_entries),
-        });
+        // Named after the first entry past the limit.
+        return Err(too_large(
+            &listed_name(&zip, limits.max_entries),
+            format!("{} entries, limit {}", zip.len(), limits.max_entries),
+        ));
+    }
+    if zip.has_duplicate_names() {
+        // The zip reader keeps one of the entries with the same name: find the name.
+        let entry = duplicated_name(archive, zip.central_directory_start())
+            .unwrap_or_else(|| "(unknown)".into());
+        return Err(unsupported(
+            &entry,
+            "duplicate entry (the archive has two entries of this name)",
+        ));
     }
 
     // Pass 1: validate every entry and the declared sizes before writing anything.
     let mut plan = Vec::with_capacity(zip.len());
+    // Each path the archive extracts to: the entry's name and whether it is a folder.
+    let mut paths: HashMap<PathBuf, (String, bool)> = HashMap::with_capacity(zip.len());
     let mut declared_total: u64 = 0;
     for index in 0..zip.len() {
-        let entry = zip.by_index_raw(index).map_err(|e| Error::NotAnArchive {
-            path: archive.to_owned(),
-            reason: crate::error::one_line(&e.to_string()),
+        let listed = listed_name(&zip, index);
+        let entry = zip.by_index_raw(index).map_err(|e| {
+            unsupported(
+                &listed,
+                &format!("unreadable: {}", crate::error::one_line(&e.to_string())),
+            )
         })?;
         let name = String::from_utf8_lossy(entry.name_raw()).into_owned();
-        let relative = checked_relative_path(archive, &name)?;
+        let relative = checked_relative_path(archive, kind, &name)?;
         if (entry.external_attributes() >> 16) & S_IFMT == S_IFLNK || entry.is_symlink() {
             return Err(Error::SymlinkEntry {
+                kind,
                 archive: archive.to_owned(),
                 entry: name,
             });
         }
-        let unsupported = |reason: &str| Error::UnsupportedEntry {
-            archive: archive.to_owned(),
-            entry: name.clone(),
-            reason: reason.to_owned(),
-        };
         if entry.encrypted() {
-            return Err(unsupported("encrypted entries are not supported"));
+            return Err(unsupported(&name, "encrypted entries are not supported"));
         }
         if !matches!(
             entry.compression(),
             CompressionMethod::Stored | CompressionMethod::Deflated
         ) {
-            return Err(unsupported(&format!(
-                "compression method {:?} (only stored and deflate are accepted)",
-                entry.compression()
-            )));
+            return Err(unsupported(
+                &name,
+                &format!(
+                    "compression method {:?} (only stored and deflate are accepted)",
+                    entry.compression()
+                ),
+            ));
         }
-        declared_total = declared_total.saturating_add(entry.size());
+        let size = entry.size();
+        declared_total = declared_total.saturating_add(size);
         if declared_total > limits.max_total_bytes {
-            return Err(Error::ArchiveTooLarge {
-                archive: archive.to_owned(),
-                entry: name,
-                reason: format!(
+            return Err(too_large(
+                &name,
+                format!(
                     "declared uncompressed size reaches {declared_total} bytes, limit {}",
                     limits.max_total_bytes
                 ),
-            });
+            ));
+        }
+        if size > limits.max_entry_bytes {
+            return Err(too_large(
+                &name,
+                format!(
+                    "declares {size} bytes, limit {} per entry",
+                    limits.max_entry_bytes
+                ),
+            ));
+        }
+        let compressed = entry.compressed_size();
+        if size > RATIO_FREE_BYTES && size > compressed.saturating_mul(limits.max_ratio) {
+            return Err(too_large(
+                &name,
+                format!(
+                    "declares {size} bytes from {compressed} compressed, a compression ratio \
+                     over the limit of {} (for entries over {RATIO_FREE_BYTES} bytes)",
+                    limits.max_ratio
+                ),
+            ));
         }
         let is_dir = entry.is_dir();
-        plan.push((index, name, relative, is_dir, entry.size()));
+        match paths.get(&relative) {
+            Some((first, first_is_dir)) if !(is_dir && *first_is_dir) => {
+                return Err(unsupported(
+                    &name,
+                    &format!("duplicate entry (the same path as entry '{first}')"),
+                ));
+            }
+            Some(_) => {}
+            None => {
+                paths.insert(relative.clone(), (name.clone(), is_dir));
+            }
+        }
+        plan.push(Planned {
+            index,
+            name,
+            relative,
+            is_dir,
+            declared: size,
+        });
+    }
+    // A path inside a file (`a` a file, `a/b` another entry) cannot be written.
+    for planned in &plan {
+        for parent in planned.relative.ancestors().skip(1) {
+            if let Some((file, false)) = paths.get(parent) {
+                return Err(unsupported(
+                    &planned.name,
+                    &format!("its folder is entry '{file}', a file"),
+                ));
+            }
+        }
     }
 
     // Pass 2: extract, counting the bytes actually produced.
-    let (temp, lock) = locked_temp_dir().map_err(io_err(&std::env::temp_dir()))?;
+    let (temp, lock) = locked_temp_dir(kind).map_err(io_err(&std::env::temp_dir()))?;
     let root = temp.path().canonicalize().map_err(io_err(temp.path()))?;
     LIVE.lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -247,7 +403,14 @@ pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> 
         _lock: Some(lock),
     };
     let mut written_total: u64 = 0;
-    for (index, name, relative, is_dir, declared) in plan {
+    for Planned {
+        index,
+        name,
+        relative,
+        is_dir,
+        declared,
+    } in plan
+    {
         let target = root.join(&relative);
         if is_dir {
             fs::create_dir_all(&target).map_err(io_err(&target))?;
@@ -262,11 +425,7 @@ pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> 
             .open(&target)
             .map_err(|source| {
                 if source.kind() == io::ErrorKind::AlreadyExists {
-                    Error::UnsupportedEntry {
-                        archive: archive.to_owned(),
-                        entry: name.clone(),
-                        reason: "duplicate entry".into(),
-                    }
+                    unsupported(&name, "duplicate entry")
                 } else {
                     Error::Io {
                         path: target.clone(),
@@ -274,28 +433,28 @@ pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> 
                     }
                 }
             })?;
-        let entry = zip.by_index(index).map_err(|e| Error::NotAnArchive {
-            path: archive.to_owned(),
-            reason: crate::error::one_line(&e.to_string()),
+        let entry = zip.by_index(index).map_err(|e| {
+            unsupported(
+                &name,
+                &format!("unreadable: {}", crate::error::one_line(&e.to_string())),
+            )
         })?;
         let budget = limits.max_total_bytes - written_total;
         let cap = budget.min(declared);
         // Read at most one byte more than allowed so an overrun is detected, not truncated.
         let copied = copy_bounded(entry, &mut out, cap.saturating_add(1)).map_err(|source| {
-            Error::UnsupportedEntry {
-                archive: archive.to_owned(),
-                entry: name.clone(),
-                reason: format!(
+            unsupported(
+                &name,
+                &format!(
                     "corrupt data: {}",
                     crate::error::one_line(&source.to_string())
                 ),
-            }
+            )
         })?;
         if copied > cap {
-            return Err(Error::ArchiveTooLarge {
-                archive: archive.to_owned(),
-                entry: name,
-                reason: if copied > declared {
+            return Err(too_large(
+                &name,
+                if copied > declared {
                     format!("inflates to more than its declared {declared} bytes")
                 } else {
                     format!(
@@ -303,12 +462,37 @@ pub(crate) fn extract(archive: &Path, limits: &ExtractLimits) -> Result<FmuDir> 
                         limits.max_total_bytes
                     )
                 },
-            });
+            ));
         }
         written_total += copied;
         out.flush().map_err(io_err(&target))?;
     }
     Ok(dir)
+}
+
+/// The first name that appears twice in the central directory starting at byte
+/// `start` of `archive` (the zip reader keeps one entry per name), or `None` if the
+/// directory cannot be read.
+fn duplicated_name(archive: &Path, start: u64) -> Option<String> {
+    let mut file = BufReader::new(fs::File::open(archive).ok()?);
+    file.seek(SeekFrom::Start(start)).ok()?;
+    let mut seen = std::collections::HashSet::new();
+    let mut header = [0u8; 46];
+    loop {
+        file.read_exact(&mut header).ok()?;
+        if header[..4] != [0x50, 0x4b, 0x01, 0x02] {
+            return None;
+        }
+        let field = |at: usize| u16::from_le_bytes([header[at], header[at + 1]]);
+        let (name_len, extra_len, comment_len) = (field(28), field(30), field(32));
+        let mut name = vec![0; name_len.into()];
+        file.read_exact(&mut name).ok()?;
+        file.seek_relative(i64::from(extra_len) + i64::from(comment_len))
+            .ok()?;
+        if !seen.insert(name.clone()) {
+            return Some(String::from_utf8_lossy(&name).escape_default().to_string());
+        }
+    }
 }
 
 /// Copies at most `max` bytes, returning how many were copied.
@@ -318,8 +502,9 @@ fn copy_bounded(reader: impl Read, writer: &mut impl Write, max: u64) -> io::Res
 
 /// Turns an entry name into a normalised relative path, refusing absolute names and
 /// names that resolve outside the extraction directory.
-fn checked_relative_path(archive: &Path, name: &str) -> Result<PathBuf> {
+fn checked_relative_path(archive: &Path, kind: ArchiveKind, name: &str) -> Result<PathBuf> {
     let err_abs = || Error::AbsoluteEntry {
+        kind,
         archive: archive.to_owned(),
         entry: name.to_owned(),
     };
@@ -327,6 +512,7 @@ fn checked_relative_path(archive: &Path, name: &str) -> Result<PathBuf> {
     // (found by fuzzing); the name is shown escaped.
     if name.chars().any(char::is_control) {
         return Err(Error::UnsupportedEntry {
+            kind,
             archive: archive.to_owned(),
             entry: name.escape_default().to_string(),
             reason: "control character in the name".into(),
@@ -345,6 +531,7 @@ fn checked_relative_path(archive: &Path, name: &str) -> Result<PathBuf> {
             Component::ParentDir => {
                 if !out.pop() {
                     return Err(Error::EntryEscapes {
+                        kind,
                         archive: archive.to_owned(),
                         entry: name.to_owned(),
                     });
@@ -355,6 +542,7 @@ fn checked_relative_path(archive: &Path, name: &str) -> Result<PathBuf> {
     }
     if out.as_os_str().is_empty() {
         return Err(Error::UnsupportedEntry {
+            kind,
             archive: archive.to_owned(),
             entry: name.to_owned(),
             reason: "empty name".into(),
@@ -367,8 +555,217 @@ fn checked_relative_path(archive: &Path, name: &str) -> Result<PathBuf> {
 mod tests {
     use super::*;
 
+    /// Writes a zip of `(name, bytes)` entries, deflated.
+    fn zip_of(path: &Path, entries: &[(&str, &[u8])]) {
+        let mut zip = zip::ZipWriter::new(fs::File::create(path).unwrap());
+        let options = zip::write::SimpleFileOptions::default()
+            .compression_method(CompressionMethod::Deflated);
+        for (name, bytes) in entries {
+            zip.start_file(*name, options).unwrap();
+            zip.write_all(bytes).unwrap();
+        }
+        zip.finish().unwrap();
+    }
+
+    /// Replaces every occurrence of `from` in the file by `to` (same length).
+    fn patch(path: &Path, from: &[u8], to: &[u8]) {
+        assert_eq!(from.len(), to.len());
+        let mut bytes = fs::read(path).unwrap();
+        let mut found = 0;
+        for i in 0..=bytes.len() - from.len() {
+            if &bytes[i..i + from.len()] == from {
+                bytes[i..i + from.len()].copy_from_slice(to);
+                found += 1;
+            }
+        }
+        assert!(found > 0);
+        fs::write(path, bytes).unwrap();
+    }
+
+    fn ssp_err(path: &Path) -> Error {
+        match extract_archive(path, ArchiveKind::Ssp, &ExtractLimits::default()) {
+            Ok(dir) => panic!("accepted, extracted to {}", dir.root().display()),
+            Err(e) => e,
+        }
+    }
+
+    #[test]
+    fn an_entry_over_the_compression_ratio_limit_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ratio.ssp");
+        // 2 MiB of zeros deflate to about 2 KiB: a ratio near 1000.
+        zip_of(
+            &path,
+            &[
+                ("SystemStructure.ssd", b"<a/>"),
+                ("resources/zeros", &[0; 2 << 20]),
+            ],
+        );
+        let err = ssp_err(&path);
+        assert!(matches!(err, Error::ArchiveTooLarge { .. }), "{err:?}");
+        let text = err.to_string();
+        assert!(
+            text.starts_with(&format!(
+                "SSP archive '{}' exceeds the extraction limit at entry 'resources/zeros': \
+                 declares 2097152 bytes from",
+                path.display()
+            )),
+            "{text}"
+        );
+        assert!(
+            text.contains("compression ratio over the limit of 100"),
+            "{text}"
+        );
+        // Within the ratio, or small, it is extracted.
+        let noise: Vec<u8> = (0..2u32 << 20)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+            .collect();
+        zip_of(&path, &[("resources/noise", &noise), ("small", &[0; 4096])]);
+        let extracted =
+            extract_archive(&path, ArchiveKind::Ssp, &ExtractLimits::default()).unwrap();
+        assert_eq!(
+            fs::read(extracted.root().join("resources/noise")).unwrap(),
+            noise
+        );
+    }
+
+    #[test]
+    fn an_entry_declared_over_the_per_entry_limit_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("big.ssp");
+        // 600 MiB declared (under the 1 GiB total): 4 KiB of data, declared sizes patched.
+        let data: Vec<u8> = (0..4096u32).map(|i| (i * 7919 % 251) as u8).collect();
+        zip_of(&path, &[("resources/big.fmu", &data)]);
+        let mut bytes = fs::read(&path).unwrap();
+        for i in 0..bytes.len() - 4 {
+            let at = match &bytes[i..i + 4] {
+                [0x50, 0x4b, 0x03, 0x04] => 22,
+                [0x50, 0x4b, 0x01, 0x02] => 24,
+                _ => continue,
+            };
+            bytes[i + at..i + at + 4].copy_from_slice(&(600u32 << 20).to_le_bytes());
+        }
+        fs::write(&path, bytes).unwrap();
+        let err = ssp_err(&path);
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "SSP archive '{}' exceeds the extraction limit at entry 'resources/big.fmu': \
+                 declares 629145600 bytes, limit 536870912 per entry",
+                path.display()
+            )
+        );
+    }
+
+    #[test]
+    fn two_entries_for_one_path_are_refused_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("twice.ssp");
+        // The zip writer refuses equal names: write two, then make them equal.
+        zip_of(
+            &path,
+            &[
+                ("SystemStructure.ssd", b"<a/>"),
+                ("SystemStructure.ssX", b"<b/>"),
+            ],
+        );
+        patch(&path, b"SystemStructure.ssX", b"SystemStructure.ssd");
+        let err = ssp_err(&path);
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "SSP archive '{}' has entry 'SystemStructure.ssd' that cannot be extracted: \
+                 duplicate entry (the archive has two entries of this name)",
+                path.display()
+            )
+        );
+        // Two names for one path.
+        zip_of(
+            &path,
+            &[("resources/a.fmu", b"1"), ("resources/./a.fmu", b"2")],
+        );
+        let err = ssp_err(&path).to_string();
+        assert!(
+            err.contains(
+                "entry 'resources/./a.fmu' that cannot be extracted: duplicate entry \
+                 (the same path as entry 'resources/a.fmu')"
+            ),
+            "{err}"
+        );
+        // A file where another entry needs a folder.
+        zip_of(&path, &[("resources", b"1"), ("resources/a.fmu", b"2")]);
+        let err = ssp_err(&path).to_string();
+        assert!(
+            err.contains("entry 'resources/a.fmu' that cannot be extracted: its folder is entry 'resources', a file"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn unreadable_entries_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("corrupt.ssp");
+        zip_of(&path, &[("a.txt", b"aaaa"), ("resources/b.txt", b"bbbb")]);
+        // Break the second entry's local header (its signature).
+        let mut bytes = fs::read(&path).unwrap();
+        let second = (1..bytes.len() - 4)
+            .find(|&i| bytes[i..i + 4] == [0x50, 0x4b, 0x03, 0x04])
+            .unwrap();
+        bytes[second + 3] = 0x09;
+        fs::write(&path, bytes).unwrap();
+        let err = ssp_err(&path);
+        assert!(matches!(err, Error::UnsupportedEntry { .. }), "{err:?}");
+        let text = err.to_string();
+        assert!(
+            text.starts_with(&format!(
+                "SSP archive '{}' has entry 'resources/b.txt' that cannot be extracted: unreadable:",
+                path.display()
+            )),
+            "{text}"
+        );
+        assert!(!text.contains('\n'));
+    }
+
+    #[test]
+    fn extraction_folders_are_private_and_leftovers_of_both_kinds_are_swept() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ok.ssp");
+        zip_of(&path, &[("SystemStructure.ssd", b"<a/>")]);
+        let extracted =
+            extract_archive(&path, ArchiveKind::Ssp, &ExtractLimits::default()).unwrap();
+        let name = extracted.root().file_name().unwrap().to_string_lossy();
+        assert!(name.starts_with("tether-ssp-"), "{name}");
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = fs::metadata(extracted.root()).unwrap().permissions().mode();
+            assert_eq!(mode & 0o777, 0o700);
+        }
+        // In a temporary directory of their own: marked folders of both kinds whose
+        // lock is free go, an unmarked one and another program's stay.
+        let temp = tempfile::tempdir().unwrap();
+        for folder in [
+            "tether-fmu-a",
+            "tether-ssp-b",
+            "tether-ssp-unmarked",
+            "other-c",
+        ] {
+            fs::create_dir(temp.path().join(folder)).unwrap();
+            if !folder.ends_with("unmarked") {
+                fs::write(temp.path().join(folder).join(MARKER), b"").unwrap();
+            }
+        }
+        assert_eq!(sweep(temp.path()), 2);
+        let mut left: Vec<String> = fs::read_dir(temp.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["other-c", "tether-ssp-unmarked"]);
+    }
+
     fn rel(name: &str) -> Result<PathBuf> {
-        checked_relative_path(Path::new("a.fmu"), name)
+        checked_relative_path(Path::new("a.fmu"), ArchiveKind::Fmu, name)
     }
 
     #[test]

@@ -3,6 +3,9 @@
 use std::fmt;
 use std::path::PathBuf;
 
+use crate::archive::ArchiveKind;
+use crate::xml::{XmlError, XmlErrorKind};
+
 /// Result alias used throughout the crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -24,8 +27,10 @@ pub enum Error {
     },
 
     /// The path is neither a readable zip archive nor an unpacked FMU directory.
-    #[error("'{}' is not an FMU archive (not a valid zip file: {reason})", path.display())]
+    #[error("'{}' is not an {kind} archive (not a valid zip file: {reason})", path.display())]
     NotAnArchive {
+        /// What the archive should hold.
+        kind: ArchiveKind,
         /// The offending path.
         path: PathBuf,
         /// Why the zip reader rejected it.
@@ -33,8 +38,10 @@ pub enum Error {
     },
 
     /// An archive entry would be extracted outside the target directory (`..`).
-    #[error("FMU archive '{}' has entry '{entry}' that escapes the extraction directory", archive.display())]
+    #[error("{kind} archive '{}' has entry '{entry}' that escapes the extraction directory", archive.display())]
     EntryEscapes {
+        /// What the archive holds.
+        kind: ArchiveKind,
         /// The archive.
         archive: PathBuf,
         /// The entry name as stored in the archive.
@@ -42,8 +49,10 @@ pub enum Error {
     },
 
     /// An archive entry has an absolute path.
-    #[error("FMU archive '{}' has entry '{entry}' with an absolute path", archive.display())]
+    #[error("{kind} archive '{}' has entry '{entry}' with an absolute path", archive.display())]
     AbsoluteEntry {
+        /// What the archive holds.
+        kind: ArchiveKind,
         /// The archive.
         archive: PathBuf,
         /// The entry name as stored in the archive.
@@ -51,8 +60,10 @@ pub enum Error {
     },
 
     /// An archive entry is a symbolic link (refused: it could point anywhere).
-    #[error("FMU archive '{}' has entry '{entry}' that is a symbolic link", archive.display())]
+    #[error("{kind} archive '{}' has entry '{entry}' that is a symbolic link", archive.display())]
     SymlinkEntry {
+        /// What the archive holds.
+        kind: ArchiveKind,
         /// The archive.
         archive: PathBuf,
         /// The entry name as stored in the archive.
@@ -61,9 +72,11 @@ pub enum Error {
 
     /// An archive entry cannot be extracted safely for another reason (encryption,
     /// compression method other than stored/deflate, duplicate name, control character
-    /// in the name).
-    #[error("FMU archive '{}' has entry '{entry}' that cannot be extracted: {reason}", archive.display())]
+    /// in the name, data the zip reader cannot read).
+    #[error("{kind} archive '{}' has entry '{entry}' that cannot be extracted: {reason}", archive.display())]
     UnsupportedEntry {
+        /// What the archive holds.
+        kind: ArchiveKind,
         /// The archive.
         archive: PathBuf,
         /// The entry name as stored in the archive.
@@ -72,10 +85,12 @@ pub enum Error {
         reason: String,
     },
 
-    /// Extraction would exceed the configured size or entry-count limit
-    /// (decompression bomb guard).
-    #[error("FMU archive '{}' exceeds the extraction limit at entry '{entry}': {reason}", archive.display())]
+    /// Extraction would exceed a limit of [`ExtractLimits`](crate::ExtractLimits): total
+    /// size, entry count, entry size or compression ratio (decompression bomb guard).
+    #[error("{kind} archive '{}' exceeds the extraction limit at entry '{entry}': {reason}", archive.display())]
     ArchiveTooLarge {
+        /// What the archive holds.
+        kind: ArchiveKind,
         /// The archive.
         archive: PathBuf,
         /// The entry at which the limit was hit.
@@ -101,6 +116,20 @@ pub enum Error {
         /// 1-based column (in characters) of the problem.
         column: usize,
         /// What the parser found.
+        message: String,
+    },
+
+    /// `modelDescription.xml` is over a limit of the XML reader: its size or its
+    /// nesting depth ([`crate::xml::MAX_BYTES`], [`crate::xml::MAX_DEPTH`]).
+    #[error("XML file '{}' is over a limit at line {line}, column {column}: {message}", file.display())]
+    XmlLimit {
+        /// The XML file.
+        file: PathBuf,
+        /// 1-based line of the problem.
+        line: usize,
+        /// 1-based column (in characters) of the problem.
+        column: usize,
+        /// Which limit, with numbers.
         message: String,
     },
 
@@ -429,6 +458,32 @@ impl Error {
 
 /// Collapses whitespace runs (including newlines) so messages from other libraries stay
 /// on one line.
+impl From<XmlError> for Error {
+    fn from(e: XmlError) -> Error {
+        let XmlError {
+            file,
+            line,
+            column,
+            message,
+            kind,
+        } = e;
+        match kind {
+            XmlErrorKind::Malformed => Error::MalformedXml {
+                file,
+                line,
+                column,
+                message,
+            },
+            XmlErrorKind::Limit => Error::XmlLimit {
+                file,
+                line,
+                column,
+                message,
+            },
+        }
+    }
+}
+
 pub(crate) fn one_line(message: &str) -> String {
     message.split_whitespace().collect::<Vec<_>>().join(" ")
 }

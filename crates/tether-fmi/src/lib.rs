@@ -2,12 +2,14 @@
 //!
 //! # Layers
 //!
-//! - **Files** — [`archive`] unpacks a `.fmu` safely (no `..`, absolute paths or
-//!   symlinks; stored/deflate only; a size budget against decompression bombs) into a
-//!   temporary directory that lives as long as anything made from it.
+//! - **Files** — [`archive`] unpacks a `.fmu` (or tether-ssp's `.ssp`) safely (no `..`,
+//!   absolute paths, duplicates or symlinks; stored/deflate only; a size budget against
+//!   decompression bombs) into a temporary directory that lives as long as anything
+//!   made from it.
 //! - **Description** — [`model_description`] peeks at `fmiVersion`, then parses
 //!   `modelDescription.xml` completely for co-simulation, applying the FMI 2.0 defaults;
-//!   errors name the file and line.
+//!   errors name the file and line. [`xml`] is the XML reader under it (and under
+//!   tether-ssp's SSD and SSV files), bounded in size and nesting depth.
 //! - **Raw** — [`raw`] mirrors the C API one-to-one (types, `fmi2CallbackFunctions`,
 //!   the function table [`raw::Fmi2Functions`]); a crate-private component wrapper calls
 //!   the functions under their C names, each through one status check that logs the call
@@ -60,9 +62,9 @@ pub mod remote;
 mod shared;
 mod state;
 mod uri;
-mod xml;
+pub mod xml;
 
-pub use archive::{remove_extractions_now, sweep_leftovers, ExtractLimits};
+pub use archive::{remove_extractions_now, sweep_leftovers, ArchiveKind, ExtractLimits};
 pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
 pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};

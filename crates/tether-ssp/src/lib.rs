@@ -10,7 +10,6 @@
 //! annotation of type [`ANNOTATION_TYPE`] that other tools skip.
 
 mod read;
-mod tree;
 mod write;
 
 use std::path::PathBuf;
@@ -23,6 +22,28 @@ use tether_master::{
 
 pub use read::{read, Loaded};
 pub use write::{write, write_toml};
+
+/// The SSP 1.0 namespaces and the prefixes the standard's examples use: the reader
+/// names elements `ssd:…`, `ssc:…` and so on whatever prefix a file uses.
+pub(crate) const NAMESPACES: [(&str, &str); 5] = [
+    (
+        "ssd",
+        "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    ),
+    ("ssc", "http://ssp-standard.org/SSP1/SystemStructureCommon"),
+    (
+        "ssv",
+        "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    ),
+    (
+        "ssm",
+        "http://ssp-standard.org/SSP1/SystemStructureParameterMapping",
+    ),
+    (
+        "ssb",
+        "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
+    ),
+];
 
 /// The `type` of Tether's `ssc:Annotation` on the root `ssd:System`.
 pub const ANNOTATION_TYPE: &str = "org.tether.system";
@@ -74,6 +95,13 @@ pub enum SspError {
         /// What is wrong.
         message: String,
     },
+    /// An SSD or SSV file that is not well-formed XML or is over a limit of the XML
+    /// reader (size, nesting depth: [`tether_fmi::xml`]).
+    #[error(transparent)]
+    Xml(#[from] tether_fmi::xml::XmlError),
+    /// An `.ssp` archive that cannot be extracted (every error names the entry).
+    #[error(transparent)]
+    Archive(#[from] tether_fmi::Error),
     /// A file cannot be read or written.
     #[error("{}: {reason}", path.display())]
     File {

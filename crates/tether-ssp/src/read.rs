@@ -1,13 +1,13 @@
 //! Reading SSP: `.ssp` archive, unpacked folder or `SystemStructure.ssd`.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 
-use tempfile::TempDir;
+use tether_fmi::archive::{extract_archive, ArchiveKind, ExtractLimits, FmuDir};
+use tether_fmi::xml::{self, Element as Node, Names};
 use tether_master::{ConnectionSpec, Experiment, InstanceSpec, StartValue, SystemSpec};
 
-use crate::tree::{parse, Node};
-use crate::{Annotation, SspError, ANNOTATION_TYPE};
+use crate::{Annotation, SspError, ANNOTATION_TYPE, NAMESPACES};
 
 /// A system read from SSP.
 pub struct Loaded {
@@ -18,24 +18,30 @@ pub struct Loaded {
     /// The `SystemStructure.ssd` read.
     pub ssd: PathBuf,
     /// The extracted archive, removed when the system is dropped.
-    _extracted: Option<TempDir>,
+    _extracted: Option<FmuDir>,
 }
 
 /// Read an SSP system. `step` and `stop` (from the command line) win over
 /// the Tether annotation's step and DefaultExperiment's stopTime; without a
 /// step from either, reading fails.
+///
+/// The `source` of a component or a parameter binding in an `.ssp` archive must be
+/// a relative path to a file in the archive; in an SSD file or a folder on disk it
+/// may name any file (docs/ssp.md, "Files and limits").
 pub fn read(path: &Path, step: Option<f64>, stop: Option<f64>) -> Result<Loaded, SspError> {
     let (ssd, extracted) = locate(path)?;
-    let text = std::fs::read_to_string(&ssd).map_err(|e| SspError::file(&ssd, e))?;
     let base = ssd.parent().unwrap_or(Path::new(".")).to_path_buf();
     let name = ssd.file_name().map_or_else(
         || "SystemStructure.ssd".into(),
         |n| n.to_string_lossy().into_owned(),
     );
-    let root = parse(&text, &name)?;
+    let root = parse_file(&ssd, &name)?;
     let mut reader = Reader {
         file: name,
         base,
+        archive: extracted
+            .as_ref()
+            .map(|dir| (path.to_path_buf(), dir.root().to_path_buf())),
         ..Reader::default()
     };
     let spec = reader.description(&root, step, stop)?;
@@ -47,8 +53,18 @@ pub fn read(path: &Path, step: Option<f64>, stop: Option<f64>) -> Result<Loaded,
     })
 }
 
-/// The SSD of `path`, extracting an archive into a temporary folder.
-fn locate(path: &Path) -> Result<(PathBuf, Option<TempDir>), SspError> {
+/// Reads and parses an SSD or SSV file, bounded as every XML file is
+/// ([`tether_fmi::xml`]); `shown` names it in errors.
+fn parse_file(path: &Path, shown: &str) -> Result<Node, SspError> {
+    let bytes = xml::read(path).map_err(|e| SspError::file(path, e))?;
+    let shown = Path::new(shown);
+    let text = xml::decode(&bytes, shown)?;
+    Ok(xml::parse(text, shown, Names::Namespaces(&NAMESPACES))?)
+}
+
+/// The SSD of `path`, extracting an archive into a temporary folder under the
+/// budget of FMU archives.
+fn locate(path: &Path) -> Result<(PathBuf, Option<FmuDir>), SspError> {
     if path.is_dir() {
         let ssd = path.join("SystemStructure.ssd");
         if !ssd.is_file() {
@@ -66,17 +82,8 @@ fn locate(path: &Path) -> Result<(PathBuf, Option<TempDir>), SspError> {
     match ext.as_str() {
         "ssd" => Ok((path.to_path_buf(), None)),
         "ssp" => {
-            let dir = tempfile::Builder::new()
-                .prefix("tether-ssp-")
-                .tempdir()
-                .map_err(|e| SspError::file(path, e))?;
-            let file = std::fs::File::open(path).map_err(|e| SspError::file(path, e))?;
-            let mut archive = zip::ZipArchive::new(file).map_err(|e| SspError::file(path, e))?;
-            // `extract` refuses entries that would land outside the folder.
-            archive
-                .extract(dir.path())
-                .map_err(|e| SspError::file(path, e))?;
-            let ssd = dir.path().join("SystemStructure.ssd");
+            let dir = extract_archive(path, ArchiveKind::Ssp, &ExtractLimits::default())?;
+            let ssd = dir.root().join("SystemStructure.ssd");
             if !ssd.is_file() {
                 return Err(SspError::file(
                     path,
@@ -136,6 +143,9 @@ struct BaseUnit {
 struct Reader {
     file: String,
     base: PathBuf,
+    /// For an `.ssp`: the archive and the folder it is extracted to, which every
+    /// `source` must stay in.
+    archive: Option<(PathBuf, PathBuf)>,
     skipped: Vec<String>,
     instances: Vec<InstanceSpec>,
     /// Full path of each component → its flat instance name.
@@ -195,8 +205,7 @@ impl Reader {
                 root,
                 format!(
                     "the root element is <{}>, not <ssd:SystemStructureDescription> (namespace {})",
-                    root.name,
-                    crate::tree::NAMESPACES[0].1
+                    root.name, NAMESPACES[0].1
                 ),
             ));
         }
@@ -433,8 +442,9 @@ impl Reader {
         Ok(())
     }
 
-    /// A component's `source`: relative to the SSD's folder, absolute, or a
-    /// `file:` URI.
+    /// A component's or parameter binding's `source`: relative to the SSD's
+    /// folder, absolute, or a `file:` URI; in an `.ssp`, relative and inside the
+    /// archive.
     fn source(&self, node: &Node, source: &str) -> Result<PathBuf, SspError> {
         let path = if let Some(rest) = source.strip_prefix("file://") {
             PathBuf::from(rest)
@@ -448,6 +458,9 @@ impl Reader {
         } else {
             PathBuf::from(source)
         };
+        if let Some((archive, root)) = &self.archive {
+            self.inside_archive(node, source, &path, archive, root)?;
+        }
         let path = if path.is_relative() {
             self.base.join(path)
         } else {
@@ -460,6 +473,49 @@ impl Reader {
             ));
         }
         Ok(path)
+    }
+
+    /// Refuses a `source` of an `.ssp` that is absolute or leaves the archive's
+    /// folder: the archive's author names files in the archive, not on the disk of
+    /// whoever runs it.
+    fn inside_archive(
+        &self,
+        node: &Node,
+        source: &str,
+        path: &Path,
+        archive: &Path,
+        root: &Path,
+    ) -> Result<(), SspError> {
+        let refused = |why: &str| {
+            self.at(
+                node,
+                format!(
+                    "source=\"{source}\" {why}: a source in the .ssp archive '{}' must be a \
+                     relative path to a file in it",
+                    archive.display()
+                ),
+            )
+        };
+        // Where the SSD's folder is inside the archive, then the source from there.
+        let mut inside: Vec<&std::ffi::OsStr> = match self.base.strip_prefix(root) {
+            Ok(rel) => rel.iter().collect(),
+            Err(_) => return Err(refused("is not in the archive")),
+        };
+        for component in path.components() {
+            match component {
+                Component::Normal(part) => inside.push(part),
+                Component::CurDir => {}
+                Component::ParentDir => {
+                    if inside.pop().is_none() {
+                        return Err(refused("leaves the archive"));
+                    }
+                }
+                Component::RootDir | Component::Prefix(_) => {
+                    return Err(refused("is an absolute path"))
+                }
+            }
+        }
+        Ok(())
     }
 
     fn connectors(&mut self, node: &Node, end: impl Fn(String) -> End) -> Result<(), SspError> {
@@ -575,9 +631,8 @@ impl Reader {
             }
             if let Some(source) = b.attr("source") {
                 let path = self.source(b, source)?;
-                let text = std::fs::read_to_string(&path).map_err(|e| SspError::file(&path, e))?;
                 let file = source.to_string();
-                let set = parse(&text, &file)?;
+                let set = parse_file(&path, &file)?;
                 let saved = std::mem::replace(&mut self.file, file);
                 let result = self.parameter_set(&set);
                 self.file = saved;
@@ -798,6 +853,7 @@ fn flat_name(path: &[String]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tempfile::TempDir;
 
     /// An SSD in a folder with empty stand-ins for the FMUs (reading does not
     /// open them).

@@ -10,7 +10,7 @@ use tether_fmi::{BaseType, Causality, ModelDescription};
 use tether_master::{StartValue, SystemSpec};
 
 use crate::read::Loaded;
-use crate::tree::NAMESPACES;
+use crate::NAMESPACES;
 use crate::{Annotation, SspError, ANNOTATION_NAMESPACE, ANNOTATION_TYPE};
 
 /// XML-escape text for an attribute value.
@@ -31,13 +31,18 @@ fn model_description(fmu: &Path) -> Result<ModelDescription, SspError> {
     }
     let file = std::fs::File::open(fmu).map_err(|e| SspError::file(fmu, e))?;
     let mut archive = zip::ZipArchive::new(file).map_err(|e| SspError::file(fmu, e))?;
-    let mut entry = archive
+    let entry_err = |e: &dyn std::fmt::Display| {
+        SspError::file(fmu, format!("entry 'modelDescription.xml': {e}"))
+    };
+    let entry = archive
         .by_name("modelDescription.xml")
-        .map_err(|e| SspError::file(fmu, e))?;
+        .map_err(|e| entry_err(&e))?;
+    // One byte past the XML reader's limit, for it to refuse.
     let mut bytes = Vec::new();
     entry
+        .take(tether_fmi::xml::MAX_BYTES as u64 + 1)
         .read_to_end(&mut bytes)
-        .map_err(|e| SspError::file(fmu, e))?;
+        .map_err(|e| entry_err(&e))?;
     ModelDescription::from_bytes(&bytes).map_err(|e| SspError::file(fmu, e))
 }
 

@@ -16,9 +16,9 @@ use crate::error::{Error, Result};
 use crate::xml;
 
 impl ModelDescription {
-    /// Reads and parses a `modelDescription.xml` file.
+    /// Reads and parses a `modelDescription.xml` file (at most [`xml::MAX_BYTES`] bytes).
     pub fn from_file(path: &Path) -> Result<ModelDescription> {
-        let bytes = std::fs::read(path).map_err(|source| Error::Io {
+        let bytes = xml::read(path).map_err(|source| Error::Io {
             path: path.to_owned(),
             source,
         })?;
@@ -105,7 +105,7 @@ pub(crate) fn parse_bytes(bytes: &[u8], file: &Path, origin: &Path) -> Result<Mo
             })
         }
     }
-    let root = xml::parse_document(text, file)?;
+    let root = xml::parse(text, file, xml::Names::AsWritten)?;
     if root.child("CoSimulation").is_none() && root.child("ModelExchange").is_some() {
         return Err(Error::NotCoSimulation {
             path: origin.to_owned(),

@@ -206,3 +206,32 @@ fn truncated_and_mangled_documents_never_panic() {
         }
     }
 }
+
+#[test]
+fn a_deeply_nested_description_is_one_error() {
+    // 200 000 levels (1.4 MB) inside an annotation: refused at the first element past
+    // the limit, with the file and the position.
+    let depth = 200_000;
+    let deep = FULL.replace(
+        "<ModelVariables>",
+        &format!(
+            "<VendorAnnotations><Tool name=\"t\">{}{}</Tool></VendorAnnotations>\n  <ModelVariables>",
+            "<x>".repeat(depth),
+            "</x>".repeat(depth)
+        ),
+    );
+    let err = parse(&deep).unwrap_err();
+    // The root, VendorAnnotations and Tool are three levels.
+    let column = 3 + "<VendorAnnotations><Tool name=\"t\">".len() + 3 * (crate::xml::MAX_DEPTH - 3);
+    assert!(
+        matches!(err, Error::XmlLimit { line: 20, column: c, .. } if c == column),
+        "{err:?}"
+    );
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "XML file 'modelDescription.xml' is over a limit at line 20, column {column}: \
+             elements nested more than 256 deep (the limit)"
+        )
+    );
+}
