@@ -13,6 +13,9 @@ pub enum Mode {
     EndlessLoop,
     LogFlood,
     SlowCalls,
+    HelperThenSegfault,
+    ForkedChildExits,
+    ForkedChildLingersThenSegfault,
 }
 
 impl Mode {
@@ -27,6 +30,9 @@ impl Mode {
             5 => Mode::EndlessLoop,
             6 => Mode::LogFlood,
             7 => Mode::SlowCalls,
+            8 => Mode::HelperThenSegfault,
+            9 => Mode::ForkedChildExits,
+            10 => Mode::ForkedChildLingersThenSegfault,
             _ => return None,
         })
     }
@@ -67,6 +73,17 @@ impl Fault {
                 }
             }
             Mode::SlowCalls => std::thread::sleep(Duration::from_secs_f64(self.pause)),
+            Mode::HelperThenSegfault => {
+                crate::start_helper();
+                crate::crash()
+            }
+            // Only in the step from `at` itself: one child, not one per step.
+            Mode::ForkedChildExits if t < self.at + 0.5 * h => crate::fork_and_exit_in_child(),
+            Mode::ForkedChildExits => {}
+            Mode::ForkedChildLingersThenSegfault => {
+                crate::fork_lingering_child();
+                crate::crash()
+            }
         }
     }
 }
