@@ -984,3 +984,21 @@ fn a_forked_child_calling_exit_is_not_the_runs_end() {
         assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
     }
 }
+
+/// An isolated FMU that starts a helper process (`system("sleep 15 &")`) and
+/// goes on: the run ends normally, and the helper with the instance (its host's
+/// process group is killed once the host has exited), so nothing is left and
+/// nothing holds the run's standard error for the helper's 15 s.
+#[test]
+fn isolated_helper_ends_with_the_instance() {
+    let s = Scratch::new();
+    let start = std::time::Instant::now();
+    let out = s.run(&system(s.path(), 11, ""), "out.csv", &["--isolate"]);
+    let elapsed = start.elapsed();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(elapsed < NO_STALL, "{elapsed:?}");
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!((csv.rows.len(), csv.trailer), (1001, None));
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
+}

@@ -16,6 +16,7 @@ pub enum Mode {
     HelperThenSegfault,
     ForkedChildExits,
     ForkedChildLingersThenSegfault,
+    Helper,
 }
 
 impl Mode {
@@ -33,6 +34,7 @@ impl Mode {
             8 => Mode::HelperThenSegfault,
             9 => Mode::ForkedChildExits,
             10 => Mode::ForkedChildLingersThenSegfault,
+            11 => Mode::Helper,
             _ => return None,
         })
     }
@@ -84,6 +86,8 @@ impl Fault {
                 crate::fork_lingering_child();
                 crate::crash()
             }
+            Mode::Helper if t < self.at + 0.5 * h => crate::start_helper(),
+            Mode::Helper => {}
         }
     }
 }

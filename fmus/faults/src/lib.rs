@@ -20,6 +20,7 @@
 //! | 8 | a helper process (`system("sleep 15 &")`), then a segmentation fault |
 //! | 9 | `fork()`, and the child calls `exit(0)` (the parent waits for it and goes on; only in the step from `at`) |
 //! | 10 | `fork()`, the child sleeps 15 s (holding every descriptor), the parent segfaults |
+//! | 11 | a helper process (`system("sleep 15 &")`), and the run goes on (only in the step from `at`) |
 //!
 //! `delay` (seconds, default 0) makes every `fmi2DoStep` sleep, in every mode, to
 //! slow a run down to wall-clock scales.

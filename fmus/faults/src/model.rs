@@ -35,8 +35,8 @@ impl Model for Faults {
                 .description("Mode 7: wall time each fmi2DoStep from `at` on sleeps"),
         ],
         integer_parameters: &[
-            Integer::new("mode", 0).min(0).max(10).description(
-                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault",
+            Integer::new("mode", 0).min(0).max(11).description(
+                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process",
             ),
             Integer::new("flood", 2000)
                 .min(0)
