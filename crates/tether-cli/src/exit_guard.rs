@@ -13,6 +13,11 @@
 //! should it deadlock. A second Ctrl-C (which exits at once, code 130) gets the
 //! trailer and the folders removed the same way.
 //!
+//! The hooks act only in the process that installed them: a child that an FMU
+//! forks inherits them, and its `exit()` (or `abort()`) must neither report the
+//! run as stopped nor remove the parent's extraction folders; in a child they
+//! let the exit go on as it would without Tether.
+//!
 //! A segmentation fault or SIGKILL cannot be handled in-process: the rows up to
 //! the last flush are on disk (`tether_master::FLUSH_INTERVAL`) and the next run
 //! sweeps the extraction folders (`tether_fmi::sweep_leftovers`).
@@ -20,6 +25,7 @@
 use std::ffi::c_int;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicI32, Ordering};
 use std::sync::{Mutex, Once};
 use std::time::Duration;
 
@@ -32,6 +38,16 @@ struct Armed {
 }
 
 static ARMED: Mutex<Option<Armed>> = Mutex::new(None);
+
+/// The process id of the process that installed the hooks (0 before).
+static INSTALLER: AtomicI32 = AtomicI32::new(0);
+
+/// Whether this is the process that installed the hooks, not a child forked
+/// from it (which inherits them, and ARMED with them).
+fn in_installer() -> bool {
+    // SAFETY: getpid is async-signal-safe and cannot fail.
+    INSTALLER.load(Ordering::Relaxed) == unsafe { libc::getpid() }
+}
 
 /// How long the hooks wait for the writer thread to write the last rows.
 const WRITE_WAIT: Duration = Duration::from_secs(5);
@@ -76,6 +92,8 @@ fn take_armed(wait: bool) -> Option<Armed> {
 }
 
 fn install() {
+    // SAFETY: getpid cannot fail.
+    INSTALLER.store(unsafe { libc::getpid() }, Ordering::Relaxed);
     register_exit_hook();
     let handler: extern "C" fn(c_int) = on_abort;
     // SAFETY: installs a handler for SIGABRT only; `on_abort` has the signature
@@ -115,6 +133,9 @@ fn register_exit_hook() {
 
 /// The process is exiting (`exit(code)`) while a run is armed.
 fn on_exit_called(code: Option<c_int>) {
+    if !in_installer() {
+        return; // a forked child's exit: not the run's
+    }
     let Some(armed) = take_armed(false) else {
         return; // main returned: a normal end
     };
@@ -138,7 +159,9 @@ extern "C" fn on_abort(_signal: c_int) {
     // SAFETY: alarm is async-signal-safe: it ends the process (SIGALRM) in 10 s
     // should the best-effort work below deadlock.
     unsafe { libc::alarm(10) };
-    if let Some(armed) = take_armed(false) {
+    if !in_installer() {
+        // A forked child's abort(): not the run's.
+    } else if let Some(armed) = take_armed(false) {
         end(armed, &blame("abort()"));
     }
     // SAFETY: signal and raise are async-signal-safe; with the default action

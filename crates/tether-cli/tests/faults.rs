@@ -849,3 +849,156 @@ fn an_isolated_host_killed_from_outside_is_an_error() {
     assert_eq!(csv.rows.len(), 501);
     assert!(s.leftovers().is_empty() && processes_left(&s).is_empty());
 }
+
+/// Runs `tether run` on `system` into out.csv with `flags`, standard error into
+/// a file (not a pipe: a process the FMU left behind would hold a pipe open and
+/// the wait would measure it, not the run); the exit status, the stderr text and
+/// the wall time.
+fn run_to_exit(
+    s: &Scratch,
+    system: &Path,
+    flags: &[&str],
+) -> (std::process::ExitStatus, String, std::time::Duration) {
+    let log = s.path().join("stderr.txt");
+    let mut args = vec!["run", system.to_str().unwrap(), "--out", "out.csv"];
+    args.extend_from_slice(flags);
+    let start = std::time::Instant::now();
+    let status = s
+        .command(&args)
+        .stderr(std::fs::File::create(&log).unwrap())
+        .status()
+        .unwrap();
+    let elapsed = start.elapsed();
+    (status, std::fs::read_to_string(&log).unwrap(), elapsed)
+}
+
+/// The helper of mode 8 and the lingering child of mode 10 sleep 15 s: a run
+/// that waited for them would take that long.
+const NO_STALL: std::time::Duration = std::time::Duration::from_secs(12);
+
+/// Kills the processes still running with this scratch's `TMPDIR` (what an
+/// in-process FMU started outlives a crash of `tether`).
+fn kill_leftover_processes(s: &Scratch) {
+    for (pid, _) in processes(s) {
+        // SAFETY: a signal to a process of this test's own scratch runs.
+        unsafe { libc::kill(pid, libc::SIGKILL) };
+    }
+}
+
+/// An isolated FMU that starts a helper process (`system("sleep 15 &")`) and
+/// then crashes: the crash is seen at once as the host's SIGSEGV (not as a 15 s
+/// hang, nor as the call time-out: the helper holds no pipe of the host, whose
+/// descriptors are close-on-exec), and the helper ends with the host (its
+/// process group is killed): nothing is left.
+#[test]
+fn isolated_crash_after_starting_a_helper_is_seen_at_once() {
+    let start = std::time::Instant::now();
+    isolated_fault(
+        8,
+        "",
+        "",
+        &["--call-timeout", "30"],
+        "its host process was killed by signal 11 (SIGSEGV) during fmi2DoStep at t=0.5",
+    );
+    assert!(start.elapsed() < NO_STALL, "{:?}", start.elapsed());
+}
+
+/// An isolated FMU whose forked child (no `exec`: it holds a copy of every
+/// descriptor of the host, the reply pipe included) lingers while the host
+/// crashes: the master sees the host's exit, not only the pipe's end, and the
+/// child ends with the host's process group.
+#[test]
+fn isolated_crash_seen_by_the_hosts_exit_while_a_child_holds_its_pipe() {
+    let start = std::time::Instant::now();
+    isolated_fault(
+        10,
+        "",
+        "",
+        &[],
+        "its host process was killed by signal 11 (SIGSEGV) during fmi2DoStep at t=0.5",
+    );
+    assert!(start.elapsed() < NO_STALL, "{:?}", start.elapsed());
+}
+
+/// In-process, the same FMU kills `tether` by SIGSEGV: seen at once, with the
+/// rows up to the last flush, as any segfault. The helper is a child of the
+/// FMU in `tether`'s own process: nothing can end it after the crash (isolate
+/// FMUs that start processes); the test ends it.
+#[test]
+fn in_process_crash_after_starting_a_helper_is_seen_at_once() {
+    use std::os::unix::process::ExitStatusExt;
+    let s = Scratch::new();
+    let (status, text, elapsed) = run_to_exit(&s, &system(s.path(), 8, ", delay = 0.001"), &[]);
+    kill_leftover_processes(&s);
+    assert_eq!(status.signal(), Some(11), "SIGSEGV; {text}");
+    assert!(elapsed < NO_STALL, "{elapsed:?}");
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(csv.trailer, None);
+    let t = last_time(&csv);
+    assert!((0.3..0.5).contains(&t), "last row at t = {t}");
+}
+
+/// An FMU that forks at t = 0.5, whose child calls `exit(0)` (the parent goes
+/// on): in-process the child inherits Tether's exit hook, which acts only in the
+/// process that installed it, so the child neither reports a false error nor
+/// removes the run's extraction folders; isolated the child is the host's. The
+/// run ends normally, every row written, nothing left behind.
+#[test]
+fn a_forked_child_calling_exit_is_not_the_runs_end() {
+    for isolate in [false, true] {
+        let s = Scratch::new();
+        // Slowed (2 ms per step) so that the folders can be seen after t = 0.5.
+        let sys = system(s.path(), 9, ", delay = 0.002");
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "out.csv"];
+        if isolate {
+            args.push("--isolate");
+        }
+        let log = s.path().join("stderr.txt");
+        let mut child = Killed(
+            s.command(&args)
+                .stderr(std::fs::File::create(&log).unwrap())
+                .spawn()
+                .unwrap(),
+        );
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+        while !std::fs::read_to_string(s.path().join("out.csv"))
+            .unwrap_or_default()
+            .lines()
+            .any(|l| l.starts_with("0.6,"))
+        {
+            assert!(std::time::Instant::now() < deadline, "no rows");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        assert_eq!(
+            s.leftovers().len(),
+            2,
+            "isolate = {isolate}: the folders are in use"
+        );
+        let status = child.0.wait().unwrap();
+        let text = std::fs::read_to_string(&log).unwrap();
+        assert!(status.success(), "isolate = {isolate}: {text}");
+        assert!(!text.contains("error"), "isolate = {isolate}: {text}");
+        let csv = read_csv(&s.path().join("out.csv"));
+        assert_eq!((csv.rows.len(), csv.trailer), (1001, None));
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+        assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
+    }
+}
+
+/// An isolated FMU that starts a helper process (`system("sleep 15 &")`) and
+/// goes on: the run ends normally, and the helper with the instance (its host's
+/// process group is killed once the host has exited), so nothing is left and
+/// nothing holds the run's standard error for the helper's 15 s.
+#[test]
+fn isolated_helper_ends_with_the_instance() {
+    let s = Scratch::new();
+    let start = std::time::Instant::now();
+    let out = s.run(&system(s.path(), 11, ""), "out.csv", &["--isolate"]);
+    let elapsed = start.elapsed();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(elapsed < NO_STALL, "{elapsed:?}");
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!((csv.rows.len(), csv.trailer), (1001, None));
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
+}

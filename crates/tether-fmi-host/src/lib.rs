@@ -8,11 +8,14 @@
 //!
 //! The host ends when the master closes the request pipe, also while the FMU
 //! is stuck inside a call (a thread watches for the hang-up), so a master that
-//! dies leaves no host behind.
+//! dies leaves no host behind, nor any process the FMU started (the host kills
+//! its process group). The pipes to the master are close-on-exec, and standard
+//! input and output are /dev/null and standard error: the FMU's child processes
+//! never hold them.
 
 use std::fs::File;
 use std::io::{BufReader, Write};
-use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd};
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::ExitCode;
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
@@ -38,21 +41,28 @@ pub fn serve_standard_streams() -> Result<(), String> {
     if !is_pipe(0) || !is_pipe(1) {
         return Err("it runs an FMU for Tether, which starts it with pipes as standard input and output; it is not meant to be started by hand".into());
     }
-    let requests = File::from(
-        std::io::stdin()
-            .as_fd()
-            .try_clone_to_owned()
-            .map_err(|e| e.to_string())?,
-    );
-    // SAFETY: dup and dup2 on the standard descriptors: the replies keep the
-    // pipe to the master on a descriptor of their own, and descriptor 1 then
-    // refers to standard error, so the FMU's printf cannot break a reply.
-    let replies = unsafe {
-        let fd = libc::dup(1);
-        if fd < 0 || libc::dup2(2, 1) < 0 {
+    // SAFETY: fcntl, open and dup2 on the standard descriptors: the requests and
+    // the replies keep the pipes to the master on descriptors of their own, both
+    // close-on-exec; descriptor 0 then reads /dev/null and descriptor 1 refers to
+    // standard error, so the FMU's printf cannot break a reply and the processes
+    // an FMU starts (`system("helper &")`) hold neither pipe.
+    let (requests, replies) = unsafe {
+        let requests = libc::fcntl(0, libc::F_DUPFD_CLOEXEC, 3);
+        if requests < 0 {
             return Err(std::io::Error::last_os_error().to_string());
         }
-        File::from(OwnedFd::from_raw_fd(fd))
+        let requests = File::from(OwnedFd::from_raw_fd(requests));
+        let replies = libc::fcntl(1, libc::F_DUPFD_CLOEXEC, 3);
+        if replies < 0 {
+            return Err(std::io::Error::last_os_error().to_string());
+        }
+        let replies = File::from(OwnedFd::from_raw_fd(replies));
+        let null = libc::open(c"/dev/null".as_ptr(), libc::O_RDONLY | libc::O_CLOEXEC);
+        if null < 0 || libc::dup2(null, 0) < 0 || libc::dup2(2, 1) < 0 {
+            return Err(std::io::Error::last_os_error().to_string());
+        }
+        libc::close(null);
+        (requests, replies)
     };
     watch_hangup(&requests);
     serve(requests, replies).map_err(|e| e.to_string())
@@ -68,7 +78,8 @@ fn is_pipe(fd: i32) -> bool {
 }
 
 /// Ends the process when the master closes the request pipe, even while the
-/// FMU is busy.
+/// FMU is busy, with every process the FMU started: the host runs in a process
+/// group of its own (the master starts it so), which it kills.
 fn watch_hangup(requests: &File) {
     let fd = requests.as_raw_fd();
     std::thread::spawn(move || loop {
@@ -81,9 +92,17 @@ fn watch_hangup(requests: &File) {
         // process (the serving loop owns it and ends the process on return).
         let n = unsafe { libc::poll(&mut poll, 1, -1) };
         if n > 0 && poll.revents & (libc::POLLHUP | libc::POLLERR) != 0 {
-            // SAFETY: _exit ends the process at once; the master is gone and
-            // nothing of ours needs flushing.
-            unsafe { libc::_exit(0) };
+            // SAFETY: getpgrp and getpid cannot fail; kill(0, SIGKILL) ends this
+            // process group, which is the host's own only if it leads it (never
+            // the group of whoever started a host by other means); _exit ends the
+            // process at once otherwise: the master is gone and nothing of ours
+            // needs flushing.
+            unsafe {
+                if libc::getpgrp() == libc::getpid() {
+                    libc::kill(0, libc::SIGKILL);
+                }
+                libc::_exit(0);
+            }
         }
     });
 }

@@ -4,7 +4,8 @@
 //! calls [`export_fmu!`] once; the kit provides every `fmi2*` function of the
 //! co-simulation interface, the state machine, input interpolation, integration
 //! (Dop853), FMU states and their serialization, logging, and the generated
-//! `modelDescription.xml` (exported as `tether_fmu_kit_model_description`).
+//! `modelDescription.xml` (exported as `tether_fmu_kit_model_description`). A model
+//! logs messages of its own through [`environment_logger`].
 //! See `docs/fmu-kit.md`.
 
 mod access;
@@ -22,6 +23,7 @@ pub mod xml;
 pub use declaration::{
     Boolean, Capabilities, Declaration, DefaultExperiment, Integer, Output, Parameters, Real, State,
 };
+pub use ffi::{environment_logger, EnvironmentLogger};
 pub use input::InputJet;
 pub use marker::MarkerKinematics;
 pub use model::Model;

@@ -13,6 +13,10 @@ pub enum Mode {
     EndlessLoop,
     LogFlood,
     SlowCalls,
+    HelperThenSegfault,
+    ForkedChildExits,
+    ForkedChildLingersThenSegfault,
+    Helper,
 }
 
 impl Mode {
@@ -27,6 +31,10 @@ impl Mode {
             5 => Mode::EndlessLoop,
             6 => Mode::LogFlood,
             7 => Mode::SlowCalls,
+            8 => Mode::HelperThenSegfault,
+            9 => Mode::ForkedChildExits,
+            10 => Mode::ForkedChildLingersThenSegfault,
+            11 => Mode::Helper,
             _ => return None,
         })
     }
@@ -67,6 +75,19 @@ impl Fault {
                 }
             }
             Mode::SlowCalls => std::thread::sleep(Duration::from_secs_f64(self.pause)),
+            Mode::HelperThenSegfault => {
+                crate::start_helper();
+                crate::crash()
+            }
+            // Only in the step from `at` itself: one child, not one per step.
+            Mode::ForkedChildExits if t < self.at + 0.5 * h => crate::fork_and_exit_in_child(),
+            Mode::ForkedChildExits => {}
+            Mode::ForkedChildLingersThenSegfault => {
+                crate::fork_lingering_child();
+                crate::crash()
+            }
+            Mode::Helper if t < self.at + 0.5 * h => crate::start_helper(),
+            Mode::Helper => {}
         }
     }
 }

@@ -17,20 +17,21 @@
 //! | 5 | an endless loop (busy) |
 //! | 6 | a log flood: `flood` warnings per `fmi2DoStep` (default 2000) |
 //! | 7 | slow calls: each `fmi2DoStep` sleeps `pause` seconds (default 1) |
+//! | 8 | a helper process (`system("sleep 15 &")`), then a segmentation fault |
+//! | 9 | `fork()`, and the child calls `exit(0)` (the parent waits for it and goes on; only in the step from `at`) |
+//! | 10 | `fork()`, the child sleeps 15 s (holding every descriptor), the parent segfaults |
+//! | 11 | a helper process (`system("sleep 15 &")`), and the run goes on (only in the step from `at`) |
 //!
 //! `delay` (seconds, default 0) makes every `fmi2DoStep` sleep, in every mode, to
 //! slow a run down to wall-clock scales.
 //!
-//! The kit's [`export_fmu!`](tether_fmu_kit::export_fmu) does not give a model the
-//! environment's logger, so this crate writes the exports itself (the kit's, with
-//! `fmi2Instantiate` remembering the logger and `fmi2DoStep` putting it in scope
-//! for the model).
+//! The warnings of the log flood go through the environment's logger
+//! ([`tether_fmu_kit::environment_logger`]) with a printf format of their own, as a
+//! C FMU logs.
 
-use std::cell::Cell;
-use std::ffi::{c_char, c_int, c_void, CStr, CString};
-use std::sync::Mutex;
+use std::ffi::{c_int, c_uint};
 
-use tether_fmu_kit::ffi::{Fmi2CallbackFunctions, Fmi2CallbackLogger, Fmi2Component};
+use tether_fmu_kit::export_fmu;
 
 mod fault;
 mod model;
@@ -38,91 +39,65 @@ mod model;
 pub use fault::Mode;
 pub use model::Faults;
 
-/// The environment's logger of each live instance: component address, logger,
-/// component environment, instance name.
-struct Logger {
-    component: usize,
-    logger: Fmi2CallbackLogger,
-    env: usize,
-    name: CString,
-}
-
-static LOGGERS: Mutex<Vec<Logger>> = Mutex::new(Vec::new());
-
-thread_local! {
-    /// The logger of the instance whose `fmi2DoStep` runs on this thread.
-    static IN_SCOPE: Cell<Option<(Fmi2CallbackLogger, usize, *const c_char)>> = const { Cell::new(None) };
-}
-
-fn loggers() -> std::sync::MutexGuard<'static, Vec<Logger>> {
-    LOGGERS
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
-/// Remembers the logger for `c`.
-///
-/// # Safety
-/// `name` is a NUL-terminated string and `functions` points at valid callbacks.
-unsafe fn remember_logger(
-    c: Fmi2Component,
-    name: *const c_char,
-    functions: *const Fmi2CallbackFunctions,
-) {
-    // SAFETY: the caller's contract.
-    let (name, callbacks) = unsafe { (CStr::from_ptr(name).to_owned(), &*functions) };
-    loggers().push(Logger {
-        component: c as usize,
-        logger: callbacks.logger,
-        env: callbacks.component_environment as usize,
-        name,
-    });
-}
-
-fn forget_logger(c: Fmi2Component) {
-    loggers().retain(|l| l.component != c as usize);
-}
-
-/// Puts the logger of an instance in scope for the duration of one call.
-struct LoggerInScope;
-
-impl LoggerInScope {
-    fn enter(c: Fmi2Component) -> LoggerInScope {
-        let found = loggers()
-            .iter()
-            .find(|l| l.component == c as usize)
-            .map(|l| (l.logger, l.env, l.name.as_ptr()));
-        IN_SCOPE.set(found);
-        LoggerInScope
-    }
-}
-
-impl Drop for LoggerInScope {
-    fn drop(&mut self) {
-        IN_SCOPE.set(None);
-    }
-}
-
 /// One warning through the environment's logger, formatted by the environment
 /// (`%u`, `%g`), as a C FMU logs.
 fn log_warning(n: u32, t: f64) {
-    let Some((Some(logger), env, name)) = IN_SCOPE.get() else {
+    let Some(logger) = tether_fmu_kit::environment_logger() else {
         return;
     };
-    // SAFETY: the logger and its environment were given to fmi2Instantiate for the
-    // instance whose fmi2DoStep is running (the FMI contract keeps them valid until
-    // fmi2FreeInstance); `name` lives in LOGGERS until then; the format's two
+    // SAFETY: the kit hands out the logger, its environment and the instance name
+    // that fmi2Instantiate received, during the fmi2DoStep running this (the FMI
+    // contract keeps them valid until fmi2FreeInstance); the format's two
     // conversions match the unsigned int and the double passed.
     unsafe {
-        logger(
-            env as *mut c_void,
-            name,
+        (logger.logger)(
+            logger.component_environment,
+            logger.instance_name,
             1 as c_int,
             c"logStatusWarning".as_ptr(),
             c"flood message %u at t = %g".as_ptr(),
-            n as std::ffi::c_uint,
+            n as c_uint,
             t,
         );
+    }
+}
+
+/// Starts a helper in the background, as an FMU that runs a tool or a licence
+/// daemon does: `system("sleep 15 &")` (the shell returns at once).
+fn start_helper() {
+    // SAFETY: system with a NUL-terminated command; it returns once the shell
+    // has started `sleep` in the background and ended.
+    unsafe { libc::system(c"sleep 15 &".as_ptr()) };
+}
+
+/// `fork()`; the child calls `exit(0)` at once (running the process's exit
+/// hooks, as a child of an FMU that does not `exec` does), the parent waits for
+/// it.
+fn fork_and_exit_in_child() {
+    // SAFETY: fork in a multithreaded process: the child only calls exit, as the
+    // FMU this mode stands for does; the parent reaps its own child.
+    unsafe {
+        match libc::fork() {
+            0 => libc::exit(0),
+            -1 => {}
+            child => {
+                libc::waitpid(child, std::ptr::null_mut(), 0);
+            }
+        }
+    }
+}
+
+/// `fork()`; the child sleeps 15 s, holding a copy of every descriptor of the
+/// process (also those that are close-on-exec: it does not `exec`), then ends
+/// without running the exit hooks.
+fn fork_lingering_child() {
+    // SAFETY: fork in a multithreaded process: the child only calls the
+    // async-signal-safe sleep and _exit.
+    unsafe {
+        if libc::fork() == 0 {
+            libc::sleep(15);
+            libc::_exit(0);
+        }
     }
 }
 
@@ -136,249 +111,4 @@ fn crash() -> ! {
     std::process::abort()
 }
 
-#[allow(non_snake_case, clippy::missing_safety_doc)]
-mod exports {
-    use super::*;
-    use std::ffi::{c_char, c_int};
-    use tether_fmu_kit::ffi as k;
-    use tether_fmu_kit::ffi::{
-        Fmi2Boolean as B, Fmi2Component as C, Fmi2FmuState as S, Fmi2Status as St,
-        Fmi2String as Str, Fmi2ValueReference as Vr,
-    };
-    type M = Faults;
-
-    /// The generated modelDescription.xml (NUL-terminated, static), or null if
-    /// the declaration is invalid.
-    #[unsafe(no_mangle)]
-    pub extern "C" fn tether_fmu_kit_model_description() -> *const c_char {
-        static XML: std::sync::OnceLock<Option<std::ffi::CString>> = std::sync::OnceLock::new();
-        k::model_description::<M>(&XML)
-    }
-
-    #[unsafe(no_mangle)]
-    pub extern "C" fn fmi2GetTypesPlatform() -> *const c_char {
-        k::get_types_platform()
-    }
-    #[unsafe(no_mangle)]
-    pub extern "C" fn fmi2GetVersion() -> *const c_char {
-        k::get_version()
-    }
-
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetDebugLogging(
-        c: C,
-        on: B,
-        n: usize,
-        categories: *const Str,
-    ) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::set_debug_logging::<M>(c, on, n, categories) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2Instantiate(
-        name: Str,
-        fmu_type: c_int,
-        guid: Str,
-        _resources: Str,
-        functions: *const k::Fmi2CallbackFunctions,
-        _visible: B,
-        logging_on: B,
-    ) -> C {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        let c = unsafe { k::instantiate::<M>(name, fmu_type, guid, functions, logging_on) };
-        if !c.is_null() {
-            // SAFETY: the kit accepted the instance, so `functions` and `name` are valid.
-            unsafe { crate::remember_logger(c, name, functions) };
-        }
-        c
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2FreeInstance(c: C) {
-        crate::forget_logger(c);
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::free_instance::<M>(c) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetupExperiment(
-        c: C,
-        tol_defined: B,
-        tol: f64,
-        start: f64,
-        stop_defined: B,
-        stop: f64,
-    ) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::setup_experiment::<M>(c, tol_defined, tol, start, stop_defined, stop) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2EnterInitializationMode(c: C) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::enter_initialization_mode::<M>(c) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2ExitInitializationMode(c: C) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::exit_initialization_mode::<M>(c) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2Terminate(c: C) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::terminate::<M>(c) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2Reset(c: C) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::reset::<M>(c) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetReal(c: C, vr: *const Vr, n: usize, v: *mut f64) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_real::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetInteger(c: C, vr: *const Vr, n: usize, v: *mut c_int) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_integer::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetBoolean(c: C, vr: *const Vr, n: usize, v: *mut B) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_boolean::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetString(c: C, vr: *const Vr, n: usize, v: *mut Str) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_string::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetReal(c: C, vr: *const Vr, n: usize, v: *const f64) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::set_real::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetInteger(c: C, vr: *const Vr, n: usize, v: *const c_int) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::set_integer::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetBoolean(c: C, vr: *const Vr, n: usize, v: *const B) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::set_boolean::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetString(c: C, vr: *const Vr, n: usize, v: *const Str) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::set_string::<M>(c, vr, n, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetFMUstate(c: C, s: *mut S) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_fmu_state::<M>(c, s) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetFMUstate(c: C, s: S) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::set_fmu_state::<M>(c, s) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2FreeFMUstate(c: C, s: *mut S) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::free_fmu_state::<M>(c, s) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: C, s: S, size: *mut usize) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::serialized_fmu_state_size::<M>(c, s, size) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SerializeFMUstate(
-        c: C,
-        s: S,
-        bytes: *mut c_char,
-        size: usize,
-    ) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::serialize_fmu_state::<M>(c, s, bytes, size) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
-        c: C,
-        bytes: *const c_char,
-        size: usize,
-        s: *mut S,
-    ) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::deserialize_fmu_state::<M>(c, bytes, size, s) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
-        c: C,
-        _u: *const Vr,
-        _nu: usize,
-        _z: *const Vr,
-        _nz: usize,
-        _dz: *const f64,
-        _du: *mut f64,
-    ) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_directional_derivative::<M>(c) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
-        c: C,
-        vr: *const Vr,
-        n: usize,
-        order: *const c_int,
-        v: *const f64,
-    ) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::set_real_input_derivatives::<M>(c, vr, n, order, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(
-        c: C,
-        vr: *const Vr,
-        n: usize,
-        order: *const c_int,
-        v: *mut f64,
-    ) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_real_output_derivatives::<M>(c, vr, n, order, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2DoStep(c: C, t: f64, h: f64, no_prior: B) -> St {
-        let _logger = crate::LoggerInScope::enter(c);
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::do_step::<M>(c, t, h, no_prior) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2CancelStep(c: C) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::cancel_step::<M>(c) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetStatus(c: C, kind: c_int, v: *mut St) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_status::<M>(c, kind, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetRealStatus(c: C, kind: c_int, v: *mut f64) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_real_status::<M>(c, kind, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetIntegerStatus(c: C, kind: c_int, v: *mut c_int) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_integer_status::<M>(c, kind, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetBooleanStatus(c: C, kind: c_int, v: *mut B) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_boolean_status::<M>(c, kind, v) }
-    }
-    #[unsafe(no_mangle)]
-    pub unsafe extern "C" fn fmi2GetStringStatus(c: C, kind: c_int, v: *mut Str) -> St {
-        // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
-        unsafe { k::get_string_status::<M>(c, kind, v) }
-    }
-}
+export_fmu!(Faults);

@@ -16,23 +16,21 @@
 //!   `Stair` does at t = 9).
 //!
 //! With the defaults (0 and times beyond any run) it is a well-behaved FMU.
+//!
+//! The equations and the declarations it shares with the oscillator come from the
+//! oscillator's model (`oscillator-model`).
 
 use std::cell::Cell;
 
-use tether_fmu_kit::{
-    export_fmu, Declaration, DefaultExperiment, InputJet, Integer, Model, Output, Parameters, Real,
-    State,
-};
+use oscillator_model::{declare, Oscillator};
+use tether_fmu_kit::{export_fmu, Declaration, InputJet, Integer, Model, Parameters, Real};
 
 /// Runge–Kutta sub-steps per communication step.
 const SUBSTEPS: u32 = 16;
 
 pub struct Quirks {
-    m: f64,
-    c: f64,
-    d: f64,
-    x0: f64,
-    v0: f64,
+    /// m, c, d, x0 and v0 (never integrated exactly: [`Quirks::rk4`] steps).
+    oscillator: Oscillator,
     rollback: i32,
     rollback_after: f64,
     nan_after: f64,
@@ -48,7 +46,7 @@ pub struct Quirks {
 
 impl Quirks {
     fn acceleration(&self, x: f64, v: f64, f: f64) -> f64 {
-        (f - self.c * x - self.d * v) / self.m
+        self.oscillator.acceleration(x, v, f)
     }
 
     fn rk4(&self, h: f64, x: &mut [f64; 2], u: InputJet) {
@@ -85,11 +83,11 @@ impl Model for Quirks {
         model_identifier: "quirks",
         description: "Single mass on a spring and damper with selectable FMI misbehaviour (conformance tests)",
         real_parameters: &[
-            Real::new("m", 1.0).unit("kg").description("Mass (must be > 0)"),
-            Real::new("c", 1000.0).min(0.0).unit("N/m").description("Spring stiffness"),
-            Real::new("d", 10.0).min(0.0).unit("N.s/m").description("Damping coefficient"),
-            Real::new("x0", 0.0).unit("m").description("Initial position"),
-            Real::new("v0", 100.0).unit("m/s").description("Initial velocity"),
+            declare::MECHANICS[0],
+            declare::MECHANICS[1],
+            declare::MECHANICS[2],
+            declare::MECHANICS[3],
+            declare::MECHANICS[4],
             Real::new("rollback_after", 0.0)
                 .unit("s")
                 .description("The rollback quirk starts with the first step from this time on"),
@@ -106,38 +104,20 @@ impl Model for Quirks {
         integer_parameters: &[Integer::new("rollback", 0).min(0).max(2).description(
             "0: exact rollback; 1: fmi2SetFMUstate has no effect; 2: a repeated step differs",
         )],
-        inputs: &[Real::new("F", 0.0).unit("N").description("Force on the mass")],
+        inputs: &[declare::FORCE],
         outputs: &[
-            Output::new("x").unit("m").description("Position").depends_on(&["pos"]),
-            Output::new("v").unit("m/s").description("Velocity").depends_on(&["vel"]),
-            Output::new("a")
-                .unit("m/s2")
-                .description("Acceleration")
-                .depends_on(&["pos", "vel", "F"]),
+            declare::POSITION_AND_VELOCITY[0],
+            declare::POSITION_AND_VELOCITY[1],
+            declare::acceleration(&["pos", "vel", "F"]),
         ],
-        states: &[
-            State::new("pos").unit("m", "m/s").description("Position state"),
-            State::new("vel").unit("m/s", "m/s2").description("Velocity state"),
-        ],
-        default_experiment: DefaultExperiment {
-            start_time: 0.0,
-            stop_time: 1.0,
-            step_size: 1e-3,
-        },
+        states: &declare::STATES,
+        default_experiment: declare::DEFAULT_EXPERIMENT,
         ..Declaration::EMPTY
     };
 
     fn new(p: &Parameters) -> Result<Self, String> {
-        let m = p.real("m")?;
-        if m.is_nan() || m <= 0.0 {
-            return Err(format!("m must be > 0, got {m}"));
-        }
         Ok(Quirks {
-            m,
-            c: p.real("c")?,
-            d: p.real("d")?,
-            x0: p.real("x0")?,
-            v0: p.real("v0")?,
+            oscillator: Oscillator::with_parameters(p, false)?,
             rollback: p.integer("rollback")?,
             rollback_after: p.real("rollback_after")?,
             nan_after: p.real("nan_after")?,
@@ -149,12 +129,11 @@ impl Model for Quirks {
     }
 
     fn initial_states(&self, x: &mut [f64]) {
-        x.copy_from_slice(&[self.x0, self.v0]);
+        self.oscillator.initial_states(x);
     }
 
     fn derivatives(&self, _t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        dx[0] = x[1];
-        dx[1] = self.acceleration(x[0], x[1], u[0]);
+        self.oscillator.derivatives_under(x, u[0], dx);
     }
 
     fn outputs(&self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {

@@ -11,7 +11,7 @@ pub mod protocol;
 
 use std::ffi::OsString;
 use std::io::{self, BufReader};
-use std::os::fd::AsRawFd;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
@@ -102,6 +102,9 @@ pub struct RemoteInstance {
     /// How the host process ended, once it did.
     ended: Option<String>,
     timeout: Option<Duration>,
+    /// Readable once the host process has ended ([`watch_exit`]), also while a
+    /// process it started still holds the reply pipe.
+    exit_watch: Option<OwnedFd>,
 }
 
 /// `exited with code 3`, `was killed by signal 11 (SIGSEGV)`.
@@ -147,7 +150,8 @@ impl RemoteInstance {
         // Requests go to the host's standard input, replies come from its
         // standard output (the host moves what the FMU prints to stderr); its
         // own process group keeps a terminal's Ctrl-C away from it (the master
-        // decides what to stop).
+        // decides what to stop) and holds the processes its FMU starts, which
+        // end with it ([`RemoteInstance::reap`]).
         let mut child = Command::new(&command.program)
             .args(&command.args)
             .stdin(Stdio::piped())
@@ -158,6 +162,7 @@ impl RemoteInstance {
         let (Some(writer), Some(reader)) = (child.stdin.take(), child.stdout.take()) else {
             unreachable!("both are piped")
         };
+        let exit_watch = watch_exit(child.id());
         let mut remote = RemoteInstance {
             child,
             reader: BufReader::with_capacity(1 << 16, reader),
@@ -170,6 +175,7 @@ impl RemoteInstance {
             fatal: false,
             ended: None,
             timeout,
+            exit_watch,
         };
         // The host logs FMU messages itself, at the level they are wanted here.
         let target = format!("fmu::{name}");
@@ -230,7 +236,7 @@ impl RemoteInstance {
         let entered = crate::current::Entered::new(function, &self.name, self.time);
         let received = match &mut self.writer {
             Some(writer) => self.out.send(writer).and_then(|()| {
-                wait_readable(&self.reader, self.timeout)?;
+                wait_readable(&self.reader, self.exit_watch.as_ref(), self.timeout)?;
                 protocol::receive(&mut self.reader, &mut self.reply)
             }),
             None => Err(io::ErrorKind::BrokenPipe.into()),
@@ -266,8 +272,8 @@ impl RemoteInstance {
     /// The host did not answer in time: kill it.
     #[cold]
     fn timed_out(&mut self, function: &'static str) -> Error {
-        let _ = self.child.kill();
-        let status = self.child.wait();
+        self.kill_group();
+        let status = self.reap();
         self.ended = Some(match status {
             Ok(status) => format!("{} after the call time-out", describe_exit(status)),
             Err(e) => format!("could not be waited for ({e})"),
@@ -283,7 +289,7 @@ impl RemoteInstance {
     /// The connection broke: the host ended; say how.
     #[cold]
     fn host_ended(&mut self, function: &'static str) -> Error {
-        let how = match self.child.wait() {
+        let how = match self.reap() {
             Ok(status) => describe_exit(status),
             Err(e) => format!("could not be waited for ({e})"),
         };
@@ -298,14 +304,40 @@ impl RemoteInstance {
 
     #[cold]
     fn protocol_error(&mut self, e: io::Error) -> Error {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        self.kill_group();
+        let _ = self.reap();
         let how = format!("sent a malformed reply ({e}) and was stopped");
         self.ended = Some(how.clone());
         Error::Host {
             instance: self.name.to_string(),
             message: format!("instance '{}': its host process {how}", self.name),
         }
+    }
+
+    /// Kills the host and every process of its group (those its FMU started).
+    fn kill_group(&self) {
+        if let Ok(pid) = libc::pid_t::try_from(self.child.id()) {
+            // SAFETY: a signal to the process group the host leads (started with
+            // process_group(0)); the host is not reaped yet, so its id is not reused.
+            unsafe { libc::killpg(pid, libc::SIGKILL) };
+        }
+    }
+
+    /// Waits for the host to end, kills what is left of its process group (the
+    /// processes its FMU started, which must not outlive it), then reaps it.
+    fn reap(&mut self) -> io::Result<ExitStatus> {
+        let pid = self.child.id() as libc::id_t;
+        // SAFETY: waitid on the host, the child of this process, with a zeroed
+        // siginfo to write into; WNOWAIT leaves it unreaped, so the process group
+        // id stays its own until `wait` below.
+        unsafe {
+            let mut info: libc::siginfo_t = std::mem::zeroed();
+            while libc::waitid(libc::P_PID, pid, &mut info, libc::WEXITED | libc::WNOWAIT) < 0
+                && io::Error::last_os_error().kind() == io::ErrorKind::Interrupted
+            {}
+        }
+        self.kill_group();
+        self.child.wait()
     }
 
     /// The results of the last reply after the status byte.
@@ -566,33 +598,70 @@ impl RemoteInstance {
     }
 }
 
+/// A descriptor that becomes readable when process `pid` ends (Linux's pidfd),
+/// or `None` where there is none (the pipe's end is then the only sign).
+fn watch_exit(pid: u32) -> Option<OwnedFd> {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: pidfd_open on the host just started (not reaped); the
+        // descriptor it returns (close-on-exec) is owned from here on.
+        let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid as libc::pid_t, 0) };
+        let fd = libc::c_int::try_from(fd).ok().filter(|fd| *fd >= 0)?;
+        // SAFETY: a new descriptor nobody else owns.
+        Some(unsafe { OwnedFd::from_raw_fd(fd) })
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = pid;
+        None
+    }
+}
+
 /// Waits until the reply pipe has data (or was closed) for at most `timeout`
-/// (`TimedOut` after it); without a time-out the read itself waits.
-fn wait_readable(reader: &BufReader<ChildStdout>, timeout: Option<Duration>) -> io::Result<()> {
-    let Some(timeout) = timeout else {
-        return Ok(());
-    };
-    if !reader.buffer().is_empty() {
+/// (`TimedOut` after it), or until the host ends (`UnexpectedEof`): a process
+/// the FMU started without `exec` holds a copy of the pipe, which then stays
+/// open. Without a time-out nor an exit watch the read itself waits.
+fn wait_readable(
+    reader: &BufReader<ChildStdout>,
+    exit_watch: Option<&OwnedFd>,
+    timeout: Option<Duration>,
+) -> io::Result<()> {
+    if !reader.buffer().is_empty() || (timeout.is_none() && exit_watch.is_none()) {
         return Ok(());
     }
-    let deadline = std::time::Instant::now() + timeout;
+    let deadline = timeout.map(|t| std::time::Instant::now() + t);
     loop {
-        let left = deadline.saturating_duration_since(std::time::Instant::now());
-        let mut poll = libc::pollfd {
-            fd: reader.get_ref().as_raw_fd(),
-            events: libc::POLLIN,
-            revents: 0,
-        };
-        let ms = libc::c_int::try_from(left.as_millis().max(1)).unwrap_or(libc::c_int::MAX);
-        // SAFETY: one valid pollfd on a descriptor the reader owns, alive here.
-        let n = unsafe { libc::poll(&mut poll, 1, ms) };
-        if n > 0 {
+        let ms = deadline.map_or(-1, |deadline| {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            libc::c_int::try_from(left.as_millis().max(1)).unwrap_or(libc::c_int::MAX)
+        });
+        let mut polls = [
+            libc::pollfd {
+                fd: reader.get_ref().as_raw_fd(),
+                events: libc::POLLIN,
+                revents: 0,
+            },
+            libc::pollfd {
+                fd: exit_watch.map_or(-1, AsRawFd::as_raw_fd), // -1: ignored
+                events: libc::POLLIN,
+                revents: 0,
+            },
+        ];
+        // SAFETY: two valid pollfds on descriptors owned by the caller, alive here.
+        let n = unsafe { libc::poll(polls.as_mut_ptr(), 2, ms) };
+        if n > 0 && polls[0].revents != 0 {
             return Ok(()); // data, or the host closed its end (the read says which)
+        }
+        if n > 0 {
+            return Err(io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                "the host process ended",
+            ));
         }
         if n < 0 && io::Error::last_os_error().kind() != io::ErrorKind::Interrupted {
             return Err(io::Error::last_os_error());
         }
-        if n == 0 && std::time::Instant::now() >= deadline {
+        if n == 0 && deadline.is_some_and(|d| std::time::Instant::now() >= d) {
             return Err(io::ErrorKind::TimedOut.into());
         }
     }
@@ -606,12 +675,12 @@ impl Drop for RemoteInstance {
             self.timeout = Some(self.timeout.unwrap_or(Duration::from_secs(10)));
             self.out.start(op::FREE_INSTANCE);
             if self.call("fmi2FreeInstance").is_err() && self.ended.is_none() {
-                let _ = self.child.kill();
+                self.kill_group();
             }
         }
         self.writer = None;
         if self.ended.is_none() {
-            let _ = self.child.wait();
+            let _ = self.reap();
         }
     }
 }

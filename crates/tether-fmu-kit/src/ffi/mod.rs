@@ -3,6 +3,7 @@
 //! module with `unsafe`. Every function checks its pointers, never lets a panic
 //! unwind into C (a panic becomes fmi2Fatal) and delegates to [`Instance`].
 
+use std::cell::Cell;
 use std::ffi::{c_char, c_int, c_uint, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::ptr;
@@ -37,6 +38,84 @@ pub struct Fmi2CallbackFunctions {
     pub free_memory: Option<unsafe extern "C" fn(*mut c_void)>,
     pub step_finished: Option<unsafe extern "C" fn(*mut c_void, Fmi2Status)>,
     pub component_environment: *mut c_void,
+}
+
+/// The environment's logger of one instance, as given to `fmi2Instantiate`: the
+/// hook through which a model logs messages of its own ([`environment_logger`]).
+#[derive(Clone, Copy)]
+pub struct EnvironmentLogger {
+    /// The `fmi2CallbackLogger` (C-variadic: `message` is a printf format whose
+    /// conversions the arguments after it fill).
+    pub logger:
+        unsafe extern "C" fn(*mut c_void, Fmi2String, Fmi2Status, Fmi2String, Fmi2String, ...),
+    /// The `componentEnvironment`, the logger's first argument.
+    pub component_environment: *mut c_void,
+    /// The instance name (NUL-terminated), the logger's second argument.
+    pub instance_name: Fmi2String,
+}
+
+impl EnvironmentLogger {
+    /// Logs `message` as it is (passed as the argument of a `"%s"` format, as the
+    /// kit's own messages are) with `status` and `category` (one of the categories
+    /// of the model description, e.g. `logStatusWarning`). Unlike the kit's own
+    /// messages it is sent whatever `fmi2SetDebugLogging` enabled: the model
+    /// decides.
+    pub fn log(&self, status: Status, category: &str, message: &str) {
+        let category = c_string(category);
+        let message = c_string(message);
+        // SAFETY: the logger, its environment and the instance name are those
+        // fmi2Instantiate received, valid until fmi2FreeInstance (the FMI contract;
+        // the kit hands them out only during a call on the instance); the strings
+        // are NUL-terminated and live across the call; "%s" consumes exactly the one
+        // extra argument passed.
+        unsafe {
+            (self.logger)(
+                self.component_environment,
+                self.instance_name,
+                status as Fmi2Status,
+                category.as_ptr(),
+                c"%s".as_ptr(),
+                message.as_ptr(),
+            );
+        }
+    }
+}
+
+thread_local! {
+    /// The logger of the instance whose FMI call runs on this thread, if it has one.
+    static IN_CALL: Cell<Option<EnvironmentLogger>> = const { Cell::new(None) };
+}
+
+/// The environment's logger of the instance whose FMI call (`fmi2DoStep`,
+/// `fmi2GetReal`, …) is running on this thread, for a model's own messages; `None`
+/// outside calls and when the environment gave no logger. Valid for the duration of
+/// the call only: a model must not keep it.
+pub fn environment_logger() -> Option<EnvironmentLogger> {
+    IN_CALL.get()
+}
+
+/// Puts an instance's logger in scope for one call; the previous one comes back on
+/// drop (also after a panic).
+struct LoggerScope(Option<EnvironmentLogger>);
+
+impl LoggerScope {
+    fn enter(logger: Option<EnvironmentLogger>) -> LoggerScope {
+        LoggerScope(IN_CALL.replace(logger))
+    }
+}
+
+impl Drop for LoggerScope {
+    fn drop(&mut self) {
+        IN_CALL.set(self.0);
+    }
+}
+
+/// What a component pointer points at: the instance and its environment's logger.
+struct Component<M: Model> {
+    instance: Instance<M>,
+    logger: Option<EnvironmentLogger>,
+    /// The instance name `logger.instance_name` points into.
+    _name: CString,
 }
 
 pub(crate) const ERROR: Fmi2Status = Status::Error as Fmi2Status;
@@ -92,8 +171,11 @@ unsafe fn with_instance<M: Model>(
     if c.is_null() {
         return ERROR;
     }
-    // SAFETY: per this function's contract, c is a live Box<Instance<M>> from instantiate.
-    let instance = unsafe { &mut *c.cast::<Instance<M>>() };
+    // SAFETY: per this function's contract, c is a live Box<Component<M>> from
+    // instantiate.
+    let component = unsafe { &mut *c.cast::<Component<M>>() };
+    let _logger = LoggerScope::enter(component.logger);
+    let instance = &mut component.instance;
     match catch_unwind(AssertUnwindSafe(|| instance.call(call, f))) {
         Ok(status) => status as Fmi2Status,
         Err(payload) => {
@@ -217,7 +299,18 @@ pub unsafe fn instantiate<M: Model>(
             instance.log(Status::Error, &format!("fmi2Instantiate: {problem}"));
             return ptr::null_mut();
         }
-        Box::into_raw(Box::new(instance)).cast::<c_void>()
+        let name = c_string(&name);
+        let logger = callbacks.logger.map(|logger| EnvironmentLogger {
+            logger,
+            component_environment: callbacks.component_environment,
+            instance_name: name.as_ptr(),
+        });
+        let component = Component {
+            instance,
+            logger,
+            _name: name,
+        };
+        Box::into_raw(Box::new(component)).cast::<c_void>()
     });
     result.unwrap_or(ptr::null_mut())
 }
@@ -227,8 +320,8 @@ pub unsafe fn instantiate<M: Model>(
 pub unsafe fn free_instance<M: Model>(c: Fmi2Component) {
     if !c.is_null() {
         // SAFETY: c came from Box::into_raw in instantiate::<M> and is freed only here.
-        let instance = unsafe { Box::from_raw(c.cast::<Instance<M>>()) };
-        let _ = catch_unwind(AssertUnwindSafe(|| drop(instance)));
+        let component = unsafe { Box::from_raw(c.cast::<Component<M>>()) };
+        let _ = catch_unwind(AssertUnwindSafe(|| drop(component)));
     }
 }
 

@@ -1,7 +1,7 @@
 //! The C layer: null and bad pointers, wrong GUIDs, FMU states and panics, called the
 //! way an importer calls them.
 
-use std::ffi::{c_char, CString};
+use std::ffi::{c_char, c_void, CStr, CString};
 use std::ptr;
 
 use super::*;
@@ -172,4 +172,91 @@ fn a_panicking_model_returns_fatal_and_the_instance_stays_fatal() {
         assert_eq!(reset::<D>(c), ERROR);
         free_instance::<D>(c);
     }
+}
+
+/// What [`environment_logger`] gave inside the last `fmi2DoStep` of [`Probe`]:
+/// the component environment and the instance name.
+type Seen = Option<(usize, String)>;
+
+std::thread_local! {
+    static SEEN: std::cell::RefCell<Option<Seen>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Decay, recording the logger hook from inside `fmi2DoStep`.
+struct Probe(Decay);
+
+impl Model for Probe {
+    const DECLARATION: crate::Declaration = Decay::DECLARATION;
+    fn new(p: &crate::Parameters) -> Result<Self, String> {
+        Decay::new(p).map(Probe)
+    }
+    fn initial_states(&self, x: &mut [f64]) {
+        self.0.initial_states(x)
+    }
+    fn derivatives(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        self.0.derivatives(t, x, u, dx)
+    }
+    fn outputs(&self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
+        self.0.outputs(t, x, u, y)
+    }
+    fn exact_step(&self, _t: f64, _h: f64, _x: &mut [f64], _u: &[crate::InputJet]) -> bool {
+        let seen = environment_logger().map(|l| {
+            // SAFETY: the hook's name is NUL-terminated and alive during the call.
+            let name = unsafe { CStr::from_ptr(l.instance_name) };
+            (
+                l.component_environment as usize,
+                name.to_string_lossy().into_owned(),
+            )
+        });
+        SEEN.set(Some(seen));
+        false
+    }
+}
+
+/// Stands in for a logger: only its address is handed around, it is never called
+/// (stable Rust cannot define a C-variadic function).
+extern "C" fn never_called() {
+    unreachable!("the test never logs");
+}
+
+/// Runs one `fmi2DoStep` of a [`Probe`] named `probe` instantiated with
+/// `functions`; what the model saw of the logger hook.
+fn seen_by_the_model(functions: &Fmi2CallbackFunctions) -> Seen {
+    let name = CString::new("probe").unwrap();
+    let guid = CString::new(xml::guid(&Probe::DECLARATION)).unwrap();
+    SEEN.set(None);
+    // SAFETY: valid NUL-terminated strings and a valid callback struct whose
+    // logger is never called; c is used while live.
+    unsafe {
+        let c = instantiate::<Probe>(name.as_ptr(), 1, guid.as_ptr(), functions, 0);
+        assert!(!c.is_null());
+        assert_eq!(enter_initialization_mode::<Probe>(c), OK);
+        assert_eq!(exit_initialization_mode::<Probe>(c), OK);
+        assert_eq!(do_step::<Probe>(c, 0.0, 0.1, 0), OK);
+        free_instance::<Probe>(c);
+    }
+    SEEN.take().expect("fmi2DoStep reached the model")
+}
+
+/// A model reaches its instance's logger through the hook during a call, and
+/// only then.
+#[test]
+fn the_model_reaches_the_environments_logger_during_a_call() {
+    assert!(environment_logger().is_none(), "outside any call");
+    let mut environment = 0u8;
+    let mut functions = callbacks();
+    // SAFETY: only the pointer's type changes; the function is never called.
+    functions.logger = Some(unsafe {
+        std::mem::transmute::<
+            extern "C" fn(),
+            unsafe extern "C" fn(*mut c_void, Fmi2String, Fmi2Status, Fmi2String, Fmi2String, ...),
+        >(never_called)
+    });
+    functions.component_environment = (&raw mut environment).cast();
+    assert_eq!(
+        seen_by_the_model(&functions),
+        Some((&raw mut environment as usize, "probe".to_string()))
+    );
+    assert!(environment_logger().is_none(), "the call ended");
+    assert_eq!(seen_by_the_model(&callbacks()), None, "no logger given");
 }
