@@ -116,7 +116,7 @@ pub enum Error {
     },
 
     /// The FMU is not an FMI 2.0 FMU.
-    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 co-simulation only", path.display())]
+    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
     UnsupportedFmiVersion {
         /// The FMU.
         path: PathBuf,
@@ -124,8 +124,20 @@ pub enum Error {
         version: String,
     },
 
+    /// An FMI 3.0 FMU offers no co-simulation (scheduled execution only, whose
+    /// clocks need a scheduler Tether does not provide).
+    #[error("'{}' (model '{model}') offers {offers} only, no co-simulation; Tether imports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    NotCoSimulationFmi3 {
+        /// The FMU.
+        path: PathBuf,
+        /// The model name.
+        model: String,
+        /// What it offers instead.
+        offers: &'static str,
+    },
+
     /// The FMU implements model exchange only.
-    #[error("'{}' (model '{model}') is a model-exchange-only FMU; Tether supports FMI 2.0 co-simulation only", path.display())]
+    #[error("'{}' (model '{model}') is a model-exchange-only FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
     NotCoSimulation {
         /// The FMU.
         path: PathBuf,
