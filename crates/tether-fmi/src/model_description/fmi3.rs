@@ -230,11 +230,7 @@ fn integer_type(at: Attrs<'_>, e: &Element, base: Option<&IntegerType>) -> Resul
 }
 
 fn simple_type(at: Attrs<'_>, t: &Element) -> Result<SimpleType> {
-    let Some(value_type) = t
-        .name
-        .strip_suffix("Type")
-        .and_then(ValueType::from_name)
-    else {
+    let Some(value_type) = t.name.strip_suffix("Type").and_then(ValueType::from_name) else {
         return Err(at.invalid(t, format!("unknown type definition <{}>", t.name)));
     };
     let kind = match value_type {
@@ -345,7 +341,7 @@ pub(crate) fn hex_decode(text: &str) -> Option<Vec<u8>> {
         .strip_prefix("0x")
         .or_else(|| text.strip_prefix("0X"))
         .unwrap_or(text);
-    if text.len() % 2 != 0 {
+    if !text.len().is_multiple_of(2) {
         return None;
     }
     (0..text.len())
@@ -386,11 +382,13 @@ fn variable(
         at.choice(e, "causality", CAUSALITIES)?.unwrap_or_default()
     };
     let float = matches!(value_type, ValueType::Float32 | ValueType::Float64);
-    let variability = at.choice(e, "variability", VARIABILITIES)?.unwrap_or(if float {
-        Variability::Continuous
-    } else {
-        Variability::Discrete
-    });
+    let variability = at
+        .choice(e, "variability", VARIABILITIES)?
+        .unwrap_or(if float {
+            Variability::Continuous
+        } else {
+            Variability::Discrete
+        });
     if variability == Variability::Continuous && !float {
         return Err(at.invalid(
             e,
@@ -506,9 +504,7 @@ fn variable(
                 _ => {
                     return Err(at.invalid(
                         e,
-                        format!(
-                            "enumeration variable '{name}' lacks the required declaredType"
-                        ),
+                        format!("enumeration variable '{name}' lacks the required declaredType"),
                     ))
                 }
             };
@@ -594,7 +590,13 @@ fn model_structure(
             None => None,
             Some(vrs) => Some(
                 vrs.into_iter()
-                    .map(|d| index_of(d, u, &format!("<{} valueReference=\"{vr}\"> dependency", u.name)))
+                    .map(|d| {
+                        index_of(
+                            d,
+                            u,
+                            &format!("<{} valueReference=\"{vr}\"> dependency", u.name),
+                        )
+                    })
                     .collect::<Result<Vec<_>>>()?,
             ),
         };

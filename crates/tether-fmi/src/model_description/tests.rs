@@ -213,8 +213,12 @@ fn reference_fmi3(model: &str) -> ModelDescription {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/reference-fmus/fmi3")
         .join(format!("{model}.fmu"));
-    let file = std::fs::File::open(&path)
-        .unwrap_or_else(|e| panic!("{}: {e} (the Reference FMUs are beside the repository)", path.display()));
+    let file = std::fs::File::open(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e} (the Reference FMUs are beside the repository)",
+            path.display()
+        )
+    });
     let mut archive = zip::ZipArchive::new(file).unwrap();
     let mut entry = archive.by_name("modelDescription.xml").unwrap();
     let mut bytes = Vec::new();
@@ -240,13 +244,20 @@ fn fmi3_state_space_has_arrays_sized_by_structural_parameters() {
     assert_eq!(m.base_type(), BaseType::Integer);
     assert_eq!(m.start_values, Some(Values::UInt(vec![3])));
     let a = md.variable("A").unwrap();
-    assert_eq!(a.dimensions, [Dimension::Parameter(2), Dimension::Parameter(2)]);
+    assert_eq!(
+        a.dimensions,
+        [Dimension::Parameter(2), Dimension::Parameter(2)]
+    );
     assert_eq!(md.array_sizes(a).unwrap(), [3, 3]);
     assert_eq!(
         a.start_values,
         Some(Values::Float(vec![1., 0., 0., 0., 1., 0., 0., 0., 1.]))
     );
-    assert_eq!(a.real().unwrap().start, None, "no scalar start for an array");
+    assert_eq!(
+        a.real().unwrap().start,
+        None,
+        "no scalar start for an array"
+    );
     let names = md.element_names(a).unwrap();
     assert_eq!(names[0], "A[1,1]");
     assert_eq!(names[1], "A[1,2]");
@@ -256,11 +267,19 @@ fn fmi3_state_space_has_arrays_sized_by_structural_parameters() {
     assert_eq!(md.element_names(y).unwrap(), ["y[1]", "y[2]", "y[3]"]);
     // der(x) is the derivative of x: the value reference 11 becomes x's index.
     let der = md.variable("der(x)").unwrap();
-    let x_index = md.model_variables.iter().position(|v| v.name == "x").unwrap() + 1;
+    let x_index = md
+        .model_variables
+        .iter()
+        .position(|v| v.name == "x")
+        .unwrap()
+        + 1;
     assert_eq!(der.real().unwrap().derivative, Some(x_index));
     let s = &md.model_structure;
     assert_eq!(md.variable_by_index(s.outputs[0].index).unwrap().name, "y");
-    assert_eq!(md.variable_by_index(s.derivatives[0].index).unwrap().name, "der(x)");
+    assert_eq!(
+        md.variable_by_index(s.derivatives[0].index).unwrap().name,
+        "der(x)"
+    );
     assert_eq!(s.initial_unknowns.len(), 3);
 }
 
@@ -271,14 +290,23 @@ fn fmi3_feedthrough_maps_every_type() {
         let v = md.variable(name).unwrap();
         (v.value_type, v.base_type())
     };
-    assert_eq!(ty("Float32_continuous_input"), (ValueType::Float32, BaseType::Real));
-    assert_eq!(ty("Float64_continuous_input"), (ValueType::Float64, BaseType::Real));
+    assert_eq!(
+        ty("Float32_continuous_input"),
+        (ValueType::Float32, BaseType::Real)
+    );
+    assert_eq!(
+        ty("Float64_continuous_input"),
+        (ValueType::Float64, BaseType::Real)
+    );
     assert_eq!(ty("Int8_input"), (ValueType::Int8, BaseType::Integer));
     assert_eq!(ty("UInt64_output"), (ValueType::UInt64, BaseType::Integer));
     assert_eq!(ty("Boolean_input"), (ValueType::Boolean, BaseType::Boolean));
     assert_eq!(ty("String_input"), (ValueType::String, BaseType::String));
     assert_eq!(ty("Binary_input"), (ValueType::Binary, BaseType::String));
-    assert_eq!(ty("Enumeration_input"), (ValueType::Enumeration, BaseType::Enumeration));
+    assert_eq!(
+        ty("Enumeration_input"),
+        (ValueType::Enumeration, BaseType::Enumeration)
+    );
     let s = md.variable("String_input").unwrap();
     assert_eq!(s.start_values, Some(Values::String(vec!["Set me!".into()])));
     let b = md.variable("Binary_input").unwrap();
@@ -288,10 +316,19 @@ fn fmi3_feedthrough_maps_every_type() {
     assert_eq!(input.initial, Some(Initial::Exact));
     // Dependencies are value references in FMI 3.0, indices here.
     let out = &md.model_structure.outputs[0];
-    assert_eq!(md.variable_by_index(out.index).unwrap().name, "Float32_continuous_output");
+    assert_eq!(
+        md.variable_by_index(out.index).unwrap().name,
+        "Float32_continuous_output"
+    );
     let dep = out.dependencies.as_ref().unwrap()[0];
-    assert_eq!(md.variable_by_index(dep).unwrap().name, "Float32_continuous_input");
-    assert_eq!(out.dependencies_kind.as_deref(), Some(&[DependencyKind::Constant][..]));
+    assert_eq!(
+        md.variable_by_index(dep).unwrap().name,
+        "Float32_continuous_input"
+    );
+    assert_eq!(
+        out.dependencies_kind.as_deref(),
+        Some(&[DependencyKind::Constant][..])
+    );
 }
 
 #[test]
@@ -319,8 +356,13 @@ fn fmi3_without_co_simulation_is_refused_in_one_line() {
     let mut entry = archive.by_name("modelDescription.xml").unwrap();
     let mut bytes = Vec::new();
     std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
-    let e = ModelDescription::from_bytes(&bytes).unwrap_err().to_string();
-    assert!(e.contains("scheduled execution") && !e.contains('\n'), "{e}");
+    let e = ModelDescription::from_bytes(&bytes)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("scheduled execution") && !e.contains('\n'),
+        "{e}"
+    );
 }
 
 #[test]
