@@ -79,8 +79,31 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
     let mut derivatives = Vec::with_capacity(variables_element.children.len());
     for e in &variables_element.children {
         let (v, derivative) = variable(at, e, &type_definitions)?;
+        // `<Alias>` children (from FMI 3.0.x development builds, read by fmpy too):
+        // more names of the same variable, with their own description and display unit.
+        let aliases = e
+            .children_named("Alias")
+            .map(|a| {
+                let mut alias = v.clone();
+                alias.name = at.required(a, "name")?;
+                if let Some(d) = a.attr("description") {
+                    alias.description = Some(d.to_owned());
+                }
+                if let (Some(unit), VariableKind::Real(r)) =
+                    (a.attr("displayUnit"), &mut alias.kind)
+                {
+                    r.attributes.display_unit = Some(unit.to_owned());
+                }
+                alias.line = a.line;
+                Ok(alias)
+            })
+            .collect::<Result<Vec<_>>>()?;
         model_variables.push(v);
         derivatives.push((derivative, e));
+        for alias in aliases {
+            model_variables.push(alias);
+            derivatives.push((derivative, e));
+        }
     }
     let mut by_name = HashMap::with_capacity(model_variables.len());
     for (i, v) in model_variables.iter().enumerate() {

@@ -340,6 +340,14 @@ fn fmi3_units_types_and_every_reference_model_parse() {
     let h = md.variable("h").unwrap();
     assert_eq!(h.real().unwrap().attributes.unit.as_deref(), Some("m"));
     assert!(h.intermediate_update);
+    // <Alias name="h_ft" displayUnit="ft"/>: another name of h.
+    let h_ft = md.variable("h_ft").unwrap();
+    assert_eq!(h_ft.value_reference, h.value_reference);
+    assert_eq!(h_ft.causality, Causality::Output);
+    assert_eq!(
+        h_ft.real().unwrap().attributes.display_unit.as_deref(),
+        Some("ft")
+    );
     assert_eq!(md.model_structure.event_indicators.len(), 1);
     for model in ["Dahlquist", "Resource", "Stair", "VanDerPol", "Roberts"] {
         let md = reference_fmi3(model);
