@@ -403,7 +403,11 @@ fn an_fmi1_fmu_is_refused_by_version() {
     }
     assert_one_line_naming(
         &err,
-        &[&shown(&path), "FMI 1.0", "FMI 2.0 and 3.0 co-simulation only"],
+        &[
+            &shown(&path),
+            "FMI 1.0",
+            "FMI 2.0 and 3.0 co-simulation only",
+        ],
     );
 }
 
