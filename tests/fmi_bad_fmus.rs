@@ -347,7 +347,7 @@ fn zip_with_description(dir: &Path, name: &str, xml: &str) -> PathBuf {
 }
 
 #[test]
-fn an_fmi3_fmu_is_refused_by_version() {
+fn an_fmi3_fmu_without_its_binary_is_refused_naming_the_x86_64_linux_path() {
     let dir = tempfile::tempdir().unwrap();
     let xml = r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="{x}">
@@ -358,13 +358,30 @@ fn an_fmi3_fmu_is_refused_by_version() {
     let path = zip_with_description(dir.path(), "three.fmu", xml);
     let err = open_err(&path);
     match &err {
-        Error::UnsupportedFmiVersion { version, .. } => assert_eq!(version, "3.0"),
+        Error::MissingBinary { expected, .. } => {
+            assert!(expected.ends_with("binaries/x86_64-linux/m.so"), "{err}")
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn an_fmi4_fmu_is_refused_by_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = r#"<?xml version="1.0"?>
+<fmiModelDescription fmiVersion="4.0" modelName="m" instantiationToken="{x}">
+  <CoSimulation modelIdentifier="m"/>
+</fmiModelDescription>"#;
+    let path = zip_with_description(dir.path(), "four.fmu", xml);
+    let err = open_err(&path);
+    match &err {
+        Error::UnsupportedFmiVersion { version, .. } => assert_eq!(version, "4.0"),
         other => panic!("{other:?}"),
     }
     assert_eq!(
         err.to_string(),
         format!(
-            "'{}' is an FMI 3.0 FMU; Tether supports FMI 2.0 co-simulation only",
+            "'{}' is an FMI 4.0 FMU; Tether supports FMI 2.0 and 3.0 co-simulation only",
             path.display()
         )
     );
@@ -386,7 +403,11 @@ fn an_fmi1_fmu_is_refused_by_version() {
     }
     assert_one_line_naming(
         &err,
-        &[&shown(&path), "FMI 1.0", "FMI 2.0 co-simulation only"],
+        &[
+            &shown(&path),
+            "FMI 1.0",
+            "FMI 2.0 and 3.0 co-simulation only",
+        ],
     );
 }
 

@@ -3,12 +3,15 @@
     python simulate.py FMU OUT.csv --stop T --step H [--start T0] [--set name=value ...]
 
 The CSV has a `time` column followed by every output, values printed with full
-(round-trip) precision. Values of --set: true/false for Booleans, numbers otherwise.
+(round-trip) precision; an array output (FMI 3.0) is one column per element, named
+`y[1]`, `A[2,3]` (1-based, row-major) as Tether names them. Values of --set: true/false for Booleans, numbers otherwise.
 """
 
 import argparse
 import csv
 import sys
+
+import numpy
 
 from fmpy import read_model_description, simulate_fmu
 
@@ -52,11 +55,22 @@ def main(argv):
         start_values=start_values,
     )
     names = result.dtype.names
+    columns = []  # (header, field name, index into the field or None)
+    for name in names:
+        shape = result.dtype[name].shape
+        if shape:
+            for index in numpy.ndindex(*shape):
+                columns.append((name + "[" + ",".join(str(i + 1) for i in index) + "]", name, index))
+        else:
+            columns.append((name, name, None))
     with open(args.out, "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(names)
+        writer.writerow([header for header, _, _ in columns])
         for row in result:
-            writer.writerow([repr(float(row[name])) for name in names])
+            writer.writerow([
+                repr(float(row[name] if index is None else row[name][index]))
+                for _, name, index in columns
+            ])
     return 0
 
 

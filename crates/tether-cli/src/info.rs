@@ -4,7 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use tether_fmi::{
-    Causality, Fmu, Initial, ModelDescription, ScalarVariable, Variability, VariableKind,
+    Causality, Dimension, FmiStandard, Fmu, Initial, ModelDescription, ScalarVariable, Values,
+    Variability, VariableKind,
 };
 
 #[derive(clap::Args)]
@@ -39,7 +40,12 @@ pub fn describe(md: &ModelDescription) -> String {
         line(format!("            {d}"));
     }
     line(format!("FMI         {} co-simulation", md.fmi_version));
-    line(format!("GUID        {}", md.guid));
+    let fmi3 = md.standard == FmiStandard::Fmi3;
+    line(format!(
+        "{}{}",
+        if fmi3 { "Token       " } else { "GUID        " },
+        md.guid
+    ));
     for (label, value) in [
         ("Author", &md.author),
         ("Version", &md.version),
@@ -58,35 +64,101 @@ pub fn describe(md: &ModelDescription) -> String {
         "  modelIdentifier                    {}",
         cs.model_identifier
     ));
-    for (name, value) in [
-        ("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state),
-        ("canSerializeFMUstate", cs.can_serialize_fmu_state),
-        ("canInterpolateInputs", cs.can_interpolate_inputs),
-        (
-            "canHandleVariableCommunicationStepSize",
-            cs.can_handle_variable_communication_step_size,
-        ),
-        (
-            "canBeInstantiatedOnlyOncePerProcess",
-            cs.can_be_instantiated_only_once_per_process,
-        ),
-        (
-            "canNotUseMemoryManagementFunctions",
-            cs.can_not_use_memory_management_functions,
-        ),
-        (
-            "providesDirectionalDerivative",
-            cs.provides_directional_derivative,
-        ),
-        ("needsExecutionTool", cs.needs_execution_tool),
-        ("canRunAsynchronuously", cs.can_run_asynchronuously),
-    ] {
-        line(format!("  {name:<38} {}", yes_no(value)));
+    if fmi3 {
+        for (name, value) in [
+            ("canGetAndSetFMUState", cs.can_get_and_set_fmu_state),
+            ("canSerializeFMUState", cs.can_serialize_fmu_state),
+            (
+                "canHandleVariableCommunicationStepSize",
+                cs.can_handle_variable_communication_step_size,
+            ),
+            (
+                "canBeInstantiatedOnlyOncePerProcess",
+                cs.can_be_instantiated_only_once_per_process,
+            ),
+            (
+                "providesDirectionalDerivatives",
+                cs.provides_directional_derivative,
+            ),
+            (
+                "providesAdjointDerivatives",
+                cs.provides_adjoint_derivatives,
+            ),
+            (
+                "providesPerElementDependencies",
+                cs.provides_per_element_dependencies,
+            ),
+            ("needsExecutionTool", cs.needs_execution_tool),
+            (
+                "providesIntermediateUpdate",
+                cs.provides_intermediate_update,
+            ),
+            (
+                "mightReturnEarlyFromDoStep",
+                cs.might_return_early_from_do_step,
+            ),
+            (
+                "canReturnEarlyAfterIntermediateUpdate",
+                cs.can_return_early_after_intermediate_update,
+            ),
+            ("hasEventMode", cs.has_event_mode),
+            (
+                "providesEvaluateDiscreteStates",
+                cs.provides_evaluate_discrete_states,
+            ),
+        ] {
+            line(format!("  {name:<38} {}", yes_no(value)));
+        }
+        line(format!(
+            "  {:<38} {}",
+            "maxOutputDerivativeOrder", cs.max_output_derivative_order
+        ));
+        line(format!(
+            "  {:<38} {}",
+            "fixedInternalStepSize",
+            cs.fixed_internal_step_size
+                .map_or_else(|| "-".to_string(), |h| h.to_string())
+        ));
+        line(format!(
+            "  {:<38} {}",
+            "recommendedIntermediateInputSmoothness", cs.recommended_intermediate_input_smoothness
+        ));
+        if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
+            line(
+                "  (Tether runs it without event mode and early return, as FMI 3.0 allows)".into(),
+            );
+        }
+    } else {
+        for (name, value) in [
+            ("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state),
+            ("canSerializeFMUstate", cs.can_serialize_fmu_state),
+            ("canInterpolateInputs", cs.can_interpolate_inputs),
+            (
+                "canHandleVariableCommunicationStepSize",
+                cs.can_handle_variable_communication_step_size,
+            ),
+            (
+                "canBeInstantiatedOnlyOncePerProcess",
+                cs.can_be_instantiated_only_once_per_process,
+            ),
+            (
+                "canNotUseMemoryManagementFunctions",
+                cs.can_not_use_memory_management_functions,
+            ),
+            (
+                "providesDirectionalDerivative",
+                cs.provides_directional_derivative,
+            ),
+            ("needsExecutionTool", cs.needs_execution_tool),
+            ("canRunAsynchronuously", cs.can_run_asynchronuously),
+        ] {
+            line(format!("  {name:<38} {}", yes_no(value)));
+        }
+        line(format!(
+            "  {:<38} {}",
+            "maxOutputDerivativeOrder", cs.max_output_derivative_order
+        ));
     }
-    line(format!(
-        "  {:<38} {}",
-        "maxOutputDerivativeOrder", cs.max_output_derivative_order
-    ));
     if md.model_exchange.is_some() {
         line("  (also offers model exchange, which Tether does not use)".into());
     }
@@ -97,6 +169,8 @@ pub fn describe(md: &ModelDescription) -> String {
         "  predictor/corrector (baumgarte, weighted)  {}",
         if rollback {
             "yes"
+        } else if fmi3 {
+            "no: needs canGetAndSetFMUState"
         } else {
             "no: needs canGetAndSetFMUstate"
         }
@@ -105,6 +179,8 @@ pub fn describe(md: &ModelDescription) -> String {
         "  coupling polynomials k > 0                 {}",
         if cs.can_interpolate_inputs {
             "yes"
+        } else if fmi3 {
+            "no: FMI 3.0 has no input derivatives (intermediate update: not yet)"
         } else {
             "no: needs canInterpolateInputs"
         }
@@ -136,9 +212,60 @@ pub fn describe(md: &ModelDescription) -> String {
         "name", "vr", "causality", "variability", "initial", "type", "start", "unit"
     ));
     for v in &md.model_variables {
-        line(variable_line(v));
+        line(variable_line(v, fmi3));
+    }
+    let arrays: Vec<&ScalarVariable> = md.model_variables.iter().filter(|v| v.is_array()).collect();
+    if !arrays.is_empty() {
+        line(String::new());
+        line("Arrays (elements named y[1], A[2,3]: 1-based, row-major)".into());
+        for v in arrays {
+            line(array_line(md, v));
+        }
     }
     out
+}
+
+/// An array's sizes and where they come from: `A  3x3  (n = 3, n = 3)`.
+fn array_line(md: &ModelDescription, v: &ScalarVariable) -> String {
+    let sizes = match md.array_sizes(v) {
+        Ok(sizes) => sizes
+            .iter()
+            .map(u64::to_string)
+            .collect::<Vec<_>>()
+            .join("x"),
+        Err(e) => format!("? ({e})"),
+    };
+    let from: Vec<String> = v
+        .dimensions
+        .iter()
+        .map(|d| match d {
+            Dimension::Fixed(n) => n.to_string(),
+            Dimension::Parameter(vr) => match md.variable_by_vr(*vr) {
+                Some(p) => format!("structural parameter {}", p.name),
+                None => format!("value reference {vr}"),
+            },
+        })
+        .collect();
+    format!("  {:<24} {:<10} ({})", v.name, sizes, from.join(", "))
+}
+
+/// FMI 3.0 start values the FMI 2.0 view holds none of (arrays, wide integers).
+fn start_text(values: &Values) -> String {
+    let items: Vec<String> = match values {
+        Values::Float(v) => v.iter().map(f64::to_string).collect(),
+        Values::Int(v) => v.iter().map(i64::to_string).collect(),
+        Values::UInt(v) => v.iter().map(u64::to_string).collect(),
+        Values::Boolean(v) => v.iter().map(bool::to_string).collect(),
+        Values::String(v) => v.clone(),
+        Values::Binary(v) => v.iter().map(|b| format!("{} bytes", b.len())).collect(),
+    };
+    let text = items.join(" ");
+    if text.chars().count() > 12 {
+        let cut: String = text.chars().take(11).collect();
+        format!("{cut}…")
+    } else {
+        text
+    }
 }
 
 /// Markers (outputs named `M.r[1]`) with the force/torque inputs each declares.
@@ -163,7 +290,7 @@ fn markers(md: &ModelDescription) -> Vec<(String, Vec<String>)> {
     found
 }
 
-fn variable_line(v: &ScalarVariable) -> String {
+fn variable_line(v: &ScalarVariable, fmi3: bool) -> String {
     let causality = match v.causality {
         Causality::Parameter => "parameter",
         Causality::CalculatedParameter => "calculated",
@@ -185,7 +312,7 @@ fn variable_line(v: &ScalarVariable) -> String {
         Some(Initial::Calculated) => "calculated",
         None => "",
     };
-    let (ty, start, unit) = match &v.kind {
+    let (mut ty, start, unit) = match &v.kind {
         VariableKind::Real(r) => (
             "Real",
             r.start.map(|s| s.to_string()),
@@ -196,9 +323,32 @@ fn variable_line(v: &ScalarVariable) -> String {
         VariableKind::Boolean(b) => ("Boolean", b.start.map(|s| s.to_string()), String::new()),
         VariableKind::String(s) => ("String", s.start.clone(), String::new()),
     };
+    let fmi3_type = v.value_type.name();
+    let start = start.or_else(|| v.start_values.as_ref().map(start_text));
+    let causality = if v.structural_parameter {
+        "structural"
+    } else {
+        causality
+    };
+    if fmi3 {
+        ty = fmi3_type;
+    }
+    let name = if v.is_array() {
+        let dims: Vec<String> = v
+            .dimensions
+            .iter()
+            .map(|d| match d {
+                Dimension::Fixed(n) => n.to_string(),
+                Dimension::Parameter(_) => ":".to_string(),
+            })
+            .collect();
+        format!("{}[{}]", v.name, dims.join(","))
+    } else {
+        v.name.clone()
+    };
     format!(
         "  {:<24} {:>6}  {:<12} {:<11} {:<10} {:<8} {:>12}  {:<8} {}",
-        v.name,
+        name,
         v.value_reference,
         causality,
         variability,

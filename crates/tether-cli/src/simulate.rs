@@ -1,12 +1,26 @@
 //! `tether simulate FILE.fmu`: one FMU at a fixed communication step, every
 //! output to CSV — the same job as `fmpy simulate`, so an FMU can be checked
 //! against fmpy before it is coupled.
+//!
+//! The FMU is driven through the master's instance interface
+//! ([`tether_fmi::FmuInstance`]), so FMI 2.0 and FMI 3.0 FMUs share this loop. An
+//! array output is one column per element, `y[1]`, `A[2,3]` (1-based, row-major).
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use tether_fmi::{BaseType, Causality, Fmu};
+use tether_fmi::{
+    BaseType, Causality, FmiStandard, Fmu, FmuInstance, Placement, ValueReference, ValueType,
+};
 use tether_master::{apply_start_value, CsvRecorder, MasterError, Observer, Sample, StartValue};
+
+/// The outputs of one kind: their value references, and the column of each value
+/// (an array has one per element).
+#[derive(Default)]
+struct Slots {
+    vrs: Vec<ValueReference>,
+    columns: Vec<usize>,
+}
 
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
@@ -60,31 +74,45 @@ pub fn main(args: Args) -> Result<()> {
     let outputs: Vec<_> = md
         .model_variables
         .iter()
-        .filter(|v| v.causality == Causality::Output && v.base_type() != BaseType::String)
+        .filter(|v| {
+            v.causality == Causality::Output
+                && v.base_type() != BaseType::String
+                && v.value_type != ValueType::Clock
+        })
         .collect();
-    let columns: Vec<String> = outputs.iter().map(|v| v.name.clone()).collect();
-    let real: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Real);
-    let mut int: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Integer);
-    int.extend(kind_slots(&outputs, BaseType::Enumeration));
-    let boolean: Vec<(usize, u32)> = kind_slots(&outputs, BaseType::Boolean);
+    let mut columns: Vec<String> = Vec::new();
+    let (mut real, mut int, mut boolean) = (Slots::default(), Slots::default(), Slots::default());
+    for v in &outputs {
+        let slots = match v.base_type() {
+            BaseType::Real => &mut real,
+            BaseType::Integer | BaseType::Enumeration => &mut int,
+            _ => &mut boolean,
+        };
+        slots.vrs.push(v.value_reference);
+        for element in md.element_names(v)? {
+            slots.columns.push(columns.len());
+            columns.push(element);
+        }
+    }
+    let fmi3 = md.standard == FmiStandard::Fmi3;
 
     let name = md.co_simulation.model_identifier.clone();
-    let mut local = tether_fmi::LocalInstance::new(fmu.instantiate(&name, Default::default())?);
+    let mut instance =
+        tether_fmi::instantiate(&fmu, &name, Default::default(), Placement::InProcess)?;
     for assignment in &args.set {
         let (var, value) = assignment
             .split_once('=')
             .with_context(|| format!("--set {assignment}: expected NAME=VALUE"))?;
         apply_start_value(
-            &mut local,
+            instance.as_mut(),
             &md,
             var.trim(),
             &StartValue::parse_cli(value.trim()),
         )?;
     }
-    let instance = local.instance();
-    instance.setup_experiment(tolerance, start, Some(stop))?;
-    instance.enter_initialization_mode()?;
-    instance.exit_initialization_mode()?;
+    instance.setup(tolerance, start, Some(stop))?;
+    instance.enter_initialization()?;
+    instance.exit_initialization()?;
 
     let out = args
         .out
@@ -97,38 +125,46 @@ pub fn main(args: Args) -> Result<()> {
     let cannot_write = || format!("cannot write {}", out.display());
     recorder.start(&columns).with_context(cannot_write)?;
     let mut row = vec![0.0; columns.len()];
-    let real_vrs: Vec<u32> = real.iter().map(|x| x.1).collect();
-    let int_vrs: Vec<u32> = int.iter().map(|x| x.1).collect();
-    let bool_vrs: Vec<u32> = boolean.iter().map(|x| x.1).collect();
-    let mut real_buf = vec![0.0; real.len()];
-    let mut int_buf = vec![0; int.len()];
-    let mut bool_buf = vec![false; boolean.len()];
-    let mut record = |instance: &mut tether_fmi::Instance, n: u64, time: f64| -> Result<()> {
-        instance.get_real(&real_vrs, &mut real_buf)?;
-        instance.get_integer(&int_vrs, &mut int_buf)?;
-        instance.get_boolean(&bool_vrs, &mut bool_buf)?;
+    let mut real_buf = vec![0.0; real.columns.len()];
+    let mut int_buf = vec![0; int.columns.len()];
+    let mut bool_buf = vec![false; boolean.columns.len()];
+    let after_step = if fmi3 {
+        "after fmi3DoStep"
+    } else {
+        "after fmi2DoStep"
+    };
+    let mut record = |instance: &mut dyn FmuInstance, n: u64, time: f64| -> Result<()> {
+        if !real.vrs.is_empty() || !fmi3 {
+            instance.get_reals(&real.vrs, &mut real_buf)?;
+        }
+        if !int.vrs.is_empty() || !fmi3 {
+            instance.get_integers(&int.vrs, &mut int_buf)?;
+        }
+        if !boolean.vrs.is_empty() || !fmi3 {
+            instance.get_booleans(&boolean.vrs, &mut bool_buf)?;
+        }
         // A non-finite output is the FMU's error, named before it is recorded.
         if let Some(k) = real_buf.iter().position(|v| !v.is_finite()) {
             return Err(MasterError::NonFiniteOutput {
                 instance: name.clone(),
-                variable: columns[real[k].0].clone(),
+                variable: columns[real.columns[k]].clone(),
                 value: real_buf[k],
                 call: if n == 0 {
                     "after initialization"
                 } else {
-                    "after fmi2DoStep"
+                    after_step
                 },
                 time,
             }
             .into());
         }
-        for (k, &(slot, _)) in real.iter().enumerate() {
+        for (k, &slot) in real.columns.iter().enumerate() {
             row[slot] = real_buf[k];
         }
-        for (k, &(slot, _)) in int.iter().enumerate() {
+        for (k, &slot) in int.columns.iter().enumerate() {
             row[slot] = f64::from(int_buf[k]);
         }
-        for (k, &(slot, _)) in boolean.iter().enumerate() {
+        for (k, &slot) in boolean.columns.iter().enumerate() {
             row[slot] = if bool_buf[k] { 1.0 } else { 0.0 };
         }
         recorder
@@ -141,7 +177,7 @@ pub fn main(args: Args) -> Result<()> {
         Ok(())
     };
     // Every failure after the header, the FMU's or ours, ends the CSV with its trailer.
-    let mut outcome = record(&mut *instance, 0, start);
+    let mut outcome = record(instance.as_mut(), 0, start);
     // Set when the FMU asks to end the simulation: the time it reached.
     let mut terminated_at = None;
     for n in 1..=steps {
@@ -157,22 +193,19 @@ pub fn main(args: Args) -> Result<()> {
             break;
         }
         let time = start + n as f64 * step;
-        outcome = match instance.do_step(start + (n - 1) as f64 * step, step, true) {
-            Ok(()) => record(&mut *instance, n, time),
-            // fmi2Discard with fmi2Terminated: the FMU ends the simulation; the
-            // point it reached is the last row (as fmpy records it).
-            Err(e @ tether_fmi::Error::Discard { .. }) => match instance.terminated() {
-                Ok(true) => {
-                    let at = instance.last_successful_time().unwrap_or(time);
-                    terminated_at = Some(at);
-                    let recorded = record(&mut *instance, n, at);
-                    if recorded.is_ok() {
-                        break;
-                    }
-                    recorded
+        outcome = match instance.step(start + (n - 1) as f64 * step, step) {
+            Ok(()) => record(instance.as_mut(), n, time),
+            // The FMU ends the simulation (FMI 2.0: fmi2Discard with fmi2Terminated;
+            // FMI 3.0: terminateSimulation): the point it reached is the last row (as
+            // fmpy records it).
+            Err(tether_fmi::Error::TerminationRequested { time: at, .. }) => {
+                terminated_at = Some(at);
+                let recorded = record(instance.as_mut(), n, at);
+                if recorded.is_ok() {
+                    break;
                 }
-                _ => Err(e.into()),
-            },
+                recorded
+            }
             Err(e) => Err(e.into()),
         };
     }
@@ -194,18 +227,14 @@ pub fn main(args: Args) -> Result<()> {
         ),
         Some(at) => crate::say!(
             "{name}: steps of {step} from {start}; the FMU requested the end of the simulation \
-             at t = {at} (fmi2Discard, fmi2Terminated), before the stop time {stop}; results: {}",
+             at t = {at} ({}), before the stop time {stop}; results: {}",
+            if fmi3 {
+                "fmi3DoStep, terminateSimulation"
+            } else {
+                "fmi2Discard, fmi2Terminated"
+            },
             out.display()
         ),
     }
     Ok(())
-}
-
-fn kind_slots(outputs: &[&tether_fmi::ScalarVariable], kind: BaseType) -> Vec<(usize, u32)> {
-    outputs
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.base_type() == kind)
-        .map(|(i, v)| (i, v.value_reference))
-        .collect()
 }

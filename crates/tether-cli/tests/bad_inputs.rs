@@ -231,7 +231,19 @@ fn malformed_model_description() {
 
 /// The standard: an FMU of another FMI version.
 #[test]
-fn fmi_3_0() {
+fn fmi_4_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = r#"<?xml version="1.0"?>
+<fmiModelDescription fmiVersion="4.0" modelName="m" instantiationToken="{x}">
+  <CoSimulation modelIdentifier="m"/>
+</fmiModelDescription>"#;
+    let path = with_description(dir.path(), "four.fmu", xml);
+    info_error(&path, &[&shown(&path), "FMI 4.0", "FMI 2.0 and 3.0"]);
+}
+
+/// An FMI 3.0 FMU is read; without its binary (under x86_64-linux) it is refused.
+#[test]
+fn fmi_3_0_without_its_binary() {
     let dir = tempfile::tempdir().unwrap();
     let xml = r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="{x}">
@@ -240,7 +252,10 @@ fn fmi_3_0() {
   <ModelStructure/>
 </fmiModelDescription>"#;
     let path = with_description(dir.path(), "three.fmu", xml);
-    info_error(&path, &[&shown(&path), "FMI 3.0"]);
+    info_error(
+        &path,
+        &["no x86_64-linux binary", "binaries/x86_64-linux/m.so"],
+    );
 }
 
 /// The binary: present but not loadable (the loader's message, on one line).

@@ -145,7 +145,7 @@ pub enum Error {
     },
 
     /// The FMU is not an FMI 2.0 FMU.
-    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 co-simulation only", path.display())]
+    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
     UnsupportedFmiVersion {
         /// The FMU.
         path: PathBuf,
@@ -153,8 +153,29 @@ pub enum Error {
         version: String,
     },
 
+    /// An FMI 3.0 FMU offers no co-simulation (scheduled execution only, whose
+    /// clocks need a scheduler Tether does not provide).
+    #[error("'{}' (model '{model}') offers {offers} only, no co-simulation; Tether imports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    NotCoSimulationFmi3 {
+        /// The FMU.
+        path: PathBuf,
+        /// The model name.
+        model: String,
+        /// What it offers instead.
+        offers: &'static str,
+    },
+
+    /// The FMU needs something Tether does not offer (FMI 3.0 clocks, …).
+    #[error("model '{model}' cannot run in Tether: {reason}")]
+    Unsupported {
+        /// The model name.
+        model: String,
+        /// What it needs, and why that is missing.
+        reason: String,
+    },
+
     /// The FMU implements model exchange only.
-    #[error("'{}' (model '{model}') is a model-exchange-only FMU; Tether supports FMI 2.0 co-simulation only", path.display())]
+    #[error("'{}' (model '{model}') is a model-exchange-only FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
     NotCoSimulation {
         /// The FMU.
         path: PathBuf,
@@ -163,7 +184,7 @@ pub enum Error {
     },
 
     /// The FMU ships no binary for this platform.
-    #[error("FMU '{model}' has no linux64 binary: expected '{}'", expected.display())]
+    #[error("FMU '{model}' has no {} binary: expected '{}'", platform_of(expected), expected.display())]
     MissingBinary {
         /// The model name.
         model: String,
@@ -181,7 +202,7 @@ pub enum Error {
     },
 
     /// The shared library lacks a function of the FMI 2.0 co-simulation API.
-    #[error("FMU library '{}' lacks the FMI 2.0 function '{symbol}'", library.display())]
+    #[error("FMU library '{}' lacks the FMI {} function '{symbol}'", library.display(), standard_of(symbol))]
     MissingSymbol {
         /// The shared library.
         library: PathBuf,
@@ -247,7 +268,10 @@ pub enum Error {
     },
 
     /// A function returned `fmi2Discard`.
-    #[error("{function} returned fmi2Discard on instance '{instance}' at t={time}{messages}")]
+    #[error(
+        "{function} returned {}Discard on instance '{instance}' at t={time}{messages}",
+        api(function)
+    )]
     Discard {
         /// The FMI function.
         function: &'static str,
@@ -261,17 +285,23 @@ pub enum Error {
 
     /// The FMU asked to end the simulation: its step returned Discard and it
     /// reports that it terminated (FMI 2.0: `fmi2GetBooleanStatus(fmi2Terminated)`).
-    #[error("instance '{instance}' requested the end of the simulation at t = {time} (fmi2DoStep returned fmi2Discard with fmi2Terminated = true)")]
+    #[error("instance '{instance}' requested the end of the simulation at t = {time} ({})", how.unwrap_or("fmi2DoStep returned fmi2Discard with fmi2Terminated = true"))]
     TerminationRequested {
         /// The instance name.
         instance: String,
         /// The last time the instance reached (its `fmi2LastSuccessfulTime`,
         /// or the step's end if it does not say).
         time: f64,
+        /// How the FMU asked, when not as FMI 2.0 does (`None`: fmi2DoStep returned
+        /// fmi2Discard with fmi2Terminated = true).
+        how: Option<&'static str>,
     },
 
     /// A function returned `fmi2Error`.
-    #[error("{function} returned fmi2Error on instance '{instance}' at t={time}{messages}")]
+    #[error(
+        "{function} returned {}Error on instance '{instance}' at t={time}{messages}",
+        api(function)
+    )]
     Failed {
         /// The FMI function.
         function: &'static str,
@@ -284,7 +314,10 @@ pub enum Error {
     },
 
     /// A function returned `fmi2Fatal`; the FMU is unusable from now on.
-    #[error("{function} returned fmi2Fatal on instance '{instance}' at t={time}{messages}")]
+    #[error(
+        "{function} returned {}Fatal on instance '{instance}' at t={time}{messages}",
+        api(function)
+    )]
     Fatal {
         /// The FMI function.
         function: &'static str,
@@ -323,7 +356,7 @@ pub enum Error {
     },
 
     /// A call was refused because an earlier call of this FMU returned `fmi2Fatal`.
-    #[error("{function} refused on instance '{instance}' at t={time}: the FMU returned fmi2Fatal earlier{messages}")]
+    #[error("{function} refused on instance '{instance}' at t={time}: the FMU returned {}Fatal earlier{messages}", api(function))]
     FmuDead {
         /// The FMI function that was not called.
         function: &'static str,
@@ -504,6 +537,32 @@ impl fmt::Display for Suggestions<'_> {
     }
 }
 
+/// The C prefix of `function`'s standard: "fmi3" for an FMI 3.0 function, else "fmi2".
+fn api(function: &str) -> &'static str {
+    if function.starts_with("fmi3") {
+        "fmi3"
+    } else {
+        "fmi2"
+    }
+}
+
+/// "3.0" for an FMI 3.0 symbol, else "2.0".
+fn standard_of(symbol: &str) -> &'static str {
+    if symbol.starts_with("fmi3") {
+        "3.0"
+    } else {
+        "2.0"
+    }
+}
+
+/// The platform directory of an expected binary path (`linux64`, `x86_64-linux`).
+fn platform_of(path: &std::path::Path) -> String {
+    path.parent()
+        .and_then(|p| p.file_name())
+        .map(|p| p.to_string_lossy().into_owned())
+        .unwrap_or_else(|| crate::library::PLATFORM.to_owned())
+}
+
 /// The error of a failed FMI 2.0 step of `instance` to `end`: a request to end
 /// the simulation (fmi2Discard with `fmi2Terminated`) becomes
 /// [`Error::TerminationRequested`], any other error stays as it is.
@@ -515,6 +574,7 @@ pub(crate) fn step_failure(e: Error, instance: &mut crate::Instance, end: f64) -
         return Error::TerminationRequested {
             instance: instance.name().to_string(),
             time,
+            how: None,
         };
     }
     e

@@ -52,7 +52,7 @@ pub fn set_debug_logging(categories: Option<Vec<String>>) {
         .unwrap_or_else(PoisonError::into_inner) = categories;
 }
 
-fn debug_logging() -> Option<Vec<String>> {
+pub(crate) fn debug_logging() -> Option<Vec<String>> {
     DEBUG_LOGGING
         .read()
         .unwrap_or_else(PoisonError::into_inner)
@@ -84,7 +84,7 @@ impl Fmu {
     /// co-simulation function and reports version "2.0" and platform "default".
     pub fn open_with(path: impl AsRef<Path>, options: &OpenOptions) -> Result<Fmu> {
         let fmu = Fmu::open_unloaded(path, options)?;
-        fmu.shared.library()?;
+        fmu.shared.load()?;
         Ok(fmu)
     }
 
@@ -118,6 +118,7 @@ impl Fmu {
         let so = binary_path(
             dir.root(),
             &model_description.co_simulation.model_identifier,
+            model_description.standard,
         );
         if !so.is_file() {
             let expected = if metadata.is_dir() {
@@ -143,8 +144,14 @@ impl Fmu {
                 model_description,
                 so,
                 library: Default::default(),
+                library3: Default::default(),
             }),
         })
+    }
+
+    /// What every instance of this FMU shares.
+    pub(crate) fn shared(&self) -> &Arc<FmuShared> {
+        &self.shared
     }
 
     /// The parsed model description.
@@ -182,6 +189,16 @@ impl Fmu {
     /// ([`Error::OnlyOncePerProcess`] otherwise).
     pub fn instantiate(&self, instance_name: &str, options: InstanceOptions) -> Result<Instance> {
         let md = &self.shared.model_description;
+        if md.standard != crate::model_description::FmiStandard::Fmi2 {
+            return Err(Error::InvalidArgument {
+                function: "fmi2Instantiate",
+                instance: instance_name.to_owned(),
+                message: format!(
+                    "model '{}' is an FMI {} FMU: instantiate it with tether_fmi::instantiate",
+                    md.model_name, md.fmi_version
+                ),
+            });
+        }
         let once = if md.co_simulation.can_be_instantiated_only_once_per_process {
             Some(OnceGuard::acquire(&md.guid, &md.model_name, instance_name)?)
         } else {

@@ -1,5 +1,10 @@
 //! [`FmuInstance`]: the one interface between a master and an FMU instance.
 //!
+//! For an FMI 3.0 instance ([`Fmi3Instance`](crate::Fmi3Instance)) "Real" means
+//! `Float64` or `Float32`, "Integer" every integer type and enumerations (values
+//! outside `i32` are errors), "String" also `Binary` as hexadecimal text; an array
+//! variable takes as many values as it has elements, row-major.
+//!
 //! The master speaks this interface only, in its own words (save, restore,
 //! step, inputs' polynomial); the implementations speak FMI. There is one
 //! implementation per place and standard: [`LocalInstance`] for an FMI 2.0
@@ -204,6 +209,20 @@ pub fn instantiate(
     options: InstanceOptions,
     placement: Placement,
 ) -> Result<Box<dyn FmuInstance>> {
+    let md = fmu.model_description();
+    if md.standard == crate::model_description::FmiStandard::Fmi3 {
+        return match placement {
+            Placement::InProcess => Ok(Box::new(crate::instance3::Fmi3Instance::new(
+                fmu, name, options,
+            )?)),
+            Placement::Process { .. } => Err(Error::Unsupported {
+                model: md.model_name.clone(),
+                reason: format!(
+                    "instance '{name}' is of an FMI 3.0 FMU, which runs in this process only: the host process (isolation) does not load FMI 3.0 FMUs yet"
+                ),
+            }),
+        };
+    }
     Ok(match placement {
         Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
         Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(

@@ -1,4 +1,9 @@
-//! FMI 2.0 co-simulation import.
+//! FMI 2.0 and FMI 3.0 co-simulation import.
+//!
+//! FMI 3.0 FMUs are opened by the same [`Fmu::open`] (binaries under
+//! `binaries/x86_64-linux/`), described by the same [`ModelDescription`] (see
+//! [`model_description`] for how FMI 3.0 maps onto it) and instantiated with
+//! [`instantiate`] as an [`Fmi3Instance`], an [`FmuInstance`] like the FMI 2.0 ones.
 //!
 //! # Layers
 //!
@@ -53,6 +58,7 @@ mod current;
 mod error;
 mod fmu;
 mod instance;
+mod instance3;
 mod interface;
 mod library;
 mod logger;
@@ -69,16 +75,17 @@ pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
 pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};
+pub use instance3::Fmi3Instance;
 pub use interface::{
     instantiate, FmuInstance, Inputs, LocalInstance, Placement, RunRequest, Slot, SLOTS,
 };
-pub use library::PLATFORM;
+pub use library::{PLATFORM, PLATFORM_FMI3};
 pub use model_description::{
-    BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
-    DependencyKind, DisplayUnit, EnumerationItem, Initial, IntegerType, IntegerVariable,
-    LogCategory, ModelDescription, ModelStructure, RealType, RealVariable, ScalarVariable,
-    SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown, ValueReference, Variability,
-    VariableKind, VariableNamingConvention,
+    element_names, BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
+    DependencyKind, Dimension, DisplayUnit, EnumerationItem, FmiStandard, Initial, IntegerType,
+    IntegerVariable, LogCategory, ModelDescription, ModelStructure, RealType, RealVariable,
+    ScalarVariable, SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown, ValueReference,
+    ValueType, Values, Variability, VariableKind, VariableNamingConvention,
 };
 pub use raw::Status;
 pub use state::FmuState;

@@ -1,4 +1,5 @@
-//! Loading an FMU's shared library and resolving the FMI 2.0 co-simulation API.
+//! Loading an FMU's shared library and resolving the FMI 2.0 or FMI 3.0 co-simulation
+//! API.
 
 use std::ffi::CStr;
 use std::mem::ManuallyDrop;
@@ -6,25 +7,101 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::error::{one_line, Error, Result};
+use crate::model_description::FmiStandard;
+use crate::raw::fmi3::Fmi3Functions;
 use crate::raw::Fmi2Functions;
 
-/// The platform directory under `binaries/` this build loads from.
+/// The platform directory under `binaries/` this build loads FMI 2.0 FMUs from.
 pub const PLATFORM: &str = "linux64";
+
+/// The platform tuple under `binaries/` this build loads FMI 3.0 FMUs from.
+pub const PLATFORM_FMI3: &str = "x86_64-linux";
+
+/// A function table of one FMI version: resolved from a library, then checked.
+pub(crate) trait Api: Sized {
+    /// Resolves every function, naming the first one that is missing.
+    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self>;
+    /// Checks what the library says about itself (version, platform).
+    fn check_identity(&self, path: &Path) -> Result<()>;
+}
+
+/// A possibly-NULL static C string returned by `fmiXGetVersion` and the like.
+fn static_text(ptr: *const std::ffi::c_char) -> String {
+    if ptr.is_null() {
+        return String::from("(NULL)");
+    }
+    // SAFETY: the standard requires a static NUL-terminated string.
+    unsafe { CStr::from_ptr(ptr) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+impl Api for Fmi2Functions {
+    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
+        Fmi2Functions::resolve(lib, path)
+    }
+
+    /// Checks `fmi2GetVersion` = "2.0" and `fmi2GetTypesPlatform` = "default".
+    fn check_identity(&self, path: &Path) -> Result<()> {
+        // SAFETY: both functions take no arguments and may be called before any instance
+        // exists (FMI 2.0, section 2.1.4).
+        let (version, platform) =
+            unsafe { ((self.fmi2GetVersion)(), (self.fmi2GetTypesPlatform)()) };
+        for (function, ptr, expected) in [
+            ("fmi2GetVersion", version, "2.0"),
+            ("fmi2GetTypesPlatform", platform, "default"),
+        ] {
+            let found = static_text(ptr);
+            if found != expected {
+                return Err(Error::IncompatibleLibrary {
+                    library: path.to_owned(),
+                    function,
+                    found,
+                    expected,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Api for Fmi3Functions {
+    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
+        Fmi3Functions::resolve(lib, path)
+    }
+
+    /// Checks that `fmi3GetVersion` is "3.x".
+    fn check_identity(&self, path: &Path) -> Result<()> {
+        // SAFETY: fmi3GetVersion takes no argument and may be called before any
+        // instance exists (FMI 3.0, section 2.3.1).
+        let found = static_text(unsafe { (self.fmi3GetVersion)() });
+        if found.starts_with("3.") {
+            Ok(())
+        } else {
+            Err(Error::IncompatibleLibrary {
+                library: path.to_owned(),
+                function: "fmi3GetVersion",
+                found,
+                expected: "3.0",
+            })
+        }
+    }
+}
 
 /// A loaded FMU shared library with its resolved function table.
 ///
 /// Shared (in an `Arc`) by the [`Fmu`](crate::Fmu) and every instance, so the code stays
 /// mapped while anything can still call it.
-pub(crate) struct Library {
+pub(crate) struct Library<F = Fmi2Functions> {
     path: PathBuf,
-    functions: Fmi2Functions,
+    functions: F,
     handle: ManuallyDrop<libloading::Library>,
     /// Set once any call returned fmi2Fatal: per the standard no further function of
     /// any instance of this FMU may be called.
     fatal: AtomicBool,
 }
 
-impl std::fmt::Debug for Library {
+impl<F> std::fmt::Debug for Library<F> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Library")
             .field("path", &self.path)
@@ -34,9 +111,13 @@ impl std::fmt::Debug for Library {
 }
 
 /// The expected path of the shared library inside an FMU directory.
-pub(crate) fn binary_path(root: &Path, model_identifier: &str) -> PathBuf {
+pub(crate) fn binary_path(root: &Path, model_identifier: &str, standard: FmiStandard) -> PathBuf {
+    let platform = match standard {
+        FmiStandard::Fmi2 => PLATFORM,
+        FmiStandard::Fmi3 => PLATFORM_FMI3,
+    };
     root.join("binaries")
-        .join(PLATFORM)
+        .join(platform)
         .join(format!("{model_identifier}.so"))
 }
 
@@ -60,9 +141,9 @@ fn load_message(e: &libloading::Error) -> String {
     one_line(&message)
 }
 
-impl Library {
-    /// Loads `path` (binding all symbols now) and resolves every FMI 2.0 function.
-    pub(crate) fn load(path: &Path) -> Result<Library> {
+impl<F: Api> Library<F> {
+    /// Loads `path` (binding all symbols now) and resolves every function of the API.
+    pub(crate) fn load(path: &Path) -> Result<Library<F>> {
         use libloading::os::unix::{Library as UnixLibrary, RTLD_LOCAL, RTLD_NOW};
         // SAFETY: loading a library runs its initialisers; an FMU's shared library is
         // trusted code by the nature of co-simulation (we are about to call into it).
@@ -75,53 +156,20 @@ impl Library {
                 }
             })?;
         let handle = libloading::Library::from(handle);
-        let functions = Fmi2Functions::resolve(&handle, path)?;
-        let library = Library {
+        let functions = F::resolve(&handle, path)?;
+        functions.check_identity(path)?;
+        Ok(Library {
             path: path.to_owned(),
             functions,
             handle: ManuallyDrop::new(handle),
             fatal: AtomicBool::new(false),
-        };
-        library.check_identity()?;
-        Ok(library)
+        })
     }
+}
 
-    /// Checks `fmi2GetVersion` = "2.0" and `fmi2GetTypesPlatform` = "default".
-    fn check_identity(&self) -> Result<()> {
-        // SAFETY: both functions take no arguments and may be called before any instance
-        // exists (FMI 2.0, section 2.1.4).
-        let (version, platform) = unsafe {
-            (
-                (self.functions.fmi2GetVersion)(),
-                (self.functions.fmi2GetTypesPlatform)(),
-            )
-        };
-        for (function, ptr, expected) in [
-            ("fmi2GetVersion", version, "2.0"),
-            ("fmi2GetTypesPlatform", platform, "default"),
-        ] {
-            let found = if ptr.is_null() {
-                String::from("(NULL)")
-            } else {
-                // SAFETY: the standard requires a static NUL-terminated string.
-                unsafe { CStr::from_ptr(ptr) }
-                    .to_string_lossy()
-                    .into_owned()
-            };
-            if found != expected {
-                return Err(Error::IncompatibleLibrary {
-                    library: self.path.clone(),
-                    function,
-                    found,
-                    expected,
-                });
-            }
-        }
-        Ok(())
-    }
-
+impl<F> Library<F> {
     /// The resolved function table.
-    pub(crate) fn functions(&self) -> &Fmi2Functions {
+    pub(crate) fn functions(&self) -> &F {
         &self.functions
     }
 
@@ -136,7 +184,7 @@ impl Library {
     }
 }
 
-impl Drop for Library {
+impl<F> Drop for Library<F> {
     fn drop(&mut self) {
         if self.is_fatal() {
             // A fatal FMU may have left threads or callbacks behind: keep its code mapped.

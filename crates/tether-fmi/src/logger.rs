@@ -238,6 +238,30 @@ extern "C" fn wanted(env: *const LogEnv, status: c_int, category: *const c_char)
     c_int::from(show || level == log::Level::Error)
 }
 
+/// The FMI 3.0 log callback (`fmi3LogMessageCallback`): FMI 3.0 hands over the
+/// finished message, so no C shim is needed; the instance environment is the
+/// instance's [`LogEnv`], as for FMI 2.0.
+pub(crate) extern "C" fn fmi3_log_message(
+    env: *mut c_void,
+    status: c_int,
+    category: *const c_char,
+    message: *const c_char,
+) {
+    let env = env.cast_const().cast::<LogEnv>();
+    if wanted(env, status, category) == 0 {
+        return;
+    }
+    sink(env, std::ptr::null(), status, category, message);
+}
+
+impl LogEnv {
+    /// The `instanceEnvironment` for `fmi3InstantiateCoSimulation`: this environment.
+    pub(crate) fn fmi3_environment(self: &mut Box<Self>) -> *mut c_void {
+        let env: *mut LogEnv = &mut **self;
+        env.cast()
+    }
+}
+
 /// Receives a formatted message from `c/logger.c`.
 extern "C" fn sink(
     env: *const LogEnv,

@@ -12,6 +12,7 @@ use crate::archive::FmuDir;
 use crate::error::{Error, Result};
 use crate::library::Library;
 use crate::model_description::ModelDescription;
+use crate::raw::fmi3::Fmi3Functions;
 
 /// What every instance of an FMU shares: the files, the description, the code.
 #[derive(Debug)]
@@ -19,11 +20,13 @@ pub(crate) struct FmuShared {
     pub origin: PathBuf,
     pub dir: Arc<FmuDir>,
     pub model_description: ModelDescription,
-    /// `binaries/linux64/<modelIdentifier>.so`.
+    /// `binaries/linux64/<modelIdentifier>.so` (FMI 3.0: `binaries/x86_64-linux/…`).
     pub so: PathBuf,
     /// The loaded library; `None` until the first instance in this process
     /// when opened with [`Fmu::open_unloaded`](crate::Fmu::open_unloaded).
     pub library: Mutex<Option<Arc<Library>>>,
+    /// The loaded library of an FMI 3.0 FMU, as `library` for FMI 2.0.
+    pub library3: Mutex<Option<Arc<Library<Fmi3Functions>>>>,
 }
 
 impl FmuShared {
@@ -39,6 +42,28 @@ impl FmuShared {
         let loaded = Arc::new(Library::load(&self.so)?);
         *library = Some(Arc::clone(&loaded));
         Ok(loaded)
+    }
+
+    /// The FMI 3.0 library, loaded now if it was not yet.
+    pub(crate) fn library3(&self) -> Result<Arc<Library<Fmi3Functions>>> {
+        let mut library = self
+            .library3
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(library) = &*library {
+            return Ok(Arc::clone(library));
+        }
+        let loaded = Arc::new(Library::<Fmi3Functions>::load(&self.so)?);
+        *library = Some(Arc::clone(&loaded));
+        Ok(loaded)
+    }
+
+    /// Loads the library of the FMU's standard (checks it, once).
+    pub(crate) fn load(&self) -> Result<()> {
+        match self.model_description.standard {
+            crate::model_description::FmiStandard::Fmi2 => self.library().map(drop),
+            crate::model_description::FmiStandard::Fmi3 => self.library3().map(drop),
+        }
     }
 }
 

@@ -286,7 +286,7 @@ impl From<tether_fmi::Error> for MasterError {
     /// it becomes [`MasterError::TerminationRequested`].
     fn from(error: tether_fmi::Error) -> MasterError {
         match error {
-            tether_fmi::Error::TerminationRequested { instance, time } => {
+            tether_fmi::Error::TerminationRequested { instance, time, .. } => {
                 MasterError::TerminationRequested { instance, time }
             }
             error => MasterError::Fmi(error),

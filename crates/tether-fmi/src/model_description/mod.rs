@@ -1,7 +1,8 @@
-//! `modelDescription.xml`: a cheap version peek, the full co-simulation parse with the
-//! FMI 2.0 defaults applied, and variable look-up by name.
+//! `modelDescription.xml`: a cheap version peek, the full co-simulation parse (FMI 2.0
+//! or FMI 3.0) with the standard's defaults applied, and variable look-up by name.
 
 mod attrs;
+mod fmi3;
 mod lookup;
 mod parse;
 mod type_attrs;
@@ -66,6 +67,63 @@ impl ModelDescription {
             .and_then(|i| self.model_variables.get(i))
     }
 
+    /// The first variable with value reference `vr` (FMI 3.0 aliases share one).
+    pub fn variable_by_vr(&self, vr: ValueReference) -> Option<&ScalarVariable> {
+        self.model_variables
+            .iter()
+            .find(|v| v.value_reference == vr)
+    }
+
+    /// The sizes of `v`'s dimensions (empty for a scalar), structural parameters
+    /// taken at their start values.
+    pub fn array_sizes(&self, v: &ScalarVariable) -> Result<Vec<u64>> {
+        self.array_sizes_with(v, &|_| None)
+    }
+
+    /// The sizes of `v`'s dimensions, structural parameters taken from `value` where
+    /// it knows them and at their start values otherwise.
+    pub fn array_sizes_with(
+        &self,
+        v: &ScalarVariable,
+        value: &dyn Fn(ValueReference) -> Option<u64>,
+    ) -> Result<Vec<u64>> {
+        v.dimensions
+            .iter()
+            .map(|d| match *d {
+                Dimension::Fixed(n) => Ok(n),
+                Dimension::Parameter(vr) => value(vr)
+                    .or_else(|| {
+                        let p = self.variable_by_vr(vr)?;
+                        match p.start_values.as_ref()? {
+                            Values::UInt(s) => s.first().copied(),
+                            Values::Int(s) => s.first().and_then(|&x| u64::try_from(x).ok()),
+                            _ => None,
+                        }
+                    })
+                    .ok_or_else(|| Error::InvalidArgument {
+                        function: "array dimensions",
+                        instance: self.model_name.clone(),
+                        message: format!(
+                            "the size of array '{}' is the structural parameter with value reference {vr}, which has no start value",
+                            v.name
+                        ),
+                    }),
+            })
+            .collect()
+    }
+
+    /// The number of values of `v` (1 for a scalar), structural parameters at their
+    /// start values.
+    pub fn element_count(&self, v: &ScalarVariable) -> Result<usize> {
+        Ok(self.array_sizes(v)?.iter().product::<u64>() as usize)
+    }
+
+    /// The names of `v`'s elements in row-major order: `y[1]`, `A[2,3]` (1-based),
+    /// or just the name for a scalar.
+    pub fn element_names(&self, v: &ScalarVariable) -> Result<Vec<String>> {
+        Ok(element_names(&v.name, &self.array_sizes(v)?))
+    }
+
     /// Variables with the given causality, in file order.
     pub fn variables_with_causality(
         &self,
@@ -75,6 +133,29 @@ impl ModelDescription {
             .iter()
             .filter(move |v| v.causality == causality)
     }
+}
+
+/// The names of the elements of an array called `name` with the given sizes, in
+/// row-major order, 1-based: `y[1]`, `A[2,3]`; just `name` for a scalar (no sizes).
+pub fn element_names(name: &str, sizes: &[u64]) -> Vec<String> {
+    if sizes.is_empty() {
+        return vec![name.to_owned()];
+    }
+    let total: u64 = sizes.iter().product();
+    let mut names = Vec::with_capacity(total as usize);
+    let mut index = vec![1u64; sizes.len()];
+    for _ in 0..total {
+        let subscript: Vec<String> = index.iter().map(u64::to_string).collect();
+        names.push(format!("{name}[{}]", subscript.join(",")));
+        for d in (0..sizes.len()).rev() {
+            index[d] += 1;
+            if index[d] <= sizes[d] {
+                break;
+            }
+            index[d] = 1;
+        }
+    }
+    names
 }
 
 /// Reads only the root start tag and returns its `fmiVersion` attribute.
@@ -90,8 +171,9 @@ pub(crate) fn parse_bytes(bytes: &[u8], file: &Path, origin: &Path) -> Result<Mo
     // Cheap peek first: an FMI 1.0 or 3.0 file is refused before its (different) schema
     // can produce confusing errors.
     let version = peek_fmi_version(text, file)?;
-    match version.as_deref() {
-        Some(v) if v.trim().starts_with("2.") || v.trim() == "2" => {}
+    let standard = match version.as_deref() {
+        Some(v) if v.trim().starts_with("2.") || v.trim() == "2" => FmiStandard::Fmi2,
+        Some(v) if v.trim().starts_with("3.") || v.trim() == "3" => FmiStandard::Fmi3,
         Some(v) => {
             return Err(Error::UnsupportedFmiVersion {
                 path: origin.to_owned(),
@@ -104,7 +186,7 @@ pub(crate) fn parse_bytes(bytes: &[u8], file: &Path, origin: &Path) -> Result<Mo
                 version: "(unknown: no fmiVersion attribute)".into(),
             })
         }
-    }
+    };
     let root = xml::parse(text, file, xml::Names::AsWritten)?;
     if root.child("CoSimulation").is_none() && root.child("ModelExchange").is_some() {
         return Err(Error::NotCoSimulation {
@@ -112,8 +194,23 @@ pub(crate) fn parse_bytes(bytes: &[u8], file: &Path, origin: &Path) -> Result<Mo
             model: root.attr("modelName").unwrap_or("?").to_owned(),
         });
     }
-    parse::model_description(attrs::Attrs { file }, &root)
+    if standard == FmiStandard::Fmi3
+        && root.child("CoSimulation").is_none()
+        && root.child("ScheduledExecution").is_some()
+    {
+        return Err(Error::NotCoSimulationFmi3 {
+            path: origin.to_owned(),
+            model: root.attr("modelName").unwrap_or("?").to_owned(),
+            offers: "scheduled execution",
+        });
+    }
+    match standard {
+        FmiStandard::Fmi2 => parse::model_description(attrs::Attrs { file }, &root),
+        FmiStandard::Fmi3 => fmi3::model_description(attrs::Attrs { file }, &root),
+    }
 }
+
+pub(crate) use fmi3::{hex_decode, hex_encode};
 
 #[cfg(test)]
 mod tests;

@@ -89,6 +89,7 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
     )?;
     Ok(ModelDescription {
         fmi_version: at.required(root, "fmiVersion")?,
+        standard: FmiStandard::Fmi2,
         model_name: at.required(root, "modelName")?,
         guid: at.required(root, "guid")?,
         description: at.string(root, "description"),
@@ -137,10 +138,11 @@ fn co_simulation(at: Attrs<'_>, cs: &Element) -> Result<CoSimulation> {
         can_get_and_set_fmu_state: at.flag(cs, "canGetAndSetFMUstate", false)?,
         can_serialize_fmu_state: at.flag(cs, "canSerializeFMUstate", false)?,
         provides_directional_derivative: at.flag(cs, "providesDirectionalDerivative", false)?,
+        ..CoSimulation::default()
     })
 }
 
-fn unit(at: Attrs<'_>, u: &Element) -> Result<Unit> {
+pub(super) fn unit(at: Attrs<'_>, u: &Element) -> Result<Unit> {
     let base_unit = match u.child("BaseUnit") {
         Some(b) => {
             let exp = |key| -> Result<i32> { Ok(at.parsed(b, key)?.unwrap_or(0)) };
@@ -166,6 +168,7 @@ fn unit(at: Attrs<'_>, u: &Element) -> Result<Unit> {
                 name: at.required(d, "name")?,
                 factor: at.parsed(d, "factor")?.unwrap_or(1.0),
                 offset: at.parsed(d, "offset")?.unwrap_or(0.0),
+                inverse: at.flag(d, "inverse", false)?,
             })
         })
         .collect::<Result<_>>()?;
@@ -179,6 +182,13 @@ fn unit(at: Attrs<'_>, u: &Element) -> Result<Unit> {
 fn simple_type(at: Attrs<'_>, t: &Element) -> Result<SimpleType> {
     let Some(element) = t.children.first() else {
         return Err(at.invalid(t, "<SimpleType> has no type element"));
+    };
+    let value_type = match element.name.as_str() {
+        "Real" => ValueType::Float64,
+        "Integer" => ValueType::Int32,
+        "Boolean" => ValueType::Boolean,
+        "String" => ValueType::String,
+        _ => ValueType::Enumeration,
     };
     let kind = match element.name.as_str() {
         "Real" => SimpleTypeKind::Real(real_type(at, element, None)?),
@@ -208,6 +218,7 @@ fn simple_type(at: Attrs<'_>, t: &Element) -> Result<SimpleType> {
         name: at.required(t, "name")?,
         description: at.string(t, "description"),
         kind,
+        value_type,
     })
 }
 
@@ -229,6 +240,7 @@ fn model_structure(
         outputs: list("Outputs")?,
         derivatives: list("Derivatives")?,
         initial_unknowns: list("InitialUnknowns")?,
+        ..ModelStructure::default()
     };
     if let Some(outputs) = s.child("Outputs") {
         for (u, e) in structure
@@ -249,6 +261,17 @@ fn model_structure(
         }
     }
     Ok(structure)
+}
+
+pub(super) fn dependency_kind(at: Attrs<'_>, u: &Element, k: &str) -> Result<DependencyKind> {
+    Ok(match k {
+        "dependent" => DependencyKind::Dependent,
+        "constant" => DependencyKind::Constant,
+        "fixed" => DependencyKind::Fixed,
+        "tunable" => DependencyKind::Tunable,
+        "discrete" => DependencyKind::Discrete,
+        other => return Err(at.invalid(u, format!("unknown dependenciesKind \"{other}\""))),
+    })
 }
 
 fn unknown(at: Attrs<'_>, u: &Element, variables: &[ScalarVariable]) -> Result<Unknown> {

@@ -115,8 +115,8 @@ fn full_description_is_parsed_with_defaults() {
 fn other_fmi_versions_are_refused_by_the_peek() {
     for (version, text) in [
         (
-            "3.0",
-            r#"<fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="x"><Bogus"#,
+            "4.0",
+            r#"<fmiModelDescription fmiVersion="4.0" modelName="m" instantiationToken="x"><Bogus"#,
         ),
         (
             "1.0",
@@ -234,4 +234,180 @@ fn a_deeply_nested_description_is_one_error() {
              elements nested more than 256 deep (the limit)"
         )
     );
+}
+
+/// `modelDescription.xml` of an FMI 3.0 Reference FMU (`../shared/reference-fmus/fmi3`
+/// from the repository root).
+fn reference_fmi3(model: &str) -> ModelDescription {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/reference-fmus/fmi3")
+        .join(format!("{model}.fmu"));
+    let file = std::fs::File::open(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e} (the Reference FMUs are beside the repository)",
+            path.display()
+        )
+    });
+    let mut archive = zip::ZipArchive::new(file).unwrap();
+    let mut entry = archive.by_name("modelDescription.xml").unwrap();
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
+    ModelDescription::from_bytes(&bytes).unwrap()
+}
+
+#[test]
+fn fmi3_state_space_has_arrays_sized_by_structural_parameters() {
+    let md = reference_fmi3("StateSpace");
+    assert_eq!(md.standard, FmiStandard::Fmi3);
+    assert_eq!(md.guid, "{D773325B-AB94-4630-BF85-643EB24FCB78}");
+    let cs = &md.co_simulation;
+    assert!(cs.can_get_and_set_fmu_state && cs.can_serialize_fmu_state);
+    assert!(cs.provides_intermediate_update && cs.can_return_early_after_intermediate_update);
+    assert!(cs.has_event_mode && !cs.can_interpolate_inputs);
+    assert_eq!(cs.fixed_internal_step_size, Some(1.0));
+    let m = md.variable("m").unwrap();
+    assert!(m.structural_parameter);
+    assert_eq!(m.causality, Causality::Parameter);
+    assert_eq!(m.variability, Variability::Tunable);
+    assert_eq!(m.value_type, ValueType::UInt64);
+    assert_eq!(m.base_type(), BaseType::Integer);
+    assert_eq!(m.start_values, Some(Values::UInt(vec![3])));
+    let a = md.variable("A").unwrap();
+    assert_eq!(
+        a.dimensions,
+        [Dimension::Parameter(2), Dimension::Parameter(2)]
+    );
+    assert_eq!(md.array_sizes(a).unwrap(), [3, 3]);
+    assert_eq!(
+        a.start_values,
+        Some(Values::Float(vec![1., 0., 0., 0., 1., 0., 0., 0., 1.]))
+    );
+    assert_eq!(
+        a.real().unwrap().start,
+        None,
+        "no scalar start for an array"
+    );
+    let names = md.element_names(a).unwrap();
+    assert_eq!(names[0], "A[1,1]");
+    assert_eq!(names[1], "A[1,2]");
+    assert_eq!(names[3], "A[2,1]");
+    assert_eq!(names[8], "A[3,3]");
+    let y = md.variable("y").unwrap();
+    assert_eq!(md.element_names(y).unwrap(), ["y[1]", "y[2]", "y[3]"]);
+    // der(x) is the derivative of x: the value reference 11 becomes x's index.
+    let der = md.variable("der(x)").unwrap();
+    let x_index = md
+        .model_variables
+        .iter()
+        .position(|v| v.name == "x")
+        .unwrap()
+        + 1;
+    assert_eq!(der.real().unwrap().derivative, Some(x_index));
+    let s = &md.model_structure;
+    assert_eq!(md.variable_by_index(s.outputs[0].index).unwrap().name, "y");
+    assert_eq!(
+        md.variable_by_index(s.derivatives[0].index).unwrap().name,
+        "der(x)"
+    );
+    assert_eq!(s.initial_unknowns.len(), 3);
+}
+
+#[test]
+fn fmi3_feedthrough_maps_every_type() {
+    let md = reference_fmi3("Feedthrough");
+    let ty = |name: &str| {
+        let v = md.variable(name).unwrap();
+        (v.value_type, v.base_type())
+    };
+    assert_eq!(
+        ty("Float32_continuous_input"),
+        (ValueType::Float32, BaseType::Real)
+    );
+    assert_eq!(
+        ty("Float64_continuous_input"),
+        (ValueType::Float64, BaseType::Real)
+    );
+    assert_eq!(ty("Int8_input"), (ValueType::Int8, BaseType::Integer));
+    assert_eq!(ty("UInt64_output"), (ValueType::UInt64, BaseType::Integer));
+    assert_eq!(ty("Boolean_input"), (ValueType::Boolean, BaseType::Boolean));
+    assert_eq!(ty("String_input"), (ValueType::String, BaseType::String));
+    assert_eq!(ty("Binary_input"), (ValueType::Binary, BaseType::String));
+    assert_eq!(
+        ty("Enumeration_input"),
+        (ValueType::Enumeration, BaseType::Enumeration)
+    );
+    let s = md.variable("String_input").unwrap();
+    assert_eq!(s.start_values, Some(Values::String(vec!["Set me!".into()])));
+    let b = md.variable("Binary_input").unwrap();
+    assert_eq!(b.start_values, Some(Values::Binary(vec![b"foo".to_vec()])));
+    assert!(matches!(&b.kind, VariableKind::String(s) if s.start.as_deref() == Some("666f6f")));
+    let input = md.variable("Float64_continuous_input").unwrap();
+    assert_eq!(input.initial, Some(Initial::Exact));
+    // Dependencies are value references in FMI 3.0, indices here.
+    let out = &md.model_structure.outputs[0];
+    assert_eq!(
+        md.variable_by_index(out.index).unwrap().name,
+        "Float32_continuous_output"
+    );
+    let dep = out.dependencies.as_ref().unwrap()[0];
+    assert_eq!(
+        md.variable_by_index(dep).unwrap().name,
+        "Float32_continuous_input"
+    );
+    assert_eq!(
+        out.dependencies_kind.as_deref(),
+        Some(&[DependencyKind::Constant][..])
+    );
+}
+
+#[test]
+fn fmi3_units_types_and_every_reference_model_parse() {
+    let md = reference_fmi3("BouncingBall");
+    let m = md.unit_definitions.iter().find(|u| u.name == "m").unwrap();
+    assert_eq!(m.base_unit.unwrap().m, 1);
+    assert_eq!(m.display_units[0].name, "ft");
+    let h = md.variable("h").unwrap();
+    assert_eq!(h.real().unwrap().attributes.unit.as_deref(), Some("m"));
+    assert!(h.intermediate_update);
+    // <Alias name="h_ft" displayUnit="ft"/>: another name of h.
+    let h_ft = md.variable("h_ft").unwrap();
+    assert_eq!(h_ft.value_reference, h.value_reference);
+    assert_eq!(h_ft.causality, Causality::Output);
+    assert_eq!(
+        h_ft.real().unwrap().attributes.display_unit.as_deref(),
+        Some("ft")
+    );
+    assert_eq!(md.model_structure.event_indicators.len(), 1);
+    for model in ["Dahlquist", "Resource", "Stair", "VanDerPol", "Roberts"] {
+        let md = reference_fmi3(model);
+        assert_eq!(md.co_simulation.model_identifier, model);
+    }
+}
+
+#[test]
+fn fmi3_without_co_simulation_is_refused_in_one_line() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/reference-fmus/fmi3/Clocks.fmu");
+    let file = std::fs::File::open(&path).unwrap();
+    let mut archive = zip::ZipArchive::new(file).unwrap();
+    let mut entry = archive.by_name("modelDescription.xml").unwrap();
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
+    let e = ModelDescription::from_bytes(&bytes)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("scheduled execution") && !e.contains('\n'),
+        "{e}"
+    );
+}
+
+#[test]
+fn element_names_are_row_major_and_one_based() {
+    assert_eq!(element_names("x", &[]), ["x"]);
+    assert_eq!(
+        element_names("A", &[2, 3]),
+        ["A[1,1]", "A[1,2]", "A[1,3]", "A[2,1]", "A[2,2]", "A[2,3]"]
+    );
+    assert!(element_names("z", &[0]).is_empty());
 }

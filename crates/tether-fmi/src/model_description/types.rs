@@ -1,5 +1,15 @@
-//! Plain data types mirroring the FMI 2.0 `modelDescription.xml` schema (co-simulation
-//! relevant parts), with the standard's defaults already applied.
+//! Plain data types mirroring the `modelDescription.xml` schema (co-simulation relevant
+//! parts), with the standard's defaults already applied.
+//!
+//! One set of types serves FMI 2.0 and FMI 3.0. An FMI 3.0 description is mapped onto
+//! the FMI 2.0 shapes callers already use (a `Float64` or `Float32` variable is a
+//! [`VariableKind::Real`], an integer type of any width an [`VariableKind::Integer`],
+//! `structuralParameter` a [`Causality::Parameter`] with
+//! [`ScalarVariable::structural_parameter`] set, value references in `derivative` and
+//! `ModelStructure` turned into 1-based indices), and what FMI 2.0 has no place for is
+//! added beside them: [`ScalarVariable::value_type`] (the exact type),
+//! [`ScalarVariable::dimensions`], [`ScalarVariable::start_values`] and the FMI 3.0
+//! capability flags of [`CoSimulation`].
 
 /// An FMI value reference.
 pub type ValueReference = u32;
@@ -7,11 +17,14 @@ pub type ValueReference = u32;
 /// The parsed `fmiModelDescription` element.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModelDescription {
-    /// `fmiVersion` (always starts with "2.").
+    /// `fmiVersion` (starts with "2." or "3.").
     pub fmi_version: String,
+    /// The standard the description follows (from `fmiVersion`).
+    pub standard: FmiStandard,
     /// `modelName`.
     pub model_name: String,
-    /// `guid`, passed to `fmi2Instantiate`.
+    /// `guid` (FMI 2.0) or `instantiationToken` (FMI 3.0), passed to
+    /// `fmi2Instantiate` / `fmi3InstantiateCoSimulation`.
     pub guid: String,
     /// `description`.
     pub description: Option<String>,
@@ -50,6 +63,16 @@ pub struct ModelDescription {
     pub(crate) by_name: std::collections::HashMap<String, usize>,
 }
 
+/// The FMI standard of a model description.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum FmiStandard {
+    /// FMI 2.0.
+    #[default]
+    Fmi2,
+    /// FMI 3.0.
+    Fmi3,
+}
+
 /// `variableNamingConvention`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum VariableNamingConvention {
@@ -61,7 +84,7 @@ pub enum VariableNamingConvention {
 }
 
 /// The `CoSimulation` element's capability flags.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct CoSimulation {
     /// Name of the shared library (without extension) and prefix of the functions.
     pub model_identifier: String,
@@ -83,8 +106,26 @@ pub struct CoSimulation {
     pub can_get_and_set_fmu_state: bool,
     /// `canSerializeFMUstate`.
     pub can_serialize_fmu_state: bool,
-    /// `providesDirectionalDerivative`.
+    /// `providesDirectionalDerivative` (FMI 3.0: `providesDirectionalDerivatives`).
     pub provides_directional_derivative: bool,
+    /// FMI 3.0 `providesAdjointDerivatives`.
+    pub provides_adjoint_derivatives: bool,
+    /// FMI 3.0 `providesPerElementDependencies`.
+    pub provides_per_element_dependencies: bool,
+    /// FMI 3.0 `fixedInternalStepSize`.
+    pub fixed_internal_step_size: Option<f64>,
+    /// FMI 3.0 `recommendedIntermediateInputSmoothness` (default 0).
+    pub recommended_intermediate_input_smoothness: i32,
+    /// FMI 3.0 `providesIntermediateUpdate`.
+    pub provides_intermediate_update: bool,
+    /// FMI 3.0 `mightReturnEarlyFromDoStep`.
+    pub might_return_early_from_do_step: bool,
+    /// FMI 3.0 `canReturnEarlyAfterIntermediateUpdate`.
+    pub can_return_early_after_intermediate_update: bool,
+    /// FMI 3.0 `hasEventMode`.
+    pub has_event_mode: bool,
+    /// FMI 3.0 `providesEvaluateDiscreteStates`.
+    pub provides_evaluate_discrete_states: bool,
 }
 
 /// A `Unit` of `UnitDefinitions`.
@@ -133,6 +174,8 @@ pub struct DisplayUnit {
     pub factor: f64,
     /// Offset (default 0).
     pub offset: f64,
+    /// FMI 3.0 `inverse`: value_display = 1/(factor·value + offset).
+    pub inverse: bool,
 }
 
 /// A `SimpleType` of `TypeDefinitions`.
@@ -144,6 +187,9 @@ pub struct SimpleType {
     pub description: Option<String>,
     /// The type element and its attributes.
     pub kind: SimpleTypeKind,
+    /// The exact type (FMI 3.0 `Int8Type` … ; FMI 2.0 `Real` is `Float64`, `Integer` is
+    /// `Int32`).
+    pub value_type: ValueType,
 }
 
 /// The type element of a `SimpleType`.
@@ -157,6 +203,10 @@ pub enum SimpleTypeKind {
     Boolean,
     /// `String`.
     String,
+    /// FMI 3.0 `BinaryType`.
+    Binary,
+    /// FMI 3.0 `ClockType`.
+    Clock,
     /// `Enumeration` with its items.
     Enumeration {
         /// `quantity`.
@@ -294,10 +344,167 @@ pub struct ScalarVariable {
     pub initial: Option<Initial>,
     /// `canHandleMultipleSetPerTimeInstant` (meaningful for inputs only).
     pub can_handle_multiple_set_per_time_instant: Option<bool>,
-    /// The type element with its attributes.
+    /// The type element with its attributes (for FMI 3.0, the FMI 2.0 view: see
+    /// the module documentation).
     pub kind: VariableKind,
+    /// The exact type: FMI 3.0's element name; for FMI 2.0 `Real` is `Float64` and
+    /// `Integer` is `Int32`.
+    pub value_type: ValueType,
+    /// FMI 3.0 `<Dimension>`s, outermost first; empty for a scalar.
+    pub dimensions: Vec<Dimension>,
+    /// FMI 3.0 `causality="structuralParameter"` (then `causality` is `Parameter`).
+    pub structural_parameter: bool,
+    /// FMI 3.0 `intermediateUpdate`.
+    pub intermediate_update: bool,
+    /// FMI 3.0 `previous` (a value reference).
+    pub previous: Option<ValueReference>,
+    /// FMI 3.0 `clocks` (value references of the clocks the variable belongs to).
+    pub clocks: Vec<ValueReference>,
+    /// FMI 3.0: every start value, row-major for an array (`None` without a start
+    /// value, and always for FMI 2.0, whose start values are in `kind`).
+    pub start_values: Option<Values>,
     /// 1-based line in modelDescription.xml.
     pub line: usize,
+}
+
+/// The exact type of a variable, as FMI 3.0 names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ValueType {
+    /// `Float32`.
+    Float32,
+    /// `Float64` (FMI 2.0 `Real`).
+    Float64,
+    /// `Int8`.
+    Int8,
+    /// `UInt8`.
+    UInt8,
+    /// `Int16`.
+    Int16,
+    /// `UInt16`.
+    UInt16,
+    /// `Int32` (FMI 2.0 `Integer`).
+    Int32,
+    /// `UInt32`.
+    UInt32,
+    /// `Int64`.
+    Int64,
+    /// `UInt64`.
+    UInt64,
+    /// `Boolean`.
+    Boolean,
+    /// `String`.
+    String,
+    /// `Binary`.
+    Binary,
+    /// `Enumeration` (FMI 3.0: accessed as `Int64`).
+    Enumeration,
+    /// `Clock`.
+    Clock,
+}
+
+impl ValueType {
+    /// The element name in an FMI 3.0 model description.
+    pub fn name(self) -> &'static str {
+        match self {
+            ValueType::Float32 => "Float32",
+            ValueType::Float64 => "Float64",
+            ValueType::Int8 => "Int8",
+            ValueType::UInt8 => "UInt8",
+            ValueType::Int16 => "Int16",
+            ValueType::UInt16 => "UInt16",
+            ValueType::Int32 => "Int32",
+            ValueType::UInt32 => "UInt32",
+            ValueType::Int64 => "Int64",
+            ValueType::UInt64 => "UInt64",
+            ValueType::Boolean => "Boolean",
+            ValueType::String => "String",
+            ValueType::Binary => "Binary",
+            ValueType::Enumeration => "Enumeration",
+            ValueType::Clock => "Clock",
+        }
+    }
+
+    /// The type of the element called `name`, if it is a variable element of FMI 3.0.
+    pub fn from_name(name: &str) -> Option<ValueType> {
+        Some(match name {
+            "Float32" => ValueType::Float32,
+            "Float64" => ValueType::Float64,
+            "Int8" => ValueType::Int8,
+            "UInt8" => ValueType::UInt8,
+            "Int16" => ValueType::Int16,
+            "UInt16" => ValueType::UInt16,
+            "Int32" => ValueType::Int32,
+            "UInt32" => ValueType::UInt32,
+            "Int64" => ValueType::Int64,
+            "UInt64" => ValueType::UInt64,
+            "Boolean" => ValueType::Boolean,
+            "String" => ValueType::String,
+            "Binary" => ValueType::Binary,
+            "Enumeration" => ValueType::Enumeration,
+            "Clock" => ValueType::Clock,
+            _ => return None,
+        })
+    }
+
+    /// Whether this is one of the eight integer types.
+    pub fn is_integer(self) -> bool {
+        matches!(
+            self,
+            ValueType::Int8
+                | ValueType::UInt8
+                | ValueType::Int16
+                | ValueType::UInt16
+                | ValueType::Int32
+                | ValueType::UInt32
+                | ValueType::Int64
+                | ValueType::UInt64
+        )
+    }
+}
+
+/// One FMI 3.0 `<Dimension>` of an array variable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Dimension {
+    /// `start`: a fixed size.
+    Fixed(u64),
+    /// `valueReference`: the size is the value of this structural parameter.
+    Parameter(ValueReference),
+}
+
+/// Values of one variable (FMI 3.0 start values), row-major for an array.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Values {
+    /// `Float32`/`Float64`.
+    Float(Vec<f64>),
+    /// `Int8` … `Int64` and `Enumeration`.
+    Int(Vec<i64>),
+    /// `UInt8` … `UInt64`.
+    UInt(Vec<u64>),
+    /// `Boolean`.
+    Boolean(Vec<bool>),
+    /// `String`.
+    String(Vec<String>),
+    /// `Binary`.
+    Binary(Vec<Vec<u8>>),
+}
+
+impl Values {
+    /// The number of values.
+    pub fn len(&self) -> usize {
+        match self {
+            Values::Float(v) => v.len(),
+            Values::Int(v) => v.len(),
+            Values::UInt(v) => v.len(),
+            Values::Boolean(v) => v.len(),
+            Values::String(v) => v.len(),
+            Values::Binary(v) => v.len(),
+        }
+    }
+
+    /// Whether there is no value.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 /// The type element of a `ScalarVariable`, with `declaredType` attributes inherited.
@@ -386,6 +593,11 @@ impl ScalarVariable {
         }
     }
 
+    /// Whether the variable is an FMI 3.0 array.
+    pub fn is_array(&self) -> bool {
+        !self.dimensions.is_empty()
+    }
+
     /// The `Real` attributes, if this is a Real variable.
     pub fn real(&self) -> Option<&RealVariable> {
         match &self.kind {
@@ -430,4 +642,8 @@ pub struct ModelStructure {
     pub derivatives: Vec<Unknown>,
     /// `InitialUnknowns`.
     pub initial_unknowns: Vec<Unknown>,
+    /// FMI 3.0 `ClockedState`s.
+    pub clocked_states: Vec<Unknown>,
+    /// FMI 3.0 `EventIndicator`s.
+    pub event_indicators: Vec<Unknown>,
 }

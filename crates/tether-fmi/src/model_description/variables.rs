@@ -7,7 +7,7 @@ use super::types::*;
 use crate::error::Result;
 use crate::xml::Element;
 
-const CAUSALITIES: &[(&str, Causality)] = &[
+pub(super) const CAUSALITIES: &[(&str, Causality)] = &[
     ("parameter", Causality::Parameter),
     ("calculatedParameter", Causality::CalculatedParameter),
     ("input", Causality::Input),
@@ -16,7 +16,7 @@ const CAUSALITIES: &[(&str, Causality)] = &[
     ("independent", Causality::Independent),
 ];
 
-const VARIABILITIES: &[(&str, Variability)] = &[
+pub(super) const VARIABILITIES: &[(&str, Variability)] = &[
     ("constant", Variability::Constant),
     ("fixed", Variability::Fixed),
     ("tunable", Variability::Tunable),
@@ -24,7 +24,7 @@ const VARIABILITIES: &[(&str, Variability)] = &[
     ("continuous", Variability::Continuous),
 ];
 
-const INITIALS: &[(&str, Initial)] = &[
+pub(super) const INITIALS: &[(&str, Initial)] = &[
     ("exact", Initial::Exact),
     ("approx", Initial::Approx),
     ("calculated", Initial::Calculated),
@@ -32,7 +32,7 @@ const INITIALS: &[(&str, Initial)] = &[
 
 /// The cases of the standard's causality × variability table that decide `initial`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum InitialCase {
+pub(super) enum InitialCase {
     /// Only `exact`, the default.
     A,
     /// `approx` or `calculated`; default `calculated`.
@@ -44,7 +44,7 @@ enum InitialCase {
 }
 
 impl InitialCase {
-    fn default_initial(self) -> Option<Initial> {
+    pub(super) fn default_initial(self) -> Option<Initial> {
         match self {
             InitialCase::A => Some(Initial::Exact),
             InitialCase::B | InitialCase::C => Some(Initial::Calculated),
@@ -52,7 +52,7 @@ impl InitialCase {
         }
     }
 
-    fn allows(self, initial: Initial) -> bool {
+    pub(super) fn allows(self, initial: Initial) -> bool {
         match self {
             InitialCase::A => initial == Initial::Exact,
             InitialCase::B => initial != Initial::Exact,
@@ -63,7 +63,7 @@ impl InitialCase {
 }
 
 /// The table of section 2.2.7: `None` for combinations the standard forbids.
-fn initial_case(causality: Causality, variability: Variability) -> Option<InitialCase> {
+pub(super) fn initial_case(causality: Causality, variability: Variability) -> Option<InitialCase> {
     use Causality as C;
     use Variability as V;
     match (variability, causality) {
@@ -164,7 +164,21 @@ fn scalar_variable(at: Attrs<'_>, e: &Element, types: &[SimpleType]) -> Result<S
         }
         None => case.default_initial(),
     };
+    let value_type = match kind {
+        VariableKind::Real(_) => ValueType::Float64,
+        VariableKind::Integer(_) => ValueType::Int32,
+        VariableKind::Boolean(_) => ValueType::Boolean,
+        VariableKind::String(_) => ValueType::String,
+        VariableKind::Enumeration(_) => ValueType::Enumeration,
+    };
     Ok(ScalarVariable {
+        value_type,
+        dimensions: Vec::new(),
+        structural_parameter: false,
+        intermediate_update: false,
+        previous: None,
+        clocks: Vec::new(),
+        start_values: None,
         value_reference,
         description: at.string(e, "description"),
         causality,
@@ -178,7 +192,7 @@ fn scalar_variable(at: Attrs<'_>, e: &Element, types: &[SimpleType]) -> Result<S
     })
 }
 
-fn declared<'t>(
+pub(super) fn declared<'t>(
     at: Attrs<'_>,
     e: &Element,
     variable: &str,

@@ -9,6 +9,7 @@
 #![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
 
 pub(crate) mod component;
+pub mod fmi3;
 mod functions;
 
 use std::ffi::{c_char, c_int, c_uint, c_void};
@@ -156,7 +157,12 @@ pub(crate) struct CallSite<'a> {
 /// passes OK, logs Warning at warn level and passes it, and turns every other status
 /// into the matching typed error.
 pub(crate) fn check(site: CallSite<'_>, code: fmi2Status) -> crate::Result<()> {
-    let status = Status::from(code);
+    let fmi3 = site.function.starts_with("fmi3");
+    let status = match Status::from(code) {
+        // fmi2Pending has no FMI 3.0 counterpart.
+        Status::Pending if fmi3 => Status::Unknown(code),
+        status => status,
+    };
     log::trace!(
         target: "tether_fmi::call",
         "{}({}) at t={} -> {:?}",
@@ -173,9 +179,10 @@ pub(crate) fn check(site: CallSite<'_>, code: fmi2Status) -> crate::Result<()> {
         Status::Ok => Ok(()),
         Status::Warning => {
             let instance = site.instance;
+            let api = if fmi3 { "fmi3" } else { "fmi2" };
             log::warn!(
                 target: "tether_fmi::call",
-                "{function} returned fmi2Warning on instance '{instance}' at t={time}"
+                "{function} returned {api}Warning on instance '{instance}' at t={time}"
             );
             Ok(())
         }

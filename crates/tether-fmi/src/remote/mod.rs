@@ -769,6 +769,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
                 Err(Error::TerminationRequested {
                     instance: self.name.to_string(),
                     time,
+                    how: None,
                 })
             }
             Err(e) => Err(e),

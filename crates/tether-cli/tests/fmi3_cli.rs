@@ -1,0 +1,100 @@
+//! `tether info` and `tether simulate` on FMI 3.0 Reference FMUs (third-party FMUs in
+//! `../shared/reference-fmus/fmi3` from the repository root).
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn reference(model: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/reference-fmus/fmi3")
+        .join(format!("{model}.fmu"))
+}
+
+fn tether(args: &[&std::ffi::OsStr]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tether"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn info_shows_the_fmi3_capabilities_and_array_dimensions() {
+    let fmu = reference("StateSpace");
+    let out = tether(&["info".as_ref(), fmu.as_os_str()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    for expected in [
+        "FMI         3.0 co-simulation",
+        "canGetAndSetFMUState                   yes",
+        "providesIntermediateUpdate             yes",
+        "hasEventMode                           yes",
+        "fixedInternalStepSize                  1",
+        "Tether runs it without event mode",
+        "no: FMI 3.0 has no input derivatives",
+        "  m                             1  structural   tunable",
+        "UInt64",
+        "Arrays (elements named y[1], A[2,3]: 1-based, row-major)",
+        "  A                        3x3        (structural parameter n, structural parameter n)",
+        "  y                        3          (structural parameter r)",
+    ] {
+        assert!(text.contains(expected), "missing {expected:?} in\n{text}");
+    }
+}
+
+#[test]
+fn simulate_names_array_elements_and_honours_termination() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("ss.csv");
+    let fmu = reference("StateSpace");
+    let out = tether(&[
+        "simulate".as_ref(),
+        fmu.as_os_str(),
+        "--stop".as_ref(),
+        "1".as_ref(),
+        "--step".as_ref(),
+        "0.5".as_ref(),
+        "--out".as_ref(),
+        csv.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().next(), Some("time,y[1],y[2],y[3]"));
+
+    let csv = dir.path().join("stair.csv");
+    let fmu = reference("Stair");
+    let out = tether(&[
+        "simulate".as_ref(),
+        fmu.as_os_str(),
+        "--out".as_ref(),
+        csv.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let said =
+        String::from_utf8_lossy(&out.stderr).to_string() + &String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("(fmi3DoStep, terminateSimulation)"), "{said}");
+}
+
+#[test]
+fn a_scheduled_execution_fmu_is_refused_in_one_line() {
+    let fmu = reference("Clocks");
+    let out = tether(&["info".as_ref(), fmu.as_os_str()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("offers scheduled execution only, no co-simulation"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
