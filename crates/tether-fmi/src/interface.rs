@@ -33,10 +33,9 @@
 //! function that failed ([`Error::function`]).
 
 use std::fmt::Debug;
-use std::time::Duration;
 
 use crate::error::{Error, Result};
-use crate::fmu::{Fmu, InstanceOptions};
+
 use crate::instance::Instance;
 use crate::model_description::{ModelDescription, ValueReference};
 use crate::state::FmuState;
@@ -48,19 +47,6 @@ pub type Slot = usize;
 
 /// The number of state slots an instance offers (0 … `SLOTS` − 1).
 pub const SLOTS: usize = 4;
-
-/// Where an instance runs.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum Placement {
-    /// The FMU's library is loaded in this process.
-    #[default]
-    InProcess,
-    /// A host process of its own; each call waits at most `timeout`.
-    Process {
-        /// The longest a call may take before the host is killed.
-        timeout: Option<Duration>,
-    },
-}
 
 /// The coupled inputs of a run: their values at the start of the step and,
 /// for a polynomial input of degree k > 0, their time derivatives there.
@@ -200,35 +186,6 @@ pub trait FmuInstance: Debug + Send {
         }
         Ok(())
     }
-}
-
-/// Instantiates `fmu` as `name` where `placement` says.
-pub fn instantiate(
-    fmu: &Fmu,
-    name: &str,
-    options: InstanceOptions,
-    placement: Placement,
-) -> Result<Box<dyn FmuInstance>> {
-    let md = fmu.model_description();
-    if md.standard == crate::model_description::FmiStandard::Fmi3 {
-        return match placement {
-            Placement::InProcess => Ok(Box::new(crate::instance3::Fmi3Instance::new(
-                fmu, name, options,
-            )?)),
-            Placement::Process { .. } => Err(Error::Unsupported {
-                model: md.model_name.clone(),
-                reason: format!(
-                    "instance '{name}' is of an FMI 3.0 FMU, which runs in this process only: the host process (isolation) does not load FMI 3.0 FMUs yet"
-                ),
-            }),
-        };
-    }
-    Ok(match placement {
-        Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
-        Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(
-            fmu, name, options, timeout,
-        )?),
-    })
 }
 
 /// An FMI 2.0 instance in this process, with its saved states.

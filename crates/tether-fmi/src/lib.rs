@@ -63,6 +63,7 @@ mod interface;
 mod library;
 mod logger;
 pub mod model_description;
+mod placement;
 pub mod raw;
 pub mod remote;
 mod shared;
@@ -76,9 +77,7 @@ pub use error::{Error, FmuMessages, Result};
 pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};
 pub use instance3::Fmi3Instance;
-pub use interface::{
-    instantiate, FmuInstance, Inputs, LocalInstance, Placement, RunRequest, Slot, SLOTS,
-};
+pub use interface::{FmuInstance, Inputs, LocalInstance, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
 pub use model_description::{
     element_names, BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
@@ -87,5 +86,6 @@ pub use model_description::{
     ScalarVariable, SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown, ValueReference,
     ValueType, Values, Variability, VariableKind, VariableNamingConvention,
 };
+pub use placement::{instantiate, Placement};
 pub use raw::Status;
 pub use state::FmuState;

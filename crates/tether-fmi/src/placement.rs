@@ -1,0 +1,50 @@
+//! Where an instance runs, and [`instantiate`]: the one place that picks the
+//! implementation of [`FmuInstance`] for an FMU's standard and placement.
+
+use std::time::Duration;
+
+use crate::error::{Error, Result};
+use crate::fmu::{Fmu, InstanceOptions};
+use crate::interface::{FmuInstance, LocalInstance};
+
+/// Where an instance runs.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Placement {
+    /// The FMU's library is loaded in this process.
+    #[default]
+    InProcess,
+    /// A host process of its own; each call waits at most `timeout`.
+    Process {
+        /// The longest a call may take before the host is killed.
+        timeout: Option<Duration>,
+    },
+}
+
+/// Instantiates `fmu` as `name` where `placement` says.
+pub fn instantiate(
+    fmu: &Fmu,
+    name: &str,
+    options: InstanceOptions,
+    placement: Placement,
+) -> Result<Box<dyn FmuInstance>> {
+    let md = fmu.model_description();
+    if md.standard == crate::model_description::FmiStandard::Fmi3 {
+        return match placement {
+            Placement::InProcess => Ok(Box::new(crate::instance3::Fmi3Instance::new(
+                fmu, name, options,
+            )?)),
+            Placement::Process { .. } => Err(Error::Unsupported {
+                model: md.model_name.clone(),
+                reason: format!(
+                    "instance '{name}' is of an FMI 3.0 FMU, which runs in this process only: the host process (isolation) does not load FMI 3.0 FMUs yet"
+                ),
+            }),
+        };
+    }
+    Ok(match placement {
+        Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
+        Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(
+            fmu, name, options, timeout,
+        )?),
+    })
+}
