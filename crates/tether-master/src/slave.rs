@@ -633,8 +633,33 @@ impl Slave {
                 None => Ok(()),
             };
         }
-        // One run, handed to the instance as one unit.
         assert!(self.saved, "rerun is only called after save_state");
+        self.run(polys, (t, h), true, out, Run::Perturbed)
+    }
+
+    /// The predictor's run: set the inputs from `polys`, step from `t` over
+    /// `h`, read the coupled outputs into `out`.
+    pub(crate) fn predict(
+        &mut self,
+        polys: &[Taylor],
+        t: f64,
+        h: f64,
+        out: &mut [f64],
+    ) -> Result<(), MasterError> {
+        self.run(polys, (t, h), false, Some(out), Run::Predictor)
+    }
+
+    /// One run handed to the instance as one unit: from the saved state when
+    /// `restore`, the inputs from `polys`, the step `(t, h)`, and with `out`
+    /// the coupled outputs read into it (checked as read after `run`).
+    fn run(
+        &mut self,
+        polys: &[Taylor],
+        (t, h): (f64, f64),
+        restore: bool,
+        out: Option<&mut [f64]>,
+        run: Run,
+    ) -> Result<(), MasterError> {
         let driven = !self.inputs.is_empty();
         if driven {
             combine_inputs(
@@ -647,7 +672,7 @@ impl Slave {
         let read = out.is_some();
         let input = &self.input;
         let request = RunRequest {
-            restore: Some(SAVED),
+            restore: restore.then_some(SAVED),
             inputs: driven.then(|| input.as_inputs()),
             step: Some((t, h)),
             outputs: if read { &self.value_vrs } else { &[] },
@@ -655,14 +680,16 @@ impl Slave {
             save: None,
         };
         let ran = self.backend.run(&request, &mut self.value_buf);
-        self.counters.state_sets += 1;
+        if restore {
+            self.counters.state_sets += 1;
+        }
         if driven {
             self.count_inputs();
         }
         self.counters.do_steps += 1;
         ran?;
         match out {
-            Some(out) => self.take_coupled(out, Run::Perturbed),
+            Some(out) => self.take_coupled(out, run),
             None => Ok(()),
         }
     }

@@ -135,11 +135,11 @@ impl PredictorCorrector {
     fn predict(&mut self, system: &mut System, at: StepAt) -> Result<(), MasterError> {
         self.extrapolate(system, at);
         for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
-            if !slave.stepped_ahead {
-                slave.apply_inputs(&self.polys)?;
-                slave.do_step(at.t, at.h)?;
+            if slave.stepped_ahead {
+                slave.read_coupled(out, Run::Predictor)?;
+            } else {
+                slave.predict(&self.polys, at.t, at.h, out)?;
             }
-            slave.read_coupled(out, Run::Predictor)?;
         }
         let view = View::at(&self.predicted, &self.u_pred);
         let nu = system.coupling.len();
