@@ -90,6 +90,10 @@ pub fn main(args: Args) -> Result<()> {
     if let Some(warning) = spec.grid_warning() {
         crate::say!("warning: {warning}");
     }
+    let unstable = spec.method.stability_warning(spec.coupling.order);
+    if let Some(warning) = &unstable {
+        crate::say!("warning: {warning}");
+    }
     let mut sim = Simulation::new(&spec)?;
     sim.time_phases(args.timing);
     // The plot's columns are checked now, not after the run.
@@ -175,6 +179,13 @@ pub fn main(args: Args) -> Result<()> {
                 out.display()
             )))
         }
+        // A divergence of a formulation known to be unstable says so again.
+        Err(e @ tether_master::MasterError::Diverged { .. }) if unstable.is_some() => Err(
+            anyhow::anyhow!("{e}; {}", unstable.unwrap_or_default()).context(format!(
+                "run stopped; results up to t = {last} kept in {} (marked incomplete)",
+                out.display()
+            )),
+        ),
         Err(e) => Err(anyhow::Error::new(e).context(format!(
             "run stopped; results up to t = {last} kept in {} (marked incomplete)",
             out.display()

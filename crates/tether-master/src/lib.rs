@@ -51,7 +51,7 @@ mod threads;
 mod touched;
 
 pub use error::MasterError;
-pub use method::Method;
+pub use method::{IndexConflict, IndexedKind, Method};
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use simulation::{MasterState, Simulation, SystemState};
