@@ -545,3 +545,86 @@ fn a_formulation_known_unstable_is_named_before_the_run_and_at_divergence() {
         stderr(&out)
     );
 }
+
+#[test]
+fn a_name_error_says_where_the_name_appears() {
+    let dir = tempfile::tempdir().unwrap();
+    let line = |edit: &dyn Fn(String) -> String, extra: &[&str]| {
+        let sys = write_system(dir.path(), edit);
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "r.csv"];
+        args.extend_from_slice(extra);
+        error_line(&tether(&args, dir.path()))
+    };
+    let same = |t: String| t;
+    type Edit = Box<dyn Fn(String) -> String>;
+    let cases: Vec<(Edit, &[&str], &str)> = vec![
+        (
+            Box::new(|t: String| t.replace("mass2.x - mass1.x", "mass2.xx - mass1.x")),
+            &[],
+            "constraint 'link', position: instance 'mass2' (oscillator.fmu) has no variable \
+             'xx'; did you mean 'x', 'x0'?",
+        ),
+        (
+            Box::new(|t: String| t.replace("mass1.F - mass2.F", "mass1.F - mass2.f")),
+            &[],
+            "constraint 'link', drives: instance 'mass2' (oscillator.fmu) has no variable 'f'; \
+             did you mean 'F', 'a', 'c'?",
+        ),
+        (
+            Box::new(|t: String| {
+                t + "\n[[coupling_variable]]\nname = \"push\"\ndrives = \"mass1.F\"\nvalue = \"mass2.vv\"\n"
+            }),
+            &[],
+            "coupling variable 'push', value: instance 'mass2' (oscillator.fmu) has no variable \
+             'vv'; did you mean 'v', 'v0'?",
+        ),
+        (
+            Box::new(|t: String| t + "\n[[connection]]\nfrom = \"mass1.xx\"\nto = \"mass2.F\"\n"),
+            &[],
+            "connection mass1.xx → mass2.F, from: instance 'mass1' (oscillator.fmu) has no \
+             variable 'xx'; did you mean 'x', 'x0'?",
+        ),
+        (
+            Box::new(|t: String| t.replace("m = 2.0,", "mm = 2.0,")),
+            &[],
+            "parameters: instance 'mass2' (oscillator.fmu) has no variable 'mm'; did you mean 'm'?",
+        ),
+        (
+            Box::new(same),
+            &["--set", "mass1.cc=3"],
+            "--set mass1.cc: instance 'mass1' (oscillator.fmu) has no variable 'cc'; did you mean \
+             'c'?",
+        ),
+        (
+            Box::new(|t: String| t + "\n[output]\nvariables = [\"link.lam\"]\n"),
+            &[],
+            "[output] variables, pattern 'link.lam': matches no column; did you mean 'link.lambda', \
+             'link.g'?",
+        ),
+    ];
+    for (edit, extra, message) in cases {
+        let got = line(&*edit, extra);
+        assert!(got.ends_with(message), "{got}\nwanted: {message}");
+    }
+    // An unknown TOML key is reported at its own line and column.
+    let got = line(
+        &|t: String| t.replace("beta = 2e-3\n", "beta = 2e-3\n  betta = 1\n"),
+        &[],
+    );
+    let sys = dir.path().join("system.toml");
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let row = text.lines().position(|l| l.contains("betta")).unwrap() + 1;
+    assert_eq!(
+        got,
+        format!(
+            "error: system file {}: line {row}, column 3: unknown field `betta`, expected one of \
+             `index`, `beta`, `gamma`",
+            sys.display()
+        )
+    );
+    let got = line(
+        &|t: String| t.replace("m = 1.0, c", "m = 1.0, cc = 2, c"),
+        &[],
+    );
+    assert!(got.contains("parameters: instance 'mass1'"), "{got}");
+}

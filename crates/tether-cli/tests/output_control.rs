@@ -162,7 +162,7 @@ fn an_output_interval_off_the_step_and_a_pattern_matching_nothing_are_refused() 
     );
     assert_eq!(
         error_line(&run(&["--output-variables", "mass3.*"])),
-        "error: output variable pattern 'mass3.*' matches no column; did you mean \
+        "error: --output-variables, pattern 'mass3.*': matches no column; did you mean \
          'mass1.x', 'mass1.v', 'mass1.a', 'mass2.x', 'mass2.v', 'mass2.a'?"
     );
     // A negative step is a value, refused as one.

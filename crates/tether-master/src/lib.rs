@@ -50,7 +50,7 @@ mod system;
 mod threads;
 mod touched;
 
-pub use error::MasterError;
+pub use error::{MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use overrides::{MethodChange, MethodKind, OverrideError, Overrides};

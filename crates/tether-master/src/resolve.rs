@@ -422,11 +422,15 @@ fn drive_inputs(
     let mut sums: Vec<(usize, u32, f64)> = Vec::new();
     for term in &expr.terms {
         let s = find_slave(owner, &term.instance, slaves)?;
-        let var = slaves[s]
-            .fmu
-            .model_description()
-            .variable(&term.variable)?
-            .clone();
+        let slave = &slaves[s];
+        let var = crate::names::variable(
+            slave.fmu.model_description(),
+            &format!("{owner}, drives"),
+            &slave.name,
+            || crate::names::fmu_file(slave.fmu.path()),
+            &term.variable,
+        )?
+        .clone();
         let is_real = var.base_type() == BaseType::Real;
         if var.causality != Causality::Input || !is_real || term.derivative_order != 0 {
             return Err(MasterError::WrongVariable {
@@ -496,11 +500,14 @@ fn output_level(
     for term in &expr.terms {
         let s = find_slave(owner, &term.instance, slaves)?;
         let slave = &mut slaves[s];
-        let var = slave
-            .fmu
-            .model_description()
-            .variable(&term.variable)?
-            .clone();
+        let var = crate::names::variable(
+            slave.fmu.model_description(),
+            &format!("{owner}, {level}"),
+            &slave.name,
+            || crate::names::fmu_file(slave.fmu.path()),
+            &term.variable,
+        )?
+        .clone();
         let is_real = var.base_type() == BaseType::Real;
         if var.causality != Causality::Output || !is_real {
             return Err(MasterError::WrongVariable {

@@ -48,6 +48,7 @@ const SIGNAL_INTERVAL: Duration = Duration::from_millis(50);
 fn kind_of(e: &MasterError) -> &'static str {
     match e {
         MasterError::Fmi(_)
+        | MasterError::UnknownVariable(_)
         | MasterError::InstanceFmu { .. }
         | MasterError::MissingCapability { .. } => "fmu",
         MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
@@ -455,7 +456,7 @@ fn run(
 ) -> PyResult<Py<PyAny>> {
     let spec = load_spec(path, text, kwargs)?;
     let outcome = py.detach(move || -> Result<_, MasterError> {
-        let mut sim = Simulation::new(&spec)?;
+        let mut sim = Simulation::new(&spec).map_err(|e| e.located(&spec, |_, _| None))?;
         let mut rows = Rows::default();
         let width = sim.columns().len() + 1;
         let points = usize::try_from(sim.total_steps()).unwrap_or(usize::MAX);
@@ -523,7 +524,8 @@ impl PySimulation {
         kwargs: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let spec = load_spec(path, text, kwargs)?;
-        let sim = Simulation::new(&spec).map_err(|e| master_failure(&e, None))?;
+        let sim = Simulation::new(&spec)
+            .map_err(|e| master_failure(&e.located(&spec, |_, _| None), None))?;
         let mut rows = Rows {
             columns: sim.columns().to_vec(),
             bytes: Vec::new(),
@@ -668,7 +670,7 @@ impl PySimulation {
             let kind = match &e {
                 MasterError::StartValue { .. }
                 | MasterError::UnknownInstance { .. }
-                | MasterError::Fmi(tether_fmi::Error::UnknownVariable { .. }) => "settings",
+                | MasterError::UnknownVariable(_) => "settings",
                 other => kind_of(other),
             };
             failure(kind, message(&e), None)
