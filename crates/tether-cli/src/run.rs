@@ -31,7 +31,9 @@ pub struct Args {
     #[arg(long, value_name = "DT", allow_hyphen_values = true)]
     output_interval: Option<f64>,
     /// Record only the columns matching PATTERN: `*` matches any characters,
-    /// everything else is literal (repeatable; overrides [output] variables).
+    /// everything else is literal; several separated by commas as in
+    /// --columns (commas inside brackets belong to the name: body.R[1,2]), or
+    /// the flag repeated (overrides [output] variables).
     #[arg(long, value_name = "PATTERN")]
     output_variables: Vec<String>,
     /// Write the run summary as JSON to FILE (docs/run-summary.md), also when
@@ -68,7 +70,7 @@ pub fn main(args: Args) -> Result<()> {
         spec.output.interval = Some(dt);
     }
     if !args.output_variables.is_empty() {
-        spec.output.variables = args.output_variables.clone();
+        spec.output.variables = crate::columns::split(&args.output_variables);
     }
     let out = match &args.out {
         Some(p) => p.clone(),

@@ -73,6 +73,7 @@ impl Coupling {
             // Stable: each port keeps its contributions in condition order.
             joint.targets.sort_by_key(|t| t.0);
         }
+        check_driven_starts(spec, slaves)?;
         check_capabilities(slaves, method, order)?;
         for slave in slaves.iter_mut() {
             slave.finalize(order);
@@ -455,6 +456,28 @@ fn drive_inputs(
             owner: owner.to_string(),
             drives: expr.to_string(),
         });
+    }
+    Ok(())
+}
+
+/// A start value given for an input the coupling drives is refused, as
+/// [`crate::Simulation::set_parameter`] refuses it: the master sets it at
+/// every step.
+fn check_driven_starts(spec: &SystemSpec, slaves: &[Slave]) -> Result<(), MasterError> {
+    for (inst, slave) in spec.instances.iter().zip(slaves) {
+        for (name, value) in &inst.parameters {
+            let md = slave.fmu.model_description();
+            let Ok(var) = md.variable(name) else { continue };
+            if slave.inputs.iter().any(|i| i.vr == var.value_reference) {
+                return Err(MasterError::StartValue {
+                    instance: inst.name.clone(),
+                    variable: name.clone(),
+                    value: value.to_string(),
+                    reason: "it is an input the coupling drives; the master sets it at every step"
+                        .into(),
+                });
+            }
+        }
     }
     Ok(())
 }
