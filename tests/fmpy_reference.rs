@@ -267,3 +267,63 @@ fn joints_agree_with_the_fmpy_reference() {
         assert!(rel <= 1e-9, "{system}: {column} deviates by {rel:e}");
     }
 }
+
+/// The reference reads `[method]` (with or without `index`) into the same
+/// weights as tether, and refuses the same contradictions with the same
+/// words. Only the system-file reader runs: no fmpy needed.
+#[test]
+fn the_reference_reads_the_method_index_as_tether_does() {
+    let reader = workspace_root().join("tools").join("fmpy_reference");
+    let script = "import sys, tomllib; sys.path.insert(0, sys.argv[1]); import system\n\
+                  from errors import RunError\n\
+                  try:\n    m = system._method(tomllib.loads(sys.argv[2])['method'])\n    \
+                  w = (m.beta, m.gamma) if m.kind == 'baumgarte' else (m.a, m.b)\n    \
+                  print(repr(w[0]), repr(w[1]))\n\
+                  except RunError as e:\n    print('error:', e)";
+    let python = std::env::var_os("TETHER_PYTHON").unwrap_or_else(|| "python3".into());
+    for table in [
+        "kind = 'baumgarte'\nbeta = 2e-3",
+        "kind = 'baumgarte'\nindex = 1",
+        "kind = 'baumgarte'\nindex = 2",
+        "kind = 'baumgarte'\nindex = 2\nbeta = 0.5",
+        "kind = 'baumgarte'\nindex = 3",
+        "kind = 'weighted'\nindex = 1",
+        "kind = 'weighted'\nindex = 2",
+        "kind = 'weighted'\nindex = 1\nb = 0.25",
+        "kind = 'baumgarte'\nindex = 2\ngamma = 1e-6",
+        "kind = 'weighted'\nindex = 3\na = 1.0",
+        "kind = 'weighted'\nindex = 1\nb = 0.0",
+        "kind = 'baumgarte'\nindex = 4",
+    ] {
+        let text = format!("[method]\n{table}\n");
+        let ours = match toml::from_str::<toml::Table>(&text)
+            .unwrap()
+            .remove("method")
+            .unwrap()
+            .try_into::<Method>()
+        {
+            Ok(Method::Baumgarte { beta, gamma }) => format!("{beta:?} {gamma:?}"),
+            Ok(Method::Weighted { a, b }) => format!("{a:?} {b:?}"),
+            Ok(other) => panic!("{other}"),
+            Err(e) => format!("error: {}", e.message()),
+        };
+        let out = std::process::Command::new(&python)
+            .args(["-c", script])
+            .arg(&reader)
+            .arg(&text)
+            .output()
+            .expect("run python3");
+        let theirs = String::from_utf8_lossy(&out.stdout).trim().to_string();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let numbers =
+            |s: &str| -> Option<Vec<f64>> { s.split(' ').map(|w| w.parse().ok()).collect() };
+        match (numbers(&ours), numbers(&theirs)) {
+            (Some(a), Some(b)) => assert_eq!(a, b, "{table}"),
+            _ => assert_eq!(ours, theirs, "{table}"),
+        }
+    }
+}

@@ -2,7 +2,7 @@
 equations, with fmpy's FMU2Slave as the FMI host.
 
     python tools/fmpy_reference SYSTEM.toml [--method baumgarte|weighted|explicit]
-        [--beta B] [--gamma G] [--a A] [--b B] [--mu MU] [--order K] [--epsilon E]
+        [--index 1|2|3] [--beta B] [--gamma G] [--a A] [--b B] [--mu MU] [--order K] [--epsilon E]
         [--stop T] [--step H] [--out FILE.csv] [--quiet]
 
 Writes the CSV layout of `tether run` (time, every Real output as
@@ -31,6 +31,7 @@ def arguments(argv):
     p.add_argument("--stop", type=float, help="stop time (overrides [experiment] stop)")
     p.add_argument("--step", type=float, help="macro-step size H (overrides [experiment] step)")
     p.add_argument("--method", choices=["baumgarte", "weighted", "explicit"])
+    p.add_argument("--index", type=int, choices=[1, 2, 3], help="index level of method baumgarte or weighted")
     p.add_argument("--beta", type=float)
     p.add_argument("--gamma", type=float)
     p.add_argument("--a", type=float)
@@ -73,7 +74,18 @@ def apply_overrides(system, args):
         had_mu = False
     else:
         had_mu = m.kind == "explicit"
-    if kind == "baumgarte":
+    if args.index is not None and kind in ("baumgarte", "weighted"):
+        # The method's own weights where the index uses them, else its defaults.
+        own = (m.beta, m.gamma) if kind == "baumgarte" else (m.a, m.b)
+        flags = (args.beta, args.gamma) if kind == "baumgarte" else (args.a, args.b)
+        kept = (own[0] > 0 and args.index <= 2, own[1] > 0 and args.index <= 1)
+        given = tuple(f if f is not None else (o if k else None) for f, o, k in zip(flags, own, kept))
+        w = systemfile.at_index(kind, args.index, given, flags=True)
+        m = systemfile.Method(kind, beta=w[0], gamma=w[1]) if kind == "baumgarte" \
+            else systemfile.Method(kind, a=w[0], b=w[1])
+    elif args.index is not None:
+        raise RunError("--index applies to method baumgarte or weighted, but the method is explicit")
+    elif kind == "baumgarte":
         m = systemfile.Method(kind, beta=_pick(args.beta, m.beta), gamma=_pick(args.gamma, m.gamma))
     elif kind == "weighted":
         m = systemfile.Method(kind, a=_pick(args.a, m.a), b=_pick(args.b, m.b))

@@ -2,6 +2,7 @@
 `tether run` checks it: unknown keys are errors, values must have the right type
 and range, relative `fmu` paths are resolved against the file's folder."""
 
+import decimal
 import math
 import os
 import re
@@ -151,15 +152,59 @@ class _Table:
             raise RunError(f"{self.where}: unknown key `{key}`")
 
 
+# The weights an explicit index gives when none are written (docs/system-file.md).
+DEFAULT_WEIGHTS = {
+    ("baumgarte", 1): (2e-3, 1e-6), ("baumgarte", 2): (2e-3, 0.0), ("baumgarte", 3): (0.0, 0.0),
+    ("weighted", 1): (1.0, 1.0), ("weighted", 2): (1.0, 0.0), ("weighted", 3): (0.0, 0.0),
+}
+WEIGHT_NAMES = {"baumgarte": ("beta", "gamma"), "weighted": ("a", "b")}
+
+
+def _number(x):
+    """A float as Rust prints it: 1 not 1.0, 0.000001 not 1e-06."""
+    if not math.isfinite(x):
+        return {math.inf: "inf", -math.inf: "-inf"}.get(x, "NaN")
+    if x == int(x):
+        return str(int(x))
+    return format(decimal.Decimal(repr(x)), "f")
+
+
+def at_index(kind, index, given, flags=False):
+    """The (velocity, acceleration) weights of method 1 or 2: without an index, those
+    given or 0; with one, those not given take its defaults and a given one must fit
+    it. `given` holds floats or None."""
+    if index is None:
+        return tuple(0.0 if w is None else w for w in given)
+
+    def key(name, value):
+        return f"--{name} {value}" if flags else f"{name} = {value}"
+
+    if index not in (1, 2, 3):
+        raise RunError(f"{key('index', index)}: expected 1, 2 or 3")
+    v, a = WEIGHT_NAMES[kind]
+    means = {3: f"{v} = {a} = 0", 2: f"{v} > 0 and {a} = 0", 1: f"{v} > 0 and {a} > 0"}[index]
+    chosen = list(DEFAULT_WEIGHTS[(kind, index)])
+    for level, w in enumerate(given):
+        if w is None:
+            continue
+        used = index <= 2 - level
+        if not (w > 0 if used else w == 0):
+            raise RunError(f"{key('index', index)} contradicts {key(WEIGHT_NAMES[kind][level], _number(w))}: "
+                           f"index {index} means {means}")
+        chosen[level] = w
+    return tuple(chosen)
+
+
 def _method(raw):
     if raw is None:
         return Method("baumgarte")
     t = _Table("[method]", raw)
     kind = t.take("kind", "string", required=True)
-    if kind == "baumgarte":
-        m = Method(kind, beta=t.take("beta", "number", 0.0), gamma=t.take("gamma", "number", 0.0))
-    elif kind == "weighted":
-        m = Method(kind, a=t.take("a", "number", 0.0), b=t.take("b", "number", 0.0))
+    if kind in ("baumgarte", "weighted"):
+        index = t.take("index", "integer", None)
+        given = tuple(t.take(name, "number", None) for name in WEIGHT_NAMES[kind])
+        w = at_index(kind, index, given)
+        m = Method(kind, beta=w[0], gamma=w[1]) if kind == "baumgarte" else Method(kind, a=w[0], b=w[1])
     elif kind == "explicit":
         m = Method(kind, mu=t.take("mu", "number", required=True))
     else:

@@ -31,7 +31,9 @@ pub struct Args {
     #[arg(long, value_name = "DT", allow_hyphen_values = true)]
     output_interval: Option<f64>,
     /// Record only the columns matching PATTERN: `*` matches any characters,
-    /// everything else is literal (repeatable; overrides [output] variables).
+    /// everything else is literal; several separated by commas as in
+    /// --columns (commas inside brackets belong to the name: body.R[1,2]), or
+    /// the flag repeated (overrides [output] variables).
     #[arg(long, value_name = "PATTERN")]
     output_variables: Vec<String>,
     /// Write the run summary as JSON to FILE (docs/run-summary.md), also when
@@ -68,7 +70,7 @@ pub fn main(args: Args) -> Result<()> {
         spec.output.interval = Some(dt);
     }
     if !args.output_variables.is_empty() {
-        spec.output.variables = args.output_variables.clone();
+        spec.output.variables = crate::columns::split(&args.output_variables);
     }
     let out = match &args.out {
         Some(p) => p.clone(),
@@ -90,7 +92,25 @@ pub fn main(args: Args) -> Result<()> {
     if let Some(warning) = spec.grid_warning() {
         crate::say!("warning: {warning}");
     }
-    let mut sim = Simulation::new(&spec)?;
+    let unstable = spec.method.stability_warning(spec.coupling.order);
+    if let Some(warning) = &unstable {
+        crate::say!("warning: {warning}");
+    }
+    let mut sim = Simulation::new(&spec).map_err(|e| match e {
+        // The patterns of --output-variables replaced the file's.
+        tether_master::MasterError::InvalidOutput(text) if !args.output_variables.is_empty() => {
+            tether_master::MasterError::InvalidOutput(
+                text.replace("[output] variables,", "--output-variables,"),
+            )
+        }
+        e => e.located(&spec, |instance, variable| {
+            let target = format!("{instance}.{variable}");
+            overrides
+                .parameters
+                .contains_key(&target)
+                .then(|| format!("--set {target}"))
+        }),
+    })?;
     sim.time_phases(args.timing);
     // The plot's columns are checked now, not after the run.
     let plot_columns = crate::columns::split(&args.columns);
@@ -175,6 +195,13 @@ pub fn main(args: Args) -> Result<()> {
                 out.display()
             )))
         }
+        // A divergence of a formulation known to be unstable says so again.
+        Err(e @ tether_master::MasterError::Diverged { .. }) if unstable.is_some() => Err(
+            anyhow::anyhow!("{e}; {}", unstable.unwrap_or_default()).context(format!(
+                "run stopped; results up to t = {last} kept in {} (marked incomplete)",
+                out.display()
+            )),
+        ),
         Err(e) => Err(anyhow::Error::new(e).context(format!(
             "run stopped; results up to t = {last} kept in {} (marked incomplete)",
             out.display()

@@ -16,6 +16,11 @@ pub struct Settings {
     /// Coupling method (overrides [method] kind).
     #[arg(long, value_parser = ["baumgarte", "weighted", "explicit"])]
     method: Option<String>,
+    /// Index level 1, 2 or 3 of method baumgarte or weighted: the weights not
+    /// given keep the system file's where the index uses them, else take the
+    /// index's defaults (docs/system-file.md, [method]).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=3))]
+    index: Option<u8>,
     /// Baumgarte velocity weight β (method baumgarte).
     #[arg(long, allow_hyphen_values = true)]
     beta: Option<f64>,
@@ -73,6 +78,7 @@ impl Settings {
         let mut overrides = Overrides {
             method: MethodChange {
                 kind: self.method.as_deref().map(str::parse).transpose()?,
+                index: self.index,
                 beta: self.beta,
                 gamma: self.gamma,
                 a: self.a,
@@ -122,6 +128,7 @@ fn flag_error(e: OverrideError) -> anyhow::Error {
             current,
         } => anyhow!("--{parameter} applies to method {method}, but the method is {current}"),
         OverrideError::MissingMu => anyhow!("method explicit needs --mu (or mu in [method])"),
+        OverrideError::Index(conflict) => anyhow!("{}", conflict.describe(true)),
         e => e.into(),
     }
 }

@@ -406,3 +406,225 @@ fn adaptive_steps_run_isolated_as_in_process() {
         "two reruns a try, one rollback a rejection"
     );
 }
+
+/// The results file of a quiet run, which must succeed.
+fn run_bytes(dir: &Path, sys: &Path, extra: &[&str], out: &str) -> Vec<u8> {
+    let mut args = vec!["run", sys.to_str().unwrap(), "--stop", "0.05", "-q"];
+    args.extend_from_slice(extra);
+    args.extend(["--out", out]);
+    let result = tether(&args, dir);
+    assert!(result.status.success(), "{args:?}: {}", stderr(&result));
+    std::fs::read(dir.join(out)).unwrap()
+}
+
+#[test]
+fn method_index_selects_the_weights_as_the_weight_only_form_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let weights = "kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6";
+    let file = |method: &str| {
+        let method = method.to_string();
+        write_system(dir.path(), move |t| t.replace(weights, &method))
+    };
+    let d = dir.path();
+    // Index 1 of Method 1 without weights: the paper's β = 2e-3, γ = 1e-6.
+    let old = run_bytes(d, &file(weights), &[], "old.csv");
+    let index1 = run_bytes(d, &file("kind = \"baumgarte\"\nindex = 1"), &[], "i1.csv");
+    assert!(
+        old == index1,
+        "index = 1 differs from beta = 2e-3, gamma = 1e-6"
+    );
+    let with_weights = file("kind = \"baumgarte\"\nindex = 1\nbeta = 2e-3\ngamma = 1e-6");
+    assert!(old == run_bytes(d, &with_weights, &[], "i1w.csv"));
+    // --index 2 keeps the file's β and drops γ; index 3 drops both.
+    let sys = file(weights);
+    let beta_only = run_bytes(d, &sys, &["--gamma", "0"], "b.csv");
+    assert!(beta_only == run_bytes(d, &sys, &["--index", "2"], "i2.csv"));
+    let none = run_bytes(d, &sys, &["--beta", "0", "--gamma", "0"], "n.csv");
+    assert!(none == run_bytes(d, &sys, &["--index", "3"], "i3.csv"));
+    // Method 2: index 1 is a = b = 1, index 2 is a = 1.
+    let weighted = file("kind = \"weighted\"\na = 1.0\nb = 1.0");
+    let ab = run_bytes(d, &weighted, &[], "ab.csv");
+    let w1 = file("kind = \"weighted\"\nindex = 1");
+    assert!(ab == run_bytes(d, &w1, &[], "w1.csv"));
+    let a = run_bytes(d, &weighted, &["--b", "0"], "a.csv");
+    assert!(a == run_bytes(d, &w1, &["--index", "2"], "w2.csv"));
+    let summary = tether(&["run", w1.to_str().unwrap(), "--stop", "0.01"], d);
+    assert!(
+        stderr(&summary).contains("weighted (index 1, a = 1, b = 1) with k = 0"),
+        "{}",
+        stderr(&summary)
+    );
+}
+
+#[test]
+fn an_index_that_contradicts_a_weight_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let weights = "kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6";
+    for (method, message) in [
+        (
+            "kind = \"baumgarte\"\nindex = 2\ngamma = 1e-6",
+            "index = 2 contradicts gamma = 0.000001: index 2 means beta > 0 and gamma = 0",
+        ),
+        (
+            "kind = \"weighted\"\nindex = 3\na = 1.0",
+            "index = 3 contradicts a = 1: index 3 means a = b = 0",
+        ),
+        (
+            "kind = \"weighted\"\nindex = 1\nb = 0.0",
+            "index = 1 contradicts b = 0: index 1 means a > 0 and b > 0",
+        ),
+        (
+            "kind = \"baumgarte\"\nindex = 4",
+            "index = 4: expected 1, 2 or 3",
+        ),
+    ] {
+        let sys = write_system(dir.path(), |t| t.replace(weights, method));
+        let line = error_line(&tether(&["run", sys.to_str().unwrap()], dir.path()));
+        assert!(line.contains(message), "{method}: {line}");
+    }
+    let sys = write_system(dir.path(), |t| t);
+    let s = sys.to_str().unwrap();
+    for (args, message) in [
+        (
+            &["--index", "3", "--beta", "0.1"][..],
+            "error: --index 3 contradicts --beta 0.1: index 3 means beta = gamma = 0",
+        ),
+        (
+            &["--method", "explicit", "--mu", "0.1", "--index", "1"][..],
+            "error: --index applies to method baumgarte or weighted, but the method is explicit",
+        ),
+    ] {
+        let mut full = vec!["run", s];
+        full.extend_from_slice(args);
+        assert_eq!(error_line(&tether(&full, dir.path())), message);
+    }
+    let out = tether(&["run", s, "--index", "0"], dir.path());
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("invalid value '0' for '--index <INDEX>': 0 is not in 1..=3"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn a_formulation_known_unstable_is_named_before_the_run_and_at_divergence() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = write_system(dir.path(), |t| t);
+    let s = sys.to_str().unwrap();
+    let warning = "warning: baumgarte index 3 with k = 1 is unstable over the whole stability map \
+                   (0 of 121 cells at k = 1, docs/paper-reproduction.md); use k = 0, \
+                   or index 1 with k = 1 (kind = \"baumgarte\", index = 1)";
+    let out = tether(&["run", s, "--index", "3", "--order", "1"], dir.path());
+    let text = stderr(&out);
+    assert_eq!(text.lines().next(), Some(warning), "{text}");
+    let line = error_line(&out);
+    let note = warning.trim_start_matches("warning: ");
+    assert!(
+        line.contains("coupling diverged at t = ") && line.ends_with(&format!("; {note}")),
+        "{line}"
+    );
+    let out = tether(
+        &["run", s, "--index", "2", "--order", "1", "--stop", "0.01"],
+        dir.path(),
+    );
+    assert!(
+        stderr(&out).starts_with(
+            "warning: baumgarte index 2 with k = 1 is unstable over most of the range \
+             (33 of 121 cells stable at k = 1, only for d >= 1000, docs/paper-reproduction.md); \
+             use k = 0, or index 1 with k = 1 (index = 1: beta = 2e-3, gamma = 1e-6)\n"
+        ),
+        "{}",
+        stderr(&out)
+    );
+    // The stable ones say nothing.
+    let out = tether(&["run", s, "--order", "1", "--stop", "0.01"], dir.path());
+    assert!(
+        out.status.success() && !stderr(&out).contains("warning"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn a_name_error_says_where_the_name_appears() {
+    let dir = tempfile::tempdir().unwrap();
+    let line = |edit: &dyn Fn(String) -> String, extra: &[&str]| {
+        let sys = write_system(dir.path(), edit);
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "r.csv"];
+        args.extend_from_slice(extra);
+        error_line(&tether(&args, dir.path()))
+    };
+    let same = |t: String| t;
+    type Edit = Box<dyn Fn(String) -> String>;
+    let cases: Vec<(Edit, &[&str], &str)> = vec![
+        (
+            Box::new(|t: String| t.replace("mass2.x - mass1.x", "mass2.xx - mass1.x")),
+            &[],
+            "constraint 'link', position: instance 'mass2' (oscillator.fmu) has no variable \
+             'xx'; did you mean 'x', 'x0'?",
+        ),
+        (
+            Box::new(|t: String| t.replace("mass1.F - mass2.F", "mass1.F - mass2.f")),
+            &[],
+            "constraint 'link', drives: instance 'mass2' (oscillator.fmu) has no variable 'f'; \
+             did you mean 'F', 'a', 'c'?",
+        ),
+        (
+            Box::new(|t: String| {
+                t + "\n[[coupling_variable]]\nname = \"push\"\ndrives = \"mass1.F\"\nvalue = \"mass2.vv\"\n"
+            }),
+            &[],
+            "coupling variable 'push', value: instance 'mass2' (oscillator.fmu) has no variable \
+             'vv'; did you mean 'v', 'v0'?",
+        ),
+        (
+            Box::new(|t: String| t + "\n[[connection]]\nfrom = \"mass1.xx\"\nto = \"mass2.F\"\n"),
+            &[],
+            "connection mass1.xx → mass2.F, from: instance 'mass1' (oscillator.fmu) has no \
+             variable 'xx'; did you mean 'x', 'x0'?",
+        ),
+        (
+            Box::new(|t: String| t.replace("m = 2.0,", "mm = 2.0,")),
+            &[],
+            "parameters: instance 'mass2' (oscillator.fmu) has no variable 'mm'; did you mean 'm'?",
+        ),
+        (
+            Box::new(same),
+            &["--set", "mass1.cc=3"],
+            "--set mass1.cc: instance 'mass1' (oscillator.fmu) has no variable 'cc'; did you mean \
+             'c'?",
+        ),
+        (
+            Box::new(|t: String| t + "\n[output]\nvariables = [\"link.lam\"]\n"),
+            &[],
+            "[output] variables, pattern 'link.lam': matches no column; did you mean 'link.lambda', \
+             'link.g'?",
+        ),
+    ];
+    for (edit, extra, message) in cases {
+        let got = line(&*edit, extra);
+        assert!(got.ends_with(message), "{got}\nwanted: {message}");
+    }
+    // An unknown TOML key is reported at its own line and column.
+    let got = line(
+        &|t: String| t.replace("beta = 2e-3\n", "beta = 2e-3\n  betta = 1\n"),
+        &[],
+    );
+    let sys = dir.path().join("system.toml");
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let row = text.lines().position(|l| l.contains("betta")).unwrap() + 1;
+    assert_eq!(
+        got,
+        format!(
+            "error: system file {}: line {row}, column 3: unknown field `betta`, expected one of \
+             `index`, `beta`, `gamma`",
+            sys.display()
+        )
+    );
+    let got = line(
+        &|t: String| t.replace("m = 1.0, c", "m = 1.0, cc = 2, c"),
+        &[],
+    );
+    assert!(got.contains("parameters: instance 'mass1'"), "{got}");
+}

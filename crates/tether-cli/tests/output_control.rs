@@ -162,7 +162,7 @@ fn an_output_interval_off_the_step_and_a_pattern_matching_nothing_are_refused() 
     );
     assert_eq!(
         error_line(&run(&["--output-variables", "mass3.*"])),
-        "error: output variable pattern 'mass3.*' matches no column; did you mean \
+        "error: --output-variables, pattern 'mass3.*': matches no column; did you mean \
          'mass1.x', 'mass1.v', 'mass1.a', 'mass2.x', 'mass2.v', 'mass2.a'?"
     );
     // A negative step is a value, refused as one.
@@ -411,4 +411,63 @@ fn a_failed_run_on_a_coarse_grid_keeps_its_last_accepted_point() {
         text.lines().last().unwrap().starts_with("# incomplete: "),
         "{text}"
     );
+}
+
+/// `--output-variables 'a,b'` is `--output-variables a --output-variables b`,
+/// as `--columns` splits at commas.
+#[test]
+fn output_variables_take_commas_as_columns_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    let s = sys.to_str().unwrap();
+    let run = |flags: &[&str], out: &str| {
+        let mut args = vec!["run", s, "--stop", "0.01", "-q", "--out", out];
+        args.extend_from_slice(flags);
+        success(&tether(&args, dir.path()));
+        std::fs::read(dir.path().join(out)).unwrap()
+    };
+    let commas = run(&["--output-variables", "mass1.*,link.g"], "commas.csv");
+    let repeated = run(
+        &[
+            "--output-variables",
+            "mass1.*",
+            "--output-variables",
+            "link.g",
+        ],
+        "repeated.csv",
+    );
+    assert!(commas == repeated);
+    let header = String::from_utf8(commas).unwrap();
+    assert_eq!(
+        header.lines().next(),
+        Some("time,mass1.x,mass1.v,mass1.a,link.g")
+    );
+}
+
+/// A start value for an input a constraint drives is refused, in the system
+/// file and with `--set`, as `Simulation::set_parameter` refuses it.
+#[test]
+fn a_start_value_for_a_driven_input_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let message = "error: instance 'mass1': cannot set F = 3: it is an input the coupling \
+                   drives; the master sets it at every step";
+    let sys = system(dir.path(), &oscillator(), ", F = 3.0", "");
+    let out = tether(
+        &["run", sys.to_str().unwrap(), "--out", "r.csv"],
+        dir.path(),
+    );
+    assert_eq!(error_line(&out), message);
+    let sys = system(dir.path(), &oscillator(), "", "");
+    let out = tether(
+        &[
+            "run",
+            sys.to_str().unwrap(),
+            "--out",
+            "r.csv",
+            "--set",
+            "mass1.F=3",
+        ],
+        dir.path(),
+    );
+    assert_eq!(error_line(&out), message);
 }

@@ -48,6 +48,9 @@ pub enum MasterError {
         /// `; did you mean …?` or empty.
         hint: String,
     },
+    /// A name refers to a variable its instance's FMU does not have.
+    #[error("{0}")]
+    UnknownVariable(Box<UnknownName>),
     /// A joint names a marker its instance does not have.
     #[error("{owner}: instance '{instance}' has no marker '{marker}' (no output '{marker}.r[1]'); {hint}")]
     UnknownMarker {
@@ -291,5 +294,60 @@ impl From<tether_fmi::Error> for MasterError {
             }
             error => MasterError::Fmi(error),
         }
+    }
+}
+
+/// A variable name its instance's FMU does not have, and where it appears.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "{place}: instance '{instance}' ({fmu}) has no variable '{name}'{}",
+    did_you_mean(suggestions)
+)]
+pub struct UnknownName {
+    /// Where the name appears: `constraint 'link', position`,
+    /// `parameters`, `--set mass1.xx` …
+    pub place: String,
+    /// Instance name.
+    pub instance: String,
+    /// The FMU's file name (`oscillator.fmu`), or `model 'oscillator'`
+    /// where the file is not known.
+    pub fmu: String,
+    /// The name as written.
+    pub name: String,
+    /// Close names, best first.
+    pub suggestions: Vec<String>,
+}
+
+impl MasterError {
+    /// An unknown start-value name made exact with the system: the FMU's file
+    /// (the error names only its model), and the place `set_by(instance,
+    /// variable)` says the value came from (`--set mass1.xx`; `None`: the
+    /// instance's `parameters`). Other errors are returned unchanged.
+    pub fn located(
+        self,
+        spec: &crate::SystemSpec,
+        set_by: impl Fn(&str, &str) -> Option<String>,
+    ) -> MasterError {
+        match self {
+            MasterError::UnknownVariable(mut u) if u.place == "parameters" => {
+                if let Some(file) = spec.instances.iter().find(|i| i.name == u.instance) {
+                    u.fmu = crate::spec::names::fmu_file(&file.fmu);
+                }
+                if let Some(place) = set_by(&u.instance, &u.name) {
+                    u.place = place;
+                }
+                MasterError::UnknownVariable(u)
+            }
+            other => other,
+        }
+    }
+}
+
+/// `; did you mean 'a', 'b'?`, or nothing without suggestions.
+fn did_you_mean(suggestions: &[String]) -> String {
+    if suggestions.is_empty() {
+        String::new()
+    } else {
+        format!("; did you mean '{}'?", suggestions.join("', '"))
     }
 }

@@ -35,8 +35,8 @@ mod start;
 mod stats;
 mod step_control;
 
-pub use error::MasterError;
-pub use method::Method;
+pub use error::{MasterError, UnknownName};
+pub use method::{IndexConflict, IndexedKind, Method};
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use simulation::{MasterState, Simulation, SystemState};
 pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};

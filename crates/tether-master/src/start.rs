@@ -23,7 +23,13 @@ pub fn apply_start_value(
         value: value.to_string(),
         reason,
     };
-    let var = md.variable(name)?;
+    let var = crate::spec::names::variable(
+        md,
+        "parameters",
+        &owner,
+        || format!("model '{}'", md.model_name),
+        name,
+    )?;
     if matches!(
         var.causality,
         Causality::Output
@@ -55,7 +61,13 @@ pub(crate) fn set_between_steps(
         value: value.to_string(),
         reason: format!("{reason} (between steps)"),
     };
-    let var = md.variable(name)?;
+    let var = crate::spec::names::variable(
+        md,
+        "set_parameter",
+        &owner,
+        || format!("model '{}'", md.model_name),
+        name,
+    )?;
     let settable = match var.causality {
         Causality::Input => var.variability != Variability::Constant,
         Causality::Parameter => var.variability == Variability::Tunable,

@@ -48,6 +48,7 @@ const SIGNAL_INTERVAL: Duration = Duration::from_millis(50);
 fn kind_of(e: &MasterError) -> &'static str {
     match e {
         MasterError::Fmi(_)
+        | MasterError::UnknownVariable(_)
         | MasterError::InstanceFmu { .. }
         | MasterError::MissingCapability { .. } => "fmu",
         MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
@@ -275,6 +276,13 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
                     o.iterations = Some(value.extract()?);
                 }
             }
+            "index" => {
+                if !value.is_none() {
+                    method.index = Some(value.extract()?);
+                }
+            }
+            // Applied to the system by `load_spec`.
+            "isolate" | "call_timeout" | "output_interval" | "output_variables" => {}
             "beta" => method.beta = real(&value)?,
             "gamma" => method.gamma = real(&value)?,
             "a" => method.a = real(&value)?,
@@ -353,6 +361,41 @@ fn load_spec(
     overrides
         .apply(&mut spec)
         .map_err(|e| override_failure(&e))?;
+    if let Some(kwargs) = kwargs {
+        // The options of `tether run` that are not overrides of tether-master.
+        let isolate = kwargs
+            .get_item("isolate")?
+            .filter(|v| !v.is_none())
+            .map(|v| v.extract::<bool>())
+            .transpose()?
+            .unwrap_or(false);
+        let timeout = kwargs
+            .get_item("call_timeout")?
+            .filter(|v| !v.is_none())
+            .map(|v| v.extract::<f64>())
+            .transpose()?;
+        for instance in &mut spec.instances {
+            if isolate {
+                instance.isolation = tether_master::spec::Isolation::Process;
+            }
+            if instance.call_timeout.is_none() {
+                instance.call_timeout = timeout;
+            }
+        }
+        if let Some(dt) = kwargs.get_item("output_interval")?.filter(|v| !v.is_none()) {
+            spec.output.interval = Some(dt.extract()?);
+        }
+        if let Some(v) = kwargs
+            .get_item("output_variables")?
+            .filter(|v| !v.is_none())
+        {
+            spec.output.variables = if let Ok(one) = v.extract::<String>() {
+                vec![one]
+            } else {
+                v.extract()?
+            };
+        }
+    }
     Ok(spec)
 }
 
@@ -455,7 +498,7 @@ fn run(
 ) -> PyResult<Py<PyAny>> {
     let spec = load_spec(path, text, kwargs)?;
     let outcome = py.detach(move || -> Result<_, MasterError> {
-        let mut sim = Simulation::new(&spec)?;
+        let mut sim = Simulation::new(&spec).map_err(|e| e.located(&spec, |_, _| None))?;
         let mut rows = Rows::default();
         let width = sim.columns().len() + 1;
         let points = usize::try_from(sim.total_steps()).unwrap_or(usize::MAX);
@@ -523,7 +566,8 @@ impl PySimulation {
         kwargs: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let spec = load_spec(path, text, kwargs)?;
-        let sim = Simulation::new(&spec).map_err(|e| master_failure(&e, None))?;
+        let sim = Simulation::new(&spec)
+            .map_err(|e| master_failure(&e.located(&spec, |_, _| None), None))?;
         let mut rows = Rows {
             columns: sim.columns().to_vec(),
             bytes: Vec::new(),
@@ -668,7 +712,7 @@ impl PySimulation {
             let kind = match &e {
                 MasterError::StartValue { .. }
                 | MasterError::UnknownInstance { .. }
-                | MasterError::Fmi(tether_fmi::Error::UnknownVariable { .. }) => "settings",
+                | MasterError::UnknownVariable(_) => "settings",
                 other => kind_of(other),
             };
             failure(kind, message(&e), None)
@@ -1046,6 +1090,7 @@ fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
 #[pymodule]
 fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("Failure", m.py().get_type::<Failure>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(info, m)?)?;

@@ -12,6 +12,9 @@ VARIANTS = [
     {"method": "explicit", "mu": 5e-3, "step": 2e-3},
     {"beta": 5e-3, "gamma": 2e-6, "order": 2, "epsilon": 1e-6, "parameters": {"mass2.m": 3.0, "mass1.d": 0}},
     {"stop": 0.25, "order": 1, "parallel": "off", "parameters": {"mass1.m": 2}},
+    {"method": "weighted", "index": 2, "iterations": 2, "jacobian": "reuse",
+     "output_interval": 0.002, "output_variables": "mass1.*,link.g"},
+    {"index": 3, "step_rtol": 1e-4, "step_atol": 1e-6, "stop": 0.1},
 ]
 
 
@@ -22,7 +25,7 @@ def flags(overrides):
             for target, v in value.items():
                 out += ["--set", f"{target}={v}"]
         else:
-            out += [f"--{key}", str(value)]
+            out += [f"--{key.replace('_', '-')}", str(value)]
     return out
 
 
@@ -222,3 +225,30 @@ def test_isolated_instances_run_in_python_hosts_bit_for_bit(oscillator_toml):
     b = tether.run(system, stop=0.05)
     assert a.columns == b.columns
     assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))
+
+
+def test_fmpy_names_mean_the_same_and_both_names_are_an_error(oscillator_toml):
+    ours = tether.run(oscillator_toml, stop=0.05, parameters={"mass2.m": 3.0},
+                      output_variables=["mass1.x", "link.*"])
+    fmpy = tether.run(oscillator_toml, stop_time=0.05, start_values={"mass2.m": 3.0},
+                      output=["mass1.x", "link.*"])
+    assert ours.columns == fmpy.columns == ["mass1.x", "link.lambda", "link.g"]
+    for name in ["time"] + ours.columns:
+        assert same_bits(ours[name], fmpy[name]), name
+    with pytest.raises(TypeError, match="stop and stop_time are the same setting; give one of them"):
+        tether.run(oscillator_toml, stop=0.05, stop_time=0.05)
+    with pytest.raises(TypeError, match="parameters and start_values are the same setting"):
+        tether.run(oscillator_toml, parameters={}, start_values={})
+    with pytest.raises(TypeError, match="output_variables and output are the same setting"):
+        tether.run(oscillator_toml, output_variables="link.g", output="link.g")
+
+
+def test_isolate_and_call_timeout_are_keywords(oscillator_toml):
+    inline = tether.run(oscillator_toml, stop=0.02)
+    isolated = tether.run(oscillator_toml, stop=0.02, isolate=True, call_timeout=30.0)
+    for name in ["time"] + inline.columns:
+        assert same_bits(inline[name], isolated[name]), name
+
+
+def test_version():
+    assert tether.__version__ == "0.1.0"

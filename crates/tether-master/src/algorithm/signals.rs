@@ -330,11 +330,15 @@ fn resolve(
     let end = |text: &str, causality: Causality, role: &str| {
         let (instance, variable) = split(&name, text)?;
         let s = find_instance(&owner, instance, names.clone())?;
-        let var = slaves[s]
-            .fmu
-            .model_description()
-            .variable(variable)?
-            .clone();
+        let slave = &slaves[s];
+        let var = crate::spec::names::variable(
+            slave.fmu.model_description(),
+            &format!("{owner}, {role}"),
+            &slave.name,
+            || crate::spec::names::fmu_file(slave.fmu.path()),
+            variable,
+        )?
+        .clone();
         let kind = kind_of(&var);
         if var.causality != causality || kind.is_none() {
             return Err(MasterError::WrongVariable {

@@ -73,6 +73,7 @@ impl Coupling {
             // Stable: each port keeps its contributions in condition order.
             joint.targets.sort_by_key(|t| t.0);
         }
+        check_driven_starts(spec, slaves)?;
         check_capabilities(slaves, method, order)?;
         for slave in slaves.iter_mut() {
             slave.finalize(order);
@@ -422,11 +423,15 @@ fn drive_inputs(
     let mut sums: Vec<(usize, u32, f64)> = Vec::new();
     for term in &expr.terms {
         let s = find_slave(owner, &term.instance, slaves)?;
-        let var = slaves[s]
-            .fmu
-            .model_description()
-            .variable(&term.variable)?
-            .clone();
+        let slave = &slaves[s];
+        let var = crate::spec::names::variable(
+            slave.fmu.model_description(),
+            &format!("{owner}, drives"),
+            &slave.name,
+            || crate::spec::names::fmu_file(slave.fmu.path()),
+            &term.variable,
+        )?
+        .clone();
         let is_real = var.base_type() == BaseType::Real;
         if var.causality != Causality::Input || !is_real || term.derivative_order != 0 {
             return Err(MasterError::WrongVariable {
@@ -451,6 +456,28 @@ fn drive_inputs(
             owner: owner.to_string(),
             drives: expr.to_string(),
         });
+    }
+    Ok(())
+}
+
+/// A start value given for an input the coupling drives is refused, as
+/// [`crate::Simulation::set_parameter`] refuses it: the master sets it at
+/// every step.
+fn check_driven_starts(spec: &SystemSpec, slaves: &[Slave]) -> Result<(), MasterError> {
+    for (inst, slave) in spec.instances.iter().zip(slaves) {
+        for (name, value) in &inst.parameters {
+            let md = slave.fmu.model_description();
+            let Ok(var) = md.variable(name) else { continue };
+            if slave.inputs.iter().any(|i| i.vr == var.value_reference) {
+                return Err(MasterError::StartValue {
+                    instance: inst.name.clone(),
+                    variable: name.clone(),
+                    value: value.to_string(),
+                    reason: "it is an input the coupling drives; the master sets it at every step"
+                        .into(),
+                });
+            }
+        }
     }
     Ok(())
 }
@@ -496,11 +523,14 @@ fn output_level(
     for term in &expr.terms {
         let s = find_slave(owner, &term.instance, slaves)?;
         let slave = &mut slaves[s];
-        let var = slave
-            .fmu
-            .model_description()
-            .variable(&term.variable)?
-            .clone();
+        let var = crate::spec::names::variable(
+            slave.fmu.model_description(),
+            &format!("{owner}, {level}"),
+            &slave.name,
+            || crate::spec::names::fmu_file(slave.fmu.path()),
+            &term.variable,
+        )?
+        .clone();
         let is_real = var.base_type() == BaseType::Real;
         if var.causality != Causality::Output || !is_real {
             return Err(MasterError::WrongVariable {

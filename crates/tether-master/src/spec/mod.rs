@@ -67,6 +67,55 @@ pub struct SystemSpec {
     pub source: Option<PathBuf>,
 }
 
+/// A TOML error on one line: `line L, column C: message`. For an unknown
+/// key the position is the key's own (toml reports the table's).
+pub(crate) fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let message = e.message().replace('\n', " ").trim().to_string();
+    let Some(span) = e.span() else {
+        return message;
+    };
+    let unknown = message
+        .strip_prefix("unknown field `")
+        .and_then(|rest| rest.split('`').next());
+    let at = unknown
+        .and_then(|key| find_key(text, span.clone(), key))
+        .unwrap_or(span.start)
+        .min(text.len());
+    let line = text[..at].matches('\n').count() + 1;
+    let column = text[..at].rfind('\n').map_or(at, |nl| at - nl - 1) + 1;
+    format!("line {line}, column {column}: {message}")
+}
+
+/// Where `key = …` is written in the table at `span`: within an inline table
+/// its span, else up to the next table header.
+fn find_key(text: &str, span: std::ops::Range<usize>, key: &str) -> Option<usize> {
+    let start = span.start.min(text.len());
+    let end = if text[start..].starts_with('{') {
+        span.end.min(text.len())
+    } else {
+        // The table's own lines: after its header, up to the next one.
+        let body = text[start..].find('\n').map_or(text.len(), |n| start + n);
+        text[body..]
+            .match_indices('\n')
+            .map(|(i, _)| body + i + 1)
+            .find(|&l| text[l..].trim_start().starts_with('['))
+            .unwrap_or(text.len())
+    };
+    let region = &text[start..end];
+    let word = |c: char| c.is_alphanumeric() || c == '_' || c == '-';
+    for (i, _) in region.match_indices(key) {
+        let before = region[..i].chars().next_back();
+        let after = region[i + key.len()..].trim_start_matches(['"', '\'']);
+        let after = after.trim_start_matches([' ', '\t']);
+        let bare = before.is_none_or(|c| !word(c));
+        if bare && after.starts_with('=') {
+            let quoted = matches!(before, Some('"' | '\''));
+            return Some(start + i - usize::from(quoted));
+        }
+    }
+    None
+}
+
 /// A signal connection: the receiving input takes `gain·value + offset` of
 /// the sending output at macro points.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -469,6 +518,35 @@ impl std::str::FromStr for JacobianMode {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_unknown_key_is_reported_at_its_own_line_and_column() {
+        let text = "[experiment]\nstop = 1.0\nstep = 1e-3\n\n[method]\nkind = \"baumgarte\"\n  \
+                    betta = 1\n\n[[instance]]\nname = \"m\"\nfmu = \"o.fmu\"\n\
+                    parameters = { c = 1.0 }\nisolate = true\n";
+        let e = SystemSpec::from_toml(&text.replace("isolate = true\n", ""))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "system file <text>: line 7, column 3: unknown field `betta`, expected one of \
+             `index`, `beta`, `gamma`"
+        );
+        let text = text.replace("  betta = 1\n", "");
+        let e = SystemSpec::from_toml(&text).unwrap_err().to_string();
+        assert!(
+            e.starts_with("system file <text>: line 12, column 1: unknown field `isolate`"),
+            "{e}"
+        );
+        let text = text
+            .replace("isolate = true\n", "")
+            .replace("[experiment]\n", "[experiment]\n\"sotp\" = 2\n");
+        let e = SystemSpec::from_toml(&text).unwrap_err().to_string();
+        assert!(
+            e.starts_with("system file <text>: line 2, column 1: unknown field `sotp`"),
+            "{e}"
+        );
+    }
 
     /// `*` matches any characters (also none), everything else only itself:
     /// brackets, commas and dots are literal.

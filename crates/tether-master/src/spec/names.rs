@@ -1,9 +1,40 @@
 //! Names in error messages: what a variable is ("a Real output"), and which
 //! instance a misspelt name probably meant.
 
-use tether_fmi::{BaseType, Causality, ScalarVariable};
+use tether_fmi::{BaseType, Causality, ModelDescription, ScalarVariable};
 
 use crate::MasterError;
+
+/// The variable `name` of an instance's model, or an error saying where the
+/// name appears (`place`), in which instance and FMU (`fmu`: its file name,
+/// or `model '…'`).
+pub(crate) fn variable<'a>(
+    md: &'a ModelDescription,
+    place: &str,
+    instance: &str,
+    fmu: impl FnOnce() -> String,
+    name: &str,
+) -> Result<&'a ScalarVariable, MasterError> {
+    md.variable(name).map_err(|e| match e {
+        tether_fmi::Error::UnknownVariable { suggestions, .. } => {
+            MasterError::UnknownVariable(Box::new(crate::UnknownName {
+                place: place.to_string(),
+                instance: instance.to_string(),
+                fmu: fmu(),
+                name: name.to_string(),
+                suggestions,
+            }))
+        }
+        e => e.into(),
+    })
+}
+
+/// An FMU's file name for messages: `oscillator.fmu`.
+pub(crate) fn fmu_file(path: &std::path::Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
+}
 
 /// "a Real output", "an Integer parameter", … for error messages.
 pub(crate) fn describe(var: &ScalarVariable) -> String {

@@ -58,7 +58,7 @@ impl OutputSpec {
             if !columns.iter().any(|c| matches_pattern(pattern, c)) {
                 let hint = crate::spec::names::suggest(pattern, columns.iter().map(String::as_str));
                 return Err(MasterError::InvalidOutput(format!(
-                    "output variable pattern '{pattern}' matches no column{hint}"
+                    "[output] variables, pattern '{pattern}': matches no column{hint}"
                 )));
             }
         }

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Deserializer};
 
-use crate::{JacobianMode, Method, Parallel, StartValue, SystemSpec};
+use crate::{IndexConflict, IndexedKind, JacobianMode, Method, Parallel, StartValue, SystemSpec};
 
 /// Settings that replace those of a system file. `None` (and an empty
 /// [`MethodChange`]) keeps the file's value.
@@ -73,6 +73,11 @@ pub struct Overrides {
 pub struct MethodChange {
     /// The method's kind.
     pub kind: Option<MethodKind>,
+    /// The index level (methods baumgarte and weighted): the weights the
+    /// change does not give are the method's own where the index uses them
+    /// and they are > 0, else the index's defaults
+    /// ([`IndexedKind::default_weights`]); weights the index does not use are 0.
+    pub index: Option<u8>,
     /// Baumgarte velocity weight β.
     pub beta: Option<f64>,
     /// Baumgarte acceleration weight γ.
@@ -131,6 +136,9 @@ pub enum OverrideError {
     /// The explicit method without its μ_B.
     #[error("method explicit needs mu (its stabilisation constant)")]
     MissingMu,
+    /// An index that a weight given with it contradicts.
+    #[error("{0}")]
+    Index(IndexConflict),
 }
 
 impl Overrides {
@@ -272,6 +280,7 @@ impl MethodChange {
         }
         MethodChange {
             kind: over.kind.or(self.kind),
+            index: over.index.or(self.index),
             beta: over.beta.or(self.beta),
             gamma: over.gamma.or(self.gamma),
             a: over.a.or(self.a),
@@ -283,6 +292,34 @@ impl MethodChange {
     /// The method that results from changing `current`.
     pub fn apply(&self, current: Method) -> Result<Method, OverrideError> {
         let kind = self.kind.unwrap_or(MethodKind::of(&current));
+        if let Some(index) = self.index {
+            let indexed = match kind {
+                MethodKind::Baumgarte => IndexedKind::Baumgarte,
+                MethodKind::Weighted => IndexedKind::Weighted,
+                MethodKind::Explicit => {
+                    return Err(OverrideError::Misplaced {
+                        parameter: "index",
+                        method: "baumgarte or weighted",
+                        current: kind.name(),
+                    })
+                }
+            };
+            let (own, given) = match (current, indexed) {
+                (Method::Baumgarte { beta, gamma }, IndexedKind::Baumgarte) => {
+                    ([beta, gamma], [self.beta, self.gamma])
+                }
+                (Method::Weighted { a, b }, IndexedKind::Weighted) => ([a, b], [self.a, self.b]),
+                (_, IndexedKind::Baumgarte) => ([0.0; 2], [self.beta, self.gamma]),
+                (_, IndexedKind::Weighted) => ([0.0; 2], [self.a, self.b]),
+            };
+            // The method's own weights where the index uses them.
+            let kept = [own[0] > 0.0 && index <= 2, own[1] > 0.0 && index <= 1];
+            let weights = [0, 1].map(|l| given[l].or(kept[l].then_some(own[l])));
+            let method =
+                Method::at_index(indexed, Some(index), weights).map_err(OverrideError::Index)?;
+            self.check_placement(kind)?;
+            return Ok(method);
+        }
         let method = match kind {
             MethodKind::Baumgarte => {
                 let (beta, gamma) = match current {
@@ -314,6 +351,12 @@ impl MethodChange {
                 }
             }
         };
+        self.check_placement(kind)?;
+        Ok(method)
+    }
+
+    /// A parameter of another kind than `kind` is an error.
+    fn check_placement(&self, kind: MethodKind) -> Result<(), OverrideError> {
         let given = [
             ("beta", self.beta, MethodKind::Baumgarte),
             ("gamma", self.gamma, MethodKind::Baumgarte),
@@ -330,7 +373,7 @@ impl MethodChange {
                 });
             }
         }
-        Ok(method)
+        Ok(())
     }
 }
 
@@ -551,6 +594,37 @@ mod tests {
         assert_eq!(whole.apply(weighted), Ok(Method::Explicit { mu: 1e-2 }));
         let explicit = Method::Explicit { mu: 3.0 };
         assert_eq!(MethodChange::default().apply(explicit), Ok(explicit));
+    }
+
+    #[test]
+    fn an_index_change_keeps_the_weights_it_uses_and_defaults_the_others() {
+        let index = |i, kind| MethodChange {
+            index: Some(i),
+            ..change(kind)
+        };
+        let weighted = Method::Weighted { a: 0.5, b: 2.0 };
+        let w = |a, b| Ok(Method::Weighted { a, b });
+        assert_eq!(index(2, None).apply(weighted), w(0.5, 0.0));
+        assert_eq!(index(3, None).apply(weighted), w(0.0, 0.0));
+        assert_eq!(
+            index(1, None).apply(Method::Weighted { a: 0.5, b: 0.0 }),
+            w(0.5, 1.0)
+        );
+        assert_eq!(
+            index(1, Some(MethodKind::Baumgarte)).apply(weighted),
+            Ok(Method::Baumgarte {
+                beta: 2e-3,
+                gamma: 1e-6
+            })
+        );
+        let contradiction = MethodChange {
+            a: Some(0.0),
+            ..index(2, None)
+        };
+        assert_eq!(
+            contradiction.apply(weighted).unwrap_err().to_string(),
+            "index = 2 contradicts a = 0: index 2 means a > 0 and b = 0"
+        );
     }
 
     #[test]

@@ -45,7 +45,7 @@ impl SystemSpec {
                 return SystemSpec::deserialize(table).map_err(|e| error(e.to_string()));
             }
         }
-        toml::from_str(text).map_err(|e| error(e.to_string()))
+        toml::from_str(text).map_err(|e| error(crate::spec::toml_error(text, &e)))
     }
 
     /// The file named in errors: [`source`](Self::source), else `<system>`.

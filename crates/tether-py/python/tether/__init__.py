@@ -35,6 +35,8 @@ import numpy as np
 
 from . import _tether
 
+__version__: str = _tether.__version__
+
 # Isolated instances (isolation = "process", docs/reliability.md) run in host
 # processes started as `python -m tether._fmi_host`: the package needs no
 # executable of its own. TETHER_FMI_HOST, when set, still comes first.
@@ -208,6 +210,34 @@ def _source(system: Union[PathLike, "System"]) -> Dict[str, Any]:
 
 def _overrides(**given: Any) -> Dict[str, Any]:
     return {k: v for k, v in given.items() if v is not None}
+
+
+def _one_of(name: str, value: Any, alias: str, alias_value: Any) -> Any:
+    """A setting given by its own name or by fmpy's, not both."""
+    if value is not None and alias_value is not None:
+        raise TypeError(f"{name} and {alias} are the same setting; give one of them")
+    return alias_value if value is None else value
+
+
+def _patterns(value: Union[str, Sequence[str]]) -> List[str]:
+    """Column patterns from a list or a comma-separated string (commas inside
+    brackets belong to the name, as on the command line)."""
+    items = [value] if isinstance(value, str) else list(value)
+    out: List[str] = []
+    for item in items:
+        depth, current = 0, ""
+        for c in item:
+            if c == "[":
+                depth += 1
+            elif c == "]":
+                depth = max(depth - 1, 0)
+            elif c == "," and depth == 0:
+                out.append(current)
+                current = ""
+                continue
+            current += c
+        out.append(current)
+    return [p.strip() for p in out if p.strip()]
 
 
 class System:
@@ -425,6 +455,19 @@ def run(
     divergence_factor: Optional[float] = None,
     parameters: Optional[Mapping[str, ParameterValue]] = None,
     progress: Optional[Callable[[int, int], Any]] = None,
+    index: Optional[int] = None,
+    iterations: Optional[int] = None,
+    iteration_tol: Optional[float] = None,
+    jacobian: Optional[str] = None,
+    step_rtol: Optional[float] = None,
+    step_atol: Optional[float] = None,
+    isolate: Optional[bool] = None,
+    call_timeout: Optional[float] = None,
+    output_interval: Optional[float] = None,
+    output_variables: Union[str, Sequence[str], None] = None,
+    stop_time: Optional[float] = None,
+    start_values: Optional[Mapping[str, ParameterValue]] = None,
+    output: Union[str, Sequence[str], None] = None,
 ) -> Result:
     """Run a coupled system to its stop time, like ``tether run``.
 
@@ -438,7 +481,19 @@ def run(
     - ``epsilon``: finite-difference increment of the interface Jacobian,
     - ``parallel``: perturbed runs on other threads, ``"auto"``, ``"on"``,
       ``"off"`` (or True/False),
-    - ``parameters``: FMU start values, ``{"mass1.m": 2.0}`` (``--set``).
+    - ``parameters``: FMU start values, ``{"mass1.m": 2.0}`` (``--set``),
+    - ``index``: index level 1, 2 or 3 of baumgarte or weighted (``--index``),
+    - ``iterations``, ``iteration_tol``, ``jacobian``: the corrections per
+      macro step and when the Jacobian is made (``--iterations`` …),
+    - ``step_rtol``, ``step_atol``: adaptive macro steps,
+    - ``isolate``, ``call_timeout``: every instance in a host process of its
+      own, the longest an FMI call may take (``--isolate``, ``--call-timeout``),
+    - ``output_interval``, ``output_variables``: the recorded grid and column
+      patterns (``--output-interval``, ``--output-variables``).
+
+    fmpy's names are accepted where they mean the same: ``stop_time`` for
+    ``stop``, ``start_values`` for ``parameters``, ``output`` for
+    ``output_variables``; giving both names of one setting is a ``TypeError``.
 
     ``progress(step, total)`` is called every 50 ms while the run goes on
     (an exception from it stops the run as Ctrl-C does).
@@ -449,10 +504,17 @@ def run(
     result. A run that diverges raises :class:`DivergenceError` with the
     partial result in ``err.result``.
     """
+    stop = _one_of("stop", stop, "stop_time", stop_time)
+    parameters = _one_of("parameters", parameters, "start_values", start_values)
+    output_variables = _one_of("output_variables", output_variables, "output", output)
     kw = _overrides(
         stop=stop, step=step, method=method, beta=beta, gamma=gamma, a=a, b=b, mu=mu,
         order=order, epsilon=epsilon, parallel=parallel,
-        divergence_factor=divergence_factor, parameters=parameters,
+        divergence_factor=divergence_factor, parameters=parameters, index=index,
+        iterations=iterations, iteration_tol=iteration_tol, jacobian=jacobian,
+        step_rtol=step_rtol, step_atol=step_atol, isolate=isolate, call_timeout=call_timeout,
+        output_interval=output_interval,
+        output_variables=None if output_variables is None else _patterns(output_variables),
     )
     try:
         raw = _tether.run(**_source(system), progress=progress, **kw)

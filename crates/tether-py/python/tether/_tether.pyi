@@ -4,6 +4,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 _Raw = Tuple[List[str], bytes, Dict[str, Any]]
 
+__version__: str
+
 class Failure(Exception):
     """(kind, message, partial) of a failure; ``tether`` raises its own classes."""
 
