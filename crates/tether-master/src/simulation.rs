@@ -457,7 +457,13 @@ impl Simulation {
         }
         self.stats.wall = clock.elapsed() + self.stats.times.setup;
         outcome?;
-        finished?;
+        // The results file failed at its end (a write, or removed during the
+        // run): the run is not completed.
+        if let Err(e) = finished {
+            let e = MasterError::from(e);
+            self.health.fail(&e);
+            return Err(e);
+        }
         Ok(self.stats())
     }
 
