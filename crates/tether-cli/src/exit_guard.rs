@@ -50,6 +50,7 @@ impl Drop for Guard {
 pub fn arm(emergency: Option<Emergency>, out: &Path) -> Guard {
     static INSTALL: Once = Once::new();
     INSTALL.call_once(install);
+    crate::interrupt::run_started();
     *ARMED
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(Armed {
