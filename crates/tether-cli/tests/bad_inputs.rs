@@ -278,6 +278,36 @@ fn a_system_file_with_an_unknown_key() {
     run_error(&sys, &[&shown(&sys), "stpe"]);
 }
 
+/// Array blocks are bounded (docs/system-file.md, "Limits"): a `count` of 10⁸
+/// instances, which would take gigabytes before any other check, and more
+/// constraint blocks in all than the limit are each one error naming the
+/// block, before anything is expanded; no results file is written.
+#[test]
+fn array_counts_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let instances = system(dir.path(), |t| {
+        swap(t, "name = \"mass2\"\n", "name = \"mass2_{i}\"\ncount = 100000000\n")
+    });
+    let started = std::time::Instant::now();
+    assert!(matches!(setup_err(&instances), MasterError::SystemFile { .. }));
+    run_error(
+        &instances,
+        &[
+            &shown(&instances),
+            "[[instance]] block 2 (count = 100000000): makes 100000001 [[instance]] blocks, above the limit of 10000",
+        ],
+    );
+    assert!(started.elapsed().as_secs() < 30, "{:?}", started.elapsed());
+    let constraints = system(dir.path(), |t| {
+        swap(t, "name = \"link\"\n", "name = \"link{i}\"\ncount = 100001\n")
+    });
+    run_error(
+        &constraints,
+        &["[[constraint]] block 1 (count = 100001): makes 100001 [[constraint]] blocks, above the limit of 100000"],
+    );
+    assert!(!dir.path().join("system.csv").exists());
+}
+
 #[test]
 fn a_system_file_naming_a_missing_fmu() {
     let dir = tempfile::tempdir().unwrap();
