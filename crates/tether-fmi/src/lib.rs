@@ -49,6 +49,7 @@
 pub mod archive;
 mod current;
 mod error;
+pub mod exit_hook;
 mod fmu;
 mod instance;
 mod interface;
