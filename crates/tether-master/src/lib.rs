@@ -21,6 +21,7 @@
 
 mod arrays;
 mod coupling;
+mod culprit;
 mod error;
 mod error_estimate;
 mod explicit;

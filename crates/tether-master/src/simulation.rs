@@ -164,6 +164,9 @@ impl Simulation {
         Feedthrough::new(&system).initial(&mut system, initial_level, exp.start, &mut stats)?;
         signals.initialize(&mut system.slaves)?;
         system.read_accepted(Run::Initial)?;
+        for slave in &mut system.slaves {
+            slave.set_divergence_limits(settings.divergence_factor);
+        }
         if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
             system.check_rollback(exp.start, exp.step)?;
         }
@@ -364,6 +367,8 @@ impl Simulation {
             )
         });
         if let Err(e) = stepped {
+            // The instance whose output diverged first in the step, if any.
+            let e = crate::culprit::blame(e, &self.system.slaves, self.grid.time());
             if !matches!(e, MasterError::TerminationRequested { .. }) {
                 self.health.fail(&e);
             }

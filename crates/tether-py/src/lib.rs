@@ -50,7 +50,9 @@ fn kind_of(e: &MasterError) -> &'static str {
         MasterError::Fmi(_)
         | MasterError::InstanceFmu { .. }
         | MasterError::MissingCapability { .. } => "fmu",
-        MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
+        MasterError::Diverged { .. }
+        | MasterError::DivergedOutput { .. }
+        | MasterError::SingularJacobian { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
         MasterError::InvalidParameter { .. } => "settings",
         MasterError::SystemFile { .. }
