@@ -1044,9 +1044,33 @@ fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("tether-fmi-host: {e}")))
 }
 
+/// An in-process FMU ends the process from inside a call (`exit()` or
+/// `abort()`, tether_fmi::exit_hook): Python cannot be told, and `exit(0)`
+/// would end it with status 0, silently. One line names the instance, the
+/// call and the time, the extraction folders are removed, and the process
+/// ends with status 1 after `exit()` (SIGABRT after `abort()`). An exit
+/// outside any FMI call (the interpreter's own) is left alone.
+fn on_ending(ending: tether_fmi::exit_hook::Ending) {
+    use std::io::Write as _;
+    let Some(blame) = tether_fmi::exit_hook::blame(ending) else {
+        return;
+    };
+    let _ = writeln!(
+        std::io::stderr(),
+        "error: the Python process ends: {blame} (an in-process FMU shares Python's process; with isolation = \"process\" this is an exception)"
+    );
+    tether_fmi::remove_extractions_now();
+    if let tether_fmi::exit_hook::Ending::Exit(_) = ending {
+        // SAFETY: _exit ends the process at once with status 1: the code the
+        // FMU chose (0 included) must not be the process's.
+        unsafe { libc::_exit(1) }
+    }
+}
+
 /// The module `tether._tether`.
 #[pymodule]
 fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    tether_fmi::exit_hook::install(on_ending);
     m.add("Failure", m.py().get_type::<Failure>())?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
