@@ -286,10 +286,17 @@ fn a_system_file_with_an_unknown_key() {
 fn array_counts_are_bounded() {
     let dir = tempfile::tempdir().unwrap();
     let instances = system(dir.path(), |t| {
-        swap(t, "name = \"mass2\"\n", "name = \"mass2_{i}\"\ncount = 100000000\n")
+        swap(
+            t,
+            "name = \"mass2\"\n",
+            "name = \"mass2_{i}\"\ncount = 100000000\n",
+        )
     });
     let started = std::time::Instant::now();
-    assert!(matches!(setup_err(&instances), MasterError::SystemFile { .. }));
+    assert!(matches!(
+        setup_err(&instances),
+        MasterError::SystemFile { .. }
+    ));
     run_error(
         &instances,
         &[
@@ -299,7 +306,11 @@ fn array_counts_are_bounded() {
     );
     assert!(started.elapsed().as_secs() < 30, "{:?}", started.elapsed());
     let constraints = system(dir.path(), |t| {
-        swap(t, "name = \"link\"\n", "name = \"link{i}\"\ncount = 100001\n")
+        swap(
+            t,
+            "name = \"link\"\n",
+            "name = \"link{i}\"\ncount = 100001\n",
+        )
     });
     run_error(
         &constraints,

@@ -427,7 +427,10 @@ fn a_huge_output_is_reported_as_its_instances_not_as_another_instances_failure()
                    t = 0.05 is beyond its divergence limit 1.0e6 (divergence_factor × its \
                    initial size); then: ";
     for (method, then) in [
-        (INDEX1, "fmi2DoStep returned fmi2Error on instance 'mass2' at t=0.049"),
+        (
+            INDEX1,
+            "fmi2DoStep returned fmi2Error on instance 'mass2' at t=0.049",
+        ),
         (
             "kind = \"baumgarte\"",
             "singular interface Jacobian (position level) at t = 0.05",

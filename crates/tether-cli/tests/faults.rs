@@ -947,7 +947,10 @@ fn an_output_replaced_during_the_run_is_an_error() {
         Some(format!("# incomplete: cannot write the results: {reason}"))
     );
     assert!(last_time(&csv) >= 0.5, "{}", last_time(&csv));
-    assert_eq!(csv.rows.len() as f64 - 1.0, (last_time(&csv) * 1000.0).round());
+    assert_eq!(
+        csv.rows.len() as f64 - 1.0,
+        (last_time(&csv) * 1000.0).round()
+    );
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
 }
 
@@ -1017,7 +1020,12 @@ fn a_signal_during_the_open_ends_the_run() {
         // SAFETY: a signal to the child this test started and has not reaped.
         unsafe { libc::kill(child.id() as i32, signal) };
         let out = wait_within(child, 30);
-        assert_eq!(out.status.code(), Some(130), "signal {signal}: {}", stderr(&out));
+        assert_eq!(
+            out.status.code(),
+            Some(130),
+            "signal {signal}: {}",
+            stderr(&out)
+        );
         assert_eq!(
             stderr(&out),
             "error: interrupted by Ctrl-C or a termination signal before the run started (nothing was written)\n"

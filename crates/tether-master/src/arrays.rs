@@ -370,10 +370,18 @@ mod tests {
             "[[joint]]\nname = \"a{i}\"\ncount = 99999\n[[joint]]\nname = \"b\"\n[[joint]]\nname = \"c\"",
         );
         let error = expand(&mut total).unwrap_err();
-        assert!(error.starts_with("[[joint]] block 3: makes 100001 [[joint]] blocks, above the limit of 100000"), "{error}");
+        assert!(
+            error.starts_with(
+                "[[joint]] block 3: makes 100001 [[joint]] blocks, above the limit of 100000"
+            ),
+            "{error}"
+        );
         let mut at_limit = table("[[instance]]\nname = \"m{i}\"\ncount = 10000");
         expand(&mut at_limit).unwrap();
-        assert_eq!(at_limit["instance"].as_array().unwrap().len(), MAX_INSTANCES);
+        assert_eq!(
+            at_limit["instance"].as_array().unwrap().len(),
+            MAX_INSTANCES
+        );
     }
 
     #[test]
