@@ -460,6 +460,22 @@ impl fmt::Display for Suggestions<'_> {
     }
 }
 
+/// The error of a failed FMI 2.0 step of `instance` to `end`: a request to end
+/// the simulation (fmi2Discard with `fmi2Terminated`) becomes
+/// [`Error::TerminationRequested`], any other error stays as it is.
+#[cold]
+#[inline(never)]
+pub(crate) fn step_failure(e: Error, instance: &mut crate::Instance, end: f64) -> Error {
+    if matches!(e, Error::Discard { .. }) && matches!(instance.terminated(), Ok(true)) {
+        let time = instance.last_successful_time().unwrap_or(end);
+        return Error::TerminationRequested {
+            instance: instance.name().to_string(),
+            time,
+        };
+    }
+    e
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -494,20 +510,4 @@ mod tests {
             "cannot load FMU library '/a.so': first second"
         );
     }
-}
-
-/// The error of a failed FMI 2.0 step of `instance` to `end`: a request to end
-/// the simulation (fmi2Discard with `fmi2Terminated`) becomes
-/// [`Error::TerminationRequested`], any other error stays as it is.
-#[cold]
-#[inline(never)]
-pub(crate) fn step_failure(e: Error, instance: &mut crate::Instance, end: f64) -> Error {
-    if matches!(e, Error::Discard { .. }) && matches!(instance.terminated(), Ok(true)) {
-        let time = instance.last_successful_time().unwrap_or(end);
-        return Error::TerminationRequested {
-            instance: instance.name().to_string(),
-            time,
-        };
-    }
-    e
 }
