@@ -1040,9 +1040,15 @@ fn use_fmi_host(program: PathBuf, args: Vec<String>) {
 /// master closes them (the body of `python -m tether._fmi_host`).
 #[pyfunction]
 fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
+    // A host's exit, whatever its code, is reported by the master it serves.
+    SERVING_HOST.store(true, std::sync::atomic::Ordering::SeqCst);
     py.detach(tether_fmi_host::serve_standard_streams)
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("tether-fmi-host: {e}")))
 }
+
+/// This process is the host of an isolated instance (`serve_fmi_host`): its
+/// FMU's exit is left to the master, which reports it with the exit code.
+static SERVING_HOST: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
 /// An in-process FMU ends the process from inside a call (`exit()` or
 /// `abort()`, tether_fmi::exit_hook): Python cannot be told, and `exit(0)`
@@ -1052,6 +1058,9 @@ fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
 /// outside any FMI call (the interpreter's own) is left alone.
 fn on_ending(ending: tether_fmi::exit_hook::Ending) {
     use std::io::Write as _;
+    if SERVING_HOST.load(std::sync::atomic::Ordering::SeqCst) {
+        return;
+    }
     let Some(blame) = tether_fmi::exit_hook::blame(ending) else {
         return;
     };
