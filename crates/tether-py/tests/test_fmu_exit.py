@@ -85,7 +85,7 @@ def test_a_normal_exit_of_python_is_left_alone(tmp_path, faults_fmu):
 
 def test_exit_of_an_isolated_fmu_is_an_exception(tmp_path, faults_fmu):
     system = faults_system(tmp_path, faults_fmu, 3, isolate=True)
-    with pytest.raises(tether.TetherError, match="its host process exited with code 0 during fmi2DoStep at t=0.5") as err:
+    with pytest.raises(tether.FmuError, match="its host process exited with code 0 during fmi2DoStep at t=0.5") as err:
         tether.run(system)
     partial = err.value.result
     assert partial is not None and partial.time[-1] == 0.5
