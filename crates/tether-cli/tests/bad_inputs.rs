@@ -1016,5 +1016,17 @@ fn a_full_disk_for_the_results() {
             assert_eq!(line.matches("No space left").count(), 1, "{line}");
             assert!(!line.contains("kept"), "claims results were kept: {line}");
         }
+        // The summary says so too, also when the rows fit in the buffer and
+        // only the end of the file fails (stop = 0.01).
+        let summary = dir.path().join("summary.json");
+        let args = ["run", system, "--stop", stop, "-q", "--out", "/dev/full"];
+        let out = tether(
+            &[&args[..], &["--summary-json", summary.to_str().unwrap()]].concat(),
+            dir.path(),
+        );
+        cli_error(&out, &["cannot write /dev/full"]);
+        let json = std::fs::read_to_string(&summary).unwrap();
+        assert!(json.contains("\"completed\": false"), "{json}");
+        assert!(json.contains("No space left on device"), "{json}");
     }
 }

@@ -408,10 +408,17 @@ impl Simulation {
     ) -> Result<RunStats, MasterError> {
         let clock = Instant::now();
         self.timing.step_end = None;
-        for o in observers.iter_mut() {
-            o.start(self.row.columns())?;
+        let columns = self.row.columns();
+        let started = observers
+            .iter_mut()
+            .try_for_each(|o| o.start(columns))
+            .map_err(MasterError::from)
+            .and_then(|()| self.notify(observers));
+        if let Err(e) = started {
+            // The results file failed at once (its header): the run failed.
+            self.health.fail(&e);
+            return Err(e);
         }
-        self.notify(observers)?;
         let outcome = (|| {
             while !self.finished() {
                 if let Some(reason) = observers.iter_mut().find_map(|o| o.interrupt()) {
