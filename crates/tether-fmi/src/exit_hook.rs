@@ -82,6 +82,17 @@ pub fn install(handler: fn(Ending)) {
     });
 }
 
+/// Makes this process the hooks' own: for a child the program itself forked
+/// to go on as a program of its own (Python's `os.fork()`, as a
+/// `multiprocessing` pool does), not for one an FMU forked. Nothing if the
+/// hooks are not installed.
+pub fn adopt() {
+    if HANDLER.get().is_some() {
+        // SAFETY: getpid has no preconditions.
+        INSTALLER.store(unsafe { libc::getpid() }, Ordering::SeqCst);
+    }
+}
+
 /// Who did it: `FMU instance 'm' called exit(3) inside fmi2DoStep at t=0.5`,
 /// if this thread is inside an FMI call.
 pub fn blame(ending: Ending) -> Option<String> {

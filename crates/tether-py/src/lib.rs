@@ -1076,6 +1076,14 @@ fn on_ending(ending: tether_fmi::exit_hook::Ending) {
     }
 }
 
+/// The exit hook acts in this process too: called in the child after
+/// Python's `os.fork()` (a `multiprocessing` worker is a Python program of
+/// its own), never after an FMU's own `fork()`.
+#[pyfunction]
+fn adopt_exit_hook() {
+    tether_fmi::exit_hook::adopt();
+}
+
 /// The module `tether._tether`.
 #[pymodule]
 fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -1088,6 +1096,7 @@ fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
     m.add_function(wrap_pyfunction!(use_fmi_host, m)?)?;
     m.add_function(wrap_pyfunction!(serve_fmi_host, m)?)?;
+    m.add_function(wrap_pyfunction!(adopt_exit_hook, m)?)?;
     m.add_class::<PySimulation>()?;
     m.add_class::<study::PyPlan>()?;
     m.add_function(wrap_pyfunction!(study::plan_sweep, m)?)?;

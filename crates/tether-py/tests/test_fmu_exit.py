@@ -89,3 +89,28 @@ def test_exit_of_an_isolated_fmu_is_an_exception(tmp_path, faults_fmu):
         tether.run(system)
     partial = err.value.result
     assert partial is not None and partial.time[-1] == 0.5
+
+
+def test_exit_in_a_forked_worker_is_not_silent(tmp_path, faults_fmu):
+    """A child of os.fork() (as a multiprocessing pool makes) is a Python
+    program of its own: the FMU's exit(0) there ends it with status 1 and the
+    line too."""
+    system = faults_system(tmp_path, faults_fmu, 3)
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    code = (
+        "import os, sys, tether\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        f"    tether.run({str(system)!r})\n"
+        "    os._exit(7)\n"
+        "_, status = os.waitpid(pid, 0)\n"
+        "print(os.waitstatus_to_exitcode(status), flush=True)\n"
+    )
+    env = dict(os.environ, TMPDIR=str(tmp))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "1", proc.stderr
+    assert proc.stderr.splitlines()[-1] == LINE.format(called="exit(0)")
+    assert list(tmp.iterdir()) == []
