@@ -2,8 +2,10 @@
 //! included) or `abort()`. The run never returns there, so nothing would mark the
 //! results file or report the error; worse, `exit(0)` looked like success.
 //!
-//! While a run is armed ([`arm`]), an exit hook (glibc's `on_exit`, which also
-//! gives the exit code; `atexit` elsewhere) and a SIGABRT handler end the results
+//! While a run is armed ([`arm`]), the exit hook and SIGABRT handler of
+//! [`tether_fmi::exit_hook`] (glibc's `on_exit`, which also gives the exit
+//! code; `atexit` elsewhere; acting only in this process, not in a child an
+//! FMU forked) end the results
 //! file with every accepted row and the trailer `# incomplete: FMU instance 'm'
 //! called exit(3) inside fmi2DoStep at t=0.5` (the call this thread was inside,
 //! from [`tether_fmi::current_call`]), remove the FMU extraction folders, print
@@ -22,13 +24,12 @@
 //! the last flush are on disk (`tether_master::FLUSH_INTERVAL`) and the next run
 //! sweeps the extraction folders (`tether_fmi::sweep_leftovers`).
 
-use std::ffi::c_int;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicI32, Ordering};
 use std::sync::{Mutex, Once};
 use std::time::Duration;
 
+use tether_fmi::exit_hook::Ending;
 use tether_master::Emergency;
 
 /// What the hooks need about the run in progress.
@@ -38,16 +39,6 @@ struct Armed {
 }
 
 static ARMED: Mutex<Option<Armed>> = Mutex::new(None);
-
-/// The process id of the process that installed the hooks (0 before).
-static INSTALLER: AtomicI32 = AtomicI32::new(0);
-
-/// Whether this is the process that installed the hooks, not a child forked
-/// from it (which inherits them, and ARMED with them).
-fn in_installer() -> bool {
-    // SAFETY: getpid is async-signal-safe and cannot fail.
-    INSTALLER.load(Ordering::Relaxed) == unsafe { libc::getpid() }
-}
 
 /// How long the hooks wait for the writer thread to write the last rows.
 const WRITE_WAIT: Duration = Duration::from_secs(5);
@@ -66,6 +57,7 @@ impl Drop for Guard {
 pub fn arm(emergency: Option<Emergency>, out: &Path) -> Guard {
     static INSTALL: Once = Once::new();
     INSTALL.call_once(install);
+    crate::interrupt::run_started();
     *ARMED
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(Armed {
@@ -92,50 +84,23 @@ fn take_armed(wait: bool) -> Option<Armed> {
 }
 
 fn install() {
-    // SAFETY: getpid cannot fail.
-    INSTALLER.store(unsafe { libc::getpid() }, Ordering::Relaxed);
-    register_exit_hook();
-    let handler: extern "C" fn(c_int) = on_abort;
-    // SAFETY: installs a handler for SIGABRT only; `on_abort` has the signature
-    // sigaction expects for a handler without SA_SIGINFO, and the sigaction value is
-    // fully initialised (zeroed, then the fields set).
-    unsafe {
-        let mut action: libc::sigaction = std::mem::zeroed();
-        action.sa_sigaction = handler as libc::sighandler_t;
-        libc::sigemptyset(&mut action.sa_mask);
-        libc::sigaction(libc::SIGABRT, &action, std::ptr::null_mut());
-    }
+    tether_fmi::exit_hook::install(on_ending);
 }
 
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-fn register_exit_hook() {
-    use std::ffi::c_void;
-    extern "C" {
-        /// glibc: like atexit, and the function receives the exit code.
-        fn on_exit(function: extern "C" fn(c_int, *mut c_void), arg: *mut c_void) -> c_int;
+/// The process is ending by `exit()` or `abort()` (tether_fmi::exit_hook).
+fn on_ending(ending: Ending) {
+    match ending {
+        Ending::Exit(_) => on_exit_called(ending),
+        Ending::Abort => {
+            if let Some(armed) = take_armed(false) {
+                end(armed, &blame(ending));
+            }
+        }
     }
-    extern "C" fn hook(code: c_int, _arg: *mut c_void) {
-        on_exit_called(Some(code));
-    }
-    // SAFETY: glibc's on_exit takes a function of exactly this signature and an
-    // argument it passes back unused; `hook` is a plain function living forever.
-    unsafe { on_exit(hook, std::ptr::null_mut()) };
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn register_exit_hook() {
-    extern "C" fn hook() {
-        on_exit_called(None);
-    }
-    // SAFETY: atexit takes a function without arguments living forever.
-    unsafe { libc::atexit(hook) };
 }
 
 /// The process is exiting (`exit(code)`) while a run is armed.
-fn on_exit_called(code: Option<c_int>) {
-    if !in_installer() {
-        return; // a forked child's exit: not the run's
-    }
+fn on_exit_called(ending: Ending) {
     let Some(armed) = take_armed(false) else {
         return; // main returned: a normal end
     };
@@ -144,33 +109,11 @@ fn on_exit_called(code: Option<c_int>) {
         end(armed, crate::interrupt::FORCED_REASON);
         return;
     }
-    let called = match code {
-        Some(code) => format!("exit({code})"),
-        None => "exit()".to_string(),
-    };
-    end(armed, &blame(&called));
+    end(armed, &blame(ending));
     let _ = std::io::stdout().flush();
     // SAFETY: _exit ends the process at once with code 1, which is the point: the
     // code the FMU chose (0 included) must not be the run's.
     unsafe { libc::_exit(1) }
-}
-
-extern "C" fn on_abort(_signal: c_int) {
-    // SAFETY: alarm is async-signal-safe: it ends the process (SIGALRM) in 10 s
-    // should the best-effort work below deadlock.
-    unsafe { libc::alarm(10) };
-    if !in_installer() {
-        // A forked child's abort(): not the run's.
-    } else if let Some(armed) = take_armed(false) {
-        end(armed, &blame("abort()"));
-    }
-    // SAFETY: signal and raise are async-signal-safe; with the default action
-    // restored, the SIGABRT raised here (blocked until this handler returns) ends
-    // the process as abort() does, with its exit status.
-    unsafe {
-        libc::signal(libc::SIGABRT, libc::SIG_DFL);
-        libc::raise(libc::SIGABRT);
-    }
 }
 
 /// Ends the run at once from another thread (the watchdog): the results file
@@ -188,14 +131,13 @@ pub fn stop_now(reason: &str) -> ! {
 }
 
 /// Who did it: the FMI call this thread is inside, if any.
-fn blame(what: &str) -> String {
-    match tether_fmi::current_call() {
-        Some(call) => format!(
-            "FMU instance '{}' called {what} inside {} at t={}",
-            call.instance, call.function, call.time
-        ),
-        None => format!("{what} was called during the run, outside any FMI call"),
-    }
+fn blame(ending: Ending) -> String {
+    tether_fmi::exit_hook::blame(ending).unwrap_or_else(|| {
+        format!(
+            "{} was called during the run, outside any FMI call",
+            ending.called()
+        )
+    })
 }
 
 /// Ends the results file with `reason`, removes the extraction folders, says so.

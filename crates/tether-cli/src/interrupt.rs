@@ -2,6 +2,12 @@
 //! current macro step, so the CSV gets its `# incomplete` trailer, every FMU instance is
 //! freed and the FMU extraction directories are removed; the process then exits with
 //! code 130. A second signal exits at once (no cleanup).
+//!
+//! Before the run starts (while the system file is read and the FMUs are
+//! extracted, loaded and instantiated) there is nothing to keep: the first
+//! signal ends the process at once, code 130, after removing the extraction
+//! folders, so that an open that never returns (a slow file system, an FMU
+//! stuck in `fmi2Instantiate`) cannot make it wait.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -11,6 +17,14 @@ static SIGNALLED: AtomicBool = AtomicBool::new(false);
 
 /// A second signal arrived: the process exits at once.
 static FORCED: AtomicBool = AtomicBool::new(false);
+
+/// The run has started ([`run_started`]): a first signal stops it after the
+/// current macro step rather than ending the process.
+static RUNNING: AtomicBool = AtomicBool::new(false);
+
+/// What the error says when a signal ends the process before the run started.
+pub const OPEN_REASON: &str =
+    "interrupted by Ctrl-C or a termination signal before the run started (nothing was written)";
 
 /// The trailer after a second signal.
 pub const FORCED_REASON: &str =
@@ -25,6 +39,15 @@ pub const EXIT_CODE: u8 = 130;
 /// Installs the handler (once per process).
 pub fn install() -> anyhow::Result<()> {
     ctrlc::set_handler(|| {
+        if !RUNNING.load(Ordering::SeqCst) {
+            // This runs on ctrlc's own thread: the main thread may be blocked
+            // in the open for ever.
+            crate::say!("error: {OPEN_REASON}");
+            tether_fmi::remove_extractions_now();
+            // SAFETY: _exit ends the process at once, without exit hooks or
+            // destructors that could wait for the blocked main thread.
+            unsafe { libc::_exit(i32::from(EXIT_CODE)) }
+        }
         if SIGNALLED.swap(true, Ordering::SeqCst) {
             FORCED.store(true, Ordering::SeqCst);
             // The exit hook (crate::exit_guard) writes the trailer.
@@ -54,6 +77,12 @@ fn say_what_keeps_the_run() {
             );
         }
     }
+}
+
+/// The run starts: from now on a first signal stops it after the current
+/// macro step, with every row kept.
+pub fn run_started() {
+    RUNNING.store(true, Ordering::SeqCst);
 }
 
 /// Whether a second signal is ending the process.

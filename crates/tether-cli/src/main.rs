@@ -108,6 +108,11 @@ fn one_line(e: &anyhow::Error) -> String {
 }
 
 fn main() -> ExitCode {
+    // A file size limit (`ulimit -f`) reached is a write error (EFBIG) like a
+    // full disk, handled by the writer (whole rows, trailer, cleanup), not a
+    // signal that kills the process mid-row.
+    // SAFETY: sets the disposition of SIGXFSZ to "ignore", before any thread.
+    unsafe { libc::signal(libc::SIGXFSZ, libc::SIG_IGN) };
     if std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
         return tether_fmi_host::serve_stdin();
     }

@@ -123,7 +123,7 @@ pub fn main(args: Args) -> Result<()> {
         }
     }
     let file = crate::output::create(&out)?;
-    let mut recorder = CsvRecorder::file(file);
+    let mut recorder = CsvRecorder::file_at(file, &out);
     let emergency = recorder.emergency();
     let mut progress = crate::progress::Progress::new(
         spec.experiment.start,

@@ -120,7 +120,7 @@ pub fn main(args: Args) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
     crate::output::not_an_input(&out, [args.fmu.as_path()])?;
     let file = crate::output::create(&out)?;
-    let mut recorder = CsvRecorder::file(file);
+    let mut recorder = CsvRecorder::file_at(file, &out);
     let guard = crate::exit_guard::arm(recorder.emergency(), &out);
     let cannot_write = || format!("cannot write {}", out.display());
     recorder.start(&columns).with_context(cannot_write)?;

@@ -506,6 +506,47 @@ fn a_system_file_with_an_unknown_key() {
     run_error(&sys, &[&shown(&sys), "stpe"]);
 }
 
+/// Array blocks are bounded (docs/system-file.md, "Limits"): a `count` of 10⁸
+/// instances, which would take gigabytes before any other check, and more
+/// constraint blocks in all than the limit are each one error naming the
+/// block, before anything is expanded; no results file is written.
+#[test]
+fn array_counts_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let instances = system(dir.path(), |t| {
+        swap(
+            t,
+            "name = \"mass2\"\n",
+            "name = \"mass2_{i}\"\ncount = 100000000\n",
+        )
+    });
+    let started = std::time::Instant::now();
+    assert!(matches!(
+        setup_err(&instances),
+        MasterError::SystemFile { .. }
+    ));
+    run_error(
+        &instances,
+        &[
+            &shown(&instances),
+            "[[instance]] block 2 (count = 100000000): makes 100000001 [[instance]] blocks, above the limit of 10000",
+        ],
+    );
+    assert!(started.elapsed().as_secs() < 30, "{:?}", started.elapsed());
+    let constraints = system(dir.path(), |t| {
+        swap(
+            t,
+            "name = \"link\"\n",
+            "name = \"link{i}\"\ncount = 100001\n",
+        )
+    });
+    run_error(
+        &constraints,
+        &["[[constraint]] block 1 (count = 100001): makes 100001 [[constraint]] blocks, above the limit of 100000"],
+    );
+    assert!(!dir.path().join("system.csv").exists());
+}
+
 #[test]
 fn a_system_file_naming_a_missing_fmu() {
     let dir = tempfile::tempdir().unwrap();
@@ -1203,5 +1244,17 @@ fn a_full_disk_for_the_results() {
             assert_eq!(line.matches("No space left").count(), 1, "{line}");
             assert!(!line.contains("kept"), "claims results were kept: {line}");
         }
+        // The summary says so too, also when the rows fit in the buffer and
+        // only the end of the file fails (stop = 0.01).
+        let summary = dir.path().join("summary.json");
+        let args = ["run", system, "--stop", stop, "-q", "--out", "/dev/full"];
+        let out = tether(
+            &[&args[..], &["--summary-json", summary.to_str().unwrap()]].concat(),
+            dir.path(),
+        );
+        cli_error(&out, &["cannot write /dev/full"]);
+        let json = std::fs::read_to_string(&summary).unwrap();
+        assert!(json.contains("\"completed\": false"), "{json}");
+        assert!(json.contains("No space left on device"), "{json}");
     }
 }

@@ -412,6 +412,58 @@ fn a_nan_output_is_reported_as_its_instances_not_as_a_singular_jacobian() {
     );
 }
 
+/// A finite but huge output of mass1 (1e300 from t = 0.05) reaches mass2 as
+/// an input before the accepted point is checked: mass2's solver fails
+/// (`exact = false`: Dop853), or the interface Jacobian turns singular. The
+/// error names mass1, whose output went beyond its divergence limit where it
+/// was read, then the failure it led to; every row before is kept, in
+/// process and isolated.
+#[test]
+fn a_huge_output_is_reported_as_its_instances_not_as_another_instances_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let culprit = "instance 'mass1': output 'x' = 1e300 after the predictor's fmi2DoStep at \
+                   t = 0.05 is beyond its divergence limit 1.0e6 (divergence_factor × its \
+                   initial size); then: ";
+    for (method, then) in [
+        (
+            INDEX1,
+            "fmi2DoStep returned fmi2Error on instance 'mass2' at t=0.049",
+        ),
+        (
+            "kind = \"baumgarte\"",
+            "singular interface Jacobian (position level) at t = 0.05",
+        ),
+    ] {
+        let sys = system(dir.path(), ", huge_after = 0.05", method, 0.1, 1e-3);
+        let text = std::fs::read_to_string(&sys).unwrap();
+        std::fs::write(&sys, text.replace("exact = true", "exact = false")).unwrap();
+        for isolate in [false, true] {
+            let csv = dir.path().join("pair.csv");
+            let mut args = vec!["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()];
+            if isolate {
+                args.push("--isolate");
+            }
+            let out = tether_env(&args, dir.path(), &[("TMPDIR", tmp.to_str().unwrap())]);
+            let line = error_line(&out);
+            let reason = line
+                .split_once("(marked incomplete): ")
+                .map(|(_, r)| r.to_string())
+                .unwrap_or_default();
+            assert!(
+                reason.starts_with(&format!("{culprit}{then}")),
+                "{method}, isolate = {isolate}: {line}"
+            );
+            assert!(line.contains("results up to t = 0.049 kept in "), "{line}");
+            let (_, rows, trailer) = read_csv(&csv);
+            assert_eq!(rows.len(), 50, "t = 0 … 0.049");
+            assert_eq!(trailer, Some(format!("incomplete: {reason}")));
+            assert_eq!(std::fs::read_dir(&tmp).unwrap().count(), 0);
+        }
+    }
+}
+
 #[test]
 fn simulate_stops_at_a_nan_output_naming_it() {
     let dir = tempfile::tempdir().unwrap();

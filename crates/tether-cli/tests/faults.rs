@@ -167,12 +167,22 @@ fn a_segfault_keeps_the_rows_up_to_the_flush_interval() {
     assert_eq!(csv.rows.len() as f64 - 1.0, (t * 1000.0).round());
 }
 
-/// A full disk (here: a file size limit, `ulimit -f`, with SIGXFSZ ignored, so
-/// writes fail with EFBIG as they would with ENOSPC, one of them halfway): the
-/// run stops with an error naming the file, which is cut back to its last whole
-/// row and, where the trailer still fits, ends with it.
+/// A full disk (here: a file size limit, `ulimit -f`; `tether` ignores
+/// SIGXFSZ, so writes fail with EFBIG as they would with ENOSPC, one of them
+/// halfway): the run stops with an error naming the file, which is cut back to
+/// its last whole row and, where the trailer still fits, ends with it. In a
+/// plain shell (SIGXFSZ at its default, which kills) and in one that ignores it.
 #[test]
 fn a_full_disk_leaves_only_whole_rows() {
+    for shell in [
+        "ulimit -f 16 && exec \"$0\" \"$@\"",
+        "ulimit -f 16 && trap '' XFSZ && exec \"$0\" \"$@\"",
+    ] {
+        full_disk(shell);
+    }
+}
+
+fn full_disk(shell: &str) {
     let s = Scratch::new();
     // The limit applies to every file, so the FMUs are unpacked beforehand.
     let text = std::fs::read_to_string(system(s.path(), 0, "")).unwrap();
@@ -194,7 +204,7 @@ fn a_full_disk_leaves_only_whole_rows() {
     std::fs::write(&sys, unpacked).unwrap();
     let out = Command::new("sh")
         .arg("-c")
-        .arg("ulimit -f 16 && trap '' XFSZ && exec \"$0\" \"$@\"")
+        .arg(shell)
         .arg(env!("CARGO_BIN_EXE_tether"))
         .args(["run", sys.to_str().unwrap(), "--out", "out.csv"])
         .current_dir(s.path())
@@ -202,7 +212,7 @@ fn a_full_disk_leaves_only_whole_rows() {
         .output()
         .unwrap();
     let text = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert_eq!(out.status.code(), Some(1), "{shell}: {out:?}");
     assert!(!text.contains("panicked"), "{text}");
     let last = text.lines().last().unwrap();
     assert!(last.starts_with("error: run stopped at t = "), "{last}");
@@ -1001,4 +1011,179 @@ fn isolated_helper_ends_with_the_instance() {
     assert_eq!((csv.rows.len(), csv.trailer), (1001, None));
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
     assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
+}
+
+/// Waits for `child` up to `secs` seconds (killed and reaped after that, or
+/// when the test fails) and returns its output.
+fn wait_within(child: std::process::Child, secs: u64) -> Output {
+    let pid = child.id() as i32;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(child.wait_with_output());
+    });
+    match rx.recv_timeout(std::time::Duration::from_secs(secs)) {
+        Ok(out) => out.unwrap(),
+        Err(_) => {
+            // SAFETY: a signal to the child this test started (not yet reaped:
+            // the waiting thread has not returned).
+            unsafe { libc::kill(pid, libc::SIGKILL) };
+            panic!("tether did not end within {secs} s");
+        }
+    }
+}
+
+/// Starts a run of the faults FMU in mode 7 (from t = 0.5 every fmi2DoStep
+/// sleeps 10 ms) writing `out`, and waits for the row at t = 0.5 in `watched`.
+fn slow_run(s: &Scratch, out: &str) -> std::process::Child {
+    let sys = system(s.path(), 7, ", pause = 0.01");
+    let child = s
+        .command(&["run", sys.to_str().unwrap(), "--out", out, "--quiet"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !std::fs::read_to_string(s.path().join(out))
+        .unwrap_or_default()
+        .lines()
+        .any(|l| l.starts_with("0.5,"))
+    {
+        assert!(std::time::Instant::now() < deadline, "no rows");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child
+}
+
+/// The results folder removed during a run: the run stops with an error
+/// naming the file (exit code 1), not `results: vdir/out.csv` and success.
+#[test]
+fn an_output_removed_during_the_run_is_an_error() {
+    let s = Scratch::new();
+    std::fs::create_dir(s.path().join("vdir")).unwrap();
+    let child = slow_run(&s, "vdir/out.csv");
+    std::fs::remove_dir_all(s.path().join("vdir")).unwrap();
+    let out = wait_within(child, 60);
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    let last = text.lines().last().unwrap_or_default();
+    assert!(last.starts_with("error: run stopped at t = "), "{last}");
+    assert!(
+        last.ends_with("cannot write vdir/out.csv: recording results: vdir/out.csv was removed or renamed during the run"),
+        "{last}"
+    );
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}
+
+/// The results file replaced during a run (renamed, another file put in its
+/// place): an error naming it; the file the run wrote, under its new name,
+/// keeps every row written with the trailer, and the new file is untouched.
+#[test]
+fn an_output_replaced_during_the_run_is_an_error() {
+    let s = Scratch::new();
+    let child = slow_run(&s, "out.csv");
+    std::fs::rename(s.path().join("out.csv"), s.path().join("moved.csv")).unwrap();
+    std::fs::write(s.path().join("out.csv"), "another file\n").unwrap();
+    let out = wait_within(child, 60);
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    let reason = "out.csv was replaced by another file during the run";
+    let last = text.lines().last().unwrap_or_default();
+    assert!(last.starts_with("error: run stopped at t = "), "{last}");
+    assert!(last.ends_with(reason), "{last}");
+    assert_eq!(
+        std::fs::read_to_string(s.path().join("out.csv")).unwrap(),
+        "another file\n"
+    );
+    let csv = read_csv(&s.path().join("moved.csv"));
+    assert_eq!(
+        csv.trailer,
+        Some(format!("# incomplete: cannot write the results: {reason}"))
+    );
+    assert!(last_time(&csv) >= 0.5, "{}", last_time(&csv));
+    assert_eq!(
+        csv.rows.len() as f64 - 1.0,
+        (last_time(&csv) * 1000.0).round()
+    );
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}
+
+/// A FIFO as `fmu =` is refused before it is opened (opening it would wait
+/// for a writer for ever), in process and isolated: one line naming the
+/// instance and the path, exit code 1, no results file, nothing left.
+#[test]
+fn a_fifo_as_an_fmu_is_refused() {
+    let s = Scratch::new();
+    let fifo = s.path().join("mass2.fmu");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a NUL-terminated path; creates a FIFO in the test's folder.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let faults = tether_fmu_build::workspace_fmu("faults").unwrap();
+    let text = std::fs::read_to_string(system(s.path(), 0, "")).unwrap();
+    let sys = s.path().join("fifo.toml");
+    std::fs::write(
+        &sys,
+        text.replace(
+            &format!("{:?}", faults.display().to_string()),
+            &format!("{:?}", fifo.display().to_string()),
+        ),
+    )
+    .unwrap();
+    for extra in [&[][..], &["--isolate"][..]] {
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "out.csv"];
+        args.extend_from_slice(extra);
+        let child = s
+            .command(&args)
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let out = wait_within(child, 60);
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        assert_eq!(
+            text,
+            format!(
+                "error: instance 'mass2': '{}' is a FIFO, not an FMU archive (a regular file) nor an unpacked FMU folder\n",
+                fifo.display()
+            ),
+            "{extra:?}"
+        );
+        assert!(!s.path().join("out.csv").exists());
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    }
+}
+
+/// A signal while the inputs are being opened (here a FIFO as the system
+/// file, which no one writes: the open waits for ever) ends the process at
+/// once with exit code 130 and one line, for SIGINT and SIGTERM alike.
+#[test]
+fn a_signal_during_the_open_ends_the_run() {
+    let s = Scratch::new();
+    let fifo = s.path().join("system.toml");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a NUL-terminated path; creates a FIFO in the test's folder.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        let child = s
+            .command(&["run", "system.toml", "--out", "out.csv"])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The handler is installed first thing; give the process time to block.
+        std::thread::sleep(std::time::Duration::from_secs(1));
+        // SAFETY: a signal to the child this test started and has not reaped.
+        unsafe { libc::kill(child.id() as i32, signal) };
+        let out = wait_within(child, 30);
+        assert_eq!(
+            out.status.code(),
+            Some(130),
+            "signal {signal}: {}",
+            stderr(&out)
+        );
+        assert_eq!(
+            stderr(&out),
+            "error: interrupted by Ctrl-C or a termination signal before the run started (nothing was written)\n"
+        );
+        assert!(!s.path().join("out.csv").exists());
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    }
 }

@@ -99,6 +99,17 @@ pub enum Error {
         reason: String,
     },
 
+    /// The path is neither a regular file nor a folder (a FIFO, a device, a
+    /// socket): refused before it is opened, since opening a FIFO waits for a
+    /// writer that may never come.
+    #[error("'{}' is a {kind}, not an FMU archive (a regular file) nor an unpacked FMU folder", path.display())]
+    NotAFile {
+        /// The offending path.
+        path: PathBuf,
+        /// What it is: `FIFO`, `character device`, `block device`, `socket`.
+        kind: &'static str,
+    },
+
     /// The FMU has no `modelDescription.xml` at its root.
     #[error("'{}' has no modelDescription.xml at its root", path.display())]
     MissingModelDescription {

@@ -101,6 +101,11 @@ impl Fmu {
         })?;
         let dir = if metadata.is_dir() {
             FmuDir::existing(&origin)?
+        } else if !metadata.is_file() {
+            return Err(Error::NotAFile {
+                path: origin,
+                kind: file_kind(&metadata),
+            });
         } else {
             archive::extract(&origin, &options.limits)?
         };
@@ -241,4 +246,27 @@ impl Fmu {
         }
         Ok(instance)
     }
+}
+
+/// What a path that is neither a regular file nor a folder is, for errors.
+fn file_kind(metadata: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = metadata.file_type();
+        if t.is_fifo() {
+            return "FIFO";
+        }
+        if t.is_char_device() {
+            return "character device";
+        }
+        if t.is_block_device() {
+            return "block device";
+        }
+        if t.is_socket() {
+            return "socket";
+        }
+    }
+    let _ = metadata;
+    "special file"
 }

@@ -56,6 +56,7 @@
 pub mod archive;
 mod current;
 mod error;
+pub mod exit_hook;
 mod fmu;
 mod instance;
 mod instance3;

@@ -211,6 +211,26 @@ pub enum MasterError {
         /// What differed, naming the variable, the values and the time.
         reason: String,
     },
+    /// An instance's coupled output went beyond its divergence limit where it
+    /// was read, and the step then failed (crate::culprit): the instance
+    /// that produced the value is named, then the failure.
+    #[error("instance '{instance}': output '{variable}' = {value:e} {call} at t = {time} is beyond its divergence limit {limit:.1e} (divergence_factor × its initial size); then: {then}")]
+    DivergedOutput {
+        /// Instance name.
+        instance: String,
+        /// The output.
+        variable: String,
+        /// Its value.
+        value: f64,
+        /// The bound it crossed.
+        limit: f64,
+        /// The call after which it was read.
+        call: &'static str,
+        /// The instance's time after the call.
+        time: f64,
+        /// The error that stopped the step.
+        then: String,
+    },
     /// An instance's output is NaN or infinite right after one of its calls.
     #[error("instance '{instance}': output '{variable}' = {value} {call} at t = {time} (the FMU computed a non-finite value)")]
     NonFiniteOutput {

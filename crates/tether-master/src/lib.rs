@@ -22,6 +22,7 @@
 mod algorithm;
 mod build;
 mod coupling;
+mod culprit;
 mod error;
 pub mod expr;
 mod linalg;

@@ -120,6 +120,11 @@ pub struct Slave {
     at_save: Vec<f64>,
     /// Coupled outputs read back after a restore (with `verify_restore`).
     readback: Vec<f64>,
+    /// Per coupled value (as `value_buf`), the magnitude beyond which it has
+    /// diverged (crate::culprit); empty until set after initialization.
+    pub(crate) limits: Vec<f64>,
+    /// The first coupled value read beyond its limit in the latest step.
+    pub(crate) beyond: Option<crate::culprit::Beyond>,
 }
 
 impl Slave {
@@ -316,6 +321,8 @@ impl Slave {
             verify_restore: false,
             at_save: Vec::new(),
             readback: Vec::new(),
+            limits: Vec::new(),
+            beyond: None,
         };
         for (name, value) in &spec.parameters {
             crate::start::apply_start_value(
@@ -596,9 +603,44 @@ impl Slave {
             out[slot] = value;
         }
         match out.iter().position(|v| !v.is_finite()) {
-            None => Ok(()),
+            None => {
+                let beyond = |(v, limit): (&f64, &f64)| v.abs() > *limit;
+                if let Some(k) = self.value_buf.iter().zip(&self.limits).position(beyond) {
+                    self.note_beyond(k, run);
+                }
+                Ok(())
+            }
             Some(slot) => Err(self.non_finite(self.coupled_name(slot), out[slot], run)),
         }
+    }
+
+    /// Divergence limits `factor`·max(|v|, 1) around the coupled values of
+    /// the last read (the initial point's), for crate::culprit; the output
+    /// derivatives are not limited.
+    pub(crate) fn set_divergence_limits(&mut self, factor: f64) {
+        let nv = self.value_vrs.len();
+        self.limits = self.value_buf[..nv]
+            .iter()
+            .map(|v| (factor * v.abs().max(1.0)).min(f64::MAX))
+            .collect();
+    }
+
+    /// Coupled value `k` of the last read is beyond its limit: noted, unless
+    /// a value of this step (a read at the same time or later) already is.
+    #[cold]
+    #[inline(never)]
+    fn note_beyond(&mut self, k: usize, run: Run) {
+        let time = self.backend.time();
+        if self.beyond.as_ref().is_some_and(|b| b.time >= time) {
+            return;
+        }
+        self.beyond = Some(crate::culprit::Beyond::new(
+            self.coupled_name(self.value_slots[k]),
+            self.value_buf[k],
+            self.limits[k],
+            run.describe(),
+            time,
+        ));
     }
 
     /// The error for output `variable` = `value` (not finite) read after `run`.

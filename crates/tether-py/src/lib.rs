@@ -51,7 +51,9 @@ fn kind_of(e: &MasterError) -> &'static str {
         | MasterError::UnknownVariable(_)
         | MasterError::InstanceFmu { .. }
         | MasterError::MissingCapability { .. } => "fmu",
-        MasterError::Diverged { .. } | MasterError::SingularJacobian { .. } => "divergence",
+        MasterError::Diverged { .. }
+        | MasterError::DivergedOutput { .. }
+        | MasterError::SingularJacobian { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
         MasterError::InvalidParameter { .. } => "settings",
         MasterError::SystemFile { .. }
@@ -1082,13 +1084,54 @@ fn use_fmi_host(program: PathBuf, args: Vec<String>) {
 /// master closes them (the body of `python -m tether._fmi_host`).
 #[pyfunction]
 fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
+    // A host's exit, whatever its code, is reported by the master it serves.
+    SERVING_HOST.store(true, std::sync::atomic::Ordering::SeqCst);
     py.detach(tether_fmi_host::serve_standard_streams)
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("tether-fmi-host: {e}")))
+}
+
+/// This process is the host of an isolated instance (`serve_fmi_host`): its
+/// FMU's exit is left to the master, which reports it with the exit code.
+static SERVING_HOST: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// An in-process FMU ends the process from inside a call (`exit()` or
+/// `abort()`, tether_fmi::exit_hook): Python cannot be told, and `exit(0)`
+/// would end it with status 0, silently. One line names the instance, the
+/// call and the time, the extraction folders are removed, and the process
+/// ends with status 1 after `exit()` (SIGABRT after `abort()`). An exit
+/// outside any FMI call (the interpreter's own) is left alone.
+fn on_ending(ending: tether_fmi::exit_hook::Ending) {
+    use std::io::Write as _;
+    if SERVING_HOST.load(std::sync::atomic::Ordering::SeqCst) {
+        return;
+    }
+    let Some(blame) = tether_fmi::exit_hook::blame(ending) else {
+        return;
+    };
+    let _ = writeln!(
+        std::io::stderr(),
+        "error: the Python process ends: {blame} (an in-process FMU shares Python's process; with isolation = \"process\" this is an exception)"
+    );
+    tether_fmi::remove_extractions_now();
+    if let tether_fmi::exit_hook::Ending::Exit(_) = ending {
+        // SAFETY: _exit ends the process at once with status 1: the code the
+        // FMU chose (0 included) must not be the process's.
+        unsafe { libc::_exit(1) }
+    }
+}
+
+/// The exit hook acts in this process too: called in the child after
+/// Python's `os.fork()` (a `multiprocessing` worker is a Python program of
+/// its own), never after an FMU's own `fork()`.
+#[pyfunction]
+fn adopt_exit_hook() {
+    tether_fmi::exit_hook::adopt();
 }
 
 /// The module `tether._tether`.
 #[pymodule]
 fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    tether_fmi::exit_hook::install(on_ending);
     m.add("Failure", m.py().get_type::<Failure>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
@@ -1098,6 +1141,7 @@ fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
     m.add_function(wrap_pyfunction!(use_fmi_host, m)?)?;
     m.add_function(wrap_pyfunction!(serve_fmi_host, m)?)?;
+    m.add_function(wrap_pyfunction!(adopt_exit_hook, m)?)?;
     m.add_class::<PySimulation>()?;
     m.add_class::<study::PyPlan>()?;
     m.add_function(wrap_pyfunction!(study::plan_sweep, m)?)?;

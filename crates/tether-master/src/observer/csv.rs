@@ -133,6 +133,74 @@ impl CsvRecorder<std::fs::File> {
         text.cut = text.out.get_ref().try_clone().ok();
         Self::background_with(text)
     }
+
+    /// [`file`](Self::file), where `file` was opened as `path`: a regular file
+    /// that `path` no longer names (removed, renamed, or replaced by another
+    /// file) is a write error, found at most [`FLUSH_INTERVAL`] after a flush
+    /// and always at the end, as the results would otherwise be reported
+    /// where they are not.
+    pub fn file_at(file: std::fs::File, path: &std::path::Path) -> Self {
+        let mut text = CsvText::new(file);
+        text.cut = text.out.get_ref().try_clone().ok();
+        text.watch = Watch::new(text.out.get_ref(), path);
+        Self::background_with(text)
+    }
+}
+
+/// A results file's path and the identity (device, inode) of the file opened
+/// as it, to find the path no longer naming it.
+struct Watch {
+    path: std::path::PathBuf,
+    identity: (u64, u64),
+    checked: Instant,
+}
+
+impl Watch {
+    /// Only regular files are watched (not `/dev/null`, a pipe, a terminal).
+    #[cfg(unix)]
+    fn new(file: &std::fs::File, path: &std::path::Path) -> Option<Watch> {
+        use std::os::unix::fs::MetadataExt;
+        let meta = file.metadata().ok().filter(|m| m.is_file())?;
+        Some(Watch {
+            path: path.to_owned(),
+            identity: (meta.dev(), meta.ino()),
+            checked: Instant::now(),
+        })
+    }
+
+    #[cfg(not(unix))]
+    fn new(_file: &std::fs::File, _path: &std::path::Path) -> Option<Watch> {
+        None
+    }
+
+    /// An error if the path no longer names the file; with `always` false at
+    /// most once every [`FLUSH_INTERVAL`].
+    #[cfg(unix)]
+    fn check(&mut self, always: bool) -> std::io::Result<()> {
+        use std::os::unix::fs::MetadataExt;
+        if !always && self.checked.elapsed() < FLUSH_INTERVAL {
+            return Ok(());
+        }
+        self.checked = Instant::now();
+        let path = self.path.display();
+        match std::fs::metadata(&self.path) {
+            Ok(meta) if (meta.dev(), meta.ino()) == self.identity => Ok(()),
+            Ok(_) => Err(std::io::Error::other(format!(
+                "{path} was replaced by another file during the run"
+            ))),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(std::io::Error::other(
+                format!("{path} was removed or renamed during the run"),
+            )),
+            Err(e) => Err(std::io::Error::other(format!(
+                "{path} can no longer be found: {e}"
+            ))),
+        }
+    }
+
+    #[cfg(not(unix))]
+    fn check(&mut self, _always: bool) -> std::io::Result<()> {
+        Ok(())
+    }
 }
 
 impl<W: Write> CsvRecorder<W> {
@@ -184,6 +252,8 @@ struct CsvText<W: Write> {
     line: Vec<u8>,
     /// The file again, to cut it back to its last whole row after a write error.
     cut: Option<std::fs::File>,
+    /// The path the file was opened as, checked after flushes and at the end.
+    watch: Option<Watch>,
 }
 
 impl<W: Write> CsvText<W> {
@@ -193,6 +263,7 @@ impl<W: Write> CsvText<W> {
             number: zmij::Buffer::new(),
             line: Vec::new(),
             cut: None,
+            watch: None,
         }
     }
 
@@ -225,7 +296,11 @@ impl<W: Write> CsvText<W> {
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
-        self.out.flush()
+        self.out.flush()?;
+        match &mut self.watch {
+            Some(watch) => watch.check(false),
+            None => Ok(()),
+        }
     }
 
     fn end(&mut self, failure: Option<&str>) -> std::io::Result<()> {
@@ -233,7 +308,11 @@ impl<W: Write> CsvText<W> {
             let line = reason.replace(['\n', '\r'], " ");
             writeln!(self.out, "# incomplete: {line}")?;
         }
-        self.out.flush()
+        self.out.flush()?;
+        match &mut self.watch {
+            Some(watch) => watch.check(true),
+            None => Ok(()),
+        }
     }
 
     /// After a write error: drop what is still buffered (it would land after
@@ -783,6 +862,45 @@ mod tests {
                 format!("{kept}# incomplete: cannot write the results: No space left on device\n")
             );
         }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A results file removed or replaced before the end of the recording is
+    /// an error of `finish`, also when the rows are written by the caller.
+    #[test]
+    fn a_results_file_removed_or_replaced_is_an_error_at_the_end() {
+        let dir =
+            std::env::temp_dir().join(format!("tether-observer-watch-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("out.csv");
+        for replace in [false, true] {
+            let file = std::fs::File::create(&path).unwrap();
+            let mut rec = CsvRecorder::file_at(file, &path);
+            rec.start(&["x".into()]).unwrap();
+            rec.sample(Sample {
+                step: 0,
+                time: 0.0,
+                values: &[1.0],
+            })
+            .unwrap();
+            std::fs::remove_file(&path).unwrap();
+            if replace {
+                std::fs::write(&path, "another\n").unwrap();
+            }
+            let error = rec.finish(None).unwrap_err().to_string();
+            let expected = if replace {
+                "was replaced by another file during the run"
+            } else {
+                "was removed or renamed during the run"
+            };
+            assert_eq!(error, format!("{} {expected}", path.display()));
+        }
+        // Unchanged: no error.
+        let file = std::fs::File::create(&path).unwrap();
+        let mut rec = CsvRecorder::file_at(file, &path);
+        rec.start(&["x".into()]).unwrap();
+        rec.finish(None).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "time,x\n");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

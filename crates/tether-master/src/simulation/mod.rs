@@ -147,6 +147,9 @@ impl Simulation {
         Feedthrough::new(&system).initial(&mut system, initial_level, exp.start, &mut stats)?;
         signals.initialize(&mut system.slaves)?;
         system.read_accepted(Run::Initial)?;
+        for slave in &mut system.slaves {
+            slave.set_divergence_limits(settings.divergence_factor);
+        }
         if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
             system.check_rollback(exp.start, exp.step)?;
         }
@@ -348,6 +351,8 @@ impl Simulation {
             )
         });
         if let Err(e) = stepped {
+            // The instance whose output diverged first in the step, if any.
+            let e = crate::culprit::blame(e, &self.system.slaves, self.grid.time());
             if !matches!(e, MasterError::TerminationRequested { .. }) {
                 self.health.fail(&e);
             }
@@ -387,10 +392,17 @@ impl Simulation {
     ) -> Result<RunStats, MasterError> {
         let clock = Instant::now();
         self.timing.step_end = None;
-        for o in observers.iter_mut() {
-            o.start(self.row.columns())?;
+        let columns = self.row.columns();
+        let started = observers
+            .iter_mut()
+            .try_for_each(|o| o.start(columns))
+            .map_err(MasterError::from)
+            .and_then(|()| self.notify(observers));
+        if let Err(e) = started {
+            // The results file failed at once (its header): the run failed.
+            self.health.fail(&e);
+            return Err(e);
         }
-        self.notify(observers)?;
         let outcome = (|| {
             while !self.finished() {
                 if let Some(reason) = observers.iter_mut().find_map(|o| o.interrupt()) {
@@ -441,7 +453,13 @@ impl Simulation {
         }
         self.stats.wall = clock.elapsed() + self.stats.times.setup;
         outcome?;
-        finished?;
+        // The results file failed at its end (a write, or removed during the
+        // run): the run is not completed.
+        if let Err(e) = finished {
+            let e = MasterError::from(e);
+            self.health.fail(&e);
+            return Err(e);
+        }
         Ok(self.stats())
     }
 

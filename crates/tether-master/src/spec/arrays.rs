@@ -15,6 +15,24 @@ use toml::{Table, Value};
 /// The sections whose blocks can repeat.
 const SECTIONS: [&str; 4] = ["instance", "constraint", "joint", "coupling_variable"];
 
+/// The most instances a system may have (docs/system-file.md, "Limits"):
+/// ten times the 1024-mass chain of the `scale` benchmark.
+pub const MAX_INSTANCES: usize = 10_000;
+
+/// The most constraints, joints, coupling variables or signal connections a
+/// system may have, each (the rows and columns of the interface system grow
+/// with them): ten times the instance limit.
+pub const MAX_BLOCKS: usize = 100_000;
+
+/// The most blocks a section may have: [`MAX_INSTANCES`] or [`MAX_BLOCKS`].
+pub(crate) fn limit(section: &str) -> usize {
+    if section == "instance" {
+        MAX_INSTANCES
+    } else {
+        MAX_BLOCKS
+    }
+}
+
 /// Whether the file has any array block (else it is read as it is, with
 /// the TOML reader's line numbers in errors).
 pub(crate) fn has_arrays(table: &Table) -> bool {
@@ -27,12 +45,35 @@ pub(crate) fn has_arrays(table: &Table) -> bool {
 }
 
 /// Expand every array block in place. Errors name the block and the text.
+/// The counts are checked against the section's [`limit`] before anything
+/// is expanded.
 pub(crate) fn expand(table: &mut Table) -> Result<(), String> {
     for section in SECTIONS {
         let Some(Value::Array(blocks)) = table.get_mut(section) else {
             continue;
         };
-        let mut expanded = Vec::with_capacity(blocks.len());
+        let limit = limit(section);
+        let mut total = 0usize;
+        for (b, block) in blocks.iter().enumerate() {
+            let (where_, count) = match block.get("count") {
+                None => (format!("[[{section}]] block {}", b + 1), 1),
+                Some(count) => {
+                    let where_ = format!("[[{section}]] block {} (count = {count})", b + 1);
+                    let count = count
+                        .as_integer()
+                        .and_then(|c| usize::try_from(c).ok())
+                        .ok_or_else(|| format!("{where_}: count must be an integer ≥ 0"))?;
+                    (where_, count)
+                }
+            };
+            total = total.saturating_add(count);
+            if total > limit {
+                return Err(format!(
+                    "{where_}: makes {total} [[{section}]] blocks, above the limit of {limit} (docs/system-file.md, \"Limits\")"
+                ));
+            }
+        }
+        let mut expanded = Vec::with_capacity(total);
         for (b, block) in std::mem::take(blocks).into_iter().enumerate() {
             let Value::Table(mut block) = block else {
                 expanded.push(block);
@@ -312,6 +353,35 @@ mod tests {
         for bad in ["i +", "j", "(i", "i / 0", "log2(0)", "1.2.3"] {
             assert!(evaluate(bad, 1).is_err(), "{bad}");
         }
+    }
+
+    /// A count, or the blocks of a section in all, above the section's limit
+    /// is refused before anything is expanded; at the limit it is expanded.
+    #[test]
+    fn counts_above_the_limits_are_refused() {
+        let table = |text: &str| -> Table { toml::from_str(text).unwrap() };
+        let mut huge = table("[[instance]]\nname = \"m{i}\"\ncount = 100000000");
+        let error = expand(&mut huge).unwrap_err();
+        assert_eq!(
+            error,
+            "[[instance]] block 1 (count = 100000000): makes 100000000 [[instance]] blocks, above the limit of 10000 (docs/system-file.md, \"Limits\")"
+        );
+        let mut total = table(
+            "[[joint]]\nname = \"a{i}\"\ncount = 99999\n[[joint]]\nname = \"b\"\n[[joint]]\nname = \"c\"",
+        );
+        let error = expand(&mut total).unwrap_err();
+        assert!(
+            error.starts_with(
+                "[[joint]] block 3: makes 100001 [[joint]] blocks, above the limit of 100000"
+            ),
+            "{error}"
+        );
+        let mut at_limit = table("[[instance]]\nname = \"m{i}\"\ncount = 10000");
+        expand(&mut at_limit).unwrap();
+        assert_eq!(
+            at_limit["instance"].as_array().unwrap().len(),
+            MAX_INSTANCES
+        );
     }
 
     #[test]

@@ -57,6 +57,24 @@ impl SystemSpec {
 
     /// Check what can be checked without the FMUs: times, settings, names.
     pub fn validate(&self) -> Result<(), MasterError> {
+        // The sizes first: everything after allocates with them.
+        for (section, n) in [
+            ("instance", self.instances.len()),
+            ("constraint", self.constraints.len()),
+            ("joint", self.joints.len()),
+            ("coupling_variable", self.coupling_variables.len()),
+            ("connection", self.connections.len()),
+        ] {
+            let limit = crate::spec::arrays::limit(section);
+            if n > limit {
+                return Err(MasterError::SystemFile {
+                    path: self.source_name(),
+                    reason: format!(
+                        "{n} [[{section}]] blocks, above the limit of {limit} (docs/system-file.md, \"Limits\")"
+                    ),
+                });
+            }
+        }
         let e = &self.experiment;
         let param = |name: &str, value: f64, expected: &str| MasterError::InvalidParameter {
             name: name.into(),

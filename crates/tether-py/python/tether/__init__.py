@@ -42,6 +42,12 @@ __version__: str = _tether.__version__
 # executable of its own. TETHER_FMI_HOST, when set, still comes first.
 _tether.use_fmi_host(sys.executable, ["-m", "tether._fmi_host"])
 
+# An in-process FMU's exit()/abort() ends the process with one line and a
+# non-zero status (docs/python.md); in a child of os.fork() (a multiprocessing
+# worker) too, but never in a process an FMU forked itself.
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_tether.adopt_exit_hook)
+
 __all__ = [
     "run",
     "run_many",
