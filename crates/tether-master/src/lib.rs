@@ -29,6 +29,7 @@ mod method;
 mod observer;
 pub mod polynomial;
 mod simulation;
+mod single;
 mod slave;
 pub mod spec;
 mod start;
@@ -39,6 +40,7 @@ pub use error::MasterError;
 pub use method::Method;
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use simulation::{MasterState, Simulation, SystemState};
+pub use single::{SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun};
 pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use spec::Parallel;
 pub use spec::{
