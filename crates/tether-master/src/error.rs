@@ -28,6 +28,14 @@ pub enum MasterError {
         /// What would have been accepted.
         expected: String,
     },
+    /// The time span of a simulation is not finite and increasing.
+    #[error("invalid time span: start {start}, stop {stop} (stop must be after start)")]
+    InvalidTimeSpan {
+        /// Start time.
+        start: f64,
+        /// Stop time.
+        stop: f64,
+    },
     /// A constraint expression cannot be parsed.
     #[error("constraint '{constraint}', {level}: {source}")]
     Expression {

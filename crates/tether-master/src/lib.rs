@@ -30,6 +30,7 @@ mod method;
 mod observer;
 pub mod polynomial;
 mod simulation;
+mod single;
 mod slave;
 pub mod spec;
 mod start;
@@ -40,6 +41,7 @@ pub use error::{MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use simulation::{MasterState, Simulation, SystemState};
+pub use single::{SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun};
 pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use spec::Parallel;
 pub use spec::{

@@ -19,10 +19,10 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
-use tether_fmi::{BaseType, Causality, Fmu, Initial, Variability, VariableKind};
+use tether_fmi::{Causality, Fmu, Initial, Variability, VariableKind};
 use tether_master::{
-    apply_start_value, MasterError, MethodChange, Observer, OverrideError, Overrides, RunStats,
-    Sample, Simulation, StartValue, SystemSpec,
+    MasterError, MethodChange, Observer, OverrideError, Overrides, RunStats, Sample, Simulation,
+    SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun, StartValue, SystemSpec,
 };
 
 mod study;
@@ -55,7 +55,7 @@ fn kind_of(e: &MasterError) -> &'static str {
         | MasterError::DivergedOutput { .. }
         | MasterError::SingularJacobian { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
-        MasterError::InvalidParameter { .. } => "settings",
+        MasterError::InvalidParameter { .. } | MasterError::InvalidTimeSpan { .. } => "settings",
         MasterError::SystemFile { .. }
         | MasterError::Expression { .. }
         | MasterError::UnknownInstance { .. }
@@ -859,8 +859,10 @@ fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
     Ok(d)
 }
 
-/// One FMU at a fixed communication step, like `tether simulate`: every
-/// non-String output at every step. Returns `(columns, data, stats)`.
+/// One FMU at a fixed communication step, like `tether simulate` (the same
+/// simulation, [`tether_master::SingleFmu`]): every non-String output at
+/// every step, an array one column per element. Returns `(columns, data,
+/// stats)`; a failure after the first row carries the rows so far.
 #[pyfunction]
 #[pyo3(signature = (fmu, start=None, stop=None, step=None, tolerance=None, parameters=None))]
 fn simulate(
@@ -878,192 +880,76 @@ fn simulate(
             values.insert(name.extract::<String>()?, start_value(&value)?);
         }
     }
+    let values: Vec<(String, StartValue)> = values.into_iter().collect();
     let outcome = py.detach(move || simulate_one(&fmu, start, stop, step, tolerance, &values));
-    match outcome {
-        Err((e, None)) => Err(e.into_err(None)),
-        Err((e, Some((rows, steps)))) => {
-            let stats = simulate_stats(py, steps, &e.message)?;
+    let (rows, run) = outcome.map_err(|e| master_failure(&e, None))?;
+    match run.end {
+        Err(e) => {
+            let stats = simulate_stats(py, run.steps, &message(&e), None)?;
             let partial = rows.into_py(py, stats)?;
-            Err(e.into_err(Some(partial)))
+            Err(master_failure(&e, Some(partial)))
         }
-        Ok((rows, steps)) => {
-            let stats = simulate_stats(py, steps, "completed")?;
+        Ok(end) => {
+            let stats = simulate_stats(py, run.steps, "completed", Some(end))?;
             rows.into_py(py, stats)
         }
     }
 }
 
-fn simulate_stats(py: Python<'_>, steps: u64, reason: &str) -> PyResult<Py<PyAny>> {
+/// The stats of `tether.simulate`: `macro_steps`, `stop_reason` and, when
+/// the FMU requested the end of the simulation, `termination` (as in the run
+/// summary: `requested_at`, `ended_at`).
+fn simulate_stats(
+    py: Python<'_>,
+    steps: u64,
+    reason: &str,
+    end: Option<SingleEnd>,
+) -> PyResult<Py<PyAny>> {
     let d = PyDict::new(py);
     d.set_item("macro_steps", steps)?;
     d.set_item("stop_reason", reason)?;
+    if let Some(SingleEnd::Terminated { time }) = end {
+        let t = PyDict::new(py);
+        t.set_item("requested_at", time)?;
+        t.set_item("ended_at", time)?;
+        d.set_item("termination", t)?;
+    }
     Ok(d.into_any().unbind())
 }
 
-/// A failure of [`simulate_one`], made into a Python error with the GIL.
-struct SimulateError {
-    kind: &'static str,
-    message: String,
-}
-
-impl SimulateError {
-    fn into_err(self, partial: Option<Py<PyAny>>) -> PyErr {
-        failure(self.kind, self.message, partial)
-    }
-}
-
-impl From<tether_fmi::Error> for SimulateError {
-    fn from(e: tether_fmi::Error) -> Self {
-        SimulateError {
-            kind: "fmu",
-            message: message(&e),
-        }
-    }
-}
-
-impl From<MasterError> for SimulateError {
-    fn from(e: MasterError) -> Self {
-        SimulateError {
-            kind: kind_of(&e),
-            message: message(&e),
-        }
-    }
-}
-
-type Simulated = (Rows, u64);
-
-/// The loop of `tether simulate` (crates/tether-cli/src/simulate.rs),
-/// recording into memory; the error carries the rows so far once the
-/// recording started.
+/// [`SingleFmu`] recording into memory, with Ctrl-C looked for before every
+/// step. An error is one before the first row (no partial result); a failure
+/// after it is in the run, with the rows so far.
 fn simulate_one(
     path: &Path,
     start: Option<f64>,
     stop: Option<f64>,
     step: Option<f64>,
     tolerance: Option<f64>,
-    parameters: &BTreeMap<String, StartValue>,
-) -> Result<Simulated, (SimulateError, Option<Simulated>)> {
-    let early = |e: SimulateError| (e, None);
-    let fmu = Fmu::open(path).map_err(|e| early(e.into()))?;
-    let md = fmu.model_description().clone();
-    let de = md.default_experiment.unwrap_or_default();
-    let start = start.or(de.start_time).unwrap_or(0.0);
-    let stop = stop.or(de.stop_time).unwrap_or(start + 1.0);
-    let step = step.or(de.step_size).unwrap_or((stop - start) / 500.0);
-    let tolerance = tolerance.or(de.tolerance);
-    let invalid = |message: String| {
-        early(SimulateError {
-            kind: "settings",
-            message,
-        })
-    };
-    if !(start.is_finite() && stop.is_finite() && stop > start) {
-        return Err(invalid(format!(
-            "invalid time span: start {start}, stop {stop} (stop must be after start)"
-        )));
-    }
-    if !(step.is_finite() && step > 0.0) {
-        return Err(invalid(format!(
-            "invalid step {step}: expected a finite step > 0"
-        )));
-    }
-    let steps = ((stop - start) / step).round().max(1.0) as u64;
-    let outputs: Vec<_> = md
-        .model_variables
-        .iter()
-        .filter(|v| v.causality == Causality::Output && v.base_type() != BaseType::String)
-        .collect();
-    let slots = |kinds: &[BaseType]| -> Vec<(usize, u32)> {
-        outputs
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| kinds.contains(&v.base_type()))
-            .map(|(i, v)| (i, v.value_reference))
-            .collect()
-    };
-    let real = slots(&[BaseType::Real]);
-    let int = slots(&[BaseType::Integer, BaseType::Enumeration]);
-    let boolean = slots(&[BaseType::Boolean]);
-    let real_vrs: Vec<u32> = real.iter().map(|x| x.1).collect();
-    let int_vrs: Vec<u32> = int.iter().map(|x| x.1).collect();
-    let bool_vrs: Vec<u32> = boolean.iter().map(|x| x.1).collect();
-
-    let name = md.co_simulation.model_identifier.clone();
-    let mut local = tether_fmi::LocalInstance::new(
-        fmu.instantiate(&name, Default::default())
-            .map_err(|e| early(e.into()))?,
-    );
-    for (var, value) in parameters {
-        apply_start_value(&mut local, &md, var, value).map_err(|e| early(e.into()))?;
-    }
-    let instance = local.instance();
-    let init = (|| -> Result<(), tether_fmi::Error> {
-        instance.setup_experiment(tolerance, start, Some(stop))?;
-        instance.enter_initialization_mode()?;
-        instance.exit_initialization_mode()
-    })();
-    init.map_err(|e| early(e.into()))?;
-
+    parameters: &[(String, StartValue)],
+) -> Result<(Rows, SingleRun), MasterError> {
+    let fmu = Fmu::open(path)?;
+    let md = fmu.model_description();
+    let experiment = SingleExperiment::new(md, start, stop, step, tolerance)?;
+    let outputs = SingleOutputs::all(md)?;
+    let mut single = SingleFmu::new(&fmu, parameters, experiment)?;
     let mut rows = Rows {
-        columns: outputs.iter().map(|v| v.name.clone()).collect(),
+        columns: Vec::new(),
         bytes: Vec::with_capacity(
-            usize::try_from(steps + 1)
+            usize::try_from(experiment.steps + 1)
                 .unwrap_or(usize::MAX)
-                .saturating_mul((outputs.len() + 1) * 8)
+                .saturating_mul((outputs.columns().len() + 1) * 8)
                 .min(1 << 30),
         ),
     };
-    let mut row = vec![0.0; outputs.len()];
-    let mut real_buf = vec![0.0; real.len()];
-    let mut int_buf = vec![0; int.len()];
-    let mut bool_buf = vec![false; boolean.len()];
-    let mut record = |instance: &mut tether_fmi::Instance,
-                      rows: &mut Rows,
-                      n: u64|
-     -> Result<(), tether_fmi::Error> {
-        instance.get_real(&real_vrs, &mut real_buf)?;
-        instance.get_integer(&int_vrs, &mut int_buf)?;
-        instance.get_boolean(&bool_vrs, &mut bool_buf)?;
-        for (k, &(slot, _)) in real.iter().enumerate() {
-            row[slot] = real_buf[k];
-        }
-        for (k, &(slot, _)) in int.iter().enumerate() {
-            row[slot] = f64::from(int_buf[k]);
-        }
-        for (k, &(slot, _)) in boolean.iter().enumerate() {
-            row[slot] = if bool_buf[k] { 1.0 } else { 0.0 };
-        }
-        rows.push(start + n as f64 * step, &row);
-        Ok(())
-    };
     let mut signals = Signals::new(None);
-    let mut outcome: Result<(), SimulateError> = record(instance, &mut rows, 0).map_err(Into::into);
-    let mut made = 0;
-    for n in 1..=steps {
-        if outcome.is_err() {
-            break;
-        }
-        if let Some(reason) = signals.interrupt() {
-            outcome = Err(MasterError::Interrupted {
-                time: start + (n - 1) as f64 * step,
-                reason,
-            }
-            .into());
-            break;
-        }
-        outcome = instance
-            .do_step(start + (n - 1) as f64 * step, step, true)
-            .and_then(|()| record(instance, &mut rows, n))
-            .map_err(Into::into);
-        if outcome.is_ok() {
-            made = n;
-        }
+    let run = single.run(&outputs, &mut rows, &mut || signals.interrupt());
+    if run.end.is_ok() {
+        // Like the CLI: a failing fmi2Terminate after complete results is an
+        // error without them. (After a failure the instance is only freed.)
+        single.terminate()?;
     }
-    if let Err(e) = outcome {
-        return Err((e, Some((rows, made))));
-    }
-    instance.terminate().map_err(|e| (e.into(), None))?;
-    Ok((rows, made))
+    Ok((rows, run))
 }
 
 // ---------------------------------------------------------------------------

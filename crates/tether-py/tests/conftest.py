@@ -29,6 +29,23 @@ def oscillator_fmu() -> Path:
 
 
 @pytest.fixture(scope="session")
+def quirks_fmu() -> Path:
+    return _need(ROOT / "target" / "fmus" / "quirks.fmu", "run `cargo xtask fmus`")
+
+
+@pytest.fixture(scope="session")
+def fmi3_reference():
+    """The FMI 3.0 Reference FMU `model` (third-party FMUs in
+    ../shared/reference-fmus/fmi3 from the repository root, as the CLI tests)."""
+
+    def fmu(model: str) -> Path:
+        return _need(ROOT.parent / "shared" / "reference-fmus" / "fmi3" / f"{model}.fmu",
+                     "the Reference FMUs belong in ../shared/reference-fmus")
+
+    return fmu
+
+
+@pytest.fixture(scope="session")
 def oscillator_toml(oscillator_fmu) -> Path:
     return ROOT / "examples" / "oscillator.toml"
 

@@ -1,15 +1,21 @@
-"""tether.simulate and tether.info against fmpy on the workspace oscillator FMU."""
+"""tether.simulate and tether.info: against fmpy on the workspace oscillator
+FMU, against `tether simulate` (the same simulation) on FMI 3.0 Reference
+FMUs, and its checks (NaN outputs, an FMU's request to end)."""
 
 import numpy as np
 import pytest
 
 import tether
+from conftest import cli, error_line, read_csv, same_bits
 
-fmpy = pytest.importorskip("fmpy")
+
+@pytest.fixture(scope="module")
+def fmpy():
+    return pytest.importorskip("fmpy")
 
 
 @pytest.mark.parametrize("parameters", [{}, {"m": 2.0, "c": 500.0, "x0": 0.1}], ids=["defaults", "set"])
-def test_simulate_matches_fmpy(oscillator_fmu, parameters):
+def test_simulate_matches_fmpy(fmpy, oscillator_fmu, parameters):
     ours = tether.simulate(oscillator_fmu, stop=1.0, step=1e-3, parameters=parameters)
     theirs = fmpy.simulate_fmu(
         str(oscillator_fmu),
@@ -37,7 +43,7 @@ def test_simulate_errors(tmp_path, oscillator_fmu):
         tether.simulate(oscillator_fmu, start=1.0, stop=0.5)
 
 
-def test_info_matches_fmpy(oscillator_fmu):
+def test_info_matches_fmpy(fmpy, oscillator_fmu):
     ours = tether.info(oscillator_fmu)
     md = fmpy.read_model_description(str(oscillator_fmu))
     assert ours["modelName"] == md.modelName
@@ -51,3 +57,68 @@ def test_info_matches_fmpy(oscillator_fmu):
         assert v["valueReference"] == w.valueReference
         assert v["causality"] == w.causality
         assert v["type"] == w.type
+
+
+def test_simulate_raises_at_a_nan_output_with_the_partial_result(tmp_path, tether_bin, quirks_fmu):
+    # The quirks FMU's output x is NaN from t = 0.05 on: the rows before it are
+    # the result, as in the CLI's CSV, and the message is the CLI's.
+    args = dict(stop=0.1, step=0.01, parameters={"nan_after": 0.05})
+    csv = tmp_path / "quirks.csv"
+    proc = cli(tether_bin, "simulate", str(quirks_fmu), "--stop", "0.1", "--step", "0.01",
+               "--set", "nan_after=0.05", "--out", str(csv))
+    assert proc.returncode == 1
+    header, rows, trailer = read_csv(csv)
+    with pytest.raises(tether.TetherError) as err:
+        tether.simulate(quirks_fmu, **args)
+    message = str(err.value)
+    assert message == ("instance 'quirks': output 'x' = NaN after fmi2DoStep at t = 0.05 "
+                       "(the FMU computed a non-finite value)")
+    assert error_line(proc).endswith(": " + message)
+    assert trailer == "# incomplete: " + message
+    partial = err.value.result
+    assert partial is not None and not partial.complete
+    assert partial.stats["stop_reason"] == message
+    assert partial.stats["macro_steps"] == 4
+    assert ["time", *partial.columns] == header
+    assert same_bits(partial.to_numpy().view(np.float64).reshape(len(partial), -1), rows)
+    assert partial["time"][-1] == 0.04
+
+
+def test_simulate_ends_normally_when_the_fmu_requests_it(quirks_fmu):
+    # stop_after: the step reaching t = 0.05 asks to end (fmi2Discard, fmi2Terminated).
+    out = tether.simulate(quirks_fmu, stop=0.1, step=0.01, parameters={"stop_after": 0.05})
+    assert out.complete
+    assert out.stats["termination"]["requested_at"] == out["time"][-1]
+    assert out.stats["macro_steps"] == len(out) - 1 < 10
+
+
+def test_simulate_of_an_fmi2_fmu_equals_the_cli(tmp_path, tether_bin, oscillator_fmu):
+    csv = tmp_path / "oscillator.csv"
+    proc = cli(tether_bin, "simulate", str(oscillator_fmu), "--stop", "1", "--step", "1e-3",
+               "--set", "m=2", "--out", str(csv))
+    assert proc.returncode == 0, proc.stderr
+    header, rows, trailer = read_csv(csv)
+    assert trailer is None
+    out = tether.simulate(oscillator_fmu, stop=1.0, step=1e-3, parameters={"m": 2})
+    assert out.complete and out.stats["macro_steps"] == 1000
+    assert ["time", *out.columns] == header
+    assert same_bits(out.to_numpy().view(np.float64).reshape(len(out), -1), rows)
+
+
+@pytest.mark.parametrize("model", ["StateSpace", "Stair", "BouncingBall", "VanDerPol", "Feedthrough"])
+def test_simulate_of_an_fmi3_fmu_equals_the_cli(tmp_path, tether_bin, fmi3_reference, model):
+    fmu = fmi3_reference(model)
+    csv = tmp_path / f"{model}.csv"
+    proc = cli(tether_bin, "simulate", str(fmu), "--out", str(csv))
+    assert proc.returncode == 0, proc.stderr
+    header, rows, trailer = read_csv(csv)
+    assert trailer is None
+    out = tether.simulate(fmu)
+    assert out.complete
+    assert ["time", *out.columns] == header
+    assert same_bits(out.to_numpy().view(np.float64).reshape(len(out), -1), rows)
+    if model == "StateSpace":
+        assert out.columns == ["y[1]", "y[2]", "y[3]"]
+    if model == "Stair":
+        # Stair asks to end the simulation at t = 9 (fmi3DoStep, terminateSimulation).
+        assert out.stats["termination"]["requested_at"] == out["time"][-1] < 10

@@ -743,11 +743,16 @@ def simulate(
     tolerance: Optional[float] = None,
     parameters: Optional[Mapping[str, ParameterValue]] = None,
 ) -> Result:
-    """Run one FMU at a fixed communication step, like ``tether simulate`` or
-    fmpy's ``simulate_fmu(..., fmi_type="CoSimulation")``: every non-String
-    output at every step. ``start``, ``stop``, ``step`` and ``tolerance``
-    default to the FMU's DefaultExperiment (else 0, start + 1,
-    (stop − start)/500); ``parameters`` are start values by variable name."""
+    """Run one FMU (FMI 2.0 or 3.0) at a fixed communication step, like
+    ``tether simulate`` (the same simulation) or fmpy's
+    ``simulate_fmu(..., fmi_type="CoSimulation")``: every non-String output at
+    every step, an array one column per element (``y[1]``, ``A[2,3]``).
+    ``start``, ``stop``, ``step`` and ``tolerance`` default to the FMU's
+    DefaultExperiment (else 0, start + 1, (stop − start)/500); ``parameters``
+    are start values by variable name. A NaN or infinite output raises
+    :class:`TetherError` with the rows before it as ``err.result``; an FMU's
+    request to end the simulation ends it normally, noted in
+    ``stats["termination"]``."""
     try:
         raw = _tether.simulate(
             os.fspath(fmu),
