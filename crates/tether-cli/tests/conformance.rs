@@ -189,22 +189,24 @@ fn run_ends_normally_at_the_last_accepted_point_when_an_instance_requests_termin
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), ", stop_after = 0.5", INDEX1, 1.0, 0.1);
     let csv = dir.path().join("pair.csv");
-    let out = tether(
-        &["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()],
-        dir.path(),
-    );
-    let text = success(&out);
-    assert!(
-        text.contains(
-            "  note: instance 'mass1' requested the end of the simulation at t = 0.5 \
-             (fmi2Discard, fmi2Terminated); the run ended normally at t = 0.4, the last accepted point"
-        ),
-        "{text}"
-    );
-    assert!(text.contains("t = 0 … 0.4"), "{text}");
-    let (_, rows, trailer) = read_csv(&csv);
-    assert_eq!(trailer, None, "a normal end");
-    assert_eq!(rows.last().unwrap()[0], 0.4);
+    // In process and in a host process: both instances say the same.
+    for isolate in [&[][..], &["--isolate"][..]] {
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()];
+        args.extend_from_slice(isolate);
+        let out = tether(&args, dir.path());
+        let text = success(&out);
+        assert!(
+            text.contains(
+                "  note: instance 'mass1' requested the end of the simulation at t = 0.5 \
+                 (fmi2Discard, fmi2Terminated); the run ended normally at t = 0.4, the last accepted point"
+            ),
+            "{isolate:?}: {text}"
+        );
+        assert!(text.contains("t = 0 … 0.4"), "{isolate:?}: {text}");
+        let (_, rows, trailer) = read_csv(&csv);
+        assert_eq!(trailer, None, "a normal end");
+        assert_eq!(rows.last().unwrap()[0], 0.4);
+    }
 }
 
 #[test]

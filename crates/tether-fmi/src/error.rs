@@ -574,12 +574,34 @@ fn platform_of(path: &std::path::Path) -> String {
         .unwrap_or_else(|| crate::library::PLATFORM.to_owned())
 }
 
+/// What an FMI 2.0 instance says after a step returned fmi2Discard: whether
+/// it terminated (`fmi2GetBooleanStatus(fmi2Terminated)`) and the time it
+/// reached (`fmi2GetRealStatus(fmi2LastSuccessfulTime)`). In process and in a
+/// host process alike.
+pub(crate) trait StepStatus {
+    fn name(&self) -> &str;
+    fn terminated(&mut self) -> Result<bool>;
+    fn last_successful_time(&mut self) -> Result<f64>;
+}
+
+impl StepStatus for crate::Instance {
+    fn name(&self) -> &str {
+        crate::Instance::name(self)
+    }
+    fn terminated(&mut self) -> Result<bool> {
+        crate::Instance::terminated(self)
+    }
+    fn last_successful_time(&mut self) -> Result<f64> {
+        crate::Instance::last_successful_time(self)
+    }
+}
+
 /// The error of a failed FMI 2.0 step of `instance` to `end`: a request to end
 /// the simulation (fmi2Discard with `fmi2Terminated`) becomes
 /// [`Error::TerminationRequested`], any other error stays as it is.
 #[cold]
 #[inline(never)]
-pub(crate) fn step_failure(e: Error, instance: &mut crate::Instance, end: f64) -> Error {
+pub(crate) fn step_failure(e: Error, instance: &mut impl StepStatus, end: f64) -> Error {
     if matches!(e, Error::Discard { .. }) && matches!(instance.terminated(), Ok(true)) {
         let time = instance.last_successful_time().unwrap_or(end);
         return Error::TerminationRequested {

@@ -8,11 +8,13 @@
 //! The master speaks this interface only, in its own words (save, restore,
 //! step, inputs' polynomial); the implementations speak FMI. There is one
 //! implementation per place and standard: [`LocalInstance`] for an FMI 2.0
-//! instance loaded in this process and
+//! instance loaded in this process,
 //! [`RemoteInstance`](crate::remote::RemoteInstance) for one in a host process
-//! of its own. The master holds a `Box<dyn FmuInstance>`: a new kind of
-//! instance (FMI 3.0, an instance on another machine) is one more
-//! implementation, and the macro step does not change.
+//! of its own, and [`Fmi3Instance`](crate::Fmi3Instance) for an FMI 3.0 instance
+//! in this process; [`instantiate`](crate::instantiate) picks one. The master
+//! holds a `Box<dyn FmuInstance>`: a new kind of instance (an instance on
+//! another machine) is one more implementation, and the macro step does not
+//! change.
 //!
 //! # Runs
 //!
@@ -202,11 +204,6 @@ impl LocalInstance {
             instance,
             states: Default::default(),
         }
-    }
-
-    /// The FMI 2.0 instance itself.
-    pub fn instance(&mut self) -> &mut Instance {
-        &mut self.instance
     }
 }
 

@@ -762,17 +762,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
         match self.do_step(t, h, true) {
             Ok(()) => Ok(()),
-            Err(e)
-                if matches!(e, Error::Discard { .. }) && matches!(self.terminated(), Ok(true)) =>
-            {
-                let time = self.last_successful_time().unwrap_or(t + h);
-                Err(Error::TerminationRequested {
-                    instance: self.name.to_string(),
-                    time,
-                    how: None,
-                })
-            }
-            Err(e) => Err(e),
+            Err(e) => Err(crate::error::step_failure(e, self, t + h)),
         }
     }
     fn save(&mut self, slot: crate::interface::Slot) -> Result<()> {
@@ -795,5 +785,17 @@ impl crate::interface::FmuInstance for RemoteInstance {
     }
     fn terminate(&mut self) -> Result<()> {
         RemoteInstance::terminate(self)
+    }
+}
+
+impl crate::error::StepStatus for RemoteInstance {
+    fn name(&self) -> &str {
+        self.name.as_str()
+    }
+    fn terminated(&mut self) -> Result<bool> {
+        RemoteInstance::terminated(self)
+    }
+    fn last_successful_time(&mut self) -> Result<f64> {
+        RemoteInstance::last_successful_time(self)
     }
 }
