@@ -285,6 +285,7 @@ impl FmuInstance for LocalInstance {
             Err(e) => Err(crate::error::step_failure(e, &mut self.instance, t + h)),
         }
     }
+    #[inline]
     fn save(&mut self, slot: Slot) -> Result<()> {
         match &mut self.states[slot] {
             Some(s) => self.instance.update_fmu_state(s),
@@ -294,6 +295,7 @@ impl FmuInstance for LocalInstance {
             }
         }
     }
+    #[inline]
     fn restore(&mut self, slot: Slot) -> Result<()> {
         let state = slot_state(&self.states, slot, &self.instance, "fmi2SetFMUstate")?;
         self.instance.set_fmu_state(state)
@@ -320,18 +322,26 @@ impl FmuInstance for LocalInstance {
 }
 
 /// The state saved in `slot`, or an error naming `function` and the slot.
+#[inline]
 fn slot_state<'a>(
     states: &'a [Option<FmuState>],
     slot: Slot,
     instance: &Instance,
     function: &'static str,
 ) -> Result<&'a FmuState> {
-    states
-        .get(slot)
-        .and_then(Option::as_ref)
-        .ok_or_else(|| Error::InvalidArgument {
-            function,
-            instance: instance.name().to_string(),
-            message: format!("no FMU state saved in slot {slot}"),
-        })
+    match states.get(slot) {
+        Some(Some(state)) => Ok(state),
+        _ => Err(no_state(slot, instance, function)),
+    }
+}
+
+/// The error for a slot without a saved state.
+#[cold]
+#[inline(never)]
+fn no_state(slot: Slot, instance: &Instance, function: &'static str) -> Error {
+    Error::InvalidArgument {
+        function,
+        instance: instance.name().to_string(),
+        message: format!("no FMU state saved in slot {slot}"),
+    }
 }

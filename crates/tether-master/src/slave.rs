@@ -89,10 +89,10 @@ pub struct Slave {
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
     value_vrs: Vec<u32>,
-    value_slots: Vec<usize>,
-    /// The output derivatives read, `(variable, order)`, and their slots.
+    /// The output derivatives read, `(variable, order)`.
     derivative_reads: Vec<(u32, i32)>,
-    derivative_slots: Vec<usize>,
+    /// The slot in the coupled outputs of each value of `value_buf`.
+    slots: Vec<usize>,
     /// A run's outputs as the instance returns them: the values
     /// (`value_vrs`), then the derivatives (`derivative_reads`).
     value_buf: Vec<f64>,
@@ -299,9 +299,8 @@ impl Slave {
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
-            value_slots: Vec::new(),
             derivative_reads: Vec::new(),
-            derivative_slots: Vec::new(),
+            slots: Vec::new(),
             value_buf: Vec::new(),
             recorded_values: vec![0.0; recorded_names.len()],
             recorded_names,
@@ -373,18 +372,19 @@ impl Slave {
         }
         self.input.derivatives = vec![0.0; self.input.derivative_vrs.len()];
         self.value_vrs.clear();
-        self.value_slots.clear();
         self.derivative_reads.clear();
-        self.derivative_slots.clear();
+        let mut derivative_slots = Vec::new();
+        self.slots.clear();
         for (slot, o) in self.coupled_outputs.iter().enumerate() {
             if o.order == 0 {
                 self.value_vrs.push(o.vr);
-                self.value_slots.push(slot);
+                self.slots.push(slot);
             } else {
                 self.derivative_reads.push((o.vr, o.order as i32));
-                self.derivative_slots.push(slot);
+                derivative_slots.push(slot);
             }
         }
+        self.slots.extend(derivative_slots);
         self.value_buf = vec![0.0; self.coupled_outputs.len()];
         self.at_save = vec![0.0; self.coupled_outputs.len()];
         self.readback = vec![0.0; self.coupled_outputs.len()];
@@ -598,20 +598,31 @@ impl Slave {
             self.counters.get_reals += 1;
         }
         self.counters.get_output_derivatives += self.derivative_reads.len() as u64;
-        let slots = self.value_slots.iter().chain(&self.derivative_slots);
-        for (&value, &slot) in self.value_buf.iter().zip(slots) {
+        // Every slot of `out` is written: when every value is finite, `out` is.
+        let mut finite = true;
+        for (&value, &slot) in self.value_buf.iter().zip(&self.slots) {
             out[slot] = value;
+            finite &= value.is_finite();
         }
-        match out.iter().position(|v| !v.is_finite()) {
-            None => {
-                let beyond = |(v, limit): (&f64, &f64)| v.abs() > *limit;
-                if let Some(k) = self.value_buf.iter().zip(&self.limits).position(beyond) {
-                    self.note_beyond(k, run);
-                }
-                Ok(())
-            }
-            Some(slot) => Err(self.non_finite(self.coupled_name(slot), out[slot], run)),
+        if !finite {
+            return Err(self.first_non_finite(out, run));
         }
+        let beyond = |(v, limit): (&f64, &f64)| v.abs() > *limit;
+        if let Some(k) = self.value_buf.iter().zip(&self.limits).position(beyond) {
+            self.note_beyond(k, run);
+        }
+        Ok(())
+    }
+
+    /// The error naming the first coupled output in `out` that is not finite.
+    #[cold]
+    #[inline(never)]
+    fn first_non_finite(&self, out: &[f64], run: Run) -> MasterError {
+        let slot = out
+            .iter()
+            .position(|v| !v.is_finite())
+            .expect("a value read is not finite");
+        self.non_finite(self.coupled_name(slot), out[slot], run)
     }
 
     /// Divergence limits `factor`·max(|v|, 1) around the coupled values of
@@ -635,7 +646,7 @@ impl Slave {
             return;
         }
         self.beyond = Some(crate::culprit::Beyond::new(
-            self.coupled_name(self.value_slots[k]),
+            self.coupled_name(self.slots[k]),
             self.value_buf[k],
             self.limits[k],
             run.describe(),
