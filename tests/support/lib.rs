@@ -5,6 +5,7 @@ pub mod fmi;
 pub mod fmpy;
 pub mod multibody;
 pub mod reference;
+pub mod tools;
 
 /// The current value of one result column of `sim` (panics on an unknown name).
 pub fn column_value(sim: &tether_master::Simulation, name: &str) -> f64 {

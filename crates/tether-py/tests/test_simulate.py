@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 import tether
-from conftest import cli, error_line, read_csv, same_bits
+from conftest import cli, error_line, need_tool, read_csv, same_bits
 
 
 @pytest.fixture(scope="module")
 def fmpy():
-    return pytest.importorskip("fmpy")
+    return need_tool("fmpy")
 
 
 @pytest.mark.parametrize("parameters", [{}, {"m": 2.0, "c": 500.0, "x0": 0.1}], ids=["defaults", "set"])
