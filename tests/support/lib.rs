@@ -4,6 +4,8 @@ pub mod faulty;
 pub mod fmi;
 pub mod fmpy;
 pub mod multibody;
+pub mod oscillator;
+pub mod planar;
 pub mod reference;
 pub mod tools;
 
