@@ -7,6 +7,7 @@ pub mod multibody;
 pub mod oscillator;
 pub mod planar;
 pub mod reference;
+pub mod signals;
 pub mod tools;
 
 /// The current value of one result column of `sim` (panics on an unknown name).
