@@ -89,9 +89,7 @@ pub fn main(args: Args) -> Result<()> {
         crate::output::not_an_input(summary, inputs())?;
     }
     spec.validate()?;
-    if let Some(warning) = spec.grid_warning() {
-        crate::say!("warning: {warning}");
-    }
+    spec.check_grid()?;
     let unstable = spec.method.stability_warning(spec.coupling.order);
     if let Some(warning) = &unstable {
         crate::say!("warning: {warning}");
