@@ -420,7 +420,7 @@ fn the_log_rate_limit_is_switchable() {
         (count, text)
     };
     for isolate in [&[][..], &["--isolate"][..]] {
-        let with = |limit: &[&str]| [limit, isolate].concat();
+        let with = |limit: &[&'static str]| -> Vec<&'static str> { [limit, isolate].concat() };
         let (count, text) = shown(&with(&["--fmu-log-limit", "5"]));
         assert!(
             text.contains("more messages suppressed (more than 5 in 1 s; --fmu-log-limit)"),
