@@ -532,6 +532,8 @@ fn the_summary_prints_max_g_and_warns_above_the_threshold() {
 #[test]
 fn a_stop_time_off_the_grid_is_refused_by_run_and_warned_by_simulate() {
     let dir = tempfile::tempdir().unwrap();
+    // The example names the packaged FMU under target/fmus.
+    tether_fmu_build::workspace_fmu("oscillator").expect("oscillator FMU");
     let sys = example("oscillator.toml");
     let csv = dir.path().join("o.csv");
     let args = [
