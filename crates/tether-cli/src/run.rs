@@ -94,21 +94,34 @@ pub fn main(args: Args) -> Result<()> {
     if let Some(warning) = &unstable {
         crate::say!("warning: {warning}");
     }
-    let mut sim = Simulation::new(&spec).map_err(|e| match e {
-        // The patterns of --output-variables replaced the file's.
-        tether_master::MasterError::InvalidOutput(text) if !args.output_variables.is_empty() => {
-            tether_master::MasterError::InvalidOutput(
-                text.replace("[output] variables,", "--output-variables,"),
-            )
-        }
-        e => e.located(&spec, |instance, variable| {
-            let target = format!("{instance}.{variable}");
-            overrides
-                .parameters
-                .contains_key(&target)
-                .then(|| format!("--set {target}"))
-        }),
-    })?;
+    let mut sim = Simulation::new(&spec)
+        .map_err(|e| match e {
+            // The patterns of --output-variables replaced the file's.
+            tether_master::MasterError::InvalidOutput(text)
+                if !args.output_variables.is_empty() =>
+            {
+                tether_master::MasterError::InvalidOutput(
+                    text.replace("[output] variables,", "--output-variables,"),
+                )
+            }
+            e => e.located(&spec, |instance, variable| {
+                let target = format!("{instance}.{variable}");
+                overrides
+                    .parameters
+                    .contains_key(&target)
+                    .then(|| format!("--set {target}"))
+            }),
+        })
+        .map_err(|e| match e {
+            // A name of an SSP system appears in its SystemStructure.ssd.
+            tether_master::MasterError::UnknownVariable(mut u)
+                if _ssp.is_some() && !u.place.starts_with("--set") =>
+            {
+                u.place = format!("{}: {}", crate::ssp::ssd_name(&args.system), u.place);
+                tether_master::MasterError::UnknownVariable(u)
+            }
+            e => e,
+        })?;
     sim.time_phases(args.timing);
     // The plot's columns are checked now, not after the run.
     let plot_columns = crate::columns::split(&args.columns);
