@@ -721,7 +721,7 @@ fn isolated_log_flood_is_rate_limited() {
     assert!(out.status.success(), "{text}");
     assert!(text.len() < 16 << 10, "{} bytes on stderr", text.len());
     assert!(text.contains("[WARN  fmu::mass2] [logStatusWarning] flood message 0 at t = 0.5"));
-    assert!(text.contains("more messages suppressed (more than 20 in 1 s)"));
+    assert!(text.contains("more messages suppressed (more than 20 in 1 s; --fmu-log-limit)"));
     let out = s.run(&flood, "out.csv", &["--isolate", "--quiet"]);
     assert_eq!(stderr(&out), "", "--quiet");
     assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);
