@@ -493,11 +493,11 @@ fn a_results_file_above_a_gigabyte_is_announced_before_the_run() {
         .unwrap();
     child.kill().unwrap();
     child.wait().unwrap();
-    // 1e10 + 1 rows of time and the 2 × 4 outputs and link.lambda, link.g.
+    // 1e10 + 1 rows of time, the 2 × 3 outputs x, v, a and link.lambda, link.g.
     assert!(
         first.starts_with("warning: the results file will be about ")
             && first.ends_with(
-                " GB (10000000001 rows × 11 columns); --output-interval DT records fewer rows, \
+                " GB (10000000001 rows × 9 columns); --output-interval DT records fewer rows, \
                  --output-variables PATTERN,… fewer columns"
             ),
         "{first}"
