@@ -99,7 +99,7 @@ fn commands(text: &str) -> Vec<String> {
         };
         let line = line.trim();
         if let Some(part) = line.strip_suffix('\\') {
-            current.push_str(part);
+            current.push_str(part.trim_end());
             current.push(' ');
             continue;
         }
