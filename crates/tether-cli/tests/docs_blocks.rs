@@ -196,8 +196,7 @@ fn spliced(fragment: &str) -> String {
         .filter(|h| !h.is_empty())
         .collect();
     let drop = |h: &str| {
-        replaced.contains(&h)
-            || (replaced.contains(&"[[instance]]") && h == "[[constraint]]")
+        replaced.contains(&h) || (replaced.contains(&"[[instance]]") && h == "[[constraint]]")
     };
     let mut text: String = tables(&base)
         .into_iter()
@@ -214,9 +213,15 @@ fn run_toml(block: &Block, dir: &Path) {
     let place = format!("{}:{}", block.file, block.line);
     let text = &block.text;
     let full = text.contains("[experiment]");
-    let fragment = ["[method]", "[output]", "[[instance]]", "[coupling]", "[signals]"]
-        .iter()
-        .any(|t| text.lines().any(|l| l.trim_start().starts_with(t)));
+    let fragment = [
+        "[method]",
+        "[output]",
+        "[[instance]]",
+        "[coupling]",
+        "[signals]",
+    ]
+    .iter()
+    .any(|t| text.lines().any(|l| l.trim_start().starts_with(t)));
     assert!(
         full || fragment,
         "{place}: a toml block that is neither a system file nor a fragment of one; \
@@ -284,6 +289,9 @@ fn command_lines_are_split_as_a_shell_would() {
         words(r#"tether run "a b.toml" --set 'x=1'"#),
         ["tether", "run", "a b.toml", "--set", "x=1"]
     );
-    assert_eq!(tether_args("cargo tether run x"), Some(vec!["run".into(), "x".into()]));
+    assert_eq!(
+        tether_args("cargo tether run x"),
+        Some(vec!["run".into(), "x".into()])
+    );
     assert_eq!(tether_args("cargo test"), None);
 }
