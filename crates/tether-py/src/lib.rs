@@ -499,7 +499,10 @@ fn run(
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Py<PyAny>> {
     let spec = load_spec(path, text, kwargs)?;
+    // A divergence of a formulation known to be unstable says so again, as the CLI does.
+    let unstable = spec.method.stability_warning(spec.coupling.order);
     let outcome = py.detach(move || -> Result<_, MasterError> {
+        spec.check_grid()?;
         let mut sim = Simulation::new(&spec).map_err(|e| e.located(&spec, |_, _| None))?;
         let mut rows = Rows::default();
         let width = sim.columns().len() + 1;
@@ -524,7 +527,14 @@ fn run(
         Ok((rows, Err(e), stats)) => {
             let stats = stats_dict(py, &stats, &message(&e))?.into_any().unbind();
             let partial = rows.into_py(py, stats)?;
-            Err(master_failure(&e, Some(partial)))
+            match (&e, unstable) {
+                (MasterError::Diverged { .. }, Some(advice)) => Err(failure(
+                    kind_of(&e),
+                    format!("{}; {advice}", message(&e)),
+                    Some(partial),
+                )),
+                _ => Err(master_failure(&e, Some(partial))),
+            }
         }
     }
 }
@@ -546,6 +556,8 @@ struct PySimulation {
     failed: Option<String>,
     /// The counters at [`close`](Self::close).
     closed_stats: Option<(RunStats, u64)>,
+    /// The advice for a formulation known to be unstable, repeated on divergence.
+    unstable: Option<String>,
 }
 
 impl PySimulation {
@@ -583,6 +595,7 @@ impl PySimulation {
             rows,
             failed: None,
             closed_stats: None,
+            unstable: spec.method.stability_warning(spec.coupling.order),
         })
     }
 
@@ -693,7 +706,11 @@ impl PySimulation {
             }
             if let Err(e) = sim.step() {
                 let text = message(&e);
-                self.failed = Some(text);
+                self.failed = Some(text.clone());
+                // A formulation known to be unstable says so again, as the CLI does.
+                if let (MasterError::Diverged { .. }, Some(advice)) = (&e, &self.unstable) {
+                    return Err(failure(kind_of(&e), format!("{text}; {advice}"), None));
+                }
                 return Err(master_failure(&e, None));
             }
             self.n += 1;
