@@ -189,7 +189,6 @@ fn oscillator_agrees_with_the_fmpy_reference() {
     for (label, method, order, flags) in variants {
         let (a, b) = both(
             &python,
-            &python,
             "tests/validation/oscillator.toml",
             method,
             order,
