@@ -789,15 +789,15 @@ fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
         "canNotUseMemoryManagementFunctions",
         cs.can_not_use_memory_management_functions,
     )?;
+    // fmpy's names, FMI 2.0's spelling for the flags both standards have.
+    c.set_item("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state)?;
+    c.set_item("canSerializeFMUstate", cs.can_serialize_fmu_state)?;
+    c.set_item(
+        "providesDirectionalDerivative",
+        cs.provides_directional_derivative,
+    )?;
     let fmi3 = md.standard == FmiStandard::Fmi3;
     if fmi3 {
-        // FMI 3.0's attribute names (fmpy's read_model_description uses them too).
-        c.set_item("canGetAndSetFMUState", cs.can_get_and_set_fmu_state)?;
-        c.set_item("canSerializeFMUState", cs.can_serialize_fmu_state)?;
-        c.set_item(
-            "providesDirectionalDerivatives",
-            cs.provides_directional_derivative,
-        )?;
         c.set_item(
             "providesAdjointDerivatives",
             cs.provides_adjoint_derivatives,
@@ -827,13 +827,6 @@ fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
         c.set_item(
             "recommendedIntermediateInputSmoothness",
             cs.recommended_intermediate_input_smoothness,
-        )?;
-    } else {
-        c.set_item("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state)?;
-        c.set_item("canSerializeFMUstate", cs.can_serialize_fmu_state)?;
-        c.set_item(
-            "providesDirectionalDerivative",
-            cs.provides_directional_derivative,
         )?;
     }
     d.set_item("coSimulation", c)?;
@@ -921,7 +914,7 @@ fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
             let sizes = md
                 .array_sizes(v)
                 .map_err(|e| failure("fmu", message(&e), None))?;
-            x.set_item("dimensions", sizes)?;
+            x.set_item("shape", PyTuple::new(py, sizes)?)?;
             if let Some(values) = &v.start_values {
                 let start = start_object(py, values)?;
                 if v.is_array() {

@@ -65,31 +65,35 @@ FMI3_MODELS = ["BouncingBall", "Dahlquist", "Feedthrough", "Resource", "Stair", 
 
 @pytest.mark.parametrize("model", FMI3_MODELS)
 def test_info_of_an_fmi3_fmu_matches_fmpy(fmpy, fmi3_reference, model):
-    """FMI 3.0: the capability flags by their FMI 3.0 names, each variable's
-    exact type, causality, dimensions and start values, as fmpy reads them."""
+    """FMI 3.0: the capability flags, each variable's exact type, causality,
+    shape and start values, as fmpy reads them (and names them)."""
     fmu = fmi3_reference(model)
     ours = tether.info(fmu)
     md = fmpy.read_model_description(str(fmu))
     assert ours["fmiVersion"] == md.fmiVersion == "3.0"
     assert ours["guid"] == md.guid
     cs = ours["coSimulation"]
-    for flag in ("canGetAndSetFMUState", "canSerializeFMUState", "providesIntermediateUpdate",
-                 "hasEventMode", "canHandleVariableCommunicationStepSize"):
+    for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate", "providesIntermediateUpdate",
+                 "hasEventMode", "canHandleVariableCommunicationStepSize",
+                 "canReturnEarlyAfterIntermediateUpdate", "providesEvaluateDiscreteStates"):
         assert cs[flag] == bool(getattr(md.coSimulation, flag)), flag
     assert [v["name"] for v in ours["modelVariables"]] == [v.name for v in md.modelVariables]
     for v, w in zip(ours["modelVariables"], md.modelVariables):
         assert v["valueReference"] == w.valueReference
         assert v["causality"] == w.causality, v["name"]
         assert v["type"] == w.type, v["name"]
+        assert v["intermediateUpdate"] == w.intermediateUpdate, v["name"]
+        if w.shape is not None:
+            assert v["shape"] == tuple(w.shape), v["name"]
         # fmpy keeps a start value as text ("1 0 0 …" for an array).
         if w.start is not None and w.type in ("Float32", "Float64"):
             expected = [float(x) for x in str(w.start).split()]
             got = v["start"] if isinstance(v["start"], list) else [v["start"]]
             assert got == expected, v["name"]
     if model == "StateSpace":
-        dims = {v["name"]: v["dimensions"] for v in ours["modelVariables"]}
-        assert dims["A"] == [3, 3] and dims["B"] == [3, 3] and dims["x"] == [3]
-        assert dims["m"] == []
+        shape = {v["name"]: v["shape"] for v in ours["modelVariables"]}
+        assert shape["A"] == (3, 3) and shape["B"] == (3, 3) and shape["x"] == (3,)
+        assert shape["m"] == ()
         a = next(v for v in ours["modelVariables"] if v["name"] == "A")
         assert a["start"] == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 
