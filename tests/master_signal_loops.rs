@@ -188,3 +188,15 @@ fn the_control_loop_example_runs() {
     eprintln!("examples/control_loop.toml: max |Y − Y_ref| = {err:.3e}");
     assert!(err < 2e-3, "{err:e}");
 }
+
+/// A tolerance that is not a positive number is refused by name.
+#[test]
+fn a_bad_signal_tolerance_is_refused() {
+    let mut spec = system(1e-3, 0.1, 1.0, "jacobi");
+    spec.signals.tolerance = Some(-1.0);
+    let message = match Simulation::new(&spec) {
+        Ok(_) => panic!("a negative tolerance"),
+        Err(e) => e.to_string(),
+    };
+    assert!(message.contains("[signals] tolerance"), "{message}");
+}
