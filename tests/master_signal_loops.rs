@@ -200,3 +200,16 @@ fn a_bad_signal_tolerance_is_refused() {
     };
     assert!(message.contains("[signals] tolerance"), "{message}");
 }
+
+/// The loop exported as SSP and read back runs to the same results, bit
+/// for bit (`tether run system.ssp` takes this path).
+#[test]
+fn the_loop_runs_from_ssp() {
+    let spec = system(1e-3, 0.2, 1.0, "gauss_seidel");
+    let dir = tempfile::tempdir().unwrap();
+    let ssp = dir.path().join("loop.ssp");
+    tether_ssp::write(&spec, &ssp).unwrap();
+    let loaded = tether_ssp::read(&ssp, None, None).unwrap();
+    assert_eq!(loaded.spec.signals, spec.signals);
+    assert_eq!(plant_y(&loaded.spec), plant_y(&spec));
+}
