@@ -409,8 +409,25 @@ impl Slave {
         stop: f64,
         tolerance: Option<f64>,
     ) -> Result<(), MasterError> {
+        self.enter_initialization(start, stop, tolerance)?;
+        self.exit_initialization()
+    }
+
+    /// Setup experiment and enter initialization mode, where inputs can be
+    /// set and outputs read before the first step (a loop's values at T_0).
+    pub(crate) fn enter_initialization(
+        &mut self,
+        start: f64,
+        stop: f64,
+        tolerance: Option<f64>,
+    ) -> Result<(), MasterError> {
         self.backend.setup(tolerance, start, Some(stop))?;
         self.backend.enter_initialization()?;
+        Ok(())
+    }
+
+    /// Leave initialization mode.
+    pub(crate) fn exit_initialization(&mut self) -> Result<(), MasterError> {
         self.backend.exit_initialization()?;
         Ok(())
     }
