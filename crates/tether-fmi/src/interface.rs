@@ -161,6 +161,12 @@ pub trait FmuInstance: Debug + Send {
 
     /// Back to the instantiated state.
     fn reset(&mut self) -> Result<()>;
+
+    /// The messages this instance exchanged with a process of its own so far,
+    /// each a request and its reply (0 for an instance in this process).
+    fn round_trips(&self) -> u64 {
+        0
+    }
     /// End the simulation (the instance is freed when dropped).
     fn terminate(&mut self) -> Result<()>;
 

@@ -786,9 +786,12 @@ impl Slave {
         &self.recorded_values
     }
 
-    /// Call counters.
-    pub fn counters(&self) -> &InstanceCounters {
-        &self.counters
+    /// Call counters, with the round trips to the instance's host process.
+    pub fn counters(&self) -> InstanceCounters {
+        InstanceCounters {
+            round_trips: self.backend.round_trips(),
+            ..self.counters.clone()
+        }
     }
 }
 

@@ -102,6 +102,8 @@ pub struct RemoteInstance {
     /// How the host process ended, once it did.
     ended: Option<String>,
     timeout: Option<Duration>,
+    /// Requests sent and answered (or not): [`FmuInstance::round_trips`](crate::FmuInstance::round_trips).
+    round_trips: u64,
     /// Readable once the host process has ended ([`watch_exit`]), also while a
     /// process it started still holds the reply pipe.
     exit_watch: Option<OwnedFd>,
@@ -175,6 +177,7 @@ impl RemoteInstance {
             fatal: false,
             ended: None,
             timeout,
+            round_trips: 0,
             exit_watch,
         };
         // The host logs FMU messages itself, at the level they are wanted here.
@@ -234,6 +237,7 @@ impl RemoteInstance {
             });
         }
         let entered = crate::current::Entered::new(function, &self.name, self.time);
+        self.round_trips += 1;
         let received = match &mut self.writer {
             Some(writer) => self.out.send(writer).and_then(|()| {
                 wait_readable(&self.reader, self.exit_watch.as_ref(), self.timeout)?;
@@ -782,6 +786,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
     }
     fn reset(&mut self) -> Result<()> {
         RemoteInstance::reset(self)
+    }
+    fn round_trips(&self) -> u64 {
+        self.round_trips
     }
     fn terminate(&mut self) -> Result<()> {
         RemoteInstance::terminate(self)

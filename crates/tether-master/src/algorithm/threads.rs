@@ -200,7 +200,7 @@ impl PerturbedRuns for Threads {
             add(counters, &self.retired[s]);
             for lane in &self.lanes {
                 if let Some(extra) = &lock(&lane.shared).extras[s] {
-                    add(counters, &extra.counters);
+                    add(counters, &extra.counters());
                 }
             }
         }
@@ -270,7 +270,7 @@ impl Threads {
         for lane in &self.lanes {
             for (s, extra) in lock(&lane.shared).extras.iter().enumerate() {
                 if let Some(extra) = extra {
-                    add(&mut self.retired[s], &extra.counters);
+                    add(&mut self.retired[s], &extra.counters());
                 }
             }
         }
@@ -504,6 +504,7 @@ fn add(into: &mut InstanceCounters, from: &InstanceCounters) {
     into.get_reals += from.get_reals;
     into.set_input_derivatives += from.set_input_derivatives;
     into.get_output_derivatives += from.get_output_derivatives;
+    into.round_trips += from.round_trips;
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

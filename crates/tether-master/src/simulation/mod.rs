@@ -21,7 +21,7 @@ use crate::build::feedthrough::Feedthrough;
 use crate::build::system::{MacroStep, StepAt, System};
 use crate::coupling::rows::RowLevel;
 use crate::observer::Observer;
-use crate::slave::Run;
+use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, SystemSpec};
 use crate::stats::{Lap, RunStats, Termination};
 use crate::step_control::Controller;
@@ -330,7 +330,7 @@ impl Simulation {
             .system
             .slaves
             .iter()
-            .map(|s| s.counters().clone())
+            .map(Slave::counters)
             .collect();
         self.method.report(&mut stats);
         stats
