@@ -232,7 +232,11 @@ fn watch_calls(
             seconds: timeout.as_secs_f64(),
         };
         let mut out = Out::default();
-        let _ = out.start(protocol::ERR).u32(u32::MAX).error(&error).send(&mut *writer);
+        let _ = out
+            .start(protocol::ERR)
+            .u32(u32::MAX)
+            .error(&error)
+            .send(&mut *writer);
         // SAFETY: as in watch_hangup: the host's own process group, or this
         // process alone.
         unsafe {

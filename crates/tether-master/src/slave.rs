@@ -780,7 +780,12 @@ impl Slave {
         let mut len = 0;
         for (p, input) in planned.iter().zip(&mut self.run_inputs) {
             if let (Some((polys, _, _)), true) = (p.step, driven) {
-                combine_inputs(&self.inputs, polys, &mut input.values, &mut input.derivatives);
+                combine_inputs(
+                    &self.inputs,
+                    polys,
+                    &mut input.values,
+                    &mut input.derivatives,
+                );
             }
             if p.out.is_some() {
                 len += self.value_buf.len();
@@ -797,7 +802,11 @@ impl Slave {
                 restore: p.restore.then_some(SAVED),
                 inputs: (driven && p.step.is_some()).then(|| input.as_inputs()),
                 step: p.step.map(|(_, t, h)| (t, h)),
-                outputs: if p.out.is_some() { &self.value_vrs } else { &[] },
+                outputs: if p.out.is_some() {
+                    &self.value_vrs
+                } else {
+                    &[]
+                },
                 output_derivatives: if p.out.is_some() {
                     &self.derivative_reads
                 } else {

@@ -272,7 +272,9 @@ impl RemoteInstance {
     /// The coupled inputs, queued: `fmi2SetReal`, then
     /// `fmi2SetRealInputDerivatives` when derivatives are given.
     fn queue_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) {
-        self.queue(op::SET_REAL).u32s(inputs.vrs).f64s(inputs.values);
+        self.queue(op::SET_REAL)
+            .u32s(inputs.vrs)
+            .f64s(inputs.values);
         if !inputs.derivative_vrs.is_empty() {
             self.queue(op::SET_REAL_INPUT_DERIVATIVES)
                 .u32s(inputs.derivative_vrs)
@@ -313,9 +315,10 @@ impl RemoteInstance {
         // The host enforces the time-out on each call; this is the backstop
         // for a host that cannot (stopped, or its watch never scheduled).
         let calls = u32::try_from(self.calls.len()).unwrap_or(u32::MAX);
-        let backstop = self
-            .timeout
-            .map(|t| t.saturating_mul(calls).saturating_add(Duration::from_secs(2)));
+        let backstop = self.timeout.map(|t| {
+            t.saturating_mul(calls)
+                .saturating_add(Duration::from_secs(2))
+        });
         let received = match &mut self.writer {
             Some(writer) => self.out.send(writer).and_then(|()| {
                 wait_readable(&self.reader, self.exit_watch.as_ref(), backstop)?;
@@ -353,7 +356,9 @@ impl RemoteInstance {
             {
                 return Err((self.timed_out(blamed.function, blamed.time), None))
             }
-            Ok(false) | Err(_) => return Err((self.host_ended(blamed.function, blamed.time), None)),
+            Ok(false) | Err(_) => {
+                return Err((self.host_ended(blamed.function, blamed.time), None))
+            }
         }
         match self.reply.first() {
             Some(&protocol::OK) => Ok(()),
@@ -599,7 +604,8 @@ impl RemoteInstance {
 
     /// `fmi2SetString`.
     pub fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
-        let out = self.queue(op::SET_STRING)
+        let out = self
+            .queue(op::SET_STRING)
             .u32s(vrs)
             .u32(values.len() as u32);
         for v in values {

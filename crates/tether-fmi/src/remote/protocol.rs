@@ -273,7 +273,12 @@ impl Out {
                 time,
                 seconds,
             } => {
-                return self.u8(7).str(function).str(instance).f64(*time).f64(*seconds);
+                return self
+                    .u8(7)
+                    .str(function)
+                    .str(instance)
+                    .f64(*time)
+                    .f64(*seconds);
             }
             other => {
                 return self.u8(6).str(&crate::error::one_line(&other.to_string()));

@@ -134,15 +134,25 @@ impl PredictorCorrector {
     /// evaluated from the outputs at T_{N+1}. With `perturb`, the perturbed
     /// runs of Step 3 are handed to each instance with its predictor run:
     /// they depend on u^p, not on the predictor's outputs.
-    fn predict(&mut self, system: &mut System, at: StepAt, perturb: bool) -> Result<(), MasterError> {
+    fn predict(
+        &mut self,
+        system: &mut System,
+        at: StepAt,
+        perturb: bool,
+    ) -> Result<(), MasterError> {
         self.extrapolate(system, at);
         if perturb {
             self.perturbed_polynomials(system, at);
         }
         let perturbed = perturb.then_some((&self.perturbed[..], &mut self.outputs[..]));
         let slaves = &mut system.slaves;
-        self.runs
-            .predict(slaves, (at.t, at.h), &self.polys, &mut self.predicted, perturbed)?;
+        self.runs.predict(
+            slaves,
+            (at.t, at.h),
+            &self.polys,
+            &mut self.predicted,
+            perturbed,
+        )?;
         let view = View::at(&self.predicted, &self.u_pred);
         let nu = system.coupling.len();
         for (&level, g) in self.levels.iter().zip(self.g.chunks_exact_mut(nu)) {

@@ -326,12 +326,7 @@ impl Simulation {
         stats.residuals = self.health.residuals(self.row.all_columns()).collect();
         stats.residual_warning = self.health.residual_warning();
         stats.adaptive = self.grid.adaptive_stats();
-        stats.instances = self
-            .system
-            .slaves
-            .iter()
-            .map(Slave::counters)
-            .collect();
+        stats.instances = self.system.slaves.iter().map(Slave::counters).collect();
         self.method.report(&mut stats);
         stats
     }
