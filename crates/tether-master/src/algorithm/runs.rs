@@ -35,9 +35,7 @@ pub(crate) trait PerturbedRuns: Send {
         predicted: &mut [Vec<f64>],
         perturbed: Option<Perturbed<'_>>,
     ) -> Result<(), MasterError> {
-        for (slave, out) in slaves.iter_mut().zip(predicted) {
-            slave.predict_and_perturb(polys, (t, h), out, Vec::new())?;
-        }
+        predictor_runs(slaves, (t, h), polys, predicted)?;
         match perturbed {
             Some((polys, outputs)) => self.run(slaves, t, h, polys, outputs),
             None => Ok(()),
@@ -53,6 +51,19 @@ pub(crate) trait PerturbedRuns: Send {
     fn terminate(&mut self) -> Result<(), MasterError> {
         Ok(())
     }
+}
+
+/// The predictor run of every instance, alone.
+pub(crate) fn predictor_runs(
+    slaves: &mut [Slave],
+    (t, h): (f64, f64),
+    polys: &[Taylor],
+    predicted: &mut [Vec<f64>],
+) -> Result<(), MasterError> {
+    for (slave, out) in slaves.iter_mut().zip(predicted) {
+        slave.predict_and_perturb(polys, (t, h), out, Vec::new())?;
+    }
+    Ok(())
 }
 
 /// The perturbed runs' polynomials and outputs, per group (as

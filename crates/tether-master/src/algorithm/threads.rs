@@ -19,7 +19,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crate::algorithm::runs::{PerturbedRuns, Sequential};
+use crate::algorithm::runs::{predictor_runs, Perturbed, PerturbedRuns, Sequential};
 use crate::polynomial::Taylor;
 use crate::slave::Slave;
 use crate::spec::{InstanceSpec, Parallel};
@@ -181,6 +181,29 @@ impl PerturbedRuns for Threads {
             self.keep_or_stop();
         }
         Ok(())
+    }
+
+    fn predict(
+        &mut self,
+        slaves: &mut [Slave],
+        (t, h): (f64, f64),
+        polys: &[Taylor],
+        predicted: &mut [Vec<f64>],
+        perturbed: Option<Perturbed<'_>>,
+    ) -> Result<(), MasterError> {
+        // "auto" decided for the main thread: its runs go as sequentially.
+        let decided = self.auto && self.steps > CALIBRATION_STEPS && !self.active;
+        match perturbed {
+            Some(perturbed) if decided => {
+                self.sequential
+                    .predict(slaves, (t, h), polys, predicted, Some(perturbed))
+            }
+            Some((runs, outputs)) => {
+                predictor_runs(slaves, (t, h), polys, predicted)?;
+                self.run(slaves, t, h, runs, outputs)
+            }
+            None => predictor_runs(slaves, (t, h), polys, predicted),
+        }
     }
 
     fn terminate(&mut self) -> Result<(), MasterError> {
