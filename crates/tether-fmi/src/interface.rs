@@ -23,7 +23,9 @@
 //! the state where due. [`FmuInstance::run`] takes one run as one unit, a
 //! [`RunRequest`], so that an implementation that crosses a process or a
 //! network can send it in one message. Its provided body makes the calls one
-//! by one, in the order the request lists them.
+//! by one, in the order the request lists them. [`FmuInstance::run_batch`]
+//! takes runs that do not depend on each other's outputs (a macro step's
+//! predictor and perturbed runs) as one unit in the same way.
 //!
 //! # Deferred calls
 //!
