@@ -85,6 +85,10 @@ pub struct Slave {
     pub(crate) inputs: Vec<CoupledInput>,
     /// The coupled inputs' values and derivatives as the instance takes them.
     input: InputBuffers,
+    /// The same for each run of a batch ([`Slave::runs`]).
+    run_inputs: Vec<InputBuffers>,
+    /// The outputs of a batch of runs, run after run.
+    batch_buf: Vec<f64>,
     /// The degree k of the unknowns' polynomials (`finalize`).
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
@@ -301,6 +305,8 @@ impl Slave {
             saved: false,
             inputs: Vec::new(),
             input: InputBuffers::default(),
+            run_inputs: Vec::new(),
+            batch_buf: Vec::new(),
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
@@ -388,6 +394,7 @@ impl Slave {
         }
         self.slots.extend(derivative_slots);
         self.value_buf = vec![0.0; self.coupled_outputs.len()];
+        self.run_inputs.clear();
         self.at_save = vec![0.0; self.coupled_outputs.len()];
         self.readback = vec![0.0; self.coupled_outputs.len()];
     }
@@ -706,73 +713,180 @@ impl Slave {
             };
         }
         assert!(self.saved, "rerun is only called after save_state");
-        self.run(polys, (t, h), true, out, Run::Perturbed)
+        self.runs(&mut [Planned {
+            step: Some((polys, t, h)),
+            restore: true,
+            out,
+            record: false,
+            run: Run::Perturbed,
+        }])
     }
 
-    /// The predictor's run: set the inputs from `polys`, step from `t` over
-    /// `h`, read the coupled outputs into `out`.
-    pub(crate) fn predict(
+    /// The predictor's run (only the read of the coupled outputs for an
+    /// instance the signals' sweep has stepped) and, with the same step, the
+    /// perturbed runs from the saved state, one per `(polys, out)` of
+    /// `perturbed`: handed to the instance together, since none depends on
+    /// another's outputs (docs/algorithm.md, Steps 2 and 3).
+    pub(crate) fn predict_and_perturb(
+        &mut self,
+        polys: &[Taylor],
+        (t, h): (f64, f64),
+        out: &mut [f64],
+        perturbed: Vec<(&[Taylor], &mut [f64])>,
+    ) -> Result<(), MasterError> {
+        let predictor = Planned {
+            step: (!self.stepped_ahead).then_some((polys, t, h)),
+            restore: false,
+            out: Some(out),
+            record: false,
+            run: Run::Predictor,
+        };
+        if self.verify_restore {
+            // Each restore is checked on its own (its outputs read back).
+            self.runs(&mut [predictor])?;
+            for (polys, out) in perturbed {
+                self.rerun(polys, t, h, Some(out))?;
+            }
+            return Ok(());
+        }
+        let mut planned = Vec::with_capacity(1 + perturbed.len());
+        planned.push(predictor);
+        planned.extend(perturbed.into_iter().map(|(polys, out)| Planned {
+            step: Some((polys, t, h)),
+            restore: true,
+            out: Some(out),
+            record: false,
+            run: Run::Perturbed,
+        }));
+        self.runs(&mut planned)
+    }
+
+    /// The corrector's run: from the saved state with the inputs from
+    /// `polys` over the step, the coupled outputs into `out` and the recorded
+    /// outputs read at T_{N+1}, the accepted point.
+    pub(crate) fn correct(
         &mut self,
         polys: &[Taylor],
         t: f64,
         h: f64,
         out: &mut [f64],
     ) -> Result<(), MasterError> {
-        self.run(polys, (t, h), false, Some(out), Run::Predictor)
+        if self.verify_restore {
+            self.rerun(polys, t, h, None)?;
+            return self.read_accepted(out, Run::Corrector);
+        }
+        assert!(self.saved, "correct is only called after save_state");
+        self.runs(&mut [Planned {
+            step: Some((polys, t, h)),
+            restore: true,
+            out: Some(out),
+            record: true,
+            run: Run::Corrector,
+        }])
     }
 
-    /// One run handed to the instance as one unit: from the saved state when
-    /// `restore`, the inputs from `polys`, the step `(t, h)`, and with `out`
-    /// the coupled outputs read into it (checked as read after `run`).
-    fn run(
-        &mut self,
-        polys: &[Taylor],
-        (t, h): (f64, f64),
-        restore: bool,
-        out: Option<&mut [f64]>,
-        run: Run,
-    ) -> Result<(), MasterError> {
+    /// The coupled outputs into `out` and the recorded outputs, at an
+    /// accepted point reached after `run`.
+    pub(crate) fn read_accepted(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
+        self.runs(&mut [Planned {
+            step: None,
+            restore: false,
+            out: Some(out),
+            record: true,
+            run,
+        }])
+    }
+
+    /// Runs handed to the instance as one unit ([`FmuInstance::run_batch`]),
+    /// in order: each from the saved state when `restore`, with the inputs
+    /// from its polynomials over its step, its coupled outputs read into its
+    /// `out` (checked as read after its `run`) and, with `record`, the
+    /// recorded outputs.
+    fn runs(&mut self, planned: &mut [Planned<'_>]) -> Result<(), MasterError> {
         let driven = !self.inputs.is_empty();
-        if driven {
-            combine_inputs(
-                &self.inputs,
-                polys,
-                &mut self.input.values,
-                &mut self.input.derivatives,
-            );
+        if self.run_inputs.len() < planned.len() {
+            self.run_inputs.resize(planned.len(), self.input.clone());
         }
-        let read = out.is_some();
-        let input = &self.input;
-        let request = RunRequest {
-            restore: restore.then_some(SAVED),
-            inputs: driven.then(|| input.as_inputs()),
-            step: Some((t, h)),
-            outputs: if read { &self.value_vrs } else { &[] },
-            output_derivatives: if read { &self.derivative_reads } else { &[] },
-            save: None,
-        };
-        let ran = self.backend.run(&request, &mut self.value_buf);
-        if restore {
-            self.counters.state_sets += 1;
+        let mut len = 0;
+        for (p, input) in planned.iter().zip(&mut self.run_inputs) {
+            if let (Some((polys, _, _)), true) = (p.step, driven) {
+                combine_inputs(
+                    &self.inputs,
+                    polys,
+                    &mut input.values,
+                    &mut input.derivatives,
+                );
+            }
+            if p.out.is_some() {
+                len += self.value_buf.len();
+            }
+            if p.record {
+                len += self.recorded_vrs.len();
+            }
         }
-        if driven {
-            self.count_inputs();
+        self.batch_buf.resize(len, 0.0);
+        let requests: Vec<RunRequest<'_>> = planned
+            .iter()
+            .zip(&self.run_inputs)
+            .map(|(p, input)| RunRequest {
+                restore: p.restore.then_some(SAVED),
+                inputs: (driven && p.step.is_some()).then(|| input.as_inputs()),
+                step: p.step.map(|(_, t, h)| (t, h)),
+                outputs: if p.out.is_some() {
+                    &self.value_vrs
+                } else {
+                    &[]
+                },
+                output_derivatives: if p.out.is_some() {
+                    &self.derivative_reads
+                } else {
+                    &[]
+                },
+                recorded: if p.record { &self.recorded_vrs } else { &[] },
+                save: None,
+            })
+            .collect();
+        let ran = self.backend.run_batch(&requests, &mut self.batch_buf);
+        drop(requests);
+        for p in planned.iter() {
+            if p.restore {
+                self.counters.state_sets += 1;
+            }
+            if p.step.is_some() {
+                if driven {
+                    self.count_inputs();
+                }
+                self.counters.do_steps += 1;
+            }
         }
-        self.counters.do_steps += 1;
         ran?;
-        match out {
-            Some(out) => self.take_coupled(out, run),
-            None => Ok(()),
-        }
+        let batch = std::mem::take(&mut self.batch_buf);
+        let mut values = batch.as_slice();
+        let taken = planned.iter_mut().try_for_each(|p| {
+            if let Some(out) = p.out.as_deref_mut() {
+                let (coupled, rest) = values.split_at(self.value_buf.len());
+                self.value_buf.copy_from_slice(coupled);
+                values = rest;
+                self.take_coupled(out, p.run)?;
+            }
+            if p.record {
+                let (recorded, rest) = values.split_at(self.recorded_vrs.len());
+                values = rest;
+                self.take_recorded(recorded, p.run)?;
+            }
+            Ok(())
+        });
+        self.batch_buf = batch;
+        taken
     }
 
-    /// Read every Real, Integer and Boolean output into `recorded_values`.
-    /// Every Real value must be finite, as in [`read_coupled`](Self::read_coupled).
-    pub(crate) fn read_recorded(&mut self, run: Run) -> Result<(), MasterError> {
-        let reals = self.recorded_vrs.len();
+    /// The recorded Real outputs `reals` as read, and the Integer and
+    /// Boolean ones read now, into `recorded_values`. Every Real value must be
+    /// finite, as in [`read_coupled`](Self::read_coupled).
+    fn take_recorded(&mut self, reals: &[f64], run: Run) -> Result<(), MasterError> {
+        self.recorded_values[..reals.len()].copy_from_slice(reals);
+        let reals = reals.len();
         if reals > 0 {
-            self.backend
-                .get_reals(&self.recorded_vrs, &mut self.recorded_values[..reals])?;
             self.counters.get_reals += 1;
         }
         if !self.recorded_ints.is_empty() {
@@ -816,15 +930,32 @@ impl Slave {
         &self.recorded_values
     }
 
-    /// Call counters.
-    pub fn counters(&self) -> &InstanceCounters {
-        &self.counters
+    /// Call counters, with the round trips to the instance's host process.
+    pub fn counters(&self) -> InstanceCounters {
+        InstanceCounters {
+            round_trips: self.backend.round_trips(),
+            ..self.counters.clone()
+        }
     }
+}
+
+/// One run of an instance as a macro step plans it ([`Slave::runs`]).
+struct Planned<'a> {
+    /// The inputs' polynomials and the step `(t, h)`; `None`: no step, a read.
+    step: Option<(&'a [Taylor], f64, f64)>,
+    /// From the saved state.
+    restore: bool,
+    /// Where the coupled outputs go, if read.
+    out: Option<&'a mut [f64]>,
+    /// Read the recorded outputs too (an accepted point).
+    record: bool,
+    /// What the outputs are read after, for messages.
+    run: Run,
 }
 
 /// The coupled inputs' values and their derivatives (the first derivatives
 /// of every input, then the second, as far as min(k, 2) asks).
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 struct InputBuffers {
     vrs: Vec<u32>,
     values: Vec<f64>,

@@ -151,8 +151,7 @@ impl System {
     /// `run` names the call they come after, for a non-finite value.
     pub fn read_accepted(&mut self, run: Run) -> Result<(), MasterError> {
         for (slave, out) in self.slaves.iter_mut().zip(&mut self.outputs) {
-            slave.read_coupled(out, run)?;
-            slave.read_recorded(run)?;
+            slave.read_accepted(out, run)?;
         }
         Ok(())
     }

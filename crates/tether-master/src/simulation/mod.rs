@@ -21,7 +21,7 @@ use crate::build::feedthrough::Feedthrough;
 use crate::build::system::{MacroStep, StepAt, System};
 use crate::coupling::rows::RowLevel;
 use crate::observer::Observer;
-use crate::slave::Run;
+use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, SystemSpec};
 use crate::stats::{Lap, RunStats, Termination};
 use crate::step_control::Controller;
@@ -345,12 +345,7 @@ impl Simulation {
         stats.residuals = self.health.residuals(self.row.all_columns()).collect();
         stats.residual_warning = self.health.residual_warning();
         stats.adaptive = self.grid.adaptive_stats();
-        stats.instances = self
-            .system
-            .slaves
-            .iter()
-            .map(|s| s.counters().clone())
-            .collect();
+        stats.instances = self.system.slaves.iter().map(Slave::counters).collect();
         self.method.report(&mut stats);
         stats
     }
