@@ -50,6 +50,16 @@ pub fn model_description(
         escape(name),
         yes(capabilities.state),
     );
+    let mut units: Vec<&str> = variables.iter().filter_map(|v| v.unit.as_deref()).collect();
+    units.sort_unstable();
+    units.dedup();
+    if !units.is_empty() {
+        let _ = writeln!(x, "  <UnitDefinitions>");
+        for unit in units {
+            let _ = writeln!(x, r#"    <Unit name="{}"/>"#, escape(unit));
+        }
+        let _ = writeln!(x, "  </UnitDefinitions>");
+    }
     let _ = writeln!(x, "  <LogCategories>");
     for (category, description) in LOG_CATEGORIES {
         let _ = writeln!(
