@@ -11,6 +11,11 @@ usage: exported_fmu.py FMU OUT.csv
 5. Two instances in one process do not share state: instance A stepped
    alone and interleaved with instance B (another parameter value) gives the
    same outputs bit for bit.
+6. fmi2Instantiate with a wrong GUID returns NULL, the reason reaching the
+   logger the importer gave.
+7. A member's error (mass1 with m = -1 through the exported parameter)
+   fails fmi2ExitInitializationMode with fmi2Error, and the member's own
+   message reaches the importer's logger of that instance.
 Prints one line per check; exit 1 on the first that fails.
 """
 
@@ -113,4 +118,54 @@ if rows_a != rows_alone:
 if rows_a == rows_b:
     fail("two instances: a and b (other parameter) give the same outputs")
 print("two instances: independent")
+
+from ctypes import byref  # noqa: E402
+
+from fmpy import calloc, free  # noqa: E402
+from fmpy.fmi2 import (  # noqa: E402
+    fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE)
+from fmpy.logging import addLoggerProxy  # noqa: E402
+
+messages = []
+
+
+def logger(component, name, status, category, message):
+    messages.append((name.decode(), status, message.decode()))
+
+
+callbacks = fmi2CallbackFunctions()
+callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+addLoggerProxy(byref(callbacks))
+wrong = FMU2Slave(guid="{00000000-0000-0000-0000-000000000000}", unzipDirectory=unzipped,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="wrong")
+try:
+    wrong.instantiate(callbacks=callbacks)
+    fail("a wrong GUID was accepted")
+except Exception:
+    pass
+if not any(n == "wrong" and st == 3 and "GUID" in m for n, st, m in messages):
+    fail(f"wrong GUID: no logged reason: {messages}")
+print(f"wrong GUID: NULL, logged: {messages[-1][2]}")
+
+messages.clear()
+negative = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                     modelIdentifier=md.coSimulation.modelIdentifier, instanceName="negative")
+negative.instantiate(callbacks=callbacks)
+negative.setupExperiment(startTime=0.0)
+negative.setReal(parameters[:1], [-1.0])
+negative.enterInitializationMode()
+try:
+    negative.exitInitializationMode()
+    fail("m = -1 was accepted")
+except FMICallException as e:
+    if e.status != 3:
+        fail(f"m = -1: status {e.status}, expected 3 (fmi2Error)")
+member = [m for n, st, m in messages if n == "negative" and st == 3 and m.startswith("fmu::mass1")]
+if not member:
+    fail(f"m = -1: the member's message was not forwarded: {messages}")
+print(f"member error: fmi2Error, forwarded: {member[0]}")
+negative.freeInstance()
 shutil.rmtree(unzipped, ignore_errors=True)

@@ -113,11 +113,14 @@ fn export(system: &Path, out: &Path) -> Result<()> {
         let binary = format!("binaries/linux64/{}.so", export.model_name);
         zip.start_file(binary, options.unix_permissions(0o755))?;
         zip.write_all(&std::fs::read(&runtime)?)?;
-        zip.start_file(format!("resources/{}", tether_fmu_export::SYSTEM_FILE), options)?;
+        zip.start_file(
+            format!("resources/{}", tether_fmu_export::SYSTEM_FILE),
+            options,
+        )?;
         zip.write_all(text.as_bytes())?;
         for (path, name) in &members {
-            let bytes = std::fs::read(path)
-                .with_context(|| format!("cannot read {}", path.display()))?;
+            let bytes =
+                std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
             zip.start_file(format!("resources/{name}"), options)?;
             zip.write_all(&bytes)?;
         }

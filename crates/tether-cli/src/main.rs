@@ -6,8 +6,8 @@ use clap::{Parser, Subcommand};
 
 mod columns;
 mod compare;
-mod fmu;
 mod exit_guard;
+mod fmu;
 mod info;
 mod interrupt;
 mod isolation;

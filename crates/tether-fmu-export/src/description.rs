@@ -40,7 +40,10 @@ pub fn model_description(
         guid(system_text),
         escape(&format!(
             "Tether system{} exported as one FMU: its members and system file are in resources/",
-            spec.name.as_deref().map(|n| format!(" '{n}'")).unwrap_or_default()
+            spec.name
+                .as_deref()
+                .map(|n| format!(" '{n}'"))
+                .unwrap_or_default()
         )),
         env!("CARGO_PKG_VERSION"),
     );
@@ -86,7 +89,12 @@ pub fn model_description(
         let description = v
             .description
             .as_deref()
-            .map(|d| format!(r#" description="{}""#, escape(&format!("{d} ({})", v.target))))
+            .map(|d| {
+                format!(
+                    r#" description="{}""#,
+                    escape(&format!("{d} ({})", v.target))
+                )
+            })
             .unwrap_or_else(|| format!(r#" description="{}""#, escape(&v.target)));
         let _ = writeln!(
             x,
@@ -98,7 +106,10 @@ pub fn model_description(
             .as_deref()
             .map(|u| format!(r#" unit="{}""#, escape(u)))
             .unwrap_or_default();
-        let start = v.start.map(|s| format!(r#" start="{s:?}""#)).unwrap_or_default();
+        let start = v
+            .start
+            .map(|s| format!(r#" start="{s:?}""#))
+            .unwrap_or_default();
         let _ = writeln!(x, r#"      <Real{unit}{start}/>"#);
         let _ = writeln!(x, "    </ScalarVariable>");
     }

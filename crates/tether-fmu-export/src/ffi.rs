@@ -7,6 +7,7 @@
 
 #![allow(non_snake_case, clippy::missing_safety_doc)]
 
+use std::cell::Cell;
 use std::ffi::{c_char, c_int, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::ptr;
@@ -55,9 +56,74 @@ impl Component {
         } else if failure.enters_error_state {
             self.exported.machine = MachineState::Error;
         }
-        self.log(failure.status, &format!("{}: {}", call.name(), failure.message));
+        self.log(
+            failure.status,
+            &format!("{}: {}", call.name(), failure.message),
+        );
         failure.status as St
     }
+}
+
+thread_local! {
+    /// The logger of the instance whose call runs on this thread, and
+    /// whether its debug logging is on: where the members' messages and the
+    /// master's warnings (the `log` facade) go.
+    static IN_CALL: Cell<Option<(EnvironmentLogger, bool)>> = const { Cell::new(None) };
+}
+
+/// Puts an instance's logger in scope for one call; the previous one comes
+/// back on drop (also after a panic).
+struct Scope(Option<(EnvironmentLogger, bool)>);
+
+impl Scope {
+    fn enter(logger: Option<EnvironmentLogger>, logging_on: bool) -> Scope {
+        Scope(IN_CALL.replace(logger.map(|l| (l, logging_on))))
+    }
+}
+
+impl Drop for Scope {
+    fn drop(&mut self) {
+        IN_CALL.set(self.0);
+    }
+}
+
+/// Forwards `log` records (the member FMUs' messages, as tether-fmi
+/// reports them, and the master's) to the importer's logger of the instance
+/// in the call: warnings and errors always, the rest with debug logging on.
+struct Forward;
+
+impl log::Log for Forward {
+    fn enabled(&self, metadata: &log::Metadata) -> bool {
+        IN_CALL
+            .get()
+            .is_some_and(|(_, on)| on || metadata.level() <= log::Level::Warn)
+    }
+
+    fn log(&self, record: &log::Record) {
+        let Some((logger, on)) = IN_CALL.get() else {
+            return;
+        };
+        let (status, category) = match record.level() {
+            log::Level::Error => (Status::Error, "logStatusError"),
+            log::Level::Warn => (Status::Warning, "logStatusWarning"),
+            _ if on => (Status::Ok, "logEvents"),
+            _ => return,
+        };
+        let message = format!("{}: {}", record.target(), record.args());
+        logger.log(status, category, &message);
+    }
+
+    fn flush(&self) {}
+}
+
+/// Installs [`Forward`] once per process (this library's own `log` facade).
+fn forward_log() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if log::set_logger(&Forward).is_ok() {
+            log::set_max_level(log::LevelFilter::Info);
+        }
+    });
 }
 
 fn c_string(text: &str) -> CString {
@@ -81,6 +147,7 @@ unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Outcome) -> St
     }
     // SAFETY: per the contract, c is a live Box<Component> from fmi2Instantiate.
     let component = unsafe { &mut *c.cast::<Component>() };
+    let _scope = Scope::enter(component.logger, component.logging_on);
     let exported = &mut component.exported;
     let result = catch_unwind(AssertUnwindSafe(|| {
         let state = exported.machine;
@@ -179,6 +246,8 @@ pub unsafe extern "C" fn fmi2Instantiate(
         });
         // SAFETY: the FMI contract: NUL-terminated strings or null.
         let (guid, resources) = unsafe { (text(guid), text(resources)) };
+        forward_log();
+        let _scope = Scope::enter(logger, logging_on != 0);
         let exported = if fmu_type != 1 {
             Err("this FMU supports co-simulation only (fmuType must be fmi2CoSimulation)".into())
         } else {
@@ -219,7 +288,12 @@ pub unsafe extern "C" fn fmi2FreeInstance(c: C) {
 }
 
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn fmi2SetDebugLogging(c: C, on: B, _n: usize, _categories: *const Str) -> St {
+pub unsafe extern "C" fn fmi2SetDebugLogging(
+    c: C,
+    on: B,
+    _n: usize,
+    _categories: *const Str,
+) -> St {
     if c.is_null() {
         return ERROR;
     }
@@ -239,7 +313,11 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
 ) -> St {
     let stop = (stop_defined != 0).then_some(stop);
     // SAFETY: the FMI contract (see `with`).
-    unsafe { with(c, Call::SetupExperiment, |e| e.setup_experiment(start, stop)) }
+    unsafe {
+        with(c, Call::SetupExperiment, |e| {
+            e.setup_experiment(start, stop)
+        })
+    }
 }
 
 #[unsafe(no_mangle)]
@@ -295,7 +373,10 @@ pub unsafe extern "C" fn fmi2GetReal(c: C, vr: *const Vr, n: usize, v: *mut f64)
     // SAFETY: the FMI contract (see `with`).
     unsafe {
         with(c, Call::GetReal, |e| {
-            e.get_real(vr.ok_or_else(|| null("vr"))?, v.ok_or_else(|| null("value"))?)
+            e.get_real(
+                vr.ok_or_else(|| null("vr"))?,
+                v.ok_or_else(|| null("value"))?,
+            )
         })
     }
 }
@@ -307,7 +388,10 @@ pub unsafe extern "C" fn fmi2SetReal(c: C, vr: *const Vr, n: usize, v: *const f6
     // SAFETY: the FMI contract (see `with`).
     unsafe {
         with(c, Call::SetReal, |e| {
-            e.set_real(vr.ok_or_else(|| null("vr"))?, v.ok_or_else(|| null("value"))?)
+            e.set_real(
+                vr.ok_or_else(|| null("vr"))?,
+                v.ok_or_else(|| null("value"))?,
+            )
         })
     }
 }

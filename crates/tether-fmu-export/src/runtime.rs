@@ -56,7 +56,8 @@ pub fn uri_path(uri: &str) -> Result<PathBuf, String> {
         out.push(bytes[i]);
         i += 1;
     }
-    let path = String::from_utf8(out).map_err(|_| format!("fmuResourceLocation '{uri}' is not UTF-8"))?;
+    let path =
+        String::from_utf8(out).map_err(|_| format!("fmuResourceLocation '{uri}' is not UTF-8"))?;
     Ok(PathBuf::from(path))
 }
 
@@ -76,7 +77,9 @@ impl Exported {
         }
         let mut spec = SystemSpec::from_file(&file).map_err(|e| e.to_string())?;
         if spec.step_control.is_some() {
-            return Err("systems with [step_control] are not exported (fixed macro steps only)".into());
+            return Err(
+                "systems with [step_control] are not exported (fixed macro steps only)".into(),
+            );
         }
         // Inner perturbed runs stay on the importer's thread unless the
         // system file asks for threads.
@@ -151,7 +154,11 @@ impl Exported {
 
     pub fn reset(&mut self) {
         self.sim = None;
-        self.values = self.variables.iter().map(|v| v.start.unwrap_or(0.0)).collect();
+        self.values = self
+            .variables
+            .iter()
+            .map(|v| v.start.unwrap_or(0.0))
+            .collect();
         self.stop = None;
         self.start = self.spec.experiment.start;
     }
@@ -181,11 +188,17 @@ impl Exported {
         for (&vr, &value) in vrs.iter().zip(values) {
             let v = self.variable(vr)?.clone();
             if !value.is_finite() {
-                return Err(Failure::usage(format!("{} = {value}: not a finite number", v.name)));
+                return Err(Failure::usage(format!(
+                    "{} = {value}: not a finite number",
+                    v.name
+                )));
             }
             match (v.kind, stepping) {
                 (ExportKind::Output, _) => {
-                    return Err(Failure::usage(format!("{} is an output: it cannot be set", v.name)))
+                    return Err(Failure::usage(format!(
+                        "{} is an output: it cannot be set",
+                        v.name
+                    )))
                 }
                 (ExportKind::Parameter, true) => {
                     return Err(Failure::usage(format!(

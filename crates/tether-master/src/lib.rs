@@ -46,8 +46,9 @@ pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use spec::Parallel;
 pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
-    ExportLink, ExportSource, ExportSpec, Experiment, InitialMultiplier, InstanceSpec, JacobianMode, JointInitial, JointSpec, OutputSpec,
-    SignalScheme, SignalSettings, StartValue, SystemSpec,
+    Experiment, ExportLink, ExportSource, ExportSpec, InitialMultiplier, InstanceSpec,
+    JacobianMode, JointInitial, JointSpec, OutputSpec, SignalScheme, SignalSettings, StartValue,
+    SystemSpec,
 };
 pub use start::apply_start_value;
 pub use stats::{

@@ -5,7 +5,7 @@
 use tether_fmi::{Causality, Variability};
 
 use super::Simulation;
-use crate::spec::names::{describe, fmu_file, find_instance, suggest, variable};
+use crate::spec::names::{describe, find_instance, fmu_file, suggest, variable};
 use crate::MasterError;
 
 /// What an exported variable is.
@@ -63,7 +63,11 @@ impl Simulation {
                 let columns = self.columns();
                 let Some(column) = columns.iter().position(|c| c == target) else {
                     let hint = suggest(target, columns.iter().map(String::as_str));
-                    return Err(bad(kind, name, format!("'{target}' is not a column of the system{hint}")));
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is not a column of the system{hint}"),
+                    ));
                 };
                 let (unit, description) = self.column_unit(target);
                 variables.push(ExportVariable {
@@ -87,32 +91,58 @@ impl Simulation {
             let md = slave.fmu.model_description();
             let v = variable(md, &place, instance, || fmu_file(slave.fmu.path()), var)?;
             let Some(real) = v.real() else {
-                return Err(bad(kind, name, format!("'{target}' is {}: only Real variables are exported", describe(v))));
+                return Err(bad(
+                    kind,
+                    name,
+                    format!(
+                        "'{target}' is {}: only Real variables are exported",
+                        describe(v)
+                    ),
+                ));
             };
             let export_kind = if kind == "input" {
                 if v.causality != Causality::Input {
-                    return Err(bad(kind, name, format!("'{target}' is {}, not an input", describe(v))));
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is {}, not an input", describe(v)),
+                    ));
                 }
                 let coupled = slave.inputs.iter().any(|i| i.vr == v.value_reference);
                 let signal = spec.connections.iter().any(|c| c.to == target);
                 if coupled || signal {
-                    let by = if coupled { "the coupling" } else { "a [[connection]]" };
-                    return Err(bad(kind, name, format!("'{target}' is driven by {by}; export an input nothing drives")));
+                    let by = if coupled {
+                        "the coupling"
+                    } else {
+                        "a [[connection]]"
+                    };
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is driven by {by}; export an input nothing drives"),
+                    ));
                 }
                 ExportKind::Input
             } else {
-                let settable = v.causality == Causality::Parameter
-                    && v.variability != Variability::Constant;
+                let settable =
+                    v.causality == Causality::Parameter && v.variability != Variability::Constant;
                 if !settable {
-                    return Err(bad(kind, name, format!("'{target}' is {}, not a parameter", describe(v))));
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is {}, not a parameter", describe(v)),
+                    ));
                 }
                 ExportKind::Parameter
             };
-            let set = spec.instances[s].parameters.get(var).and_then(|value| match value {
-                crate::StartValue::Real(x) => Some(*x),
-                crate::StartValue::Integer(i) => Some(*i as f64),
-                _ => None,
-            });
+            let set = spec.instances[s]
+                .parameters
+                .get(var)
+                .and_then(|value| match value {
+                    crate::StartValue::Real(x) => Some(*x),
+                    crate::StartValue::Integer(i) => Some(*i as f64),
+                    _ => None,
+                });
             variables.push(ExportVariable {
                 kind: export_kind,
                 name: name.to_string(),

@@ -48,9 +48,18 @@ impl ExportSpec {
     /// Every exported variable as (kind, name, target) in value-reference
     /// order: parameters, inputs, outputs.
     pub fn variables(&self) -> impl Iterator<Item = (&'static str, &str, &str)> {
-        let parameters = self.parameters.iter().map(|p| ("parameter", p.name.as_str(), p.to.as_str()));
-        let inputs = self.inputs.iter().map(|i| ("input", i.name.as_str(), i.to.as_str()));
-        let outputs = self.outputs.iter().map(|o| ("output", o.name.as_str(), o.from.as_str()));
+        let parameters = self
+            .parameters
+            .iter()
+            .map(|p| ("parameter", p.name.as_str(), p.to.as_str()));
+        let inputs = self
+            .inputs
+            .iter()
+            .map(|i| ("input", i.name.as_str(), i.to.as_str()));
+        let outputs = self
+            .outputs
+            .iter()
+            .map(|o| ("output", o.name.as_str(), o.from.as_str()));
         parameters.chain(inputs).chain(outputs)
     }
 }
@@ -83,7 +92,11 @@ impl SystemSpec {
         let mut names = std::collections::HashMap::new();
         let mut targets = std::collections::HashMap::new();
         for (kind, name, target) in export.variables() {
-            if name.is_empty() || name.chars().any(|c| c.is_control() || c == '"' || c == '<' || c == '>' || c == '&') {
+            if name.is_empty()
+                || name
+                    .chars()
+                    .any(|c| c.is_control() || c == '"' || c == '<' || c == '>' || c == '&')
+            {
                 return Err(error(format!(
                     "[[export.{kind}]] name {name:?} must be a non-empty name without control characters, quotes, '<', '>' or '&'"
                 )));
