@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import tether
-from conftest import cli, read_csv, same_bits
+from conftest import cli, need_tool, read_csv, same_bits
 
 VARIANTS = [
     {},
@@ -85,7 +85,7 @@ def test_result_api(oscillator_toml):
 
 
 def test_fmpy_write_csv_accepts_the_result(tmp_path, oscillator_toml):
-    fmpy_util = pytest.importorskip("fmpy.util")
+    fmpy_util = need_tool("fmpy.util")
     result = tether.run(oscillator_toml, stop=0.05)
     out = tmp_path / "fmpy.csv"
     fmpy_util.write_csv(str(out), result.to_numpy())
@@ -99,8 +99,8 @@ def test_fmpy_write_csv_accepts_the_result(tmp_path, oscillator_toml):
 def test_fmpy_plot_result_accepts_the_result(tmp_path, oscillator_toml):
     # fmpy 0.3's plot_result draws with plotly: create_plotly_figure is its
     # whole reading of the result (writing an image then needs kaleido).
-    fmpy_util = pytest.importorskip("fmpy.util")
-    pytest.importorskip("plotly")
+    fmpy_util = need_tool("fmpy.util")
+    need_tool("plotly")
     result = tether.run(oscillator_toml, stop=0.05)
     figure = fmpy_util.create_plotly_figure(result.to_numpy(), names=["mass1.x", "link.lambda"])
     out = tmp_path / "plot.html"
@@ -111,7 +111,7 @@ def test_fmpy_plot_result_accepts_the_result(tmp_path, oscillator_toml):
 
 
 def test_to_pandas(oscillator_toml):
-    pd = pytest.importorskip("pandas")
+    pd = need_tool("pandas")
     frame = tether.run(oscillator_toml, stop=0.01).to_pandas()
     assert isinstance(frame, pd.DataFrame)
     assert list(frame.columns)[:2] == ["time", "mass1.x"]

@@ -283,7 +283,9 @@ impl SystemSpec {
     /// rely on rounding (studies over several steps) call [`Self::end_time`].
     pub fn check_grid(&self) -> Result<(), MasterError> {
         let e = &self.experiment;
-        if self.step_control.is_some() {
+        // A step or span that is invalid in itself is validation's to report.
+        let valid = e.step.is_finite() && e.step > 0.0 && e.stop.is_finite() && e.stop > e.start;
+        if self.step_control.is_some() || !valid {
             return Ok(());
         }
         let end = self.end_time();
