@@ -19,7 +19,7 @@ use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::ExitCode;
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
-use tether_fmi::{Error, Fmu, FmuState, Instance, InstanceOptions, StatusKind};
+use tether_fmi::{Error, Fmu, FmuInstance, InstanceOptions, Inputs, Placement};
 
 /// Serves the master on standard input and output; the exit code is 0 when
 /// the master closed the connection, 2 when standard input and output are not
@@ -107,15 +107,17 @@ fn watch_hangup(requests: &File) {
     });
 }
 
-/// The instance being served and what its calls need.
+/// The instance being served and what its calls need: the instance is made by
+/// [`tether_fmi::instantiate`] in this process, an FMI 2.0 or FMI 3.0 one, and
+/// keeps its FMU states in its own slots.
 #[derive(Default)]
 struct Host {
-    fmu: Option<Fmu>,
-    instance: Option<Instance>,
-    states: Vec<Option<FmuState>>,
+    instance: Option<Box<dyn FmuInstance>>,
     vrs: Vec<u32>,
+    derivative_vrs: Vec<u32>,
     ints: Vec<i32>,
     reals: Vec<f64>,
+    derivatives: Vec<f64>,
     bools: Vec<bool>,
     bytes: Vec<u8>,
 }
@@ -142,8 +144,10 @@ fn serve(requests: File, mut writer: File) -> std::io::Result<()> {
 }
 
 /// The instance, or the error for a call before `INSTANTIATE`.
-fn live(instance: &mut Option<Instance>) -> Result<&mut Instance, Error> {
-    instance.as_mut().ok_or_else(|| Error::Host {
+fn live(
+    instance: &mut Option<Box<dyn FmuInstance>>,
+) -> Result<&mut (dyn FmuInstance + 'static), Error> {
+    instance.as_deref_mut().ok_or_else(|| Error::Host {
         instance: String::new(),
         message: "the host has no instance yet".into(),
     })
@@ -177,16 +181,12 @@ impl Host {
                 };
                 Fmu::open(dir)
                     .and_then(|fmu| {
-                        let instance = fmu.instantiate(name, options)?;
-                        self.fmu = Some(fmu);
-                        Ok(instance)
+                        tether_fmi::instantiate(&fmu, name, options, Placement::InProcess)
                     })
                     .map(|instance| self.instance = Some(instance))
             }
             op::FREE_INSTANCE => {
-                self.states.clear();
                 self.instance = None;
-                self.fmu = None;
                 Ok(())
             }
             _ => self.call(code, input, out)?,
@@ -210,50 +210,50 @@ impl Host {
                 let start = input.f64()?;
                 let has_stop = input.bool()?;
                 let stop = input.f64()?;
-                i.setup_experiment(tolerance, start, has_stop.then_some(stop))
+                i.setup(tolerance, start, has_stop.then_some(stop))
             }
-            op::ENTER_INITIALIZATION_MODE => i.enter_initialization_mode(),
-            op::EXIT_INITIALIZATION_MODE => i.exit_initialization_mode(),
+            op::ENTER_INITIALIZATION_MODE => i.enter_initialization(),
+            op::EXIT_INITIALIZATION_MODE => i.exit_initialization(),
             op::TERMINATE => i.terminate(),
             op::RESET => i.reset(),
             op::SET_REAL => {
                 input.u32s(&mut self.vrs)?;
                 input.f64s(&mut self.reals)?;
-                i.set_real(&self.vrs, &self.reals)
+                i.set_reals(&self.vrs, &self.reals)
             }
             op::GET_REAL => {
                 input.u32s(&mut self.vrs)?;
                 self.reals.clear();
-                self.reals.resize(self.vrs.len(), 0.0);
-                i.get_real(&self.vrs, &mut self.reals).map(|()| {
+                self.reals.resize(input.u32()? as usize, 0.0);
+                i.get_reals(&self.vrs, &mut self.reals).map(|()| {
                     out.f64s(&self.reals);
                 })
             }
             op::GET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
                 self.ints.clear();
-                self.ints.resize(self.vrs.len(), 0);
-                i.get_integer(&self.vrs, &mut self.ints).map(|()| {
+                self.ints.resize(input.u32()? as usize, 0);
+                i.get_integers(&self.vrs, &mut self.ints).map(|()| {
                     out.i32s(&self.ints);
                 })
             }
             op::GET_BOOLEAN => {
                 input.u32s(&mut self.vrs)?;
                 self.bools.clear();
-                self.bools.resize(self.vrs.len(), false);
-                i.get_boolean(&self.vrs, &mut self.bools).map(|()| {
+                self.bools.resize(input.u32()? as usize, false);
+                i.get_booleans(&self.vrs, &mut self.bools).map(|()| {
                     out.bools(&self.bools);
                 })
             }
             op::SET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
                 input.i32s(&mut self.ints)?;
-                i.set_integer(&self.vrs, &self.ints)
+                i.set_integers(&self.vrs, &self.ints)
             }
             op::SET_BOOLEAN => {
                 input.u32s(&mut self.vrs)?;
                 input.bools(&mut self.bools)?;
-                i.set_boolean(&self.vrs, &self.bools)
+                i.set_booleans(&self.vrs, &self.bools)
             }
             op::SET_STRING => {
                 input.u32s(&mut self.vrs)?;
@@ -262,20 +262,28 @@ impl Host {
                 for _ in 0..n {
                     strings.push(input.str()?);
                 }
-                i.set_string(&self.vrs, &strings)
+                i.set_strings(&self.vrs, &strings)
             }
-            op::SET_REAL_INPUT_DERIVATIVES => {
+            op::SET_INPUTS => {
                 input.u32s(&mut self.vrs)?;
-                input.i32s(&mut self.ints)?;
                 input.f64s(&mut self.reals)?;
-                i.set_real_input_derivatives(&self.vrs, &self.ints, &self.reals)
+                input.u32s(&mut self.derivative_vrs)?;
+                input.i32s(&mut self.ints)?;
+                input.f64s(&mut self.derivatives)?;
+                i.set_inputs(&Inputs {
+                    vrs: &self.vrs,
+                    values: &self.reals,
+                    derivative_vrs: &self.derivative_vrs,
+                    orders: &self.ints,
+                    derivatives: &self.derivatives,
+                })
             }
             op::GET_REAL_OUTPUT_DERIVATIVES => {
                 input.u32s(&mut self.vrs)?;
                 input.i32s(&mut self.ints)?;
                 self.reals.clear();
                 self.reals.resize(self.vrs.len(), 0.0);
-                i.get_real_output_derivatives(&self.vrs, &self.ints, &mut self.reals)
+                i.get_output_derivatives(&self.vrs, &self.ints, &mut self.reals)
                     .map(|()| {
                         out.f64s(&self.reals);
                     })
@@ -283,43 +291,24 @@ impl Host {
             op::DO_STEP => {
                 let t = input.f64()?;
                 let h = input.f64()?;
-                let no_prior = input.bool()?;
-                i.do_step(t, h, no_prior)
+                let _no_prior = input.bool()?;
+                // A request to end the simulation comes back as
+                // Error::TerminationRequested, which crosses as such.
+                i.step(t, h)
             }
-            op::GET_BOOLEAN_STATUS => i.get_boolean_status(StatusKind::Terminated).map(|b| {
-                out.bool(b);
-            }),
-            op::GET_REAL_STATUS => i.get_real_status(StatusKind::LastSuccessfulTime).map(|t| {
-                out.f64(t);
-            }),
-            op::SAVE_STATE => {
-                let slot = slot(&mut self.states, input.u32()?);
-                match slot {
-                    Some(state) => i.update_fmu_state(state),
-                    None => i.get_fmu_state().map(|s| *slot = Some(s)),
-                }
+            op::SAVE_STATE => i.save(slot(input.u32()?, i)?),
+            op::RESTORE_STATE => i.restore(slot(input.u32()?, i)?),
+            op::FREE_STATE => i.free(slot(input.u32()?, i)?),
+            op::SERIALIZE_STATE => {
+                let s = slot(input.u32()?, i)?;
+                i.serialize(s, &mut self.bytes).map(|()| {
+                    out.bytes(&self.bytes);
+                })
             }
-            op::RESTORE_STATE => match &self.states[..].get(input.u32()? as usize) {
-                Some(Some(state)) => i.set_fmu_state(state),
-                _ => Err(no_state(i)),
-            },
-            op::FREE_STATE => {
-                *slot(&mut self.states, input.u32()?) = None;
-                Ok(())
-            }
-            op::SERIALIZE_STATE => match self.states.get(input.u32()? as usize) {
-                Some(Some(state)) => i
-                    .serialize_fmu_state_into(state, &mut self.bytes)
-                    .map(|()| {
-                        out.bytes(&self.bytes);
-                    }),
-                _ => Err(no_state(i)),
-            },
             op::DESERIALIZE_STATE => {
-                let index = input.u32()?;
+                let s = slot(input.u32()?, i)?;
                 let bytes = input.bytes()?;
-                i.deserialize_fmu_state(bytes)
-                    .map(|s| *slot(&mut self.states, index) = Some(s))
+                i.deserialize(s, bytes)
             }
             _ => {
                 return Err(std::io::Error::new(
@@ -331,19 +320,20 @@ impl Host {
     }
 }
 
-/// State slot `index`, made if new.
-fn slot(states: &mut Vec<Option<FmuState>>, index: u32) -> &mut Option<FmuState> {
+/// State slot `index` of a request, or an error for one the instance lacks.
+fn slot(index: u32, i: &dyn FmuInstance) -> std::io::Result<tether_fmi::Slot> {
     let index = index as usize;
-    if states.len() <= index {
-        states.resize_with(index + 1, || None);
-    }
-    &mut states[index]
-}
-
-fn no_state(i: &Instance) -> Error {
-    Error::Host {
-        instance: i.name().to_string(),
-        message: format!("instance '{}': no saved FMU state in that slot", i.name()),
+    if index < tether_fmi::SLOTS {
+        Ok(index)
+    } else {
+        Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "instance '{}': state slot {index} (an instance has {})",
+                i.name(),
+                tether_fmi::SLOTS
+            ),
+        ))
     }
 }
 

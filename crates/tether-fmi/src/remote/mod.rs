@@ -455,14 +455,20 @@ impl RemoteInstance {
 
     /// `fmi2GetReal` into `out`.
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
-        self.out.start(op::GET_REAL).u32s(vrs);
+        self.out
+            .start(op::GET_REAL)
+            .u32s(vrs)
+            .u32(count(out.len()));
         self.call("fmi2GetReal")?;
         self.read_reals(out)
     }
 
     /// `fmi2GetInteger` into `out`.
     pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
-        self.out.start(op::GET_INTEGER).u32s(vrs);
+        self.out
+            .start(op::GET_INTEGER)
+            .u32s(vrs)
+            .u32(count(out.len()));
         self.call("fmi2GetInteger")?;
         let mut values = Vec::with_capacity(out.len());
         let read = In::new(&self.reply[1..]).i32s(&mut values);
@@ -471,7 +477,10 @@ impl RemoteInstance {
 
     /// `fmi2GetBoolean` into `out`.
     pub fn get_boolean(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
-        self.out.start(op::GET_BOOLEAN).u32s(vrs);
+        self.out
+            .start(op::GET_BOOLEAN)
+            .u32s(vrs)
+            .u32(count(out.len()));
         self.call("fmi2GetBoolean")?;
         let mut values = Vec::with_capacity(out.len());
         let read = In::new(&self.reply[1..]).bools(&mut values);
@@ -503,19 +512,17 @@ impl RemoteInstance {
         self.call("fmi2SetString")
     }
 
-    /// `fmi2SetRealInputDerivatives`.
-    pub fn set_real_input_derivatives(
-        &mut self,
-        vrs: &[ValueReference],
-        orders: &[i32],
-        values: &[f64],
-    ) -> Result<()> {
+    /// The coupled inputs of a run in one request: their values, then their
+    /// derivatives (FMI 2.0: `fmi2SetReal`, `fmi2SetRealInputDerivatives`).
+    pub fn set_coupled_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) -> Result<()> {
         self.out
-            .start(op::SET_REAL_INPUT_DERIVATIVES)
-            .u32s(vrs)
-            .i32s(orders)
-            .f64s(values);
-        self.call("fmi2SetRealInputDerivatives")
+            .start(op::SET_INPUTS)
+            .u32s(inputs.vrs)
+            .f64s(inputs.values)
+            .u32s(inputs.derivative_vrs)
+            .i32s(inputs.orders)
+            .f64s(inputs.derivatives);
+        self.call("fmi2SetReal")
     }
 
     /// `fmi2GetRealOutputDerivatives` into `out`.
@@ -544,22 +551,6 @@ impl RemoteInstance {
         self.call("fmi2DoStep")?;
         self.time = t + h;
         Ok(())
-    }
-
-    /// `fmi2GetBooleanStatus(fmi2Terminated)`.
-    pub fn terminated(&mut self) -> Result<bool> {
-        self.out.start(op::GET_BOOLEAN_STATUS);
-        self.call("fmi2GetBooleanStatus")?;
-        let value = self.results().bool();
-        value.map_err(|e| self.protocol_error(e))
-    }
-
-    /// `fmi2GetRealStatus(fmi2LastSuccessfulTime)`.
-    pub fn last_successful_time(&mut self) -> Result<f64> {
-        self.out.start(op::GET_REAL_STATUS);
-        self.call("fmi2GetRealStatus")?;
-        let value = self.results().f64();
-        value.map_err(|e| self.protocol_error(e))
     }
 
     /// `fmi2GetFMUstate` into the host's state `slot` (reusing the state there).
@@ -741,15 +732,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.set_string(vrs, values)
     }
     fn set_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) -> Result<()> {
-        self.set_real(inputs.vrs, inputs.values)?;
-        if !inputs.derivative_vrs.is_empty() {
-            self.set_real_input_derivatives(
-                inputs.derivative_vrs,
-                inputs.orders,
-                inputs.derivatives,
-            )?;
-        }
-        Ok(())
+        self.set_coupled_inputs(inputs)
     }
     fn get_output_derivatives(
         &mut self,
@@ -760,10 +743,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.get_real_output_derivatives(vrs, orders, out)
     }
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
-        match self.do_step(t, h, true) {
-            Ok(()) => Ok(()),
-            Err(e) => Err(crate::error::step_failure(e, self, t + h)),
-        }
+        // The host's instance turned a request to end the simulation into
+        // `Error::TerminationRequested` already (the same `step` as in process).
+        self.do_step(t, h, true)
     }
     fn save(&mut self, slot: crate::interface::Slot) -> Result<()> {
         self.save_state(slot as u32)
@@ -788,14 +770,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
     }
 }
 
-impl crate::error::StepStatus for RemoteInstance {
-    fn name(&self) -> &str {
-        self.name.as_str()
-    }
-    fn terminated(&mut self) -> Result<bool> {
-        RemoteInstance::terminated(self)
-    }
-    fn last_successful_time(&mut self) -> Result<f64> {
-        RemoteInstance::last_successful_time(self)
-    }
+/// A count of values for a request.
+fn count(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
 }

@@ -10,7 +10,7 @@ use std::io::{self, Read, Write};
 use crate::error::{Error, FmuMessages};
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -27,11 +27,10 @@ pub mod op {
     pub const SET_INTEGER: u8 = 10;
     pub const SET_BOOLEAN: u8 = 11;
     pub const SET_STRING: u8 = 12;
-    pub const SET_REAL_INPUT_DERIVATIVES: u8 = 13;
+    /// The coupled inputs of a run ([`crate::interface::Inputs`]).
+    pub const SET_INPUTS: u8 = 13;
     pub const GET_REAL_OUTPUT_DERIVATIVES: u8 = 14;
     pub const DO_STEP: u8 = 15;
-    pub const GET_BOOLEAN_STATUS: u8 = 16;
-    pub const GET_REAL_STATUS: u8 = 17;
     pub const SAVE_STATE: u8 = 18;
     pub const RESTORE_STATE: u8 = 19;
     pub const FREE_STATE: u8 = 20;
@@ -87,6 +86,49 @@ const FUNCTIONS: &[&str] = &[
     "fmi2GetDirectionalDerivative",
     "fmi2SetDebugLogging",
     "fmi2FreeInstance",
+    "fmi3InstantiateCoSimulation",
+    "fmi3EnterConfigurationMode",
+    "fmi3ExitConfigurationMode",
+    "fmi3EnterInitializationMode",
+    "fmi3ExitInitializationMode",
+    "fmi3Terminate",
+    "fmi3Reset",
+    "fmi3GetFloat64",
+    "fmi3SetFloat64",
+    "fmi3GetFloat32",
+    "fmi3SetFloat32",
+    "fmi3GetInt8",
+    "fmi3SetInt8",
+    "fmi3GetUInt8",
+    "fmi3SetUInt8",
+    "fmi3GetInt16",
+    "fmi3SetInt16",
+    "fmi3GetUInt16",
+    "fmi3SetUInt16",
+    "fmi3GetInt32",
+    "fmi3SetInt32",
+    "fmi3GetUInt32",
+    "fmi3SetUInt32",
+    "fmi3GetInt64",
+    "fmi3SetInt64",
+    "fmi3GetUInt64",
+    "fmi3SetUInt64",
+    "fmi3GetBoolean",
+    "fmi3SetBoolean",
+    "fmi3GetString",
+    "fmi3SetString",
+    "fmi3GetBinary",
+    "fmi3SetBinary",
+    "fmi3GetOutputDerivatives",
+    "fmi3DoStep",
+    "fmi3GetFMUState",
+    "fmi3SetFMUState",
+    "fmi3FreeFMUState",
+    "fmi3SerializedFMUStateSize",
+    "fmi3SerializeFMUState",
+    "fmi3DeserializeFMUState",
+    "fmi3SetDebugLogging",
+    "fmi3FreeInstance",
 ];
 
 /// The static name of FMI function `name` ("an FMI function" if unknown).
@@ -219,6 +261,18 @@ impl Out {
                 time,
                 code,
             } => (5, *function, instance.as_str(), *time, *code, &none),
+            Error::TerminationRequested {
+                instance,
+                time,
+                how,
+            } => {
+                return self
+                    .u8(7)
+                    .str(instance)
+                    .f64(*time)
+                    .bool(how.is_some())
+                    .str(how.as_deref().unwrap_or(""));
+            }
             other => {
                 return self.u8(6).str(&crate::error::one_line(&other.to_string()));
             }
@@ -389,6 +443,17 @@ impl<'a> In<'a> {
             return Ok(Error::Host {
                 instance: instance.to_string(),
                 message: self.str()?.to_string(),
+            });
+        }
+        if kind == 7 {
+            let instance = self.str()?.to_string();
+            let time = self.f64()?;
+            let has_how = self.bool()?;
+            let how = self.str()?;
+            return Ok(Error::TerminationRequested {
+                instance,
+                time,
+                how: has_how.then(|| how.to_string()),
             });
         }
         let function = function_name(self.str()?);
