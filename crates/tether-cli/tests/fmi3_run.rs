@@ -165,7 +165,12 @@ fn errors(csv: &str) -> [f64; 3] {
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let (t, x, v, l) = (col("time"), col("mass1.x"), col("mass1.v"), col("link.lambda"));
+    let (t, x, v, l) = (
+        col("time"),
+        col("mass1.x"),
+        col("mass1.v"),
+        col("link.lambda"),
+    );
     let mut e = [0.0f64; 3];
     for line in lines.filter(|l| !l.starts_with('#')) {
         let row: Vec<f64> = line.split(',').map(|s| s.parse().unwrap()).collect();
@@ -209,21 +214,32 @@ fn fmi3_instances_isolated_parallel_and_self_checked_give_the_same_csv() {
     let Some((mass, libpython)) = python_mass() else {
         return;
     };
-    let plain = ok(libpython, &system(mass, BAUMGARTE_1, ""), &["--parallel", "off"]);
+    let plain = ok(
+        libpython,
+        &system(mass, BAUMGARTE_1, ""),
+        &["--parallel", "off"],
+    );
     let isolated = ok(
         libpython,
         &system(mass, BAUMGARTE_1, ""),
         &["--isolate", "--parallel", "off"],
     );
     assert!(plain == isolated, "--isolate changed the results");
-    let parallel = ok(libpython, &system(mass, BAUMGARTE_1, ""), &["--parallel", "on"]);
+    let parallel = ok(
+        libpython,
+        &system(mass, BAUMGARTE_1, ""),
+        &["--parallel", "on"],
+    );
     assert!(plain == parallel, "--parallel on changed the results");
     let checked = ok(
         libpython,
         &system(mass, BAUMGARTE_1, "check_rollback = \"every_step\""),
         &["--parallel", "off"],
     );
-    assert!(plain == checked, "check_rollback = every_step changed the results");
+    assert!(
+        plain == checked,
+        "check_rollback = every_step changed the results"
+    );
 }
 
 /// Adaptive macro steps with an FMI 3.0 instance: the run ends at the stop time
@@ -236,7 +252,15 @@ fn adaptive_steps_with_an_fmi3_mass_match_the_workspace_pair() {
     let args = ["--step-rtol", "1e-4"];
     let fmi3 = ok(libpython, &system(mass, WEIGHTED_2, ""), &args);
     let fmi2 = ok(libpython, &system(&oscillator(), WEIGHTED_2, ""), &args);
-    let last = |csv: &str| csv.lines().last().unwrap().split(',').next().unwrap().to_string();
+    let last = |csv: &str| {
+        csv.lines()
+            .last()
+            .unwrap()
+            .split(',')
+            .next()
+            .unwrap()
+            .to_string()
+    };
     assert_eq!(last(&fmi3).parse::<f64>().unwrap(), 1.0);
     let (e3, e2) = (errors(&fmi3), errors(&fmi2));
     eprintln!("adaptive: FMI 3.0 pair errors {e3:?}, FMI 2.0 pair {e2:?}");

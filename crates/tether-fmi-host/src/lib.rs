@@ -19,7 +19,7 @@ use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::ExitCode;
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
-use tether_fmi::{Error, Fmu, FmuInstance, InstanceOptions, Inputs, Placement};
+use tether_fmi::{Error, Fmu, FmuInstance, Inputs, InstanceOptions, Placement};
 
 /// Serves the master on standard input and output; the exit code is 0 when
 /// the master closed the connection, 2 when standard input and output are not

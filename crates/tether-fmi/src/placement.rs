@@ -29,9 +29,9 @@ pub fn instantiate(
 ) -> Result<Box<dyn FmuInstance>> {
     let fmi3 = fmu.model_description().standard == crate::model_description::FmiStandard::Fmi3;
     Ok(match placement {
-        Placement::InProcess if fmi3 => Box::new(crate::instance3::Fmi3Instance::new(
-            fmu, name, options,
-        )?),
+        Placement::InProcess if fmi3 => {
+            Box::new(crate::instance3::Fmi3Instance::new(fmu, name, options)?)
+        }
         Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
         // The host makes its instance with this function, in its process.
         Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(

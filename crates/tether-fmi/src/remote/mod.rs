@@ -455,10 +455,7 @@ impl RemoteInstance {
 
     /// `fmi2GetReal` into `out`.
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
-        self.out
-            .start(op::GET_REAL)
-            .u32s(vrs)
-            .u32(count(out.len()));
+        self.out.start(op::GET_REAL).u32s(vrs).u32(count(out.len()));
         self.call("fmi2GetReal")?;
         self.read_reals(out)
     }
