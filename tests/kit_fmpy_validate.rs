@@ -8,6 +8,9 @@ use tether_tests::fmpy::run_script;
 
 #[test]
 fn every_workspace_fmu_passes_fmpy_validate() {
+    if tether_tests::tools::fmpy().is_none() {
+        return;
+    }
     let fmus = tether_fmu_build::workspace_fmus().expect("packaging the workspace FMUs");
     assert!(!fmus.is_empty(), "no FMU under fmus/");
     let args: Vec<&OsStr> = fmus.iter().map(|p| p.as_os_str()).collect();
@@ -60,6 +63,9 @@ fn simulate_oscillator(extra: &[&str]) -> Vec<(f64, f64)> {
 
 #[test]
 fn fmpy_simulates_the_oscillator_on_its_closed_form() {
+    if tether_tests::tools::fmpy().is_none() {
+        return;
+    }
     for mode in [&[][..], &["--set", "exact=true"][..]] {
         let rows = simulate_oscillator(mode);
         assert_eq!(rows.len(), 101, "{mode:?}");

@@ -7,55 +7,17 @@
 //!
 //! Needs `libcosimpy` in the test Python: `.ci/run` installs it into
 //! `TETHER_PYTHON`, and without `TETHER_PYTHON` it is installed into the
-//! tests' own virtualenv. Only where it cannot be installed or imported does
-//! the test say so and pass.
+//! tests' own virtualenv. Where it cannot be installed or imported, the
+//! tests fail on CI (`CI` set) and elsewhere are skipped saying why.
 
 use std::path::Path;
 use std::process::Command;
 
 use tether_master::{MemoryRecorder, Simulation, SystemSpec};
-use tether_tests::fmpy::{python, workspace_root};
+use tether_tests::fmpy::workspace_root;
 
 fn fmu(name: &str) -> std::path::PathBuf {
     tether_fmu_build::workspace_fmu(name).expect("package the workspace FMU")
-}
-
-/// The pinned libcosimpy (as `.ci/run` installs it).
-const LIBCOSIMPY: &str = "libcosimpy==0.0.6";
-
-/// The test Python if it can import libcosimpy, else why not. The tests'
-/// own virtualenv (without `TETHER_PYTHON`) gets libcosimpy installed.
-fn libcosim_python() -> Result<std::path::PathBuf, String> {
-    let python = python()?;
-    let import = || {
-        Command::new(&python)
-            .args(["-c", "import libcosimpy.CosimExecution"])
-            .output()
-            .map_err(|e| e.to_string())
-    };
-    let mut out = import()?;
-    if !out.status.success() && std::env::var_os("TETHER_PYTHON").is_none() {
-        let pip = Command::new(&python)
-            .args(["-m", "pip", "install", "--quiet", LIBCOSIMPY])
-            .output()
-            .map_err(|e| e.to_string())?;
-        if !pip.status.success() {
-            return Err(format!(
-                "pip install {LIBCOSIMPY}: {}",
-                String::from_utf8_lossy(&pip.stderr)
-                    .trim()
-                    .replace('\n', " ")
-            ));
-        }
-        out = import()?;
-    }
-    if out.status.success() {
-        Ok(python)
-    } else {
-        Err(String::from_utf8_lossy(&out.stderr)
-            .trim()
-            .replace('\n', " "))
-    }
 }
 
 /// Run `ssp_dir` in libcosim; the rows of `columns` after every step.
@@ -158,12 +120,8 @@ fn signal_only_system() -> SystemSpec {
 
 #[test]
 fn libcosim_and_tether_agree_on_an_exported_signal_only_system() {
-    let python = match libcosim_python() {
-        Ok(p) => p,
-        Err(why) => {
-            eprintln!("SKIPPED: libcosimpy cannot be imported by the test Python ({why}); .ci/run installs it");
-            return;
-        }
+    let Some(python) = tether_tests::tools::libcosimpy() else {
+        return;
     };
     let spec = signal_only_system();
     let dir = tempfile::tempdir().unwrap();
@@ -184,12 +142,8 @@ fn libcosim_and_tether_agree_on_an_exported_signal_only_system() {
 
 #[test]
 fn libcosim_and_tether_agree_on_the_hand_written_ssd() {
-    let python = match libcosim_python() {
-        Ok(p) => p,
-        Err(why) => {
-            eprintln!("SKIPPED: libcosimpy cannot be imported by the test Python ({why}); .ci/run installs it");
-            return;
-        }
+    let Some(python) = tether_tests::tools::libcosimpy() else {
+        return;
     };
     let dir = tempfile::tempdir().unwrap();
     let src = workspace_root().join("tests/fixtures/ssp/controlled_mass");

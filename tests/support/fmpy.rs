@@ -25,15 +25,66 @@ pub fn script(name: &str) -> PathBuf {
     workspace_root().join("tests").join("fmpy").join(name)
 }
 
-/// A Python interpreter that can `import fmpy`.
+/// A Python interpreter that can `import fmpy`, else why not.
 pub fn python() -> Result<PathBuf, String> {
     static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
     PYTHON
-        .get_or_init(|| match std::env::var_os("TETHER_PYTHON") {
-            Some(python) => Ok(PathBuf::from(python)),
-            None => venv_python(&workspace_root().join("target")),
+        .get_or_init(|| {
+            let python = match std::env::var_os("TETHER_PYTHON") {
+                Some(python) => PathBuf::from(python),
+                None => venv_python(&workspace_root().join("target"))?,
+            };
+            imports(&python, "fmpy")?;
+            Ok(python)
         })
         .clone()
+}
+
+/// `Ok` if `python` can `import module`, else why not.
+pub fn imports(python: &Path, module: &str) -> Result<(), String> {
+    let out = Command::new(python)
+        .args(["-c", &format!("import {module}")])
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{} cannot import {module}: {}",
+            python.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .trim()
+                .lines()
+                .last()
+                .unwrap_or_default()
+        ))
+    }
+}
+
+/// The pinned libcosimpy (as `.ci/run` installs it).
+const LIBCOSIMPY: &str = "libcosimpy==0.0.6";
+
+/// The test Python if it can import libcosimpy, else why not. The tests'
+/// own virtualenv (without `TETHER_PYTHON`) gets libcosimpy installed.
+pub fn libcosim_python() -> Result<PathBuf, String> {
+    let python = python()?;
+    let module = "libcosimpy.CosimExecution";
+    if imports(&python, module).is_err() && std::env::var_os("TETHER_PYTHON").is_none() {
+        let pip = Command::new(&python)
+            .args(["-m", "pip", "install", "--quiet", LIBCOSIMPY])
+            .output()
+            .map_err(|e| e.to_string())?;
+        if !pip.status.success() {
+            return Err(format!(
+                "pip install {LIBCOSIMPY}: {}",
+                String::from_utf8_lossy(&pip.stderr)
+                    .trim()
+                    .replace('\n', " ")
+            ));
+        }
+    }
+    imports(&python, module)?;
+    Ok(python)
 }
 
 fn run(command: &mut Command) -> Result<(), String> {

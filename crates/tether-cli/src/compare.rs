@@ -4,8 +4,11 @@
 //!
 //! Columns are matched by name. When the files have different times (fmpy's
 //! default output interval differs from the step, a run used
-//! `--output-interval`), the second file is interpolated linearly onto the
-//! first one's times, which must lie within its own, and the output says so.
+//! `--output-interval`), both are compared on the coarser grid (the file with
+//! fewer rows over the span both cover) over that common span, the finer one
+//! interpolated linearly onto it, and the output says so; the order of the two
+//! files does not matter. A file that stopped early (`# incomplete:`) is not
+//! compared beyond its end: if the other reaches further, that is an error.
 //! For each column c the measure is
 //!
 //! ```text
@@ -14,16 +17,26 @@
 //! rel_c   = dev_c / max(scale_c, f64::MIN_POSITIVE)
 //! ```
 //!
-//! and the column passes when `dev_c ≤ atol + rtol · scale_c`. Scaling by the
-//! column's magnitude over the whole run, not by each value, keeps zero
-//! crossings (a multiplier changing sign) from inflating the measure. Residual
-//! columns (`<constraint>.g`) are differences of nearly equal outputs and have
-//! a tiny scale of their own; `--atol` bounds them in absolute terms.
+//! and the column passes when `dev_c ≤ atol + rtol · scale_c` (by default
+//! rtol = 1e-6, atol = 1e-12: [`RTOL`], [`ATOL`]). Scaling by the column's
+//! magnitude over the whole run, not by each value, keeps zero crossings (a
+//! multiplier changing sign) from inflating the measure. Residual columns
+//! (`<constraint>.g`) are differences of nearly equal outputs and have a tiny
+//! scale of their own; `--atol` bounds them in absolute terms.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+
+/// The default relative tolerance: a millionth of each column's magnitude,
+/// far above the rounding by which two correct runs of one method differ
+/// (1e-16 to 1e-12 of the scale) and below the error of a usable macro step.
+pub const RTOL: f64 = 1e-6;
+
+/// The default absolute tolerance: keeps columns that are zero in one file and
+/// rounding-small in the other (a multiplier at rest) from failing.
+pub const ATOL: f64 = 1e-12;
 
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
@@ -33,10 +46,10 @@ pub struct Args {
     /// Second result file.
     b: PathBuf,
     /// Relative tolerance: a column passes when max |a − b| ≤ atol + rtol · scale.
-    #[arg(long, default_value_t = 1e-9, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = RTOL, allow_hyphen_values = true)]
     rtol: f64,
     /// Absolute tolerance (see --rtol).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = ATOL, allow_hyphen_values = true)]
     atol: f64,
     /// Compare only these columns (default: all; then both files must have the
     /// same columns): names separated by commas or spaces (commas inside
@@ -249,6 +262,90 @@ fn interpolated(a: &Table, b: &Table) -> Result<Table> {
     })
 }
 
+/// Both files on the coarser grid over the span both cover: the file with
+/// fewer rows in that span keeps its rows there, the other is interpolated
+/// linearly onto them. Returns them in the order given, with the note that
+/// says what was done. A file that stopped early (`# incomplete:`) while the
+/// other goes on is refused: the rest of the run cannot be compared.
+fn on_the_coarser_grid(a: Table, b: Table) -> Result<(Table, Table, String)> {
+    let span = |t: &Table| (t.times[0], t.times[t.times.len() - 1]);
+    let ((a_first, a_last), (b_first, b_last)) = (span(&a), span(&b));
+    let slack = 1e-9
+        * (a_last - a_first)
+            .abs()
+            .max((b_last - b_first).abs())
+            .max(f64::MIN_POSITIVE);
+    for (short, long) in [(&a, &b), (&b, &a)] {
+        if let Some(reason) = &short.incomplete {
+            let (end, other_end) = (span(short).1, span(long).1);
+            if end < other_end - slack {
+                bail!(
+                    "{} is incomplete ({reason}) and ends at t = {end}, {} goes on to t = {other_end}: \
+                     the rest of the run cannot be compared",
+                    short.path.display(),
+                    long.path.display()
+                );
+            }
+        }
+    }
+    let (first, last) = (a_first.max(b_first), a_last.min(b_last));
+    if first > last + slack {
+        bail!(
+            "the files share no time span ({} has t = {a_first} … {a_last}, {} has t = {b_first} … {b_last})",
+            a.path.display(),
+            b.path.display()
+        );
+    }
+    let within = |t: &Table| -> Vec<usize> {
+        (0..t.times.len())
+            .filter(|&i| t.times[i] >= first - slack && t.times[i] <= last + slack)
+            .collect()
+    };
+    let (rows_a, rows_b) = (within(&a), within(&b));
+    let a_is_coarser = rows_a.len() <= rows_b.len();
+    let (coarse, fine, rows) = if a_is_coarser {
+        (&a, &b, &rows_a)
+    } else {
+        (&b, &a, &rows_b)
+    };
+    let coarse = Table {
+        path: coarse.path.clone(),
+        names: coarse.names.clone(),
+        times: rows.iter().map(|&i| coarse.times[i]).collect(),
+        rows: rows.iter().map(|&i| coarse.rows[i].clone()).collect(),
+        incomplete: coarse.incomplete.clone(),
+    };
+    let fine = interpolated(&coarse, fine)?;
+    let whole = |t: &Table| {
+        let (f, l) = span(t);
+        (f - first).abs() <= slack && (l - last).abs() <= slack
+    };
+    let over = if whole(&a) && whole(&b) {
+        String::new()
+    } else {
+        format!(
+            " over the span both cover, t = {first} … {last} ({} has t = {a_first} … {a_last}, {} has t = {b_first} … {b_last})",
+            a.path.display(),
+            b.path.display()
+        )
+    };
+    let note = format!(
+        "note: the time grids differ ({} has {} rows, {} has {}): compared on the times of {}, \
+         the coarser{over}; {} is interpolated linearly onto them",
+        a.path.display(),
+        a.times.len(),
+        b.path.display(),
+        b.times.len(),
+        coarse.path.display(),
+        fine.path.display()
+    );
+    Ok(if a_is_coarser {
+        (coarse, fine, note)
+    } else {
+        (fine, coarse, note)
+    })
+}
+
 fn deviations(a: &Table, b: &Table, names: &[String], rtol: f64, atol: f64) -> Vec<Deviation> {
     names
         .iter()
@@ -307,21 +404,12 @@ pub fn main(args: Args) -> Result<()> {
     let a = read_table(&args.a)?;
     let b = read_table(&args.b)?;
     let names = columns_to_compare(&a, &b, &crate::columns::split(&args.columns))?;
-    let b = if same_grid(&a, &b) {
-        b
+    let (a, b) = if same_grid(&a, &b) {
+        (a, b)
     } else {
-        let on_a = interpolated(&a, &b)?;
-        crate::stdout(format_args!(
-            "note: the time grids differ ({} has {} rows, {} has {}): {} is interpolated \
-             linearly onto the times of {}\n",
-            a.path.display(),
-            a.times.len(),
-            b.path.display(),
-            b.times.len(),
-            b.path.display(),
-            a.path.display()
-        ))?;
-        on_a
+        let (a, b, note) = on_the_coarser_grid(a, b)?;
+        crate::stdout(format_args!("{note}\n"))?;
+        (a, b)
     };
     let devs = deviations(&a, &b, &names, args.rtol, args.atol);
 

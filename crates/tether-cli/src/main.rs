@@ -42,8 +42,20 @@ struct Cli {
         value_name = "CATEGORIES"
     )]
     fmu_log: Option<String>,
+    /// Messages shown per FMU instance and category in one second (the rest
+    /// are counted and reported as suppressed), or `off` for every message.
+    #[arg(long, global = true, value_name = "N|off", default_value = "20", value_parser = log_limit)]
+    fmu_log_limit: LogLimit,
     #[command(subcommand)]
     command: Command,
+}
+
+/// `--fmu-log-limit`: messages per instance, category and second; `None` for all.
+#[derive(Clone, Copy)]
+struct LogLimit(Option<u32>);
+
+fn log_limit(text: &str) -> Result<LogLimit, String> {
+    tether_fmi::parse_rate_limit(text).map(LogLimit)
 }
 
 #[derive(Subcommand)]
@@ -150,6 +162,7 @@ fn main() -> ExitCode {
                 .collect(),
         ));
     }
+    tether_fmi::set_rate_limit(cli.fmu_log_limit.0);
     logger.parse_env("TETHER_LOG").format_timestamp(None).init();
     let result = match cli.command {
         Command::Info(args) => info::main(args),

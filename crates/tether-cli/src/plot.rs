@@ -69,7 +69,17 @@ pub fn draw(
         bail!("nothing to plot");
     };
     let columns = if columns.is_empty() {
-        default_columns(first)
+        let chosen = default_columns(first);
+        if chosen.len() < first.columns.len() {
+            crate::say!(
+                "note: {} plots {} of the {} columns ({}); choose others with --columns NAME,…",
+                out.display(),
+                chosen.len(),
+                first.columns.len(),
+                chosen.join(", ")
+            );
+        }
+        chosen
     } else {
         columns.to_vec()
     };
@@ -91,11 +101,15 @@ pub fn draw(
     Ok(())
 }
 
+/// Panels of a plot whose columns are not chosen.
+pub const DEFAULT_PANELS: usize = 8;
+
 /// Small files: every column. Otherwise the multipliers and residuals of
 /// constraints (`c.lambda`, `c.g`) and joints (`j.lambda[k]`, `j.g[k]`), plus
-/// outputs named like angles or energies of mechanisms (`*.phi`, `*.E`).
+/// outputs named like angles or energies of mechanisms (`*.phi`, `*.E`), or
+/// the first columns if none is named so; at most [`DEFAULT_PANELS`].
 fn default_columns(t: &Table) -> Vec<String> {
-    if t.columns.len() <= 8 {
+    if t.columns.len() <= DEFAULT_PANELS {
         return t.columns.clone();
     }
     let base = |c: &str| -> String {
@@ -104,12 +118,19 @@ fn default_columns(t: &Table) -> Vec<String> {
             _ => c.to_string(),
         }
     };
-    t.columns
+    let named: Vec<String> = t
+        .columns
         .iter()
         .filter(|c| {
             let b = base(c);
             b.ends_with(".lambda") || b.ends_with(".g") || b.ends_with(".phi") || b.ends_with(".E")
         })
+        .take(DEFAULT_PANELS)
         .cloned()
-        .collect()
+        .collect();
+    if named.is_empty() {
+        t.columns.iter().take(DEFAULT_PANELS).cloned().collect()
+    } else {
+        named
+    }
 }

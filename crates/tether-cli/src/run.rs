@@ -89,28 +89,39 @@ pub fn main(args: Args) -> Result<()> {
         crate::output::not_an_input(summary, inputs())?;
     }
     spec.validate()?;
-    if let Some(warning) = spec.grid_warning() {
-        crate::say!("warning: {warning}");
-    }
+    spec.check_grid()?;
     let unstable = spec.method.stability_warning(spec.coupling.order);
     if let Some(warning) = &unstable {
         crate::say!("warning: {warning}");
     }
-    let mut sim = Simulation::new(&spec).map_err(|e| match e {
-        // The patterns of --output-variables replaced the file's.
-        tether_master::MasterError::InvalidOutput(text) if !args.output_variables.is_empty() => {
-            tether_master::MasterError::InvalidOutput(
-                text.replace("[output] variables,", "--output-variables,"),
-            )
-        }
-        e => e.located(&spec, |instance, variable| {
-            let target = format!("{instance}.{variable}");
-            overrides
-                .parameters
-                .contains_key(&target)
-                .then(|| format!("--set {target}"))
-        }),
-    })?;
+    let mut sim = Simulation::new(&spec)
+        .map_err(|e| match e {
+            // The patterns of --output-variables replaced the file's.
+            tether_master::MasterError::InvalidOutput(text)
+                if !args.output_variables.is_empty() =>
+            {
+                tether_master::MasterError::InvalidOutput(
+                    text.replace("[output] variables,", "--output-variables,"),
+                )
+            }
+            e => e.located(&spec, |instance, variable| {
+                let target = format!("{instance}.{variable}");
+                overrides
+                    .parameters
+                    .contains_key(&target)
+                    .then(|| format!("--set {target}"))
+            }),
+        })
+        .map_err(|e| match e {
+            // A name of an SSP system appears in its SystemStructure.ssd.
+            tether_master::MasterError::UnknownVariable(mut u)
+                if _ssp.is_some() && !u.place.starts_with("--set") =>
+            {
+                u.place = format!("{}: {}", crate::ssp::ssd_name(&args.system), u.place);
+                tether_master::MasterError::UnknownVariable(u)
+            }
+            e => e,
+        })?;
     sim.time_phases(args.timing);
     // The plot's columns are checked now, not after the run.
     let plot_columns = crate::columns::split(&args.columns);
@@ -121,6 +132,9 @@ pub fn main(args: Args) -> Result<()> {
                 crate::columns::hint(name, sim.columns())
             );
         }
+    }
+    if let Some(warning) = csv_size_warning(&spec, &sim) {
+        crate::say!("warning: {warning}");
     }
     let file = crate::output::create(&out)?;
     let mut recorder = CsvRecorder::file_at(file, &out);
@@ -215,4 +229,32 @@ fn step_text(spec: &SystemSpec) -> String {
         None => spec.experiment.step.to_string(),
         Some(c) => format!("adaptive (rtol = {:e}, atol = {:e})", c.rtol, c.atol),
     }
+}
+
+/// Results files estimated above this size are announced before the run.
+const LARGE_CSV: f64 = 1e9;
+
+/// Characters of a recorded value in the CSV, a comma included: a typical
+/// shortest round-trip decimal (`-0.12345678901234567,`).
+const BYTES_PER_VALUE: f64 = 20.0;
+
+/// A warning when the results file would exceed [`LARGE_CSV`] bytes, with the
+/// options that shrink it.
+fn csv_size_warning(spec: &tether_master::SystemSpec, sim: &Simulation) -> Option<String> {
+    let e = &spec.experiment;
+    let interval = sim.stats().output_interval;
+    let rows = if interval > 0.0 {
+        ((e.stop - e.start) / interval).round() + 1.0
+    } else {
+        sim.total_steps() as f64 + 1.0
+    };
+    let columns = sim.columns().len() as f64 + 1.0;
+    let bytes = rows * columns * BYTES_PER_VALUE;
+    (bytes > LARGE_CSV).then(|| {
+        format!(
+            "the results file will be about {:.1} GB ({rows:.0} rows × {columns:.0} columns); \
+             --output-interval DT records fewer rows, --output-variables PATTERN,… fewer columns",
+            bytes / 1e9
+        )
+    })
 }

@@ -64,6 +64,22 @@ pub fn load(
     Ok((loaded.spec.clone(), Some(loaded)))
 }
 
+/// Where an SSP system's names are written, for messages: `SystemStructure.ssd`
+/// (a folder or the file itself), `system.ssp, SystemStructure.ssd` (an archive).
+pub fn ssd_name(path: &Path) -> String {
+    let archive = path.is_file()
+        && path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("ssp"));
+    if archive {
+        format!("{}, SystemStructure.ssd", path.display())
+    } else if path.is_file() {
+        path.display().to_string()
+    } else {
+        path.join("SystemStructure.ssd").display().to_string()
+    }
+}
+
 fn read(path: &Path, step: Option<f64>, stop: Option<f64>) -> Result<Loaded> {
     let loaded = tether_ssp::read(path, step, stop)?;
     for skipped in &loaded.skipped {

@@ -390,7 +390,7 @@ fn a_log_flood_is_rate_limited() {
     assert!(text.len() < 16 << 10, "{} bytes on stderr", text.len());
     assert!(text.contains("[WARN  fmu::mass2] [logStatusWarning] flood message 0 at t = 0.5"));
     assert!(
-        text.contains("more messages suppressed (more than 20 in 1 s)"),
+        text.contains("more messages suppressed (more than 20 in 1 s; --fmu-log-limit)"),
         "{text}"
     );
     // Loose (a loaded machine): the flood must not multiply the run time.
@@ -401,6 +401,46 @@ fn a_log_flood_is_rate_limited() {
     let (out, _) = timed(&flood, &["--quiet"]);
     assert_eq!(stderr(&out), "", "--quiet");
     assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);
+}
+
+/// `--fmu-log-limit N` sets the messages shown per instance, category and
+/// second, in process and in an isolated instance's host; `off` shows every
+/// one; anything else is refused by name.
+#[test]
+fn the_log_rate_limit_is_switchable() {
+    let s = Scratch::new();
+    // 3 warnings per fmi2DoStep from t = 0.5: 500 macro steps, each with a
+    // predictor, a perturbed and a corrector run.
+    let flood = system(s.path(), 6, ", flood = 3");
+    let shown = |extra: &[&str]| {
+        let out = s.run(&flood, "out.csv", extra);
+        let text = stderr(&out);
+        assert!(out.status.success(), "{text}");
+        let count = text.matches("] flood message ").count();
+        (count, text)
+    };
+    for isolate in [&[][..], &["--isolate"][..]] {
+        let with = |limit: &[&'static str]| -> Vec<&'static str> { [limit, isolate].concat() };
+        let (count, text) = shown(&with(&["--fmu-log-limit", "5"]));
+        assert!(
+            text.contains("more messages suppressed (more than 5 in 1 s; --fmu-log-limit)"),
+            "{text}"
+        );
+        // 5 a second: a run of a few seconds shows a few tens at most.
+        assert!((5..500).contains(&count), "{count} shown, {isolate:?}");
+        let (count, text) = shown(&with(&["--fmu-log-limit", "off"]));
+        assert_eq!(count, 3 * 3 * 500, "every message with off, {isolate:?}");
+        assert!(!text.contains("suppressed"), "{isolate:?}");
+    }
+    let out = s.run(&flood, "out.csv", &["--fmu-log-limit", "many"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(
+            "'many' is not a rate limit: expected a number of messages per second, or off"
+        ),
+        "{}",
+        stderr(&out)
+    );
 }
 
 /// Asserts a failed run: exit code 1, no panic, the last stderr line holding `what`.
@@ -681,7 +721,7 @@ fn isolated_log_flood_is_rate_limited() {
     assert!(out.status.success(), "{text}");
     assert!(text.len() < 16 << 10, "{} bytes on stderr", text.len());
     assert!(text.contains("[WARN  fmu::mass2] [logStatusWarning] flood message 0 at t = 0.5"));
-    assert!(text.contains("more messages suppressed (more than 20 in 1 s)"));
+    assert!(text.contains("more messages suppressed (more than 20 in 1 s; --fmu-log-limit)"));
     let out = s.run(&flood, "out.csv", &["--isolate", "--quiet"]);
     assert_eq!(stderr(&out), "", "--quiet");
     assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);

@@ -471,3 +471,41 @@ fn a_start_value_for_a_driven_input_is_refused() {
     );
     assert_eq!(error_line(&out), message);
 }
+
+/// A results file estimated above 1 GB is announced before the run starts,
+/// with the options that shrink it (the run itself is stopped here).
+#[test]
+fn a_results_file_above_a_gigabyte_is_announced_before_the_run() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let sys = system(dir.path(), &oscillator(), "", "");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_tether"))
+        .args(["run", sys.to_str().unwrap(), "--out", "big.csv"])
+        .args(["--step", "1e-7", "--stop", "1000"])
+        .current_dir(dir.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first = std::io::BufReader::new(child.stderr.take().unwrap())
+        .lines()
+        .next()
+        .unwrap()
+        .unwrap();
+    child.kill().unwrap();
+    child.wait().unwrap();
+    // 1e10 + 1 rows of time, the 2 × 3 outputs x, v, a and link.lambda, link.g.
+    assert!(
+        first.starts_with("warning: the results file will be about ")
+            && first.ends_with(
+                " GB (10000000001 rows × 9 columns); --output-interval DT records fewer rows, \
+                 --output-variables PATTERN,… fewer columns"
+            ),
+        "{first}"
+    );
+    // The example's own size: no warning.
+    let out = tether(
+        &["run", sys.to_str().unwrap(), "--out", "small.csv"],
+        dir.path(),
+    );
+    assert!(!success(&out).contains("GB"));
+}

@@ -113,3 +113,41 @@ fn foreign_annotations_are_listed_with_v_and_a_missing_step_is_one_line() {
         "{stderr}"
     );
 }
+
+/// A connector the FMU does not have is named with the file it appears in.
+#[test]
+fn an_unknown_connector_names_the_ssd_and_the_connection() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let fixture =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/ssp/controlled_mass");
+    std::fs::create_dir(d.join("resources")).unwrap();
+    let ssd = std::fs::read_to_string(fixture.join("SystemStructure.ssd"))
+        .unwrap()
+        .replace(
+            r#"<ssd:Connector name="x" kind="output">"#,
+            r#"<ssd:Connector name="xx" kind="output">"#,
+        )
+        .replace(r#"startConnector="x""#, r#"startConnector="xx""#);
+    std::fs::write(d.join("SystemStructure.ssd"), ssd).unwrap();
+    std::fs::copy(
+        fixture.join("resources/mass.ssv"),
+        d.join("resources/mass.ssv"),
+    )
+    .unwrap();
+    for name in ["oscillator", "controller"] {
+        let fmu = tether_fmu_build::workspace_fmu(name).unwrap();
+        std::fs::copy(fmu, d.join(format!("resources/{name}.fmu"))).unwrap();
+    }
+    let out = tether(&["run", ".", "--step", "1e-3", "--out", "out.csv"], d);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("error: ./SystemStructure.ssd: connection ")
+            && stderr.contains(
+                "instance 'mass' (oscillator.fmu) has no variable 'xx'; did you mean 'x'?"
+            ),
+        "{stderr}"
+    );
+}

@@ -169,6 +169,29 @@ fn run_plot_and_plot_command_draw_results() {
     assert!(svg.contains("link.lambda"));
 }
 
+/// A wide results file: the default plot has at most 8 panels, and a line
+/// says which columns it shows and how to choose others.
+#[test]
+fn a_default_plot_has_at_most_eight_panels() {
+    let dir = tempfile::tempdir().unwrap();
+    let names: Vec<String> = (0..20).map(|i| format!("body{i}.x")).collect();
+    let mut csv = format!("time,{}\n", names.join(","));
+    for k in 0..5 {
+        let row: Vec<String> = (0..20).map(|i| format!("{}", i * k)).collect();
+        csv += &format!("{},{}\n", f64::from(k) * 0.1, row.join(","));
+    }
+    std::fs::write(dir.path().join("wide.csv"), csv).unwrap();
+    let out = tether(&["plot", "wide.csv", "--out", "w.svg"], dir.path());
+    assert!(out.status.success(), "{}", text(&out));
+    assert_eq!(
+        String::from_utf8_lossy(&out.stderr).trim_end(),
+        "note: w.svg plots 8 of the 20 columns (body0.x, body1.x, body2.x, body3.x, body4.x, \
+         body5.x, body6.x, body7.x); choose others with --columns NAME,…"
+    );
+    let svg = std::fs::read_to_string(dir.path().join("w.svg")).unwrap();
+    assert!(svg.contains("body7.x") && !svg.contains("body8.x"));
+}
+
 #[test]
 fn bad_sweeps_and_plots_are_one_line_errors() {
     let dir = tempfile::tempdir().unwrap();

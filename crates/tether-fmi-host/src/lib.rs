@@ -41,6 +41,7 @@ pub fn serve_standard_streams() -> Result<(), String> {
     if !is_pipe(0) || !is_pipe(1) {
         return Err("it runs an FMU for Tether, which starts it with pipes as standard input and output; it is not meant to be started by hand".into());
     }
+    tether_fmi::rate_limit_from_env();
     // SAFETY: fcntl, open and dup2 on the standard descriptors: the requests and
     // the replies keep the pipes to the master on descriptors of their own, both
     // close-on-exec; descriptor 0 then reads /dev/null and descriptor 1 refers to

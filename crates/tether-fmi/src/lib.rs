@@ -80,6 +80,7 @@ pub use instance::{Instance, StatusKind};
 pub use instance3::Fmi3Instance;
 pub use interface::{FmuInstance, Inputs, LocalInstance, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
+pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIMIT};
 pub use model_description::{
     element_names, BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
     DependencyKind, Dimension, DisplayUnit, EnumerationItem, FmiStandard, Initial, IntegerType,

@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 use std::ffi::{c_char, c_int, c_void, CStr};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -32,9 +32,54 @@ extern "C" {
 type Sink = extern "C" fn(*const LogEnv, *const c_char, c_int, *const c_char, *const c_char);
 type Wanted = extern "C" fn(*const LogEnv, c_int, *const c_char) -> c_int;
 
-/// Messages per instance and category shown in one [`WINDOW`]; more are counted
-/// and reported as suppressed when the window ends (or the instance is freed).
+/// Messages per instance and category shown in one [`WINDOW`] unless
+/// [`set_rate_limit`] says otherwise; more are counted and reported as
+/// suppressed when the window ends (or the instance is freed).
 pub const RATE_LIMIT: u32 = 20;
+
+/// The environment variable that carries the rate limit to an isolated
+/// instance's host process: a count, or `off`.
+pub const RATE_LIMIT_ENV: &str = "TETHER_FMU_LOG_LIMIT";
+
+/// The rate limit in force; `u32::MAX` means none.
+static LIMIT: AtomicU32 = AtomicU32::new(RATE_LIMIT);
+
+/// Sets the number of messages shown per instance, category and [`WINDOW`]
+/// (`None`: every message is shown) for every instance of the process, and
+/// for host processes started afterwards.
+pub fn set_rate_limit(limit: Option<u32>) {
+    LIMIT.store(limit.unwrap_or(u32::MAX), Ordering::Relaxed);
+}
+
+/// The rate limit in force as [`parse_rate_limit`] reads it, for a host
+/// process's environment.
+pub(crate) fn rate_limit_text() -> String {
+    match LIMIT.load(Ordering::Relaxed) {
+        u32::MAX => "off".to_string(),
+        n => n.to_string(),
+    }
+}
+
+/// Parses a rate limit as given on the command line: a count, or `off`.
+pub fn parse_rate_limit(text: &str) -> std::result::Result<Option<u32>, String> {
+    match text.trim() {
+        "off" => Ok(None),
+        t => t.parse::<u32>().map(Some).map_err(|_| {
+            format!(
+                "'{text}' is not a rate limit: expected a number of messages per second, or off"
+            )
+        }),
+    }
+}
+
+/// Takes the rate limit from [`RATE_LIMIT_ENV`], if set (in a host process).
+pub fn rate_limit_from_env() {
+    if let Ok(text) = std::env::var(RATE_LIMIT_ENV) {
+        if let Ok(limit) = parse_rate_limit(&text) {
+            LIMIT.store(limit.unwrap_or(u32::MAX), Ordering::Relaxed);
+        }
+    }
+}
 
 /// The rate limit's window.
 pub const WINDOW: Duration = Duration::from_secs(1);
@@ -145,7 +190,7 @@ impl LogEnv {
                 return true;
             }
         }
-        if window.shown < RATE_LIMIT {
+        if window.shown < LIMIT.load(Ordering::Relaxed) {
             window.shown += 1;
             true
         } else {
@@ -159,8 +204,9 @@ impl LogEnv {
         log::log!(
             target: &self.target,
             window.level,
-            "[{category}] {} more messages suppressed (more than {RATE_LIMIT} in {} s)",
+            "[{category}] {} more messages suppressed (more than {} in {} s; --fmu-log-limit)",
             window.suppressed,
+            LIMIT.load(Ordering::Relaxed),
             WINDOW.as_secs_f64()
         );
     }
@@ -390,7 +436,7 @@ mod tests {
         assert_eq!(
             flooded.last().unwrap(),
             &format!(
-                "[flood] {} more messages suppressed (more than {RATE_LIMIT} in 1 s)",
+                "[flood] {} more messages suppressed (more than {RATE_LIMIT} in 1 s; --fmu-log-limit)",
                 1000 - RATE_LIMIT
             )
         );

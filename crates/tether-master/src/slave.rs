@@ -260,6 +260,11 @@ impl Slave {
         let max_output_derivative_order = cs.max_output_derivative_order;
         let can_get_and_set_state = cs.can_get_and_set_fmu_state;
         let model_name = md.model_name.clone();
+        let counters = InstanceCounters {
+            name: name.to_string(),
+            model: model_name.clone(),
+            ..Default::default()
+        };
         let mut recorded_names = Vec::new();
         let mut recorded_vrs = Vec::new();
         let mut recorded_ints = Vec::new();
@@ -310,10 +315,7 @@ impl Slave {
             recorded_ints,
             bool_buf: vec![false; recorded_bools.len()],
             recorded_bools,
-            counters: InstanceCounters {
-                name: name.to_string(),
-                ..Default::default()
-            },
+            counters,
             can_interpolate_inputs,
             max_output_derivative_order,
             can_get_and_set_state,

@@ -11,6 +11,8 @@ use std::time::{Duration, Instant};
 pub struct InstanceCounters {
     /// Instance name.
     pub name: String,
+    /// The model it instantiates (`modelName`), for the summary's per-model lines.
+    pub model: String,
     /// `fmi2DoStep` calls.
     pub do_steps: u64,
     /// `fmi2GetFMUstate` calls.
@@ -178,13 +180,12 @@ impl fmt::Display for RunStats {
                 self.max_corrections
             )?;
         }
-        for c in &self.instances {
+        for (label, c) in instance_lines(&self.instances) {
             writeln!(
                 f,
-                "  {:<16} doStep: {:>9}   getFMUstate: {:>8}   setFMUstate: {:>8}   \
+                "  {label:<16} doStep: {:>9}   getFMUstate: {:>8}   setFMUstate: {:>8}   \
                  setReal: {:>9}   getReal: {:>9}   setRealInputDerivatives: {:>8}   \
                  getRealOutputDerivatives: {:>8}",
-                c.name,
                 c.do_steps,
                 c.state_gets,
                 c.state_sets,
@@ -194,23 +195,70 @@ impl fmt::Display for RunStats {
                 c.get_output_derivatives
             )?;
         }
+        if self.instances.len() > SUMMARY_ROWS {
+            writeln!(
+                f,
+                "  ({} instances, counted per model; per instance in --summary-json)",
+                self.instances.len()
+            )?;
+        }
         if !self.residuals.is_empty() {
+            // The largest residuals first when there are more than a line holds.
+            let mut worst: Vec<&(String, f64)> = self.residuals.iter().collect();
+            if worst.len() > SUMMARY_RESIDUALS {
+                worst.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            }
             write!(f, "  max |g|:")?;
-            for (name, max) in &self.residuals {
+            for (name, max) in worst.iter().take(SUMMARY_RESIDUALS) {
                 write!(f, "  {name} {max:.2e}")?;
             }
+            if worst.len() > SUMMARY_RESIDUALS {
+                write!(
+                    f,
+                    "  … {} more, smaller (all in --summary-json)",
+                    worst.len() - SUMMARY_RESIDUALS
+                )?;
+            }
             writeln!(f)?;
-            for (name, max) in self
+            let mut above: Vec<&(String, f64)> = self
                 .residuals
                 .iter()
                 .filter(|(_, m)| m.is_nan() || *m > self.residual_warning)
-            {
+                .collect();
+            above.sort_by(|a, b| match (a.1.is_nan(), b.1.is_nan()) {
+                (true, false) => std::cmp::Ordering::Less,
+                (false, true) => std::cmp::Ordering::Greater,
+                _ => b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)),
+            });
+            if above.len() == 1 {
+                let (name, max) = above[0];
                 writeln!(
                     f,
                     "  warning: max |{name}| = {max:.2e} exceeds residual_warning = {:e}: the \
                      constraint is not held to that accuracy (a smaller step, another index or \
                      method, or a larger residual_warning)",
                     self.residual_warning
+                )?;
+            } else if above.len() > 1 {
+                let named: Vec<String> = above
+                    .iter()
+                    .take(SUMMARY_WARNED)
+                    .map(|(name, max)| format!("|{name}| = {max:.2e}"))
+                    .collect();
+                let more = above.len().saturating_sub(SUMMARY_WARNED);
+                writeln!(
+                    f,
+                    "  warning: {} residuals exceed residual_warning = {:e}, the largest max {}{}: \
+                     these constraints are not held to that accuracy (a smaller step, another \
+                     index or method, or a larger residual_warning)",
+                    above.len(),
+                    self.residual_warning,
+                    named.join(", "),
+                    if more > 0 {
+                        format!(" and {more} more")
+                    } else {
+                        String::new()
+                    }
                 )?;
             }
         }
@@ -260,6 +308,67 @@ impl fmt::Display for RunStats {
             t.recording.as_secs_f64()
         )
     }
+}
+
+/// Instances shown one per line in the text summary; beyond, one line per model.
+pub const SUMMARY_ROWS: usize = 8;
+
+/// Residuals named on the summary's `max |g|` line (the largest, beyond it).
+pub const SUMMARY_RESIDUALS: usize = 8;
+
+/// Residuals named in the warning for those above `residual_warning`.
+pub const SUMMARY_WARNED: usize = 3;
+
+/// The summary's call-count lines: one per instance up to [`SUMMARY_ROWS`],
+/// otherwise one per model (`model ×n`), the counts summed, in the order of
+/// first appearance.
+fn instance_lines(instances: &[InstanceCounters]) -> Vec<(String, InstanceCounters)> {
+    if instances.len() <= SUMMARY_ROWS {
+        return instances
+            .iter()
+            .map(|c| (c.name.clone(), c.clone()))
+            .collect();
+    }
+    let mut models: Vec<(String, usize, InstanceCounters)> = Vec::new();
+    for c in instances {
+        let i = match models.iter().position(|(m, _, _)| *m == c.model) {
+            Some(i) => i,
+            None => {
+                models.push((c.model.clone(), 0, InstanceCounters::default()));
+                models.len() - 1
+            }
+        };
+        let (_, n, sum) = &mut models[i];
+        *n += 1;
+        add(sum, c);
+    }
+    // More models than lines: the rest together.
+    if models.len() > SUMMARY_ROWS {
+        let rest = models.split_off(SUMMARY_ROWS - 1);
+        let mut sum = InstanceCounters::default();
+        let mut n = 0;
+        for (_, k, c) in &rest {
+            n += k;
+            add(&mut sum, c);
+        }
+        models.push((format!("{} other models", rest.len()), n, sum));
+    }
+    models
+        .into_iter()
+        .map(|(model, n, sum)| (format!("{model} ×{n}"), sum))
+        .collect()
+}
+
+fn add(sum: &mut InstanceCounters, c: &InstanceCounters) {
+    sum.do_steps += c.do_steps;
+    sum.state_gets += c.state_gets;
+    sum.state_sets += c.state_sets;
+    sum.set_reals += c.set_reals;
+    sum.get_reals += c.get_reals;
+    sum.get_integers += c.get_integers;
+    sum.get_booleans += c.get_booleans;
+    sum.set_input_derivatives += c.set_input_derivatives;
+    sum.get_output_derivatives += c.get_output_derivatives;
 }
 
 /// The clock of one macro step's phases: each split adds the time since the
@@ -474,4 +583,70 @@ pub struct ParallelInfo {
     pub trial_sequential: Duration,
     /// "auto": shortest measured perturbed-run phase of the parallel trial steps.
     pub trial_parallel: Duration,
+}
+
+#[cfg(test)]
+mod summary_tests {
+    use super::*;
+
+    /// A run of any size: the text summary stays within about 30 lines,
+    /// counted per model, the largest residuals named, one warning line.
+    #[test]
+    fn the_text_summary_stays_short_at_any_size() {
+        let instances = (0..1000)
+            .map(|i| InstanceCounters {
+                name: format!("body[{i}]"),
+                model: format!("model{}", i % 12),
+                do_steps: 3,
+                ..Default::default()
+            })
+            .collect();
+        let residuals = (0..1000)
+            .map(|i| (format!("joint[{i}].g"), f64::from(i) * 1e-6))
+            .collect();
+        let stats = RunStats {
+            instances,
+            residuals,
+            residual_warning: 1e-4,
+            ..Default::default()
+        };
+        let text = stats.to_string();
+        assert!(text.lines().count() <= 30, "{text}");
+        assert!(text.contains("  model0 ×84 "), "{text}");
+        assert!(text.contains("  5 other models ×415 "), "{text}");
+        assert!(
+            text.contains("(1000 instances, counted per model; per instance in --summary-json)")
+        );
+        assert!(
+            text.contains("max |g|:  joint[999].g 9.99e-4  joint[998].g 9.98e-4"),
+            "{text}"
+        );
+        assert!(
+            text.contains("… 992 more, smaller (all in --summary-json)"),
+            "{text}"
+        );
+        assert!(
+            text.contains(
+                "warning: 899 residuals exceed residual_warning = 1e-4, the largest max \
+                 |joint[999].g| = 9.99e-4, |joint[998].g| = 9.98e-4, |joint[997].g| = 9.97e-4 and \
+                 896 more: "
+            ),
+            "{text}"
+        );
+        // Small runs: one line per instance, every residual named.
+        let small = RunStats {
+            instances: vec![InstanceCounters {
+                name: "mass1".into(),
+                model: "oscillator".into(),
+                ..Default::default()
+            }],
+            residuals: vec![("link.g".into(), 2e-3)],
+            residual_warning: 1e-3,
+            ..Default::default()
+        };
+        let text = small.to_string();
+        assert!(text.contains("\n  mass1 "), "{text}");
+        assert!(text.contains("max |g|:  link.g 2.00e-3\n"), "{text}");
+        assert!(text.contains("warning: max |link.g| = 2.00e-3 exceeds residual_warning = 1e-3"));
+    }
 }

@@ -19,7 +19,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
-use tether_fmi::{Causality, Fmu, Initial, Variability, VariableKind};
+use tether_fmi::{Causality, FmiStandard, Fmu, Initial, Values, Variability, VariableKind};
 use tether_master::{
     MasterError, MethodChange, Observer, OverrideError, Overrides, RunStats, Sample, Simulation,
     SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun, StartValue, SystemSpec,
@@ -499,7 +499,10 @@ fn run(
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Py<PyAny>> {
     let spec = load_spec(path, text, kwargs)?;
+    // A divergence of a formulation known to be unstable says so again, as the CLI does.
+    let unstable = spec.method.stability_warning(spec.coupling.order);
     let outcome = py.detach(move || -> Result<_, MasterError> {
+        spec.check_grid()?;
         let mut sim = Simulation::new(&spec).map_err(|e| e.located(&spec, |_, _| None))?;
         let mut rows = Rows::default();
         let width = sim.columns().len() + 1;
@@ -524,7 +527,14 @@ fn run(
         Ok((rows, Err(e), stats)) => {
             let stats = stats_dict(py, &stats, &message(&e))?.into_any().unbind();
             let partial = rows.into_py(py, stats)?;
-            Err(master_failure(&e, Some(partial)))
+            match (&e, unstable) {
+                (MasterError::Diverged { .. }, Some(advice)) => Err(failure(
+                    kind_of(&e),
+                    format!("{}; {advice}", message(&e)),
+                    Some(partial),
+                )),
+                _ => Err(master_failure(&e, Some(partial))),
+            }
         }
     }
 }
@@ -546,6 +556,8 @@ struct PySimulation {
     failed: Option<String>,
     /// The counters at [`close`](Self::close).
     closed_stats: Option<(RunStats, u64)>,
+    /// The advice for a formulation known to be unstable, repeated on divergence.
+    unstable: Option<String>,
 }
 
 impl PySimulation {
@@ -583,6 +595,7 @@ impl PySimulation {
             rows,
             failed: None,
             closed_stats: None,
+            unstable: spec.method.stability_warning(spec.coupling.order),
         })
     }
 
@@ -693,7 +706,11 @@ impl PySimulation {
             }
             if let Err(e) = sim.step() {
                 let text = message(&e);
-                self.failed = Some(text);
+                self.failed = Some(text.clone());
+                // A formulation known to be unstable says so again, as the CLI does.
+                if let (MasterError::Diverged { .. }, Some(advice)) = (&e, &self.unstable) {
+                    return Err(failure(kind_of(&e), format!("{text}; {advice}"), None));
+                }
                 return Err(master_failure(&e, None));
             }
             self.n += 1;
@@ -772,12 +789,46 @@ fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
         "canNotUseMemoryManagementFunctions",
         cs.can_not_use_memory_management_functions,
     )?;
+    // fmpy's names, FMI 2.0's spelling for the flags both standards have.
     c.set_item("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state)?;
     c.set_item("canSerializeFMUstate", cs.can_serialize_fmu_state)?;
     c.set_item(
         "providesDirectionalDerivative",
         cs.provides_directional_derivative,
     )?;
+    let fmi3 = md.standard == FmiStandard::Fmi3;
+    if fmi3 {
+        c.set_item(
+            "providesAdjointDerivatives",
+            cs.provides_adjoint_derivatives,
+        )?;
+        c.set_item(
+            "providesPerElementDependencies",
+            cs.provides_per_element_dependencies,
+        )?;
+        c.set_item(
+            "providesIntermediateUpdate",
+            cs.provides_intermediate_update,
+        )?;
+        c.set_item(
+            "mightReturnEarlyFromDoStep",
+            cs.might_return_early_from_do_step,
+        )?;
+        c.set_item(
+            "canReturnEarlyAfterIntermediateUpdate",
+            cs.can_return_early_after_intermediate_update,
+        )?;
+        c.set_item("hasEventMode", cs.has_event_mode)?;
+        c.set_item(
+            "providesEvaluateDiscreteStates",
+            cs.provides_evaluate_discrete_states,
+        )?;
+        c.set_item("fixedInternalStepSize", cs.fixed_internal_step_size)?;
+        c.set_item(
+            "recommendedIntermediateInputSmoothness",
+            cs.recommended_intermediate_input_smoothness,
+        )?;
+    }
     d.set_item("coSimulation", c)?;
     d.set_item("modelExchange", &md.model_exchange)?;
     match &md.default_experiment {
@@ -853,10 +904,44 @@ fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
                 x.set_item("unit", py.None())?;
             }
         }
+        if fmi3 {
+            // The exact type, every start value (arrays row-major), the dimensions.
+            x.set_item("type", v.value_type.name())?;
+            if v.structural_parameter {
+                x.set_item("causality", "structuralParameter")?;
+            }
+            x.set_item("intermediateUpdate", v.intermediate_update)?;
+            let sizes = md
+                .array_sizes(v)
+                .map_err(|e| failure("fmu", message(&e), None))?;
+            x.set_item("shape", PyTuple::new(py, sizes)?)?;
+            if let Some(values) = &v.start_values {
+                let start = start_object(py, values)?;
+                if v.is_array() {
+                    x.set_item("start", start)?;
+                } else {
+                    let first = start.bind(py).get_item(0).ok();
+                    x.set_item("start", first)?;
+                }
+            }
+        }
         variables.append(x)?;
     }
     d.set_item("modelVariables", variables)?;
     Ok(d)
+}
+
+/// FMI 3.0 start values as a Python list (Binary values as bytes).
+fn start_object(py: Python<'_>, values: &Values) -> PyResult<Py<PyList>> {
+    let list = match values {
+        Values::Float(v) => PyList::new(py, v)?,
+        Values::Int(v) => PyList::new(py, v)?,
+        Values::UInt(v) => PyList::new(py, v)?,
+        Values::Boolean(v) => PyList::new(py, v)?,
+        Values::String(v) => PyList::new(py, v)?,
+        Values::Binary(v) => PyList::new(py, v.iter().map(|b| PyBytes::new(py, b)))?,
+    };
+    Ok(list.unbind())
 }
 
 /// One FMU at a fixed communication step, like `tether simulate` (the same

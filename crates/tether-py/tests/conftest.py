@@ -2,6 +2,7 @@
 ``tether`` binary (``cargo build --release -p tether-cli``, or $TETHER_BIN)."""
 
 import csv
+import importlib
 import os
 import subprocess
 from pathlib import Path
@@ -10,6 +11,19 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[3]
+
+
+def need_tool(module: str):
+    """The third-party `module` a test runs against (fmpy, dask, plotly,
+    pandas): without it the test fails on CI (`CI` set: .ci/run installs every
+    tool) and elsewhere is skipped, saying why."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:
+        why = f"{module} is not installed ({e}); .ci/run installs it"
+        if os.environ.get("CI"):
+            pytest.fail(f"{why}: needed on CI")
+        pytest.skip(why)
 
 
 def _need(path: Path, how: str) -> Path:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import tether
-from conftest import cli, read_csv, same_bits
+from conftest import cli, need_tool, read_csv, same_bits
 
 VARIANTS = [
     {},
@@ -85,7 +85,7 @@ def test_result_api(oscillator_toml):
 
 
 def test_fmpy_write_csv_accepts_the_result(tmp_path, oscillator_toml):
-    fmpy_util = pytest.importorskip("fmpy.util")
+    fmpy_util = need_tool("fmpy.util")
     result = tether.run(oscillator_toml, stop=0.05)
     out = tmp_path / "fmpy.csv"
     fmpy_util.write_csv(str(out), result.to_numpy())
@@ -99,8 +99,8 @@ def test_fmpy_write_csv_accepts_the_result(tmp_path, oscillator_toml):
 def test_fmpy_plot_result_accepts_the_result(tmp_path, oscillator_toml):
     # fmpy 0.3's plot_result draws with plotly: create_plotly_figure is its
     # whole reading of the result (writing an image then needs kaleido).
-    fmpy_util = pytest.importorskip("fmpy.util")
-    pytest.importorskip("plotly")
+    fmpy_util = need_tool("fmpy.util")
+    need_tool("plotly")
     result = tether.run(oscillator_toml, stop=0.05)
     figure = fmpy_util.create_plotly_figure(result.to_numpy(), names=["mass1.x", "link.lambda"])
     out = tmp_path / "plot.html"
@@ -111,7 +111,7 @@ def test_fmpy_plot_result_accepts_the_result(tmp_path, oscillator_toml):
 
 
 def test_to_pandas(oscillator_toml):
-    pd = pytest.importorskip("pandas")
+    pd = need_tool("pandas")
     frame = tether.run(oscillator_toml, stop=0.01).to_pandas()
     assert isinstance(frame, pd.DataFrame)
     assert list(frame.columns)[:2] == ["time", "mass1.x"]
@@ -252,3 +252,28 @@ def test_isolate_and_call_timeout_are_keywords(oscillator_toml):
 
 def test_version():
     assert tether.__version__ == "0.1.0"
+
+
+def test_to_toml_keeps_the_order_of_the_file(tmp_path, oscillator_toml):
+    """A loaded system writes its sections in the file's order, also an
+    unusual one (instances first, the method last)."""
+    text = oscillator_toml.read_text()
+    sections = text.split("\n[")
+    head, tables = sections[0], ["[" + t for t in sections[1:]]
+    method = [t for t in tables if t.startswith("[method]")]
+    rest = [t for t in tables if not t.startswith("[method]")]
+    experiment = [t for t in rest if t.startswith("[experiment]")]
+    others = [t for t in rest if not t.startswith("[experiment]")]
+    reordered = tmp_path / "reordered.toml"
+    fmu_dir = oscillator_toml.parent
+    body = "\n".join([head] + others + experiment + method)
+    reordered.write_text(body.replace('"../target', '"' + str(fmu_dir / "../target")))
+    def order(t):
+        names = [line.strip("[]").split(".")[0] for line in t.splitlines() if line.startswith("[")]
+        return [n for i, n in enumerate(names) if i == 0 or names[i - 1] != n]
+    written = tether.System.from_file(reordered).to_toml()
+    assert order(written) == order(reordered.read_text()), written
+    # And it runs as the original does.
+    a = tether.run(oscillator_toml, stop=0.05)
+    b = tether.run(tether.System.from_file(reordered), stop=0.05)
+    assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))

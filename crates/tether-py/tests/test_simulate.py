@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 import tether
-from conftest import cli, error_line, read_csv, same_bits
+from conftest import cli, error_line, need_tool, read_csv, same_bits
 
 
 @pytest.fixture(scope="module")
 def fmpy():
-    return pytest.importorskip("fmpy")
+    return need_tool("fmpy")
 
 
 @pytest.mark.parametrize("parameters", [{}, {"m": 2.0, "c": 500.0, "x0": 0.1}], ids=["defaults", "set"])
@@ -57,6 +57,53 @@ def test_info_matches_fmpy(fmpy, oscillator_fmu):
         assert v["valueReference"] == w.valueReference
         assert v["causality"] == w.causality
         assert v["type"] == w.type
+
+
+FMI3_MODELS = ["BouncingBall", "Dahlquist", "Feedthrough", "Resource", "Stair", "StateSpace",
+               "VanDerPol"]
+
+
+@pytest.mark.parametrize("model", FMI3_MODELS)
+def test_info_of_an_fmi3_fmu_matches_fmpy(fmpy, fmi3_reference, model):
+    """FMI 3.0: the capability flags, each variable's exact type, causality,
+    shape and start values, as fmpy reads them (and names them)."""
+    fmu = fmi3_reference(model)
+    ours = tether.info(fmu)
+    md = fmpy.read_model_description(str(fmu))
+    assert ours["fmiVersion"] == md.fmiVersion == "3.0"
+    assert ours["guid"] == md.guid
+    cs = ours["coSimulation"]
+    for flag in ("canGetAndSetFMUstate", "canSerializeFMUstate", "providesIntermediateUpdate",
+                 "hasEventMode", "canHandleVariableCommunicationStepSize",
+                 "canReturnEarlyAfterIntermediateUpdate", "providesEvaluateDiscreteStates"):
+        assert cs[flag] == bool(getattr(md.coSimulation, flag)), flag
+    # The same variables (fmpy lists an <Alias> after every variable, here it
+    # follows the variable it names).
+    theirs = {w.name: w for w in md.modelVariables}
+    assert sorted(v["name"] for v in ours["modelVariables"]) == sorted(theirs)
+    for v in ours["modelVariables"]:
+        w = theirs[v["name"]]
+        assert v["valueReference"] == w.valueReference
+        assert v["causality"] == w.causality, v["name"]
+        assert v["type"] == w.type, v["name"]
+        if w.shape is not None:
+            assert v["shape"] == tuple(w.shape), v["name"]
+        # fmpy keeps a start value as text ("1 0 0 …" for an array).
+        if w.start is not None and w.type in ("Float32", "Float64"):
+            expected = [float(x) for x in str(w.start).split()]
+            got = v["start"] if isinstance(v["start"], list) else [v["start"]]
+            assert got == expected, v["name"]
+    if model == "BouncingBall":
+        # modelDescription.xml: h and v have intermediateUpdate="true" (fmpy
+        # 0.3.32 reads it as False), der(h) has none.
+        update = {v["name"]: v["intermediateUpdate"] for v in ours["modelVariables"]}
+        assert update["h"] and update["v"] and not update["der(h)"]
+    if model == "StateSpace":
+        shape = {v["name"]: v["shape"] for v in ours["modelVariables"]}
+        assert shape["A"] == (3, 3) and shape["B"] == (3, 3) and shape["x"] == (3,)
+        assert shape["m"] == ()
+        a = next(v for v in ours["modelVariables"] if v["name"] == "A")
+        assert a["start"] == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 
 
 def test_simulate_raises_at_a_nan_output_with_the_partial_result(tmp_path, tether_bin, quirks_fmu):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tether
-from conftest import cli, error_line, same_bits
+from conftest import cli, error_line, need_tool, same_bits
 
 # A small map of the paper's oscillator, Method 1 on index 1 with large
 # Baumgarte parameters at H = 5e-3: stable at small c, unstable at large c.
@@ -87,7 +87,7 @@ def test_process_pool_equals_local(oscillator_toml):
 
 
 def test_dask_local_cluster_equals_local(oscillator_toml, tmp_path):
-    distributed = pytest.importorskip("dask.distributed")
+    distributed = need_tool("dask.distributed")
     # A study file with two variants: one map each.
     study = tmp_path / "map.toml"
     study.write_text(

@@ -156,6 +156,10 @@ impl RemoteInstance {
             .args(&command.args)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
+            .env(
+                crate::logger::RATE_LIMIT_ENV,
+                crate::logger::rate_limit_text(),
+            )
             .process_group(0)
             .spawn()
             .map_err(|e| start_error(format!("{}: {e}", command.program.display())))?;

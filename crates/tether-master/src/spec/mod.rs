@@ -599,7 +599,7 @@ mod tests {
     }
 
     #[test]
-    fn a_stop_time_off_the_grid_is_named_with_the_actual_end() {
+    fn a_stop_time_off_the_grid_is_refused_naming_the_nearest_grid_point() {
         let spec = |stop: f64, step: f64| {
             SystemSpec::from_toml(
                 &OSC.replace("stop = 1.0", &format!("stop = {stop:?}"))
@@ -607,22 +607,22 @@ mod tests {
             )
             .unwrap()
         };
-        assert_eq!(spec(1.0, 1e-3).grid_warning(), None);
-        assert_eq!(
-            spec(0.1, 1e-3).grid_warning(),
-            None,
+        assert!(spec(1.0, 1e-3).check_grid().is_ok());
+        assert!(
+            spec(0.1, 1e-3).check_grid().is_ok(),
             "within rounding of the grid"
         );
         let off = spec(1e-4, 1e-3);
         assert_eq!(off.end_time(), 1e-3);
         assert_eq!(
-            off.grid_warning().as_deref(),
-            Some("stop = 0.0001 is not on the macro grid start + n·step (start = 0, step = 0.001): the run ends at t = 0.001"),
+            off.check_grid().unwrap_err().to_string(),
+            "invalid stop = 0.0001: expected a point of the macro grid start + n·step (start = 0, step = 0.001); the nearest is 0.001 (or give a step that divides stop - start, or adaptive steps)",
         );
-        assert_eq!(
-            spec(1.0, 0.3).grid_warning().as_deref(),
-            Some("stop = 1 is not on the macro grid start + n·step (start = 0, step = 0.3): the run ends at t = 0.9")
-        );
+        assert!(spec(1.0, 0.3)
+            .check_grid()
+            .unwrap_err()
+            .to_string()
+            .contains("the nearest is 0.9 "));
     }
 
     const OSC: &str = r#"

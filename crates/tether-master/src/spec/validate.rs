@@ -278,19 +278,30 @@ impl SystemSpec {
         e.start + self.macro_steps() as f64 * e.step
     }
 
-    /// A warning when `stop` is not on the macro grid (beyond a relative 1e-9
-    /// of a step): the run ends at the nearest grid point instead.
-    pub fn grid_warning(&self) -> Option<String> {
+    /// Refuses a `stop` off the macro grid of a fixed-step run (beyond a
+    /// relative 1e-9 of a step), naming the nearest grid point. Runs that
+    /// rely on rounding (studies over several steps) call [`Self::end_time`].
+    pub fn check_grid(&self) -> Result<(), MasterError> {
         let e = &self.experiment;
-        if self.step_control.is_some() {
-            return None;
+        // A step or span that is invalid in itself is validation's to report.
+        let valid = e.step.is_finite() && e.step > 0.0 && e.stop.is_finite() && e.stop > e.start;
+        if self.step_control.is_some() || !valid {
+            return Ok(());
         }
         let end = self.end_time();
-        ((end - e.stop).abs() > 1e-9 * e.step).then(|| {
-            format!(
-                "stop = {} is not on the macro grid start + n·step (start = {}, step = {}): the run ends at t = {}",
-                e.stop, e.start, e.step, tidy(end)
-            )
+        if (end - e.stop).abs() <= 1e-9 * e.step {
+            return Ok(());
+        }
+        Err(MasterError::InvalidParameter {
+            name: "stop".into(),
+            value: e.stop,
+            expected: format!(
+                "a point of the macro grid start + n·step (start = {}, step = {}); the nearest is {} \
+                 (or give a step that divides stop - start, or adaptive steps)",
+                e.start,
+                e.step,
+                tidy(end)
+            ),
         })
     }
 

@@ -33,6 +33,11 @@ from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Seque
 
 import numpy as np
 
+try:  # Python 3.11+: a loaded system keeps the file's order of sections
+    import tomllib
+except ImportError:  # pragma: no cover
+    tomllib = None
+
 from . import _tether
 
 __version__: str = _tether.__version__
@@ -246,6 +251,17 @@ def _patterns(value: Union[str, Sequence[str]]) -> List[str]:
     return [p.strip() for p in out if p.strip()]
 
 
+def _ordered_like(value: Any, raw: Any) -> Any:
+    """`value` (a loaded system's dict) with its keys in the order of `raw`
+    (the file as tomllib reads it), the keys the file does not have last."""
+    if isinstance(value, dict) and isinstance(raw, dict):
+        keys = [k for k in raw if k in value] + [k for k in value if k not in raw]
+        return {k: _ordered_like(value[k], raw.get(k)) for k in keys}
+    if isinstance(value, list) and isinstance(raw, list) and len(value) == len(raw):
+        return [_ordered_like(v, r) for v, r in zip(value, raw)]
+    return value
+
+
 class System:
     """A system built in code: FMU instances, constraints, joints, coupling
     variables, the time grid and the method; the same content as a system file
@@ -293,6 +309,10 @@ class System:
                 system._data[key] = list(value) if isinstance(value, list) else value
         for inst in system._data["instance"]:
             inst["fmu"] = os.path.abspath(inst["fmu"])
+        # The file's order of sections and of the keys in each (to_toml keeps it).
+        if tomllib is not None:
+            with open(path, "rb") as f:
+                system._data = _ordered_like(system._data, tomllib.load(f))
         return system
 
     @property
@@ -425,10 +445,17 @@ class System:
         return out
 
     def to_toml(self) -> str:
-        """The system file text (TOML)."""
+        """The system file text (TOML), its sections in the order they were
+        added (or, for a loaded system, of the file)."""
         if self._data["experiment"] is None:
             raise SystemFileError("system: no experiment; call System.experiment(stop=…, step=…)")
-        return _tether.dump_toml(self.to_dict())
+        data = self.to_dict()
+        # TOML wants the top-level keys before the first table; each section
+        # is then written on its own, in order.
+        top = {k: v for k, v in data.items() if not isinstance(v, (dict, list))}
+        parts = [_tether.dump_toml(top)] if top else []
+        parts += [_tether.dump_toml({k: v}) for k, v in data.items() if k not in top]
+        return "\n".join(p.strip("\n") + "\n" for p in parts if p.strip())
 
     def save(self, path: PathLike) -> None:
         """Write the system file."""
