@@ -289,3 +289,40 @@ fn coupling_polynomials_of_degree_one_are_refused_for_the_fmi3_instance() {
         "{line}"
     );
 }
+
+/// An isolated FMI 3.0 instance's macro step is two messages to its host, as an
+/// FMI 2.0 one's (the batched protocol is the same for both): `round_trips` of the
+/// run summary between two stop times (the setup cancels out), for the pair with
+/// the FMI 3.0 mass and for the workspace pair.
+#[test]
+fn an_isolated_fmi3_macro_step_costs_two_round_trips_like_fmi2() {
+    let Some((mass, libpython)) = python_mass() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let trips = |mass2: &Path, stop: &str| {
+        let json = dir.path().join("summary.json");
+        let args = ["--isolate", "--parallel", "off", "--stop", stop];
+        let mut args: Vec<&str> = args.to_vec();
+        args.extend(["--summary-json", json.to_str().unwrap()]);
+        ok(libpython, &system(mass2, BAUMGARTE_1, ""), &args);
+        let text = std::fs::read_to_string(&json).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let steps = v["macro_steps"].as_u64().unwrap();
+        let per = |name: &str| v["instances"][name]["round_trips"].as_u64().unwrap();
+        (steps, [per("mass1"), per("mass2")])
+    };
+    let per_step = |mass2: &Path| {
+        let ((s0, a), (s1, b)) = (trips(mass2, "0.2"), trips(mass2, "0.4"));
+        let steps = s1 - s0;
+        assert!(steps >= 100, "{steps} steps");
+        [
+            (b[0] - a[0]) as f64 / steps as f64,
+            (b[1] - a[1]) as f64 / steps as f64,
+        ]
+    };
+    let (fmi3, fmi2) = (per_step(mass), per_step(&oscillator()));
+    eprintln!("round trips per macro step: FMI 3.0 pair {fmi3:?}, FMI 2.0 pair {fmi2:?}");
+    assert_eq!(fmi3, [2.0, 2.0]);
+    assert_eq!(fmi2, [2.0, 2.0]);
+}

@@ -17,9 +17,12 @@ use std::fs::File;
 use std::io::{BufReader, Write};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
+use std::time::{Duration, Instant};
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
-use tether_fmi::{Error, Fmu, FmuInstance, Inputs, InstanceOptions, Placement};
+use tether_fmi::{Error, FmiStandard, Fmu, FmuInstance, Inputs, InstanceOptions, Placement};
 
 /// Serves the master on standard input and output; the exit code is 0 when
 /// the master closed the connection, 2 when standard input and output are not
@@ -121,27 +124,135 @@ struct Host {
     derivatives: Vec<f64>,
     bools: Vec<bool>,
     bytes: Vec<u8>,
+    /// `call_timeout` of the instance, sent with `INSTANTIATE`.
+    timeout: Option<Duration>,
 }
 
-/// Answers requests until the master closes the connection.
-fn serve(requests: File, mut writer: File) -> std::io::Result<()> {
+/// Answers requests until the master closes the connection: the calls of a
+/// request one after the other, until one fails.
+fn serve(requests: File, writer: File) -> std::io::Result<()> {
     let mut reader = BufReader::with_capacity(1 << 16, requests);
+    let writer = Arc::new(Mutex::new(writer));
+    let clock = Arc::new(CallClock::default());
     let mut request = Vec::new();
     let mut out = Out::default();
     let mut host = Host::default();
+    let mut watching = false;
     while protocol::receive(&mut reader, &mut request)? {
         let mut input = In::new(&request);
-        let code = input.u8()?;
         out.start(protocol::OK);
-        if let Err(e) = host.handle(code, &mut input, &mut out)? {
-            out.start(protocol::ERR).error(&e);
+        let mut index = 0u32;
+        let mut freed = false;
+        while !input.is_empty() {
+            let code = input.u8()?;
+            clock.enter(code, host.call_time(code, input));
+            let result = host.handle(code, &mut input, &mut out);
+            clock.leave();
+            if let Err(e) = result? {
+                out.start(protocol::ERR).u32(index).error(&e);
+                break;
+            }
+            freed |= code == op::FREE_INSTANCE;
+            index += 1;
         }
-        out.send(&mut writer)?;
-        if code == op::FREE_INSTANCE {
+        if let (Some(timeout), Some(instance), false) = (host.timeout, &host.instance, watching) {
+            let standard = instance.model_description().standard;
+            watch_calls(&clock, &writer, timeout, instance.name(), standard);
+            watching = true;
+        }
+        out.send(&mut *lock(&writer))?;
+        if freed {
             break;
         }
     }
     Ok(())
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The FMI call in progress, for the watch of `call_timeout`: a sequence
+/// number that is odd during a call, and the call's start, function and time.
+#[derive(Default)]
+struct CallClock {
+    sequence: AtomicU64,
+    /// Nanoseconds since `epoch` when the call began.
+    started: AtomicU64,
+    code: AtomicU8,
+    time: AtomicU64,
+    epoch: OnceLock<Instant>,
+}
+
+impl CallClock {
+    fn now(&self) -> u64 {
+        let epoch = self.epoch.get_or_init(Instant::now);
+        u64::try_from(epoch.elapsed().as_nanos()).unwrap_or(u64::MAX)
+    }
+    fn enter(&self, code: u8, time: f64) {
+        self.code.store(code, Ordering::Relaxed);
+        self.time.store(time.to_bits(), Ordering::Relaxed);
+        self.started.store(self.now(), Ordering::Relaxed);
+        self.sequence.fetch_add(1, Ordering::Release);
+    }
+    fn leave(&self) {
+        self.sequence.fetch_add(1, Ordering::Release);
+    }
+}
+
+/// Enforces `call_timeout` on every FMI call: a call still running past it is
+/// answered with [`Error::CallTimeout`] naming it (the function of the
+/// instance's FMI `standard`), and the host ends with its process group (the
+/// FMU cannot be stopped otherwise). The watch wakes about once per time-out,
+/// not per call.
+fn watch_calls(
+    clock: &Arc<CallClock>,
+    writer: &Arc<Mutex<File>>,
+    timeout: Duration,
+    instance: &str,
+    standard: FmiStandard,
+) {
+    let (clock, writer) = (Arc::clone(clock), Arc::clone(writer));
+    let instance = instance.to_string();
+    let limit = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
+    std::thread::spawn(move || loop {
+        let sequence = clock.sequence.load(Ordering::Acquire);
+        if sequence % 2 == 0 {
+            std::thread::sleep(timeout);
+            continue;
+        }
+        let deadline = clock.started.load(Ordering::Relaxed).saturating_add(limit);
+        let now = clock.now();
+        if now < deadline {
+            std::thread::sleep(Duration::from_nanos(deadline - now));
+            continue;
+        }
+        // The reply lock: the serving thread is not answering meanwhile.
+        let mut writer = lock(&writer);
+        if clock.sequence.load(Ordering::Acquire) != sequence {
+            continue;
+        }
+        let error = Error::CallTimeout {
+            function: protocol::op_function(clock.code.load(Ordering::Relaxed), standard),
+            instance: instance.clone(),
+            time: f64::from_bits(clock.time.load(Ordering::Relaxed)),
+            seconds: timeout.as_secs_f64(),
+        };
+        let mut out = Out::default();
+        let _ = out
+            .start(protocol::ERR)
+            .u32(u32::MAX)
+            .error(&error)
+            .send(&mut *writer);
+        // SAFETY: as in watch_hangup: the host's own process group, or this
+        // process alone.
+        unsafe {
+            if libc::getpgrp() == libc::getpid() {
+                libc::kill(0, libc::SIGKILL);
+            }
+            libc::_exit(1);
+        }
+    });
 }
 
 /// The instance, or the error for a call before `INSTANTIATE`.
@@ -155,6 +266,14 @@ fn live(
 }
 
 impl Host {
+    /// The instance's time when call `code` begins: a step's own start time.
+    fn call_time(&self, code: u8, mut input: In<'_>) -> f64 {
+        match code {
+            op::DO_STEP => input.f64().unwrap_or(0.0),
+            _ => self.instance.as_deref().map_or(0.0, |i| i.time()),
+        }
+    }
+
     /// One request: `Ok(Err(e))` is an FMI error for the master, `Err` a
     /// message that does not parse.
     fn handle(
@@ -180,6 +299,8 @@ impl Host {
                     logging_on: input.bool()?,
                     visible: input.bool()?,
                 };
+                let timeout = input.f64()?;
+                self.timeout = (timeout > 0.0).then(|| Duration::from_secs_f64(timeout));
                 Fmu::open(dir)
                     .and_then(|fmu| {
                         tether_fmi::instantiate(&fmu, name, options, Placement::InProcess)
@@ -297,19 +418,18 @@ impl Host {
                 // Error::TerminationRequested, which crosses as such.
                 i.step(t, h)
             }
-            op::SAVE_STATE => i.save(slot(input.u32()?, i)?),
-            op::RESTORE_STATE => i.restore(slot(input.u32()?, i)?),
-            op::FREE_STATE => i.free(slot(input.u32()?, i)?),
-            op::SERIALIZE_STATE => {
-                let s = slot(input.u32()?, i)?;
+            op::SAVE_STATE => slot(input.u32()?, code, i).and_then(|s| i.save(s)),
+            op::RESTORE_STATE => slot(input.u32()?, code, i).and_then(|s| i.restore(s)),
+            op::FREE_STATE => slot(input.u32()?, code, i).and_then(|s| i.free(s)),
+            op::SERIALIZE_STATE => slot(input.u32()?, code, i).and_then(|s| {
                 i.serialize(s, &mut self.bytes).map(|()| {
                     out.bytes(&self.bytes);
                 })
-            }
+            }),
             op::DESERIALIZE_STATE => {
-                let s = slot(input.u32()?, i)?;
+                let index = input.u32()?;
                 let bytes = input.bytes()?;
-                i.deserialize(s, bytes)
+                slot(index, code, i).and_then(|s| i.deserialize(s, bytes))
             }
             _ => {
                 return Err(std::io::Error::new(
@@ -321,20 +441,21 @@ impl Host {
     }
 }
 
-/// State slot `index` of a request, or an error for one the instance lacks.
-fn slot(index: u32, i: &dyn FmuInstance) -> std::io::Result<tether_fmi::Slot> {
+/// State slot `index` of request `code`, or the error for a slot the
+/// instance does not have.
+fn slot(index: u32, code: u8, i: &dyn FmuInstance) -> Result<tether_fmi::Slot, Error> {
     let index = index as usize;
     if index < tether_fmi::SLOTS {
         Ok(index)
     } else {
-        Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!(
-                "instance '{}': state slot {index} (an instance has {})",
-                i.name(),
+        Err(Error::InvalidArgument {
+            function: protocol::op_function(code, i.model_description().standard),
+            instance: i.name().to_string(),
+            message: format!(
+                "no state slot {index} (an instance has {})",
                 tether_fmi::SLOTS
             ),
-        ))
+        })
     }
 }
 

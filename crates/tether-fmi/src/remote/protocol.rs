@@ -1,16 +1,21 @@
 //! The messages between the master and an FMU host process
 //! (`tether-fmi-host`): one request, one reply, each a frame of a 4-byte
-//! little-endian length and the payload. A request is an operation code and
-//! its arguments; a reply is `OK` and the results, or `ERR` and an error.
-//! Numbers are little-endian, slices are a 4-byte count and the elements,
-//! strings and byte strings a 4-byte length and the bytes.
+//! little-endian length and the payload. A request is a sequence of calls,
+//! each an operation code and its arguments, which the host makes in order
+//! (a batch: the calls that answer nothing travel with the next that does);
+//! a reply is `OK` and the results of every call in order, or `ERR`, the
+//! index of the call that failed in the request, and the error (the calls
+//! after it are not made). Numbers are little-endian, slices are a 4-byte
+//! count and the elements, strings and byte strings a 4-byte length and the
+//! bytes.
 
 use std::io::{self, Read, Write};
 
 use crate::error::{Error, FmuMessages};
+use crate::model_description::FmiStandard;
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -131,6 +136,46 @@ const FUNCTIONS: &[&str] = &[
     "fmi3FreeInstance",
 ];
 
+/// The FMI function operation `code` calls on an instance of FMI `standard`,
+/// for errors and time-outs.
+pub fn op_function(code: u8, standard: FmiStandard) -> &'static str {
+    let (fmi2, fmi3) = match code {
+        op::INSTANTIATE => ("fmi2Instantiate", "fmi3InstantiateCoSimulation"),
+        // FMI 3.0 passes the experiment to fmi3EnterInitializationMode.
+        op::SETUP_EXPERIMENT => ("fmi2SetupExperiment", "fmi3EnterInitializationMode"),
+        op::ENTER_INITIALIZATION_MODE => {
+            ("fmi2EnterInitializationMode", "fmi3EnterInitializationMode")
+        }
+        op::EXIT_INITIALIZATION_MODE => {
+            ("fmi2ExitInitializationMode", "fmi3ExitInitializationMode")
+        }
+        op::TERMINATE => ("fmi2Terminate", "fmi3Terminate"),
+        op::RESET => ("fmi2Reset", "fmi3Reset"),
+        op::SET_REAL | op::SET_INPUTS => ("fmi2SetReal", "fmi3SetFloat64"),
+        op::GET_REAL => ("fmi2GetReal", "fmi3GetFloat64"),
+        op::SET_INTEGER => ("fmi2SetInteger", "fmi3SetInt32"),
+        op::GET_INTEGER => ("fmi2GetInteger", "fmi3GetInt32"),
+        op::SET_BOOLEAN => ("fmi2SetBoolean", "fmi3SetBoolean"),
+        op::GET_BOOLEAN => ("fmi2GetBoolean", "fmi3GetBoolean"),
+        op::SET_STRING => ("fmi2SetString", "fmi3SetString"),
+        op::GET_REAL_OUTPUT_DERIVATIVES => {
+            ("fmi2GetRealOutputDerivatives", "fmi3GetOutputDerivatives")
+        }
+        op::DO_STEP => ("fmi2DoStep", "fmi3DoStep"),
+        op::SAVE_STATE => ("fmi2GetFMUstate", "fmi3GetFMUState"),
+        op::RESTORE_STATE => ("fmi2SetFMUstate", "fmi3SetFMUState"),
+        op::FREE_STATE => ("fmi2FreeFMUstate", "fmi3FreeFMUState"),
+        op::SERIALIZE_STATE => ("fmi2SerializeFMUstate", "fmi3SerializeFMUState"),
+        op::DESERIALIZE_STATE => ("fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"),
+        op::FREE_INSTANCE => ("fmi2FreeInstance", "fmi3FreeInstance"),
+        _ => ("an FMI function", "an FMI function"),
+    };
+    match standard {
+        FmiStandard::Fmi2 => fmi2,
+        FmiStandard::Fmi3 => fmi3,
+    }
+}
+
 /// The static name of FMI function `name` ("an FMI function" if unknown).
 pub fn function_name(name: &str) -> &'static str {
     FUNCTIONS
@@ -151,6 +196,19 @@ impl Out {
         self.0.extend_from_slice(&[0; 4]);
         self.0.push(tag);
         self
+    }
+    /// One more call of a request: its operation `code` (the frame begins
+    /// with the first).
+    pub fn call(&mut self, code: u8) -> &mut Out {
+        if self.0.is_empty() {
+            self.0.extend_from_slice(&[0; 4]);
+        }
+        self.0.push(code);
+        self
+    }
+    /// Whether no call is waiting to be sent.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
     }
     /// A byte.
     pub fn u8(&mut self, v: u8) -> &mut Out {
@@ -261,13 +319,26 @@ impl Out {
                 time,
                 code,
             } => (5, *function, instance.as_str(), *time, *code, &none),
+            Error::CallTimeout {
+                function,
+                instance,
+                time,
+                seconds,
+            } => {
+                return self
+                    .u8(7)
+                    .str(function)
+                    .str(instance)
+                    .f64(*time)
+                    .f64(*seconds);
+            }
             Error::TerminationRequested {
                 instance,
                 time,
                 how,
             } => {
                 return self
-                    .u8(7)
+                    .u8(8)
                     .str(instance)
                     .f64(*time)
                     .bool(how.is_some())
@@ -293,6 +364,10 @@ impl Out {
         let n = u32::try_from(self.0.len() - 4).expect("a frame below 4 GiB");
         self.0[..4].copy_from_slice(&n.to_le_bytes());
         to.write_all(&self.0)
+    }
+    /// Forgets the frame (sent, or not to be sent).
+    pub fn clear(&mut self) {
+        self.0.clear();
     }
 }
 
@@ -324,7 +399,7 @@ pub fn receive(from: &mut impl Read, buf: &mut Vec<u8>) -> io::Result<bool> {
 }
 
 /// Reads the parts of a received frame in order.
-#[derive(Debug)]
+#[derive(Debug, Clone, Copy)]
 pub struct In<'a> {
     data: &'a [u8],
 }
@@ -346,6 +421,10 @@ impl<'a> In<'a> {
         let (head, rest) = self.data.split_at(n);
         self.data = rest;
         Ok(head)
+    }
+    /// Whether every part was read.
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
     }
     /// A byte.
     pub fn u8(&mut self) -> io::Result<u8> {
@@ -446,6 +525,14 @@ impl<'a> In<'a> {
             });
         }
         if kind == 7 {
+            return Ok(Error::CallTimeout {
+                function: function_name(self.str()?),
+                instance: self.str()?.to_string(),
+                time: self.f64()?,
+                seconds: self.f64()?,
+            });
+        }
+        if kind == 8 {
             let instance = self.str()?.to_string();
             let time = self.f64()?;
             let has_how = self.bool()?;
@@ -545,5 +632,86 @@ mod tests {
         // A truncated frame is an error, not a panic.
         assert!(receive(&mut &wire[..wire.len() - 1], &mut buf).is_err());
         assert!(!receive(&mut &wire[..0], &mut buf).unwrap());
+    }
+
+    /// A time-out and a request to end the simulation cross as themselves,
+    /// with an FMI 3.0 function name kept as the static name.
+    #[test]
+    fn time_outs_and_termination_requests_cross_as_such() {
+        let sent = [
+            Error::CallTimeout {
+                function: op_function(op::DO_STEP, FmiStandard::Fmi3),
+                instance: "mass2".into(),
+                time: 0.25,
+                seconds: 0.5,
+            },
+            Error::TerminationRequested {
+                instance: "stair".into(),
+                time: 9.0,
+                how: Some("fmi3DoStep returned terminateSimulation = true".into()),
+            },
+            Error::TerminationRequested {
+                instance: "osc".into(),
+                time: 1.5,
+                how: None,
+            },
+        ];
+        let mut out = Out::default();
+        out.start(ERR);
+        for e in &sent {
+            out.error(e);
+        }
+        let mut wire = Vec::new();
+        out.send(&mut wire).unwrap();
+        let mut buf = Vec::new();
+        assert!(receive(&mut wire.as_slice(), &mut buf).unwrap());
+        let mut input = In::new(&buf[1..]);
+        for e in &sent {
+            let received = input.error("other").unwrap();
+            assert_eq!(format!("{received:?}"), format!("{e:?}"));
+        }
+        assert!(input.is_empty());
+    }
+
+    /// Every operation's FMI function, of either standard, is one the
+    /// protocol can report (an error keeps its name when it crosses).
+    #[test]
+    fn every_operation_names_a_function_the_protocol_knows() {
+        let codes = [
+            op::INSTANTIATE,
+            op::SETUP_EXPERIMENT,
+            op::ENTER_INITIALIZATION_MODE,
+            op::EXIT_INITIALIZATION_MODE,
+            op::TERMINATE,
+            op::RESET,
+            op::SET_REAL,
+            op::GET_REAL,
+            op::SET_INTEGER,
+            op::SET_BOOLEAN,
+            op::SET_STRING,
+            op::SET_INPUTS,
+            op::GET_REAL_OUTPUT_DERIVATIVES,
+            op::DO_STEP,
+            op::SAVE_STATE,
+            op::RESTORE_STATE,
+            op::FREE_STATE,
+            op::SERIALIZE_STATE,
+            op::DESERIALIZE_STATE,
+            op::FREE_INSTANCE,
+            op::GET_INTEGER,
+            op::GET_BOOLEAN,
+        ];
+        for standard in [FmiStandard::Fmi2, FmiStandard::Fmi3] {
+            let prefix = match standard {
+                FmiStandard::Fmi2 => "fmi2",
+                FmiStandard::Fmi3 => "fmi3",
+            };
+            for code in codes {
+                let name = op_function(code, standard);
+                assert!(name.starts_with(prefix), "{code}: {name}");
+                assert_eq!(function_name(name), name, "{code}");
+            }
+        }
+        assert_eq!(op_function(op::DO_STEP, FmiStandard::Fmi3), "fmi3DoStep");
     }
 }

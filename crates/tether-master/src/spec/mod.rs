@@ -140,11 +140,20 @@ pub struct ConnectionSpec {
 pub struct SignalSettings {
     /// `"jacobi"` (the default) or `"gauss_seidel"`.
     pub scheme: SignalScheme,
+    /// Relative tolerance on the exchanged values of direct-feedthrough
+    /// loops (at T_0, and per step when iterated); default 1e-10.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
 }
 
 impl SignalSettings {
     fn is_default(&self) -> bool {
         *self == SignalSettings::default()
+    }
+
+    /// `tolerance`, or its default 1e-10.
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance.unwrap_or(1e-10)
     }
 }
 

@@ -99,6 +99,15 @@ impl SystemSpec {
                 return Err(param("tolerance", tol, "a finite tolerance > 0"));
             }
         }
+        if let Some(tol) = self.signals.tolerance {
+            if !tol.is_finite() || tol <= 0.0 {
+                return Err(param(
+                    "[signals] tolerance",
+                    tol,
+                    "a finite relative tolerance > 0",
+                ));
+            }
+        }
         self.method.validate()?;
         self.output.every(e.step)?;
         let c = &self.coupling;
