@@ -5,12 +5,14 @@
 
 use std::time::Instant;
 
+mod export;
 mod grid;
 mod health;
 mod row;
 mod state;
 mod tune;
 
+pub use export::{ExportKind, ExportVariable};
 pub use state::{MasterState, SystemState};
 
 use crate::algorithm::explicit::Explicit;

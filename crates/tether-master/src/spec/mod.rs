@@ -5,11 +5,13 @@
 //! checked against the FMUs when the [`crate::Simulation`] is built.
 
 mod arrays;
+mod export;
 pub(crate) mod names;
 mod output;
 pub(crate) mod overrides;
 mod validate;
 
+pub use export::{ExportLink, ExportSource, ExportSpec};
 pub use output::{matches_pattern, OutputSpec};
 
 use std::collections::BTreeMap;
@@ -61,6 +63,10 @@ pub struct SystemSpec {
     /// What is recorded: the output grid and the columns (`[output]`).
     #[serde(default, skip_serializing_if = "OutputSpec::is_default")]
     pub output: OutputSpec,
+    /// The interface of the system exported as one FMU (`[export]`,
+    /// docs/fmu-export.md); ignored by `tether run`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub export: Option<ExportSpec>,
     /// The file this description was read from (set by
     /// [`SystemSpec::from_file`]), named in its error messages.
     #[serde(skip)]

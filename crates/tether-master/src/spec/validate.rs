@@ -49,7 +49,7 @@ impl SystemSpec {
     }
 
     /// The file named in errors: [`source`](Self::source), else `<system>`.
-    fn source_name(&self) -> PathBuf {
+    pub(crate) fn source_name(&self) -> PathBuf {
         self.source
             .clone()
             .unwrap_or_else(|| PathBuf::from("<system>"))
@@ -273,7 +273,7 @@ impl SystemSpec {
                 }
             }
         }
-        Ok(())
+        self.validate_export()
     }
 
     /// Number of macro steps: the stop time rounded to the grid `start + n·step`.
