@@ -617,13 +617,6 @@ impl RemoteInstance {
         self.send()
     }
 
-    /// The coupled inputs of a run: their values, then their derivatives
-    /// (FMI 2.0: `fmi2SetReal`, `fmi2SetRealInputDerivatives`).
-    pub fn set_coupled_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) -> Result<()> {
-        self.queue_inputs(inputs);
-        self.send()
-    }
-
     /// `fmi2GetRealOutputDerivatives` into `out`.
     pub fn get_real_output_derivatives(
         &mut self,
