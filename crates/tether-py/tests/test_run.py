@@ -273,6 +273,14 @@ def test_to_toml_keeps_the_order_of_the_file(tmp_path, oscillator_toml):
         return [n for i, n in enumerate(names) if i == 0 or names[i - 1] != n]
     written = tether.System.from_file(reordered).to_toml()
     assert order(written) == order(reordered.read_text()), written
+    # The keys inside a table too: [experiment] is start, stop, step in the
+    # file (not alphabetical), and so is the written text.
+    def keys(t, table):
+        lines = t.split("[" + table + "]\n", 1)[1].split("\n[", 1)[0].splitlines()
+        return [line.split("=")[0].strip() for line in lines
+                if "=" in line and not line.startswith("#")]
+    assert keys(written, "experiment") == keys(reordered.read_text(), "experiment") == [
+        "start", "stop", "step"], written
     # And it runs as the original does.
     a = tether.run(oscillator_toml, stop=0.05)
     b = tether.run(tether.System.from_file(reordered), stop=0.05)
