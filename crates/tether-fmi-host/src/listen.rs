@@ -93,10 +93,7 @@ fn serve_connection(stream: TcpStream, token: &[u8], max_fmu: u64) -> Result<(),
     drop((reader, writer, stream));
     let status = child.wait().map_err(io_error)?;
     if !status.success() {
-        log::info!(
-            "host process {}",
-            tether_fmi::remote::describe_exit(status)
-        );
+        log::info!("host process {}", tether_fmi::remote::describe_exit(status));
     }
     drop(fmu); // and its unpacked directory
     Ok(())
@@ -146,7 +143,7 @@ fn authenticate(
         Ok(protocol::OK) => {}
         Ok(protocol::ERR) => {
             return Err(format!(
-                "the master refused: {}",
+                "wrong token: the master holds another one (it says: {})",
                 answer.str().unwrap_or("no reason")
             ))
         }

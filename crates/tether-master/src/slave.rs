@@ -300,11 +300,12 @@ impl Slave {
             (Some(host), Some(token_file), _) => Placement::Remote {
                 timeout,
                 host: tether_fmi::remote::tcp::RemoteHost {
-                    address: tether_fmi::remote::tcp::RemoteHost::parse_address(host)
-                        .map_err(|reason| tether_fmi::Error::HostStart {
+                    address: tether_fmi::remote::tcp::RemoteHost::parse_address(host).map_err(
+                        |reason| tether_fmi::Error::HostStart {
                             instance: name.to_string(),
                             reason,
-                        })?,
+                        },
+                    )?,
                     token_file: token_file.clone(),
                     fmu_on_host: spec.fmu_on_host.clone(),
                 },

@@ -20,10 +20,10 @@ pub mod tcp;
 use std::ffi::OsString;
 use std::fs::File;
 use std::io::{self, BufReader};
+use std::net::{Shutdown, TcpStream};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
-use std::net::{Shutdown, TcpStream};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::Mutex;
 use std::time::Duration;
@@ -101,8 +101,9 @@ pub fn host_command() -> std::result::Result<HostCommand, String> {
 pub struct RemoteInstance {
     /// The host process, if this process started it (not on another machine).
     child: Option<Child>,
-    /// The connection to a host on another machine (`tether host`).
-    socket: Option<TcpStream>,
+    /// The connection to a host on another machine (`tether host`), and
+    /// its address.
+    socket: Option<(TcpStream, String)>,
     reader: BufReader<File>,
     /// `None` once closed (the host then ends).
     writer: Option<File>,
@@ -129,7 +130,7 @@ pub struct RemoteInstance {
 /// machine.
 struct Connection {
     child: Option<Child>,
-    socket: Option<TcpStream>,
+    socket: Option<(TcpStream, String)>,
     reader: File,
     writer: File,
     exit_watch: Option<OwnedFd>,
@@ -246,7 +247,7 @@ impl RemoteInstance {
             child: None,
             reader: clone(&socket)?,
             writer: clone(&socket)?,
-            socket: Some(socket),
+            socket: Some((socket, host.address.clone())),
             exit_watch: None,
             program: format!("host {}", host.address),
         };
@@ -488,12 +489,7 @@ impl RemoteInstance {
     fn host_ended(&mut self, function: &'static str, time: f64) -> Error {
         let reaped = self.reap();
         let how = match (&self.socket, reaped) {
-            (Some(socket), _) => format!(
-                "lost the connection{}",
-                socket
-                    .peer_addr()
-                    .map_or(String::new(), |a| format!(" to {a}"))
-            ),
+            (Some((_, address)), _) => format!("lost the connection to {address}"),
             (None, Ok(status)) => describe_exit(status),
             (None, Err(e)) => format!("could not be waited for ({e})"),
         };
@@ -521,7 +517,7 @@ impl RemoteInstance {
     /// Kills the host and every process of its group (those its FMU started);
     /// a host on another machine loses its connection, and ends with it.
     fn kill_group(&self) {
-        if let Some(socket) = &self.socket {
+        if let Some((socket, _)) = &self.socket {
             let _ = socket.shutdown(Shutdown::Both);
         }
         let Some(child) = &self.child else { return };
@@ -868,7 +864,7 @@ impl Drop for RemoteInstance {
             }
         }
         self.writer = None;
-        if let Some(socket) = &self.socket {
+        if let Some((socket, _)) = &self.socket {
             let _ = socket.shutdown(Shutdown::Both);
         }
         if self.ended.is_none() && self.child.is_some() {

@@ -161,9 +161,7 @@ impl SystemSpec {
                         "needs token_file, the file holding the host's token".into(),
                     ))
                 }
-                (None, Some(_)) => {
-                    return Err(remote("token_file", "given without host".into()))
-                }
+                (None, Some(_)) => return Err(remote("token_file", "given without host".into())),
                 (None, None) => {}
             }
             if let Some(path) = &i.fmu_on_host {
