@@ -655,3 +655,47 @@ fn a_call_past_its_time_out_ends_the_run() {
     assert_eq!(trailer, Some(format!("# incomplete: {reason}")));
     host.wait_clean();
 }
+
+/// An FMU that crashes on the host: its host process ends, the run ends as
+/// after a lost connection, and the host goes on serving.
+#[test]
+fn a_crashing_fmu_on_the_host_ends_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let token_file = token(dir.path(), "token", TOKEN, 0o600);
+    let host = Host::start(&token_file);
+    let sys = slow_system(dir.path(), &host.url(), "");
+    let text = std::fs::read_to_string(&sys)
+        .unwrap()
+        .replace("delay = 0.002,", "mode = 1,");
+    std::fs::write(&sys, text).unwrap();
+    let out = run(dir.path(), &sys, "out.csv", &[]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let reason = format!(
+        "instance 'mass2': its host process lost the connection to 127.0.0.1:{} during fmi2DoStep at t=0.5",
+        host.port
+    );
+    assert_eq!(
+        last_line(&out),
+        format!("error: run stopped; results up to t = 0.5 kept in out.csv (marked incomplete): {reason}")
+    );
+    let (rows, trailer) = rows_and_trailer(&dir.path().join("out.csv"));
+    assert_eq!(rows, 501);
+    assert_eq!(trailer, Some(format!("# incomplete: {reason}")));
+    host.wait_clean();
+    same_on(&host, dir.path());
+}
+
+/// The oscillator on `host` gives the in-process results (the host still serves).
+fn same_on(host: &Host, dir: &Path) {
+    let keys = format!("host = {:?}\ntoken_file = \"token\"\n", host.url());
+    let remote = system(dir, "oscillator", &keys);
+    let out = run(dir, &remote, "again.csv", &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let local = system(dir, "oscillator", "");
+    let out = run(dir, &local, "local.csv", &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        std::fs::read(dir.join("again.csv")).unwrap()
+            == std::fs::read(dir.join("local.csv")).unwrap()
+    );
+}
