@@ -12,10 +12,16 @@ use std::os::fd::OwnedFd;
 use std::os::unix::process::CommandExt;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
 
 use tether_fmi::remote::protocol::{self, In, Out};
 use tether_fmi::remote::tcp::{self, FMU_CHUNK, FMU_END, FMU_PATH, MAX_CHUNK, MAX_OPENING_FRAME};
 use tether_fmi::{Fmu, OpenOptions};
+
+/// The most connections in their opening (not yet authenticated and given
+/// their FMU) at once; more are closed at once.
+const MAX_OPENING: usize = 64;
 
 /// What `tether host` is told.
 #[derive(Debug, Clone)]
@@ -42,14 +48,23 @@ pub fn listen(options: &ListenOptions) -> Result<(), String> {
         "reachable from other machines: whoever holds the token can run any FMU here"
     };
     eprintln!("tether host: listening on {local} ({reach})");
+    let opening = Arc::new(AtomicUsize::new(0));
     for stream in listener.incoming() {
         let Ok(stream) = stream else { continue };
         let peer = stream
             .peer_addr()
             .map_or_else(|_| "a master".to_string(), |a| a.to_string());
+        if opening.fetch_add(1, Ordering::AcqRel) >= MAX_OPENING {
+            opening.fetch_sub(1, Ordering::AcqRel);
+            eprintln!(
+                "tether host: {peer}: refused: {MAX_OPENING} connections are opening already"
+            );
+            continue;
+        }
         let (token, max) = (token.clone(), options.max_fmu_bytes);
+        let opening = Arc::clone(&opening);
         std::thread::spawn(move || {
-            if let Err(line) = serve_connection(stream, &token, max) {
+            if let Err(line) = serve_connection(stream, &token, max, &opening) {
                 eprintln!("tether host: {peer}: {line}");
             }
         });
@@ -58,7 +73,20 @@ pub fn listen(options: &ListenOptions) -> Result<(), String> {
 }
 
 /// One master: the opening, then its host process until the connection ends.
-fn serve_connection(stream: TcpStream, token: &[u8], max_fmu: u64) -> Result<(), String> {
+fn serve_connection(
+    stream: TcpStream,
+    token: &[u8],
+    max_fmu: u64,
+    opening: &AtomicUsize,
+) -> Result<(), String> {
+    // Counted among the openings until its host process starts.
+    struct Opened<'a>(&'a AtomicUsize);
+    impl Drop for Opened<'_> {
+        fn drop(&mut self) {
+            self.0.fetch_sub(1, Ordering::AcqRel);
+        }
+    }
+    let opened = Opened(opening);
     let io_error = |e: std::io::Error| format!("the connection failed ({e})");
     stream.set_nodelay(true).map_err(io_error)?;
     stream
@@ -90,7 +118,7 @@ fn serve_connection(stream: TcpStream, token: &[u8], max_fmu: u64) -> Result<(),
     let mut child = host
         .spawn()
         .map_err(|e| format!("cannot start {}: {e}", command.program.display()))?;
-    drop((reader, writer, stream));
+    drop((reader, writer, stream, opened));
     let status = child.wait().map_err(io_error)?;
     if !status.success() {
         log::info!("host process {}", tether_fmi::remote::describe_exit(status));
