@@ -151,6 +151,7 @@ fn system(dir: &Path, example: &str, keys: &str) -> PathBuf {
     tether_fmu_build::workspace_fmu("oscillator").unwrap();
     tether_fmu_build::workspace_fmu("link").unwrap();
     tether_fmu_build::workspace_fmu("faults").unwrap();
+    tether_fmu_build::workspace_fmu("body3d").unwrap();
     let fmus = root().join("target/fmus");
     let text = std::fs::read_to_string(root().join(format!("examples/{example}.toml"))).unwrap();
     let mut out = String::new();
@@ -219,6 +220,21 @@ fn remote_oscillator_k1_is_bit_for_bit_in_process() {
 #[test]
 fn remote_double_pendulum_is_bit_for_bit_in_process() {
     same_as_in_process("double_pendulum", &["--stop", "2"]);
+}
+
+#[test]
+fn remote_3d_revolute_is_bit_for_bit_in_process() {
+    same_as_in_process("3d_revolute", &["--stop", "0.2"]);
+}
+
+#[test]
+fn remote_adaptive_steps_are_bit_for_bit_in_process() {
+    same_as_in_process("oscillator", &["--step-rtol", "1e-4"]);
+}
+
+#[test]
+fn remote_parallel_perturbed_runs_are_bit_for_bit_in_process() {
+    same_as_in_process("double_pendulum", &["--stop", "0.5", "--parallel", "on"]);
 }
 
 /// `tether run --host --token-file` places every instance there.
