@@ -715,3 +715,47 @@ fn same_on(host: &Host, dir: &Path) {
             == std::fs::read(dir.join("local.csv")).unwrap()
     );
 }
+
+/// Bad remote keys and an unreachable host: one line naming the instance and
+/// the key, exit code 1.
+#[test]
+fn bad_remote_keys_are_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    token(dir.path(), "token", TOKEN, 0o600);
+    // A port nobody listens on: bound, then closed.
+    let port = TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let sys = dir.path().join("oscillator.toml");
+    for (keys, error) in [
+        (
+            "host = \"http://127.0.0.1:1\"\ntoken_file = \"token\"\n".to_string(),
+            "instance 'mass1': host: 'http://127.0.0.1:1' is not a host address: expected tcp://ADDR:PORT".to_string(),
+        ),
+        (
+            "host = \"tcp://127.0.0.1:1\"\n".into(),
+            "instance 'mass1': host: needs token_file, the file holding the host's token".into(),
+        ),
+        (
+            "token_file = \"token\"\n".into(),
+            "instance 'mass1': token_file: given without host".into(),
+        ),
+        (
+            "host = \"tcp://127.0.0.1:1\"\ntoken_file = \"token\"\nfmu_on_host = \"fmus/x.fmu\"\n".into(),
+            "instance 'mass1': fmu_on_host: 'fmus/x.fmu' is not an absolute path on the host".into(),
+        ),
+        (
+            format!("host = \"tcp://127.0.0.1:{port}\"\ntoken_file = \"token\"\n"),
+            format!("error: cannot start the host process of instance 'mass1': cannot connect to host 127.0.0.1:{port}: Connection refused (os error 111)"),
+        ),
+    ] {
+        system(dir.path(), "oscillator", &keys);
+        let out = run(dir.path(), &sys, "out.csv", &[]);
+        assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+        assert_eq!(stderr(&out).lines().count(), 1, "{}", stderr(&out));
+        let line = last_line(&out);
+        assert!(line.starts_with("error: ") && line.ends_with(&error), "{line}");
+    }
+}
