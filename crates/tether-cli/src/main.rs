@@ -8,6 +8,7 @@ mod columns;
 mod compare;
 mod exit_guard;
 mod fmu;
+mod host;
 mod info;
 mod interrupt;
 mod isolation;
@@ -79,6 +80,8 @@ enum Command {
     Ssp(ssp::Args),
     /// FMU: export a system file as one FMI 2.0 co-simulation FMU.
     Fmu(fmu::Args),
+    /// Serve FMU instances to masters on other machines over TCP.
+    Host(host::Args),
 }
 
 /// `eprintln!` that never panics: a closed or full stderr (`2>/dev/full`) is no
@@ -177,6 +180,7 @@ fn main() -> ExitCode {
         Command::Study(args) => study::main(args),
         Command::Ssp(args) => ssp::main(args),
         Command::Fmu(args) => fmu::main(args),
+        Command::Host(args) => host::main(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

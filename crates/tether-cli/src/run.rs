@@ -54,6 +54,13 @@ pub struct Args {
     /// one ends the run.
     #[arg(long, value_name = "SECONDS")]
     call_timeout: Option<f64>,
+    /// Run every FMU instance on this host (`tether host`), `tcp://ADDR:PORT`,
+    /// as the instance key `host` does (docs/remote.md); needs --token-file.
+    #[arg(long, value_name = "tcp://ADDR:PORT", requires = "token_file")]
+    host: Option<String>,
+    /// The file holding the token of --host (mode 600).
+    #[arg(long, value_name = "FILE", requires = "host")]
+    token_file: Option<PathBuf>,
     /// Do not print the run summary, nor the FMUs' warnings (their errors still).
     #[arg(long, short)]
     pub(crate) quiet: bool,
@@ -66,6 +73,12 @@ pub fn main(args: Args) -> Result<()> {
     let (mut spec, _ssp) = crate::ssp::load(&args.system, overrides.step, overrides.stop)?;
     crate::settings::apply(&overrides, &mut spec)?;
     crate::isolation::apply(args.isolate, args.call_timeout, &mut spec)?;
+    if let (Some(host), Some(token_file)) = (&args.host, &args.token_file) {
+        for instance in &mut spec.instances {
+            instance.host = Some(host.clone());
+            instance.token_file = Some(token_file.clone());
+        }
+    }
     if let Some(dt) = args.output_interval {
         spec.output.interval = Some(dt);
     }

@@ -50,6 +50,8 @@ fn limits(spec: &SystemSpec) -> HashMap<String, Limit> {
         .map(|i| {
             let limit = match (i.call_timeout, i.isolation) {
                 (None, _) => Limit::None,
+                // A host on another machine enforces it as an isolated one does.
+                (Some(_), _) if i.host.is_some() => Limit::Library,
                 (Some(t), Isolation::None) => Limit::Watchdog(t),
                 (Some(_), Isolation::Process) => Limit::Library,
             };

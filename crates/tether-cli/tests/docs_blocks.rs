@@ -10,7 +10,9 @@
 //!
 //! The commands run in a scratch folder where `examples`, `target`, `tests`
 //! and `tools` are links to the repository's, so that what they write lands
-//! where the docs say (`target/…`) or in the scratch folder.
+//! where the docs say (`target/…`) or in the scratch folder. It also holds
+//! `host.token`, the token file docs/remote.md makes; a `tether host` line
+//! starts a host that serves the blocks after it and ends with the test.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -154,6 +156,42 @@ fn tether_args(line: &str) -> Option<Vec<String>> {
     Some(w[skip..].to_vec())
 }
 
+/// The `tether host` processes started by the docs, killed at the end.
+#[derive(Default)]
+struct Hosts(Vec<std::process::Child>);
+
+impl Hosts {
+    /// Starts `tether host` with `args` and waits until it listens.
+    fn start(&mut self, dir: &Path, args: &[String], place: &str) {
+        use std::io::BufRead;
+        let mut child = Command::new(env!("CARGO_BIN_EXE_tether"))
+            .args(args)
+            .current_dir(dir)
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufReader::new(child.stderr.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        self.0.push(child);
+        assert!(
+            line.starts_with("tether host: listening on "),
+            "{place}: `tether {}` does not listen: {line}",
+            args.join(" ")
+        );
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        for child in &mut self.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
 fn run_tether(dir: &Path, args: &[String], place: &str) {
     let out = Command::new(env!("CARGO_BIN_EXE_tether"))
         .args(args)
@@ -249,6 +287,10 @@ fn run_toml(block: &Block, dir: &Path) {
 fn every_system_file_and_command_in_the_docs_runs_as_written() {
     tether_fmu_build::workspace_fmus().expect("package the workspace FMUs");
     let dir = scratch();
+    let token = dir.path().join("host.token");
+    std::fs::write(&token, "a token of this docs test, 40 characters\n").unwrap();
+    std::fs::set_permissions(&token, std::os::unix::fs::PermissionsExt::from_mode(0o600)).unwrap();
+    let mut hosts = Hosts::default();
     let mut ran = 0;
     for block in blocks() {
         let place = format!("{}:{}", block.file, block.line);
@@ -265,7 +307,11 @@ fn every_system_file_and_command_in_the_docs_runs_as_written() {
                              mark the block `(Not run in tests: reason.)`"
                         )
                     });
-                    run_tether(dir.path(), &args, &place);
+                    if args.first().is_some_and(|a| a == "host") {
+                        hosts.start(dir.path(), &args, &place);
+                    } else {
+                        run_tether(dir.path(), &args, &place);
+                    }
                     ran += 1;
                 }
             }

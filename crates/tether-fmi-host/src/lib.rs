@@ -13,6 +13,8 @@
 //! input and output are /dev/null and standard error: the FMU's child processes
 //! never hold them.
 
+pub mod listen;
+
 use std::fs::File;
 use std::io::{BufReader, Write};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
@@ -41,7 +43,7 @@ pub fn serve_stdin() -> ExitCode {
 /// package's `python -m tether._fmi_host`): `Ok` when the master closed the
 /// connection, otherwise what went wrong.
 pub fn serve_standard_streams() -> Result<(), String> {
-    if !is_pipe(0) || !is_pipe(1) {
+    if !is_stream(0) || !is_stream(1) {
         return Err("it runs an FMU for Tether, which starts it with pipes as standard input and output; it is not meant to be started by hand".into());
     }
     tether_fmi::rate_limit_from_env();
@@ -72,12 +74,14 @@ pub fn serve_standard_streams() -> Result<(), String> {
     serve(requests, replies).map_err(|e| e.to_string())
 }
 
-/// Whether descriptor `fd` is a pipe.
-fn is_pipe(fd: i32) -> bool {
+/// Whether descriptor `fd` is a pipe, or a socket (a connection that
+/// `tether host` accepted).
+fn is_stream(fd: i32) -> bool {
     // SAFETY: fstat writes into the zeroed stat value and reads nothing else.
     unsafe {
         let mut stat: libc::stat = std::mem::zeroed();
-        libc::fstat(fd, &mut stat) == 0 && stat.st_mode & libc::S_IFMT == libc::S_IFIFO
+        libc::fstat(fd, &mut stat) == 0
+            && matches!(stat.st_mode & libc::S_IFMT, libc::S_IFIFO | libc::S_IFSOCK)
     }
 }
 
@@ -89,13 +93,14 @@ fn watch_hangup(requests: &File) {
     std::thread::spawn(move || loop {
         let mut poll = libc::pollfd {
             fd,
-            events: 0,
+            // A socket's peer may close its side only (POLLRDHUP).
+            events: libc::POLLRDHUP,
             revents: 0,
         };
         // SAFETY: one valid pollfd; `fd` stays open for the life of the
         // process (the serving loop owns it and ends the process on return).
         let n = unsafe { libc::poll(&mut poll, 1, -1) };
-        if n > 0 && poll.revents & (libc::POLLHUP | libc::POLLERR) != 0 {
+        if n > 0 && poll.revents & (libc::POLLHUP | libc::POLLERR | libc::POLLRDHUP) != 0 {
             // SAFETY: getpgrp and getpid cannot fail; kill(0, SIGKILL) ends this
             // process group, which is the host's own only if it leads it (never
             // the group of whoever started a host by other means); _exit ends the

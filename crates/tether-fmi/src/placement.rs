@@ -8,7 +8,7 @@ use crate::fmu::{Fmu, InstanceOptions};
 use crate::interface::{FmuInstance, LocalInstance};
 
 /// Where an instance runs.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub enum Placement {
     /// The FMU's library is loaded in this process.
     #[default]
@@ -17,6 +17,14 @@ pub enum Placement {
     Process {
         /// The longest a call may take before the host is killed.
         timeout: Option<Duration>,
+    },
+    /// A host on another machine (`tether host`), over TCP; each call waits
+    /// at most `timeout`.
+    Remote {
+        /// The longest a call may take before the host is stopped.
+        timeout: Option<Duration>,
+        /// Where the host is, its token and the FMU on it.
+        host: crate::remote::tcp::RemoteHost,
     },
 }
 
@@ -36,6 +44,9 @@ pub fn instantiate(
         // The host makes its instance with this function, in its process.
         Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(
             fmu, name, options, timeout,
+        )?),
+        Placement::Remote { timeout, host } => Box::new(crate::remote::RemoteInstance::connect(
+            fmu, name, options, timeout, &host,
         )?),
     })
 }

@@ -296,9 +296,22 @@ impl Slave {
             }
         }
         let timeout = spec.call_timeout.map(std::time::Duration::from_secs_f64);
-        let placement = match spec.isolation {
-            Isolation::Process => Placement::Process { timeout },
-            Isolation::None => Placement::InProcess,
+        let placement = match (&spec.host, &spec.token_file, spec.isolation) {
+            (Some(host), Some(token_file), _) => Placement::Remote {
+                timeout,
+                host: tether_fmi::remote::tcp::RemoteHost {
+                    address: tether_fmi::remote::tcp::RemoteHost::parse_address(host).map_err(
+                        |reason| tether_fmi::Error::HostStart {
+                            instance: name.to_string(),
+                            reason,
+                        },
+                    )?,
+                    token_file: token_file.clone(),
+                    fmu_on_host: spec.fmu_on_host.clone(),
+                },
+            },
+            (_, _, Isolation::Process) => Placement::Process { timeout },
+            (_, _, Isolation::None) => Placement::InProcess,
         };
         let backend = tether_fmi::instantiate(&fmu, name, Default::default(), placement)?;
         let mut slave = Slave {

@@ -439,6 +439,9 @@ impl Reader {
             parameters,
             isolation: Default::default(),
             call_timeout: None,
+            host: None,
+            token_file: None,
+            fmu_on_host: None,
         });
         Ok(())
     }

@@ -15,13 +15,16 @@
 //! The host executable is found by [`host_command`] (docs/reliability.md).
 
 pub mod protocol;
+pub mod tcp;
 
 use std::ffi::OsString;
+use std::fs::File;
 use std::io::{self, BufReader};
+use std::net::{Shutdown, TcpStream};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::Mutex;
 use std::time::Duration;
 
@@ -96,10 +99,14 @@ pub fn host_command() -> std::result::Result<HostCommand, String> {
 /// An FMU instance running in a host process of its own.
 #[derive(Debug)]
 pub struct RemoteInstance {
-    child: Child,
-    reader: BufReader<ChildStdout>,
+    /// The host process, if this process started it (not on another machine).
+    child: Option<Child>,
+    /// The connection to a host on another machine (`tether host`), and
+    /// its address.
+    socket: Option<(TcpStream, String)>,
+    reader: BufReader<File>,
     /// `None` once closed (the host then ends).
-    writer: Option<ChildStdin>,
+    writer: Option<File>,
     /// The calls waiting to be sent, as one request.
     out: Out,
     /// What each waiting call is, for errors (its FMI function and time).
@@ -117,6 +124,18 @@ pub struct RemoteInstance {
     /// Readable once the host process has ended ([`watch_exit`]), also while a
     /// process it started still holds the reply pipe.
     exit_watch: Option<OwnedFd>,
+}
+
+/// The way to a host: its process and pipes, or a connection to another
+/// machine.
+struct Connection {
+    child: Option<Child>,
+    socket: Option<(TcpStream, String)>,
+    reader: File,
+    writer: File,
+    exit_watch: Option<OwnedFd>,
+    /// What to call the host in errors.
+    program: String,
 }
 
 /// A call of the request being built: its operation, its FMI function (of
@@ -188,8 +207,78 @@ impl RemoteInstance {
             unreachable!("both are piped")
         };
         let exit_watch = watch_exit(child.id());
+        let dir = fmu.directory().to_str().ok_or_else(|| {
+            start_error(format!(
+                "the FMU directory {} is not UTF-8",
+                fmu.directory().display()
+            ))
+        })?;
+        let connection = Connection {
+            child: Some(child),
+            socket: None,
+            reader: File::from(OwnedFd::from(reader)),
+            writer: File::from(OwnedFd::from(writer)),
+            exit_watch,
+            program: command.program.display().to_string(),
+        };
+        RemoteInstance::start(connection, fmu, name, options, timeout, dir)
+    }
+
+    /// Connects to the host `host` on another machine (`tether host`),
+    /// hands it the FMU and instantiates it there as `name`.
+    pub fn connect(
+        fmu: &Fmu,
+        name: &str,
+        options: InstanceOptions,
+        timeout: Option<Duration>,
+        host: &tcp::RemoteHost,
+    ) -> Result<RemoteInstance> {
+        let start_error = |reason: String| Error::HostStart {
+            instance: name.to_string(),
+            reason,
+        };
+        let (socket, dir) = tcp::connect(host, fmu.path()).map_err(start_error)?;
+        let clone = |s: &TcpStream| {
+            s.try_clone()
+                .map(|s| File::from(OwnedFd::from(s)))
+                .map_err(|e| start_error(format!("host {}: {e}", host.address)))
+        };
+        let connection = Connection {
+            child: None,
+            reader: clone(&socket)?,
+            writer: clone(&socket)?,
+            socket: Some((socket, host.address.clone())),
+            exit_watch: None,
+            program: format!("host {}", host.address),
+        };
+        RemoteInstance::start(connection, fmu, name, options, timeout, &dir)
+    }
+
+    /// Says hello to the host on `connection` and instantiates the FMU
+    /// unpacked in `dir` there.
+    fn start(
+        connection: Connection,
+        fmu: &Fmu,
+        name: &str,
+        options: InstanceOptions,
+        timeout: Option<Duration>,
+        dir: &str,
+    ) -> Result<RemoteInstance> {
+        let start_error = |reason: String| Error::HostStart {
+            instance: name.to_string(),
+            reason,
+        };
+        let Connection {
+            child,
+            socket,
+            reader,
+            writer,
+            exit_watch,
+            program,
+        } = connection;
         let mut remote = RemoteInstance {
             child,
+            socket,
             reader: BufReader::with_capacity(1 << 16, reader),
             writer: Some(writer),
             out: Out::default(),
@@ -227,17 +316,10 @@ impl RemoteInstance {
             .map_err(|e| remote.protocol_error(e))?;
         if version != protocol::VERSION {
             return Err(start_error(format!(
-                "{} speaks protocol version {version}, this library {}; use the host of the same Tether version",
-                command.program.display(),
+                "{program} speaks protocol version {version}, this library {}; use the host of the same Tether version",
                 protocol::VERSION
             )));
         }
-        let dir = fmu.directory().to_str().ok_or_else(|| {
-            start_error(format!(
-                "the FMU directory {} is not UTF-8",
-                fmu.directory().display()
-            ))
-        })?;
         remote
             .queue(op::INSTANTIATE)
             .str(dir)
@@ -405,9 +487,11 @@ impl RemoteInstance {
     /// The connection broke: the host ended; say how.
     #[cold]
     fn host_ended(&mut self, function: &'static str, time: f64) -> Error {
-        let how = match self.reap() {
-            Ok(status) => describe_exit(status),
-            Err(e) => format!("could not be waited for ({e})"),
+        let reaped = self.reap();
+        let how = match (&self.socket, reaped) {
+            (Some((_, address)), _) => format!("lost the connection to {address}"),
+            (None, Ok(status)) => describe_exit(status),
+            (None, Err(e)) => format!("could not be waited for ({e})"),
         };
         self.ended = Some(how.clone());
         Error::HostEnded {
@@ -430,9 +514,14 @@ impl RemoteInstance {
         }
     }
 
-    /// Kills the host and every process of its group (those its FMU started).
+    /// Kills the host and every process of its group (those its FMU started);
+    /// a host on another machine loses its connection, and ends with it.
     fn kill_group(&self) {
-        if let Ok(pid) = libc::pid_t::try_from(self.child.id()) {
+        if let Some((socket, _)) = &self.socket {
+            let _ = socket.shutdown(Shutdown::Both);
+        }
+        let Some(child) = &self.child else { return };
+        if let Ok(pid) = libc::pid_t::try_from(child.id()) {
             // SAFETY: a signal to the process group the host leads (started with
             // process_group(0)); the host is not reaped yet, so its id is not reused.
             unsafe { libc::killpg(pid, libc::SIGKILL) };
@@ -442,7 +531,10 @@ impl RemoteInstance {
     /// Waits for the host to end, kills what is left of its process group (the
     /// processes its FMU started, which must not outlive it), then reaps it.
     fn reap(&mut self) -> io::Result<ExitStatus> {
-        let pid = self.child.id() as libc::id_t;
+        let Some(child) = &self.child else {
+            return Err(io::Error::other("on another machine"));
+        };
+        let pid = child.id() as libc::id_t;
         // SAFETY: waitid on the host, the child of this process, with a zeroed
         // siginfo to write into; WNOWAIT leaves it unreaped, so the process group
         // id stays its own until `wait` below.
@@ -453,7 +545,10 @@ impl RemoteInstance {
             {}
         }
         self.kill_group();
-        self.child.wait()
+        match &mut self.child {
+            Some(child) => child.wait(),
+            None => Err(io::Error::other("on another machine")),
+        }
     }
 
     /// The results of the last reply after the status byte.
@@ -509,9 +604,9 @@ impl RemoteInstance {
         self.fatal
     }
 
-    /// The host's process id.
+    /// The host's process id (0 for a host on another machine).
     pub fn host_pid(&self) -> u32 {
-        self.child.id()
+        self.child.as_ref().map_or(0, Child::id)
     }
 
     /// A request without an FMI call and its reply: the transport's round trip.
@@ -677,6 +772,7 @@ impl RemoteInstance {
 fn ended_after_timeout(status: io::Result<ExitStatus>) -> String {
     match status {
         Ok(status) => format!("{} after the call time-out", describe_exit(status)),
+        Err(e) if e.kind() == io::ErrorKind::Other => "was stopped after the call time-out".into(),
         Err(e) => format!("could not be waited for ({e})"),
     }
 }
@@ -705,7 +801,7 @@ fn watch_exit(pid: u32) -> Option<OwnedFd> {
 /// the FMU started without `exec` holds a copy of the pipe, which then stays
 /// open. Without a time-out nor an exit watch the read itself waits.
 fn wait_readable(
-    reader: &BufReader<ChildStdout>,
+    reader: &BufReader<File>,
     exit_watch: Option<&OwnedFd>,
     timeout: Option<Duration>,
 ) -> io::Result<()> {
@@ -768,7 +864,10 @@ impl Drop for RemoteInstance {
             }
         }
         self.writer = None;
-        if self.ended.is_none() {
+        if let Some((socket, _)) = &self.socket {
+            let _ = socket.shutdown(Shutdown::Both);
+        }
+        if self.ended.is_none() && self.child.is_some() {
             let _ = self.reap();
         }
     }

@@ -286,6 +286,16 @@ pub struct InstanceSpec {
     /// the `tether` CLI ends the run).
     #[serde(default)]
     pub call_timeout: Option<f64>,
+    /// A host on another machine that runs the instance, `tcp://ADDR:PORT`
+    /// (`tether host`, docs/remote.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub host: Option<String>,
+    /// The file holding the token of `host`, relative to the system file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub token_file: Option<PathBuf>,
+    /// The FMU already on `host` (a path there): the archive is not sent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fmu_on_host: Option<PathBuf>,
 }
 
 /// Where an instance's FMU runs (`isolation` of an instance).

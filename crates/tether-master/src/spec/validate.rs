@@ -28,6 +28,9 @@ impl SystemSpec {
             if inst.fmu.is_relative() {
                 inst.fmu = base.join(&inst.fmu);
             }
+            if let Some(token) = inst.token_file.as_mut().filter(|t| t.is_relative()) {
+                *token = base.join(&*token);
+            }
         }
         Ok(spec)
     }
@@ -143,6 +146,35 @@ impl SystemSpec {
             ));
         }
         for i in &self.instances {
+            let remote = |key: &str, reason: String| MasterError::SystemFile {
+                path: self.source_name(),
+                reason: format!("instance '{}': {key}: {reason}", i.name),
+            };
+            match (&i.host, &i.token_file) {
+                (Some(host), Some(_)) => {
+                    tether_fmi::remote::tcp::RemoteHost::parse_address(host)
+                        .map_err(|reason| remote("host", reason))?;
+                }
+                (Some(_), None) => {
+                    return Err(remote(
+                        "host",
+                        "needs token_file, the file holding the host's token".into(),
+                    ))
+                }
+                (None, Some(_)) => return Err(remote("token_file", "given without host".into())),
+                (None, None) => {}
+            }
+            if let Some(path) = &i.fmu_on_host {
+                if i.host.is_none() {
+                    return Err(remote("fmu_on_host", "given without host".into()));
+                }
+                if !path.is_absolute() {
+                    return Err(remote(
+                        "fmu_on_host",
+                        format!("'{}' is not an absolute path on the host", path.display()),
+                    ));
+                }
+            }
             if let Some(t) = i.call_timeout.filter(|t| !t.is_finite() || *t <= 0.0) {
                 return Err(param(
                     &format!("{}.call_timeout", i.name),
