@@ -486,6 +486,199 @@ fn a_deeply_nested_ssd() {
     );
 }
 
+/// `entries` as `dir/name.ssp`, deflated.
+fn ssp_of(dir: &Path, name: &str, entries: &[Entry<'_>]) -> PathBuf {
+    let path = dir.join(name);
+    write_zip(&path, entries);
+    path
+}
+
+/// An SSD of 8 MiB (whitespace after the root) that deflates to about 8 KiB: refused by
+/// the compression ratio before anything is written (the issue's 1.5 GB SSD in a 3.2 MB
+/// archive, smaller).
+#[test]
+fn an_ssp_with_a_highly_compressible_system_structure() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = ssd("resources/a.fmu", "");
+    text.push_str(&" ".repeat(8 << 20));
+    let path = ssp_of(
+        dir.path(),
+        "ratio.ssp",
+        &[
+            Entry::File("SystemStructure.ssd", text.as_bytes()),
+            Entry::File("resources/a.fmu", b""),
+        ],
+    );
+    ssp_error(
+        &path,
+        &[
+            &format!(
+                "SSP archive '{}' exceeds the extraction limit at entry 'SystemStructure.ssd': declares {} bytes from",
+                shown(&path),
+                text.len()
+            ),
+            "a compression ratio over the limit of 100 (for entries over 1048576 bytes)",
+        ],
+    );
+}
+
+/// An unused entry of 8 MiB of zeros that declares 1000 bytes (so its ratio looks
+/// harmless): the bytes inflated are counted, the extraction stops at the entry and
+/// the folder is removed.
+#[test]
+fn an_ssp_entry_inflating_past_its_declared_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = ssd("resources/a.fmu", "");
+    let zeros = vec![0; 8 << 20];
+    let path = ssp_of(
+        dir.path(),
+        "liar.ssp",
+        &[
+            Entry::File("SystemStructure.ssd", text.as_bytes()),
+            Entry::File("resources/a.fmu", b""),
+            Entry::File("resources/zeros", &zeros),
+        ],
+    );
+    declare_size(&path, "resources/zeros", 1000);
+    ssp_error(
+        &path,
+        &[
+            &format!("SSP archive '{}' has entry 'resources/zeros'", shown(&path)),
+            "larger than its declared uncompressed size",
+        ],
+    );
+}
+
+/// One entry declaring 600 MiB, under the 1 GiB total: over the per-entry limit.
+#[test]
+fn an_ssp_entry_over_the_per_entry_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = ssd("resources/a.fmu", "");
+    let path = ssp_of(
+        dir.path(),
+        "big.ssp",
+        &[
+            Entry::File("SystemStructure.ssd", text.as_bytes()),
+            Entry::File("resources/a.fmu", &[7; 4096]),
+        ],
+    );
+    declare_size(&path, "resources/a.fmu", 600 << 20);
+    ssp_error(
+        &path,
+        &[&format!(
+            "SSP archive '{}' exceeds the extraction limit at entry 'resources/a.fmu': declares 629145600 bytes, limit 536870912 per entry",
+            shown(&path)
+        )],
+    );
+}
+
+/// 100 001 empty entries: over the entry limit, named after the first one past it.
+#[test]
+fn an_ssp_with_more_entries_than_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("many.ssp");
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&path).unwrap());
+    let stored =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    zip.start_file("SystemStructure.ssd", stored).unwrap();
+    for i in 1..=100_000 {
+        zip.start_file(format!("resources/{i}"), stored).unwrap();
+    }
+    zip.finish().unwrap();
+    ssp_error(
+        &path,
+        &[&format!(
+            "SSP archive '{}' exceeds the extraction limit at entry 'resources/100000': 100001 entries, limit 100000",
+            shown(&path)
+        )],
+    );
+}
+
+/// A central directory header whose extra field runs past the directory: the zip
+/// reader refuses the whole archive, the error names the entry.
+#[test]
+fn an_ssp_with_a_broken_central_directory_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = ssd("resources/a.fmu", "");
+    let path = ssp_of(
+        dir.path(),
+        "directory.ssp",
+        &[
+            Entry::File("SystemStructure.ssd", text.as_bytes()),
+            Entry::File("resources/a.fmu", b""),
+        ],
+    );
+    let mut bytes = std::fs::read(&path).unwrap();
+    let second = (0..bytes.len() - 4)
+        .filter(|&i| bytes[i..i + 4] == [0x50, 0x4b, 0x01, 0x02])
+        .nth(1)
+        .unwrap();
+    bytes[second + 30..second + 32].copy_from_slice(&60_000u16.to_le_bytes());
+    std::fs::write(&path, bytes).unwrap();
+    ssp_error(
+        &path,
+        &[&format!(
+            "SSP archive '{}' has entry 'resources/a.fmu' that cannot be extracted: unreadable central directory header:",
+            shown(&path)
+        )],
+    );
+}
+
+/// A parameter set (`.ssv`) in the archive nested 200 000 levels deep.
+#[test]
+fn a_deeply_nested_ssv_in_an_ssp() {
+    let dir = tempfile::tempdir().unwrap();
+    let depth = 200_000;
+    let text = ssd(
+        "resources/a.fmu",
+        r#"<ssd:ParameterBindings><ssd:ParameterBinding source="resources/p.ssv"/></ssd:ParameterBindings>"#,
+    );
+    let ssv = format!(
+        "<?xml version=\"1.0\"?>\n<ssv:ParameterSet version=\"1.0\" name=\"p\" \
+         xmlns:ssv=\"http://ssp-standard.org/SSP1/SystemStructureParameterValues\">\n{}{}</ssv:ParameterSet>",
+        "<x>".repeat(depth),
+        "</x>".repeat(depth)
+    );
+    // Stored: deflated, its ratio would be refused first.
+    let path = dir.path().join("deep.ssp");
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&path).unwrap());
+    let stored =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for (name, bytes) in [
+        ("SystemStructure.ssd", text.as_bytes()),
+        ("resources/a.fmu", b"".as_slice()),
+        ("resources/p.ssv", ssv.as_bytes()),
+    ] {
+        zip.start_file(name, stored).unwrap();
+        std::io::Write::write_all(&mut zip, bytes).unwrap();
+    }
+    zip.finish().unwrap();
+    ssp_error(
+        &path,
+        &["p.ssv:3:", "elements nested more than 256 deep (the limit)"],
+    );
+}
+
+/// A `tether-ssp-*` folder a killed run left (marked, its lock free) is swept by the
+/// next extraction, whatever that run's outcome.
+#[test]
+fn a_leftover_ssp_folder_is_swept() {
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().join("tmp");
+    let leftover = tmp.join("tether-ssp-killed");
+    std::fs::create_dir_all(leftover.join("resources")).unwrap();
+    std::fs::write(leftover.join(".tether-lock"), b"").unwrap();
+    std::fs::write(leftover.join("resources/a.fmu"), b"x").unwrap();
+    // An archive that extracts, then fails: its source is missing.
+    let text = ssd("resources/missing.fmu", "");
+    let path = ssp_of(
+        dir.path(),
+        "missing.ssp",
+        &[Entry::File("SystemStructure.ssd", text.as_bytes())],
+    );
+    ssp_error(&path, &["SystemStructure.ssd:5:", "resources/missing.fmu"]);
+}
+
 // ---------------------------------------------------------------- system files
 
 #[test]
@@ -520,7 +713,6 @@ fn array_counts_are_bounded() {
             "name = \"mass2_{i}\"\ncount = 100000000\n",
         )
     });
-    let started = std::time::Instant::now();
     assert!(matches!(
         setup_err(&instances),
         MasterError::SystemFile { .. }
@@ -532,7 +724,6 @@ fn array_counts_are_bounded() {
             "[[instance]] block 2 (count = 100000000): makes 100000001 [[instance]] blocks, above the limit of 10000",
         ],
     );
-    assert!(started.elapsed().as_secs() < 30, "{:?}", started.elapsed());
     let constraints = system(dir.path(), |t| {
         swap(
             t,
@@ -544,6 +735,34 @@ fn array_counts_are_bounded() {
         &constraints,
         &["[[constraint]] block 1 (count = 100001): makes 100001 [[constraint]] blocks, above the limit of 100000"],
     );
+    assert!(!dir.path().join("system.csv").exists());
+}
+
+/// 100 000 constraints between the same two masses are within the block limits, but
+/// each couples every other: an interface Jacobian of 10¹⁰ entries. One error naming
+/// the file, before the matrices are allocated (docs/system-file.md, "Limits").
+#[test]
+fn an_interface_system_over_the_entry_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let dense = system(dir.path(), |t| {
+        swap(
+            t,
+            "name = \"link\"\n",
+            "name = \"link{i}\"\ncount = 100000\n",
+        )
+    });
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let out = tether_env(&["run", dense.to_str().unwrap()], dir.path(), Some(&tmp));
+    cli_error(
+        &out,
+        &[&format!(
+            "system file {}: its 100000 coupling unknowns make an interface Jacobian with more than 10000000 entries that can be non-zero, above the limit",
+            shown(&dense)
+        )],
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stderr).lines().count(), 1);
+    assert_eq!(std::fs::read_dir(&tmp).unwrap().count(), 0);
     assert!(!dir.path().join("system.csv").exists());
 }
 

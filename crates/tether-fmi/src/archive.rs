@@ -255,12 +255,23 @@ pub fn extract_archive(
         move |source| Error::Io { path, source }
     };
     let file = fs::File::open(archive).map_err(io_err(archive))?;
-    let mut zip =
-        zip::ZipArchive::new(io::BufReader::new(file)).map_err(|e| Error::NotAnArchive {
-            kind,
-            path: archive.to_owned(),
-            reason: crate::error::one_line(&e.to_string()),
-        })?;
+    let mut zip = zip::ZipArchive::new(io::BufReader::new(file)).map_err(|e| {
+        let reason = crate::error::one_line(&e.to_string());
+        // A zip whose directory lists an entry the reader cannot read: name it.
+        match broken_header(archive) {
+            Some(header) => Error::UnsupportedEntry {
+                kind,
+                archive: archive.to_owned(),
+                entry: header.shown(),
+                reason: format!("unreadable central directory header: {reason}"),
+            },
+            None => Error::NotAnArchive {
+                kind,
+                path: archive.to_owned(),
+                reason,
+            },
+        }
+    })?;
     let too_large = |entry: &str, reason: String| Error::ArchiveTooLarge {
         kind,
         archive: archive.to_owned(),
@@ -470,29 +481,116 @@ pub fn extract_archive(
     Ok(dir)
 }
 
-/// The first name that appears twice in the central directory starting at byte
-/// `start` of `archive` (the zip reader keeps one entry per name), or `None` if the
-/// directory cannot be read.
-fn duplicated_name(archive: &Path, start: u64) -> Option<String> {
-    let mut file = BufReader::new(fs::File::open(archive).ok()?);
-    file.seek(SeekFrom::Start(start)).ok()?;
-    let mut seen = std::collections::HashSet::new();
-    let mut header = [0u8; 46];
-    loop {
-        file.read_exact(&mut header).ok()?;
-        if header[..4] != [0x50, 0x4b, 0x01, 0x02] {
-            return None;
-        }
-        let field = |at: usize| u16::from_le_bytes([header[at], header[at + 1]]);
-        let (name_len, extra_len, comment_len) = (field(28), field(30), field(32));
-        let mut name = vec![0; name_len.into()];
-        file.read_exact(&mut name).ok()?;
-        file.seek_relative(i64::from(extra_len) + i64::from(comment_len))
-            .ok()?;
-        if !seen.insert(name.clone()) {
-            return Some(String::from_utf8_lossy(&name).escape_default().to_string());
+/// A central directory header: its position (from 1) and, if its bytes allow,
+/// its name.
+struct Header {
+    position: usize,
+    name: Option<Vec<u8>>,
+}
+
+impl Header {
+    /// The entry's name for an error: escaped, or its position.
+    fn shown(&self) -> String {
+        match &self.name {
+            Some(name) => String::from_utf8_lossy(name).escape_default().to_string(),
+            None => format!("#{} in the central directory", self.position),
         }
     }
+}
+
+/// Walks the central directory of `archive`, bytes `start..end`, handing each
+/// header's name to `visit` until it returns `Some`. `Err` is the first header
+/// whose fields do not fit the directory (or its extra field's blocks do not fit
+/// the extra field); `Ok(None)` if every header was visited. Linear in the
+/// directory.
+fn walk_central_directory<T>(
+    archive: &Path,
+    start: u64,
+    end: u64,
+    mut visit: impl FnMut(&[u8]) -> Option<T>,
+) -> io::Result<Result<Option<T>, Header>> {
+    let mut file = BufReader::new(fs::File::open(archive)?);
+    file.seek(SeekFrom::Start(start))?;
+    let mut at = start;
+    let mut header = [0u8; 46];
+    for position in 1.. {
+        if at >= end {
+            return Ok(Ok(None));
+        }
+        let broken = |name| Err(Header { position, name });
+        if at + 46 > end || file.read_exact(&mut header).is_err() {
+            return Ok(broken(None));
+        }
+        let field = |at: usize| u64::from(u16::from_le_bytes([header[at], header[at + 1]]));
+        let (name_len, extra_len, comment_len) = (field(28), field(30), field(32));
+        let mut name = vec![0; name_len as usize];
+        let name_fits = at + 46 + name_len <= end && file.read_exact(&mut name).is_ok();
+        let name = name_fits.then_some(name);
+        if header[..4] != [0x50, 0x4b, 0x01, 0x02] || name.is_none() {
+            return Ok(broken(name));
+        }
+        at += 46 + name_len + extra_len + comment_len;
+        let mut extra = vec![0; extra_len as usize];
+        if at > end || file.read_exact(&mut extra).is_err() {
+            return Ok(broken(name));
+        }
+        // The extra field is blocks of (id, size, data).
+        let mut rest = extra.as_slice();
+        while rest.len() >= 4 {
+            let size = usize::from(u16::from_le_bytes([rest[2], rest[3]]));
+            if rest.len() < 4 + size {
+                return Ok(broken(name));
+            }
+            rest = &rest[4 + size..];
+        }
+        file.seek_relative(comment_len as i64)?;
+        if let Some(found) = visit(name.as_deref().unwrap_or_default()) {
+            return Ok(Ok(Some(found)));
+        }
+    }
+    unreachable!("the loop returns")
+}
+
+/// The first name that appears twice in the central directory of `archive`
+/// starting at byte `start` (the zip reader keeps one entry per name), or `None`
+/// if the directory cannot be read.
+fn duplicated_name(archive: &Path, start: u64) -> Option<String> {
+    let end = fs::metadata(archive).ok()?.len();
+    let mut seen = std::collections::HashSet::new();
+    let found = walk_central_directory(archive, start, end, |name| {
+        (!seen.insert(name.to_vec()))
+            .then(|| String::from_utf8_lossy(name).escape_default().to_string())
+    });
+    found.ok()?.ok()?
+}
+
+/// The central directory header the zip reader could not read, for an archive it
+/// refused as a whole: found from the end-of-central-directory record, `None` if
+/// that record is missing (the file is no zip, or is truncated), is ZIP64, or
+/// every header reads.
+fn broken_header(archive: &Path) -> Option<Header> {
+    let mut file = fs::File::open(archive).ok()?;
+    let len = file.metadata().ok()?.len();
+    // The record (22 bytes) and its comment (at most 65 535) end the file.
+    let tail_len = len.min(22 + 65_535);
+    file.seek(SeekFrom::Start(len - tail_len)).ok()?;
+    let mut tail = vec![0; tail_len as usize];
+    file.read_exact(&mut tail).ok()?;
+    let record = (0..tail.len().saturating_sub(21))
+        .rev()
+        .find(|&i| tail[i..i + 4] == [0x50, 0x4b, 0x05, 0x06])?;
+    let word = |at: usize| {
+        let at = record + at;
+        u32::from_le_bytes([tail[at], tail[at + 1], tail[at + 2], tail[at + 3]])
+    };
+    let (size, start) = (word(12), word(16));
+    if size == u32::MAX || start == u32::MAX {
+        return None;
+    }
+    let (start, end) = (u64::from(start), u64::from(start) + u64::from(size));
+    walk_central_directory(archive, start, end.min(len), |_| None::<()>)
+        .ok()?
+        .err()
 }
 
 /// Copies at most `max` bytes, returning how many were copied.
@@ -724,6 +822,49 @@ mod tests {
             "{text}"
         );
         assert!(!text.contains('\n'));
+    }
+
+    /// The zip reader refuses an archive as a whole when one header of its central
+    /// directory cannot be read: the error names that entry.
+    #[test]
+    fn a_broken_central_directory_header_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("directory.ssp");
+        let header = |bytes: &[u8], n: usize| {
+            (0..bytes.len() - 4)
+                .filter(|&i| bytes[i..i + 4] == [0x50, 0x4b, 0x01, 0x02])
+                .nth(n)
+                .unwrap()
+        };
+        // The second header's extra field runs past the directory, then its
+        // signature is broken.
+        for (field, value, reason) in [
+            (
+                30,
+                60_000u16,
+                "Variable-length field extends beyond file boundary",
+            ),
+            (0, 0x0a0d, "Invalid Central Directory header"),
+        ] {
+            zip_of(&path, &[("a.txt", b"aaaa"), ("resources/b.txt", b"bbbb")]);
+            let mut bytes = fs::read(&path).unwrap();
+            let at = header(&bytes, 1) + field;
+            bytes[at..at + 2].copy_from_slice(&value.to_le_bytes());
+            fs::write(&path, bytes).unwrap();
+            let err = ssp_err(&path);
+            assert!(matches!(err, Error::UnsupportedEntry { .. }), "{err:?}");
+            assert_eq!(
+                err.to_string(),
+                format!(
+                    "SSP archive '{}' has entry 'resources/b.txt' that cannot be extracted: \
+                     unreadable central directory header: invalid Zip archive: {reason}",
+                    path.display()
+                )
+            );
+        }
+        // No end-of-directory record: not a zip, no entry to name.
+        fs::write(&path, b"PK\x03\x04 and nothing else").unwrap();
+        assert!(matches!(ssp_err(&path), Error::NotAnArchive { .. }));
     }
 
     #[test]

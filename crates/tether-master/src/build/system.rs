@@ -2,7 +2,7 @@
 //! coupling rows and unknowns, the unknowns' history, which instances each
 //! unknown drives — and [`MacroStep`], a coupling method's step on it.
 
-use crate::coupling::touched::Touched;
+use crate::coupling::touched::{Touched, MAX_INTERFACE_ENTRIES};
 use crate::coupling::Coupling;
 use crate::polynomial::{Past, Taylor};
 use crate::slave::{Run, Slave};
@@ -56,6 +56,17 @@ impl System {
                 }
             }
         }
+        // The interface system's size first: what follows grows with it.
+        let touched = Touched::new(&coupling, &owners, slaves.len()).ok_or_else(|| {
+            MasterError::SystemFile {
+                path: spec.source_name(),
+                reason: format!(
+                    "its {n} coupling unknowns make an interface Jacobian with more than \
+                     {MAX_INTERFACE_ENTRIES} entries that can be non-zero, above the limit (docs/system-file.md, \"Limits\")",
+                    n = coupling.len()
+                ),
+            }
+        })?;
         let groups = perturbation_groups(&owners, slaves.len());
         let group_slaves = groups
             .iter()
@@ -69,7 +80,6 @@ impl System {
                 members
             })
             .collect();
-        let touched = Touched::new(&coupling, &owners, slaves.len());
         let exp = spec.experiment;
         let every_step = spec.coupling.check_rollback == CheckRollback::EveryStep;
         for slave in &mut slaves {

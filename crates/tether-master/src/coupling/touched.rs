@@ -12,6 +12,13 @@
 use crate::coupling::rows::{RowLevel, View};
 use crate::coupling::{Coupling, Row};
 
+/// The most entries the interface Jacobian's pattern may have (docs/system-file.md,
+/// "Limits"): each costs about 100 bytes at setup (its row index, its values of
+/// every level, the dense matrix of a system with few zeros), so the limit bounds
+/// the interface system's memory near 1 GB. The largest systems of the tests and
+/// benchmarks have a few thousand.
+pub const MAX_INTERFACE_ENTRIES: usize = 10_000_000;
+
 /// The rows (and joints) each unknown's perturbation touches, compressed by
 /// column; the rows of a column are sorted.
 #[derive(Debug, Clone, Default)]
@@ -26,8 +33,9 @@ pub(crate) struct Touched {
 
 impl Touched {
     /// The structure from the coupling rows and `owners` (per unknown, the
-    /// instances it drives), in time linear in the number of non-zeros.
-    pub fn new(coupling: &Coupling, owners: &[Vec<usize>], instances: usize) -> Touched {
+    /// instances it drives), in time linear in the number of non-zeros; `None`,
+    /// before it is stored, if it has more than [`MAX_INTERFACE_ENTRIES`].
+    pub fn new(coupling: &Coupling, owners: &[Vec<usize>], instances: usize) -> Option<Touched> {
         let n = coupling.len();
         // Per instance: the constraint and variable rows, and the joints, reading it.
         let mut instance_rows = vec![Vec::new(); instances];
@@ -130,6 +138,9 @@ impl Touched {
                     add_row(&mut rows, joint.first_unknown + c);
                 }
             }
+            if touched.rows.len() + rows.len() > MAX_INTERFACE_ENTRIES {
+                return None;
+            }
             rows.sort_unstable();
             joints.sort_unstable();
             touched.rows.extend_from_slice(&rows);
@@ -137,7 +148,7 @@ impl Touched {
             touched.joints.extend_from_slice(&joints);
             touched.joint_ptr.push(touched.joints.len());
         }
-        touched
+        Some(touched)
     }
 
     /// The rows column `m` may change, sorted.
