@@ -178,6 +178,19 @@ pub enum MasterError {
         /// The bound it crossed.
         limit: f64,
     },
+    /// A constraint or joint condition is broken: its |g| at an accepted point
+    /// exceeds `[coupling] residual_limit`.
+    #[error("constraint broken at t = {time}: |{condition}| = {value:e} exceeds residual_limit = {limit:e} (in the condition's units); the coupling does not hold it: a smaller step, another index or method, check_rollback = \"every_step\" to test the FMUs' rollback, or residual_limit = \"off\" to run anyway")]
+    ResidualLimit {
+        /// Time of the accepted point.
+        time: f64,
+        /// The residual's column name, e.g. `link.g`.
+        condition: String,
+        /// Its magnitude |g|.
+        value: f64,
+        /// `[coupling] residual_limit`.
+        limit: f64,
+    },
     /// Adaptive steps: a step at the smallest allowed size still misses the
     /// tolerances.
     #[error("adaptive macro steps: at t = {time} the local error estimate is {error:.2} times the tolerance even at h_min = {h_min:e}; loosen [step_control] rtol/atol or lower h_min, or, if smaller steps do not lower the estimate, choose a method, index and k stable for this system (docs/paper-reproduction.md)")]

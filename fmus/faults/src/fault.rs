@@ -1,6 +1,9 @@
 //! The faults themselves, struck from inside `fmi2DoStep`.
 
+use std::cell::Cell;
 use std::time::Duration;
+
+use tether_fmu_kit::model::Restore;
 
 /// What goes wrong from `at` on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -17,6 +20,8 @@ pub enum Mode {
     ForkedChildExits,
     ForkedChildLingersThenSegfault,
     Helper,
+    RestoreIgnored,
+    RestoreNoisy,
 }
 
 impl Mode {
@@ -35,18 +40,25 @@ impl Mode {
             9 => Mode::ForkedChildExits,
             10 => Mode::ForkedChildLingersThenSegfault,
             11 => Mode::Helper,
+            12 => Mode::RestoreIgnored,
+            13 => Mode::RestoreNoisy,
             _ => return None,
         })
     }
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Fault {
     pub mode: Mode,
     pub at: f64,
     pub delay: f64,
     pub pause: f64,
     pub flood: u32,
+    /// Mode 13: the largest offset a restore adds to every state.
+    pub noise: f64,
+    /// Mode 13: the state of the pseudo-random offsets (xorshift64), so that
+    /// two restores of one state give different states.
+    pub seed: Cell<u64>,
 }
 
 impl Fault {
@@ -87,7 +99,29 @@ impl Fault {
                 crate::crash()
             }
             Mode::Helper if t < self.at + 0.5 * h => crate::start_helper(),
-            Mode::Helper => {}
+            Mode::Helper | Mode::RestoreIgnored | Mode::RestoreNoisy => {}
+        }
+    }
+
+    /// What `fmi2SetFMUstate` does when the instance is at `t`: modes 12 and
+    /// 13 break it once `t` reaches `at` (after the master's setup check).
+    pub fn restore(&self, t: f64) -> Restore {
+        if t < self.at {
+            return Restore::Exact;
+        }
+        match self.mode {
+            Mode::RestoreIgnored => Restore::Ignore,
+            Mode::RestoreNoisy => {
+                let mut x = self.seed.get();
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                self.seed.set(x);
+                // Uniform in [-noise, noise].
+                let unit = (x >> 11) as f64 / (1u64 << 53) as f64;
+                Restore::Perturbed(self.noise * (2.0 * unit - 1.0))
+            }
+            _ => Restore::Exact,
         }
     }
 }

@@ -50,7 +50,15 @@ pub struct Simulation {
     /// and the clock reading that ended the last macro step's phases, for
     /// the recording phase that follows it in [`Simulation::run`].
     timing: Timing,
+    /// `check_rollback = "periodic"`: the step size H of the rollback
+    /// self-check repeated every [`RECHECK_EVERY`] accepted macro steps.
+    recheck: Option<f64>,
 }
+
+/// With `check_rollback = "periodic"` (the default), the rollback self-check
+/// is repeated from the accepted point after this many macro steps, and
+/// every this many after.
+pub const RECHECK_EVERY: u64 = 100;
 
 /// Phase timing of the macro steps.
 #[derive(Default)]
@@ -202,6 +210,7 @@ impl Simulation {
             first_residual,
             settings.divergence_factor,
             settings.residual_warning,
+            settings.residual_limit.0,
         );
         health.check(row.all_values(), row.all_columns(), exp.start)?;
         stats.method = method;
@@ -219,6 +228,12 @@ impl Simulation {
             health,
             stats,
             timing: Timing::default(),
+            recheck: (method.needs_rollback()
+                && matches!(
+                    settings.check_rollback,
+                    CheckRollback::Periodic | CheckRollback::EveryStep
+                ))
+            .then_some(exp.step),
         })
     }
 
@@ -339,6 +354,14 @@ impl Simulation {
     /// Advance one macro step with the configured method (with adaptive
     /// steps: one accepted step, after as many rejected tries as it takes).
     pub fn step(&mut self) -> Result<(), MasterError> {
+        let n = self.stats.macro_steps;
+        if let Some(h) = self.recheck.filter(|_| n > 0 && n % RECHECK_EVERY == 0) {
+            // The rollback self-check again, from the accepted point: a
+            // restore that stopped being exact after the first check.
+            self.system
+                .check_rollback(self.grid.time(), h)
+                .inspect_err(|e| self.health.fail(e))?;
+        }
         let mut lap = Lap::start(self.timing.on);
         let (signals, method, system) = (&mut self.signals, &mut self.method, &mut self.system);
         let stats = &mut self.stats;

@@ -195,12 +195,17 @@ pub struct CouplingSettings {
     /// Perturbed runs on other threads: auto, on or off (docs/algorithm.md).
     pub parallel: Parallel,
     /// When the rollback of the instances the method rolls back is checked
-    /// (docs/reliability.md): at setup (the default), also after every
+    /// (docs/reliability.md): at setup, at setup and every
+    /// [`crate::RECHECK_EVERY`] macro steps (the default), also after every
     /// restore, or never.
     pub check_rollback: CheckRollback,
     /// The run summary warns when the largest |g| of a constraint or joint
     /// condition over the run exceeds this (in the condition's units).
     pub residual_warning: f64,
+    /// A run whose |g| of a constraint or joint condition exceeds this (in
+    /// the condition's units) at an accepted point fails: the constraint is
+    /// broken (docs/reliability.md). `"off"` disables it.
+    pub residual_limit: ResidualLimit,
     /// Corrections per macro step (1 = the paper): after the corrector run,
     /// g is evaluated again and corrected with the same Jacobian, up to this
     /// many corrections in all (docs/algorithm.md, iterated correction).
@@ -223,14 +228,66 @@ pub enum CheckRollback {
     /// Once, before the first macro step: save, step, restore, compare the
     /// outputs with those at the save, repeat the step and require
     /// bit-identical outputs, restore.
-    #[default]
     Setup,
+    /// The setup check, repeated from the accepted point every
+    /// [`crate::RECHECK_EVERY`] macro steps (the default): a restore that
+    /// stops being exact, or was never deterministic, later in the run.
+    #[default]
+    Periodic,
     /// At setup, and after every restore of a macro step the coupled outputs
     /// are read back and compared with those at the save (one more
     /// `fmi2GetReal` per save and per restore).
     EveryStep,
     /// Never.
     Off,
+}
+
+/// `[coupling] residual_limit`: a number (in the constraint's units), or
+/// `"off"`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResidualLimit(pub Option<f64>);
+
+impl ResidualLimit {
+    /// The default limit, 0.1 in the condition's units (docs/system-file.md
+    /// says why).
+    pub const DEFAULT: ResidualLimit = ResidualLimit(Some(0.1));
+}
+
+impl Serialize for ResidualLimit {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self.0 {
+            Some(v) => s.serialize_f64(v),
+            None => s.serialize_str("off"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for ResidualLimit {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = ResidualLimit;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number > 0 or \"off\"")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<ResidualLimit, E> {
+                Ok(ResidualLimit(Some(v)))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<ResidualLimit, E> {
+                Ok(ResidualLimit(Some(v as f64)))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<ResidualLimit, E> {
+                Ok(ResidualLimit(Some(v as f64)))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<ResidualLimit, E> {
+                match v {
+                    "off" => Ok(ResidualLimit(None)),
+                    _ => Err(E::invalid_value(serde::de::Unexpected::Str(v), &self)),
+                }
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
 }
 
 impl Default for CouplingSettings {
@@ -241,8 +298,9 @@ impl Default for CouplingSettings {
             max_condition: 1e12,
             divergence_factor: 1e6,
             parallel: Parallel::Auto,
-            check_rollback: CheckRollback::Setup,
+            check_rollback: CheckRollback::Periodic,
             residual_warning: 1e-3,
+            residual_limit: ResidualLimit::DEFAULT,
             iterations: 1,
             iteration_tol: 1e-10,
             jacobian: JacobianMode::EveryStep,

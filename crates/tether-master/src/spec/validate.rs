@@ -133,6 +133,9 @@ impl SystemSpec {
                 "a finite number > 0",
             ));
         }
+        if let Some(l) = c.residual_limit.0.filter(|l| !l.is_finite() || *l <= 0.0) {
+            return Err(param("residual_limit", l, "a finite number > 0 or \"off\""));
+        }
         for i in &self.instances {
             if let Some(t) = i.call_timeout.filter(|t| !t.is_finite() || *t <= 0.0) {
                 return Err(param(
