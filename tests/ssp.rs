@@ -253,7 +253,7 @@ fn every_example_round_trips_through_ssp() {
         .collect();
     examples.sort();
     assert!(examples.len() >= 10);
-    let fmus: Vec<(String, PathBuf)> = ["oscillator", "controller", "link", "body3d"]
+    let fmus: Vec<(String, PathBuf)> = ["oscillator", "controller", "link", "body3d", "lti"]
         .iter()
         .map(|n| (format!("../target/fmus/{n}.fmu"), fmu(n)))
         .collect();

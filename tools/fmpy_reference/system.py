@@ -332,6 +332,8 @@ def _from_document(doc):
                                              t.take("drives", "string", required=True),
                                              t.take("value", "string", required=True), initial))
         t.done()
+    # [export] declares the interface of `tether fmu export`: nothing to run.
+    top.take("export", "table", None)
     top.done()
     return system
 

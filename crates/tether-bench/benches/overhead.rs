@@ -736,7 +736,7 @@ fn bench_isolation() {
     ] {
         let steps = spec.macro_steps() as f64;
         let mut times: [Vec<f64>; 2] = Default::default();
-        let mut calls = 0;
+        let (mut calls, mut trips) = (0, 0);
         for _ in 0..reps {
             for (i, isolation) in [Isolation::None, Isolation::Process]
                 .into_iter()
@@ -764,16 +764,21 @@ fn bench_isolation() {
                     })
                     .sum::<u64>()
                     / stats.macro_steps;
+                let round_trips = stats.instances.iter().map(|c| c.round_trips).sum::<u64>();
+                if round_trips > 0 {
+                    // Setup included: ~0 per step of a long run.
+                    trips = round_trips / stats.macro_steps;
+                }
             }
         }
         let [a, b] = times.clone().map(median);
-        println!("{name} ({calls} FMI calls per macro step)");
+        println!("{name} ({calls} FMI calls, {trips} round trips per macro step)");
         println!(
-            "  per macro step: in-process {}   isolated {}   ratio {:.1}x, {:.2} µs more per FMI call",
+            "  per macro step: in-process {}   isolated {}   ratio {:.1}x, {:.2} µs more per round trip",
             us2(&times[0]),
             us2(&times[1]),
             b / a,
-            (b - a) * 1e6 / calls as f64
+            (b - a) * 1e6 / trips.max(1) as f64
         );
     }
 }

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod columns;
 mod compare;
 mod exit_guard;
+mod fmu;
 mod info;
 mod interrupt;
 mod isolation;
@@ -76,6 +77,8 @@ enum Command {
     Study(study::Args),
     /// SSP: export a system file as .ssp, import an .ssp as a system file.
     Ssp(ssp::Args),
+    /// FMU: export a system file as one FMI 2.0 co-simulation FMU.
+    Fmu(fmu::Args),
 }
 
 /// `eprintln!` that never panics: a closed or full stderr (`2>/dev/full`) is no
@@ -173,6 +176,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => sweep::main(args),
         Command::Study(args) => study::main(args),
         Command::Ssp(args) => ssp::main(args),
+        Command::Fmu(args) => fmu::main(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

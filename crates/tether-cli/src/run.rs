@@ -123,6 +123,9 @@ pub fn main(args: Args) -> Result<()> {
             e => e,
         })?;
     sim.time_phases(args.timing);
+    for note in sim.notes() {
+        crate::say!("note: {note}");
+    }
     // The plot's columns are checked now, not after the run.
     let plot_columns = crate::columns::split(&args.columns);
     for name in &plot_columns {

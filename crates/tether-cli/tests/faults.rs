@@ -767,6 +767,61 @@ fn isolated_runs_equal_in_process_runs_bit_for_bit() {
     assert!(s.leftovers().is_empty() && processes_left(&s).is_empty());
 }
 
+/// An isolated instance's macro step is two messages to its host: the save,
+/// the predictor and the perturbed runs in one, the corrector with the reads
+/// of the accepted point in the other; with k = 1, adaptive steps and
+/// Jacobian reuse too (`round_trips` of the run summary, counted between two
+/// stop times so that the setup cancels out).
+#[test]
+fn an_isolated_macro_step_costs_two_round_trips_per_instance() {
+    let s = Scratch::new();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    for fmu in ["oscillator", "link"] {
+        tether_fmu_build::workspace_fmu(fmu).expect("package the example's FMUs");
+    }
+    for (example, flags) in [
+        ("oscillator", &[][..]),
+        ("oscillator", &["--order", "1"][..]),
+        ("oscillator", &["--step-rtol", "1e-4"][..]),
+        ("double_pendulum", &["--jacobian", "reuse"][..]),
+    ] {
+        let system = root.join("examples").join(format!("{example}.toml"));
+        let summary = |stop: &str| {
+            let mut args = vec!["--quiet", "--isolate", "--parallel", "off", "--stop", stop];
+            args.extend_from_slice(&["--summary-json", "summary.json"]);
+            args.extend_from_slice(flags);
+            let out = s.run(&system, "out.csv", &args);
+            assert!(out.status.success(), "{example}: {}", stderr(&out));
+            let text = std::fs::read_to_string(s.path().join("summary.json")).unwrap();
+            serde_json::from_str::<serde_json::Value>(&text).unwrap()
+        };
+        let (short, long) = (summary("0.2"), summary("0.4"));
+        let tries = |v: &serde_json::Value| match v["adaptive"].as_object() {
+            Some(a) => a["accepted"].as_u64().unwrap() + a["rejected"].as_u64().unwrap(),
+            None => v["macro_steps"].as_u64().unwrap(),
+        };
+        let steps = tries(&long) - tries(&short);
+        assert!(steps >= 100, "{example} {flags:?}: {steps} steps");
+        let instances = long["instances"].as_object().unwrap();
+        for (name, calls) in instances {
+            let trips = calls["round_trips"].as_u64().unwrap()
+                - short["instances"][name]["round_trips"].as_u64().unwrap();
+            // Jacobian reuse remakes a mispredicting Jacobian: then the
+            // perturbed runs and the correction go again (a few steps).
+            let most = if flags.contains(&"reuse") {
+                2 * steps + steps / 10
+            } else {
+                2 * steps
+            };
+            assert!(
+                trips <= most && trips >= 2 * steps,
+                "{example} {flags:?} {name}: {trips} round trips in {steps} steps"
+            );
+        }
+    }
+    assert!(s.leftovers().is_empty() && processes_left(&s).is_empty());
+}
+
 /// In-process, an endless loop cannot be stopped: with `--call-timeout` the
 /// watchdog ends the run, keeping every accepted row with the trailer naming
 /// the instance, the call and the time, and removing the folders.

@@ -146,7 +146,7 @@ fn an_unknown_connector_names_the_ssd_and_the_connection() {
     assert!(
         stderr.starts_with("error: ./SystemStructure.ssd: connection ")
             && stderr.contains(
-                "instance 'mass' (oscillator.fmu) has no variable 'xx'; did you mean 'x'?"
+                "instance 'mass' (oscillator.fmu) has no variable 'xx'; did you mean 'x'"
             ),
         "{stderr}"
     );

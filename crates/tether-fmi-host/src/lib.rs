@@ -17,6 +17,9 @@ use std::fs::File;
 use std::io::{BufReader, Write};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
+use std::time::{Duration, Instant};
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
 use tether_fmi::{Error, Fmu, FmuState, Instance, InstanceOptions, StatusKind};
@@ -119,27 +122,131 @@ struct Host {
     reals: Vec<f64>,
     bools: Vec<bool>,
     bytes: Vec<u8>,
+    /// `call_timeout` of the instance, sent with `INSTANTIATE`.
+    timeout: Option<Duration>,
 }
 
-/// Answers requests until the master closes the connection.
-fn serve(requests: File, mut writer: File) -> std::io::Result<()> {
+/// Answers requests until the master closes the connection: the calls of a
+/// request one after the other, until one fails.
+fn serve(requests: File, writer: File) -> std::io::Result<()> {
     let mut reader = BufReader::with_capacity(1 << 16, requests);
+    let writer = Arc::new(Mutex::new(writer));
+    let clock = Arc::new(CallClock::default());
     let mut request = Vec::new();
     let mut out = Out::default();
     let mut host = Host::default();
+    let mut watching = false;
     while protocol::receive(&mut reader, &mut request)? {
         let mut input = In::new(&request);
-        let code = input.u8()?;
         out.start(protocol::OK);
-        if let Err(e) = host.handle(code, &mut input, &mut out)? {
-            out.start(protocol::ERR).error(&e);
+        let mut index = 0u32;
+        let mut freed = false;
+        while !input.is_empty() {
+            let code = input.u8()?;
+            clock.enter(code, host.call_time(code, input));
+            let result = host.handle(code, &mut input, &mut out);
+            clock.leave();
+            if let Err(e) = result? {
+                out.start(protocol::ERR).u32(index).error(&e);
+                break;
+            }
+            freed |= code == op::FREE_INSTANCE;
+            index += 1;
         }
-        out.send(&mut writer)?;
-        if code == op::FREE_INSTANCE {
+        if let (Some(timeout), Some(instance), false) = (host.timeout, &host.instance, watching) {
+            watch_calls(&clock, &writer, timeout, instance.name().to_string());
+            watching = true;
+        }
+        out.send(&mut *lock(&writer))?;
+        if freed {
             break;
         }
     }
     Ok(())
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The FMI call in progress, for the watch of `call_timeout`: a sequence
+/// number that is odd during a call, and the call's start, function and time.
+#[derive(Default)]
+struct CallClock {
+    sequence: AtomicU64,
+    /// Nanoseconds since `epoch` when the call began.
+    started: AtomicU64,
+    code: AtomicU8,
+    time: AtomicU64,
+    epoch: OnceLock<Instant>,
+}
+
+impl CallClock {
+    fn now(&self) -> u64 {
+        let epoch = self.epoch.get_or_init(Instant::now);
+        u64::try_from(epoch.elapsed().as_nanos()).unwrap_or(u64::MAX)
+    }
+    fn enter(&self, code: u8, time: f64) {
+        self.code.store(code, Ordering::Relaxed);
+        self.time.store(time.to_bits(), Ordering::Relaxed);
+        self.started.store(self.now(), Ordering::Relaxed);
+        self.sequence.fetch_add(1, Ordering::Release);
+    }
+    fn leave(&self) {
+        self.sequence.fetch_add(1, Ordering::Release);
+    }
+}
+
+/// Enforces `call_timeout` on every FMI call: a call still running past it is
+/// answered with [`Error::CallTimeout`] naming it, and the host ends with its
+/// process group (the FMU cannot be stopped otherwise). The watch wakes about
+/// once per time-out, not per call.
+fn watch_calls(
+    clock: &Arc<CallClock>,
+    writer: &Arc<Mutex<File>>,
+    timeout: Duration,
+    instance: String,
+) {
+    let (clock, writer) = (Arc::clone(clock), Arc::clone(writer));
+    let limit = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
+    std::thread::spawn(move || loop {
+        let sequence = clock.sequence.load(Ordering::Acquire);
+        if sequence % 2 == 0 {
+            std::thread::sleep(timeout);
+            continue;
+        }
+        let deadline = clock.started.load(Ordering::Relaxed).saturating_add(limit);
+        let now = clock.now();
+        if now < deadline {
+            std::thread::sleep(Duration::from_nanos(deadline - now));
+            continue;
+        }
+        // The reply lock: the serving thread is not answering meanwhile.
+        let mut writer = lock(&writer);
+        if clock.sequence.load(Ordering::Acquire) != sequence {
+            continue;
+        }
+        let error = Error::CallTimeout {
+            function: protocol::op_function(clock.code.load(Ordering::Relaxed)),
+            instance: instance.clone(),
+            time: f64::from_bits(clock.time.load(Ordering::Relaxed)),
+            seconds: timeout.as_secs_f64(),
+        };
+        let mut out = Out::default();
+        let _ = out
+            .start(protocol::ERR)
+            .u32(u32::MAX)
+            .error(&error)
+            .send(&mut *writer);
+        // SAFETY: as in watch_hangup: the host's own process group, or this
+        // process alone.
+        unsafe {
+            if libc::getpgrp() == libc::getpid() {
+                libc::kill(0, libc::SIGKILL);
+            }
+            libc::_exit(1);
+        }
+    });
 }
 
 /// The instance, or the error for a call before `INSTANTIATE`.
@@ -151,6 +258,14 @@ fn live(instance: &mut Option<Instance>) -> Result<&mut Instance, Error> {
 }
 
 impl Host {
+    /// The instance's time when call `code` begins: a step's own start time.
+    fn call_time(&self, code: u8, mut input: In<'_>) -> f64 {
+        match code {
+            op::DO_STEP => input.f64().unwrap_or(0.0),
+            _ => self.instance.as_ref().map_or(0.0, Instance::time),
+        }
+    }
+
     /// One request: `Ok(Err(e))` is an FMI error for the master, `Err` a
     /// message that does not parse.
     fn handle(
@@ -176,6 +291,8 @@ impl Host {
                     logging_on: input.bool()?,
                     visible: input.bool()?,
                 };
+                let timeout = input.f64()?;
+                self.timeout = (timeout > 0.0).then(|| Duration::from_secs_f64(timeout));
                 Fmu::open(dir)
                     .and_then(|fmu| {
                         let instance = fmu.instantiate(name, options)?;

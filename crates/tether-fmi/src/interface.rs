@@ -23,16 +23,20 @@
 //! the state where due. [`FmuInstance::run`] takes one run as one unit, a
 //! [`RunRequest`], so that an implementation that crosses a process or a
 //! network can send it in one message. Its provided body makes the calls one
-//! by one, in the order the request lists them.
+//! by one, in the order the request lists them. [`FmuInstance::run_batch`]
+//! takes runs that do not depend on each other's outputs (a macro step's
+//! predictor and perturbed runs) as one unit in the same way.
 //!
 //! # Deferred calls
 //!
 //! The methods that return nothing but a status ([`restore`](FmuInstance::restore),
 //! [`set_reals`](FmuInstance::set_reals), [`set_inputs`](FmuInstance::set_inputs),
-//! [`step`](FmuInstance::step), [`save`](FmuInstance::save), …) may be deferred by an
-//! implementation to the next call that needs an answer. The error of a
-//! deferred call is then returned by that later call, and still names the FMI
-//! function that failed ([`Error::function`]).
+//! [`step`](FmuInstance::step), [`save`](FmuInstance::save), [`free`](FmuInstance::free),
+//! a run that reads nothing, …) may be deferred by an implementation to the
+//! next call that needs an answer: the isolated instance does, so that a
+//! macro step costs it two messages. The error of a deferred call is then
+//! returned by that later call, and still names the FMI function that failed
+//! and its time ([`Error::function`]).
 
 use std::fmt::Debug;
 
@@ -79,10 +83,20 @@ pub struct RunRequest<'a> {
     /// Read these Real values into the run's output (`outputs[..len]`).
     pub outputs: &'a [ValueReference],
     /// Then read these output derivatives `(variable, order)`, one call each,
-    /// into the rest of the run's output.
+    /// into the run's output after the values.
     pub output_derivatives: &'a [(ValueReference, i32)],
+    /// Then read these Real values (the recorded outputs, a second
+    /// `fmi2GetReal`) into the rest of the run's output.
+    pub recorded: &'a [ValueReference],
     /// Save the state into this slot last.
     pub save: Option<Slot>,
+}
+
+impl RunRequest<'_> {
+    /// The number of values the run reads: its output's length.
+    pub fn outputs_len(&self) -> usize {
+        self.outputs.len() + self.output_derivatives.len() + self.recorded.len()
+    }
 }
 
 /// An FMU instance as a master drives it: the life cycle, values, the
@@ -161,6 +175,12 @@ pub trait FmuInstance: Debug + Send {
 
     /// Back to the instantiated state.
     fn reset(&mut self) -> Result<()>;
+
+    /// The messages this instance exchanged with a process of its own so far,
+    /// each a request and its reply (0 for an instance in this process).
+    fn round_trips(&self) -> u64 {
+        0
+    }
     /// End the simulation (the instance is freed when dropped).
     fn terminate(&mut self) -> Result<()>;
 
@@ -180,11 +200,30 @@ pub trait FmuInstance: Debug + Send {
         if !run.outputs.is_empty() {
             self.get_reals(run.outputs, values)?;
         }
+        let (derivatives, recorded) = derivatives.split_at_mut(run.output_derivatives.len());
         for (&(vr, order), out) in run.output_derivatives.iter().zip(derivatives) {
             self.get_output_derivatives(&[vr], &[order], std::slice::from_mut(out))?;
         }
+        if !run.recorded.is_empty() {
+            self.get_reals(run.recorded, recorded)?;
+        }
         if let Some(slot) = run.save {
             self.save(slot)?;
+        }
+        Ok(())
+    }
+
+    /// Runs that do not depend on each other's outputs, in order (the
+    /// predictor and the perturbed runs of a macro step, each from the saved
+    /// state): one unit, which an instance in another process receives as
+    /// one message. Each run's output ([`RunRequest::outputs_len`] values)
+    /// follows the previous one's in `out`. Stops at the first error.
+    fn run_batch(&mut self, runs: &[RunRequest<'_>], out: &mut [f64]) -> Result<()> {
+        let mut rest = out;
+        for run in runs {
+            let (head, tail) = std::mem::take(&mut rest).split_at_mut(run.outputs_len());
+            self.run(run, head)?;
+            rest = tail;
         }
         Ok(())
     }
@@ -285,6 +324,7 @@ impl FmuInstance for LocalInstance {
             Err(e) => Err(crate::error::step_failure(e, &mut self.instance, t + h)),
         }
     }
+    #[inline]
     fn save(&mut self, slot: Slot) -> Result<()> {
         match &mut self.states[slot] {
             Some(s) => self.instance.update_fmu_state(s),
@@ -294,6 +334,7 @@ impl FmuInstance for LocalInstance {
             }
         }
     }
+    #[inline]
     fn restore(&mut self, slot: Slot) -> Result<()> {
         let state = slot_state(&self.states, slot, &self.instance, "fmi2SetFMUstate")?;
         self.instance.set_fmu_state(state)
@@ -320,18 +361,26 @@ impl FmuInstance for LocalInstance {
 }
 
 /// The state saved in `slot`, or an error naming `function` and the slot.
+#[inline]
 fn slot_state<'a>(
     states: &'a [Option<FmuState>],
     slot: Slot,
     instance: &Instance,
     function: &'static str,
 ) -> Result<&'a FmuState> {
-    states
-        .get(slot)
-        .and_then(Option::as_ref)
-        .ok_or_else(|| Error::InvalidArgument {
-            function,
-            instance: instance.name().to_string(),
-            message: format!("no FMU state saved in slot {slot}"),
-        })
+    match states.get(slot) {
+        Some(Some(state)) => Ok(state),
+        _ => Err(no_state(slot, instance, function)),
+    }
+}
+
+/// The error for a slot without a saved state.
+#[cold]
+#[inline(never)]
+fn no_state(slot: Slot, instance: &Instance, function: &'static str) -> Error {
+    Error::InvalidArgument {
+        function,
+        instance: instance.name().to_string(),
+        message: format!("no FMU state saved in slot {slot}"),
+    }
 }

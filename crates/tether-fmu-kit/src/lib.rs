@@ -5,7 +5,8 @@
 //! co-simulation interface, the state machine, input interpolation, integration
 //! (Dop853), FMU states and their serialization, logging, and the generated
 //! `modelDescription.xml` (exported as `tether_fmu_kit_model_description`). A model
-//! logs messages of its own through [`environment_logger`].
+//! that declares [`Model::LOGS`] logs messages of its own through
+//! [`environment_logger`].
 //! See `docs/fmu-kit.md`.
 
 mod access;

@@ -13,6 +13,13 @@ pub trait Model: Sized + 'static {
     /// Names, parameters, inputs, outputs and states, in value-reference order.
     const DECLARATION: Declaration;
 
+    /// Whether the model logs messages of its own through
+    /// [`environment_logger`](crate::environment_logger). Only then does the
+    /// kit put the instance's logger in scope during each FMI call (a
+    /// thread-local set and reset around the call); for a model that says
+    /// `false`, the default, `environment_logger` is `None`.
+    const LOGS: bool = false;
+
     /// Builds the model from parameter values, or says which one is invalid (the kit
     /// logs the message and returns fmi2Error).
     fn new(parameters: &Parameters) -> Result<Self, String>;

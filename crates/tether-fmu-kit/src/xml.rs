@@ -32,7 +32,11 @@ const GUID_PLACEHOLDER: &str = "@GUID@";
 /// The GUID: a 128-bit FNV-1a hash of the model description without the GUID, so the
 /// same declaration always gives the same GUID and any change gives a new one.
 pub fn guid(declaration: &Declaration) -> String {
-    let text = render(declaration, GUID_PLACEHOLDER);
+    text_guid(&render(declaration, GUID_PLACEHOLDER))
+}
+
+/// A GUID in FMI's `{8-4-4-4-12}` form: the 128-bit FNV-1a hash of `text`.
+pub fn text_guid(text: &str) -> String {
     let h1 = fnv1a64(text.as_bytes(), 0xcbf2_9ce4_8422_2325);
     let h2 = fnv1a64(text.as_bytes(), 0x6c62_272e_07bb_0142);
     let hex = format!("{h1:016x}{h2:016x}");

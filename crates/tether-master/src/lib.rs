@@ -40,14 +40,17 @@ mod step_control;
 pub use error::{MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
-pub use simulation::{MasterState, Simulation, SystemState, RECHECK_EVERY};
+pub use simulation::{
+    ExportKind, ExportVariable, MasterState, Simulation, SystemState, RECHECK_EVERY,
+};
 pub use single::{SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun};
 pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use spec::Parallel;
 pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
-    Experiment, InitialMultiplier, InstanceSpec, JacobianMode, JointInitial, JointSpec, OutputSpec,
-    ResidualLimit, SignalScheme, SignalSettings, StartValue, SystemSpec,
+    Experiment, ExportLink, ExportSource, ExportSpec, InitialMultiplier, InstanceSpec,
+    JacobianMode, JointInitial, JointSpec, OutputSpec, ResidualLimit, SignalScheme, SignalSettings,
+    StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
 pub use stats::{

@@ -85,14 +85,18 @@ pub struct Slave {
     pub(crate) inputs: Vec<CoupledInput>,
     /// The coupled inputs' values and derivatives as the instance takes them.
     input: InputBuffers,
+    /// The same for each run of a batch ([`Slave::runs`]).
+    run_inputs: Vec<InputBuffers>,
+    /// The outputs of a batch of runs, run after run.
+    batch_buf: Vec<f64>,
     /// The degree k of the unknowns' polynomials (`finalize`).
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
     value_vrs: Vec<u32>,
-    value_slots: Vec<usize>,
-    /// The output derivatives read, `(variable, order)`, and their slots.
+    /// The output derivatives read, `(variable, order)`.
     derivative_reads: Vec<(u32, i32)>,
-    derivative_slots: Vec<usize>,
+    /// The slot in the coupled outputs of each value of `value_buf`.
+    slots: Vec<usize>,
     /// A run's outputs as the instance returns them: the values
     /// (`value_vrs`), then the derivatives (`derivative_reads`).
     value_buf: Vec<f64>,
@@ -301,12 +305,13 @@ impl Slave {
             saved: false,
             inputs: Vec::new(),
             input: InputBuffers::default(),
+            run_inputs: Vec::new(),
+            batch_buf: Vec::new(),
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
-            value_slots: Vec::new(),
             derivative_reads: Vec::new(),
-            derivative_slots: Vec::new(),
+            slots: Vec::new(),
             value_buf: Vec::new(),
             recorded_values: vec![0.0; recorded_names.len()],
             recorded_names,
@@ -375,19 +380,21 @@ impl Slave {
         }
         self.input.derivatives = vec![0.0; self.input.derivative_vrs.len()];
         self.value_vrs.clear();
-        self.value_slots.clear();
         self.derivative_reads.clear();
-        self.derivative_slots.clear();
+        let mut derivative_slots = Vec::new();
+        self.slots.clear();
         for (slot, o) in self.coupled_outputs.iter().enumerate() {
             if o.order == 0 {
                 self.value_vrs.push(o.vr);
-                self.value_slots.push(slot);
+                self.slots.push(slot);
             } else {
                 self.derivative_reads.push((o.vr, o.order as i32));
-                self.derivative_slots.push(slot);
+                derivative_slots.push(slot);
             }
         }
+        self.slots.extend(derivative_slots);
         self.value_buf = vec![0.0; self.coupled_outputs.len()];
+        self.run_inputs.clear();
         self.at_save = vec![0.0; self.coupled_outputs.len()];
         self.readback = vec![0.0; self.coupled_outputs.len()];
     }
@@ -409,8 +416,25 @@ impl Slave {
         stop: f64,
         tolerance: Option<f64>,
     ) -> Result<(), MasterError> {
+        self.enter_initialization(start, stop, tolerance)?;
+        self.exit_initialization()
+    }
+
+    /// Setup experiment and enter initialization mode, where inputs can be
+    /// set and outputs read before the first step (a loop's values at T_0).
+    pub(crate) fn enter_initialization(
+        &mut self,
+        start: f64,
+        stop: f64,
+        tolerance: Option<f64>,
+    ) -> Result<(), MasterError> {
         self.backend.setup(tolerance, start, Some(stop))?;
         self.backend.enter_initialization()?;
+        Ok(())
+    }
+
+    /// Leave initialization mode.
+    pub(crate) fn exit_initialization(&mut self) -> Result<(), MasterError> {
         self.backend.exit_initialization()?;
         Ok(())
     }
@@ -600,20 +624,31 @@ impl Slave {
             self.counters.get_reals += 1;
         }
         self.counters.get_output_derivatives += self.derivative_reads.len() as u64;
-        let slots = self.value_slots.iter().chain(&self.derivative_slots);
-        for (&value, &slot) in self.value_buf.iter().zip(slots) {
+        // Every slot of `out` is written: when every value is finite, `out` is.
+        let mut finite = true;
+        for (&value, &slot) in self.value_buf.iter().zip(&self.slots) {
             out[slot] = value;
+            finite &= value.is_finite();
         }
-        match out.iter().position(|v| !v.is_finite()) {
-            None => {
-                let beyond = |(v, limit): (&f64, &f64)| v.abs() > *limit;
-                if let Some(k) = self.value_buf.iter().zip(&self.limits).position(beyond) {
-                    self.note_beyond(k, run);
-                }
-                Ok(())
-            }
-            Some(slot) => Err(self.non_finite(self.coupled_name(slot), out[slot], run)),
+        if !finite {
+            return Err(self.first_non_finite(out, run));
         }
+        let beyond = |(v, limit): (&f64, &f64)| v.abs() > *limit;
+        if let Some(k) = self.value_buf.iter().zip(&self.limits).position(beyond) {
+            self.note_beyond(k, run);
+        }
+        Ok(())
+    }
+
+    /// The error naming the first coupled output in `out` that is not finite.
+    #[cold]
+    #[inline(never)]
+    fn first_non_finite(&self, out: &[f64], run: Run) -> MasterError {
+        let slot = out
+            .iter()
+            .position(|v| !v.is_finite())
+            .expect("a value read is not finite");
+        self.non_finite(self.coupled_name(slot), out[slot], run)
     }
 
     /// Divergence limits `factor`·max(|v|, 1) around the coupled values of
@@ -637,7 +672,7 @@ impl Slave {
             return;
         }
         self.beyond = Some(crate::culprit::Beyond::new(
-            self.coupled_name(self.value_slots[k]),
+            self.coupled_name(self.slots[k]),
             self.value_buf[k],
             self.limits[k],
             run.describe(),
@@ -678,73 +713,180 @@ impl Slave {
             };
         }
         assert!(self.saved, "rerun is only called after save_state");
-        self.run(polys, (t, h), true, out, Run::Perturbed)
+        self.runs(&mut [Planned {
+            step: Some((polys, t, h)),
+            restore: true,
+            out,
+            record: false,
+            run: Run::Perturbed,
+        }])
     }
 
-    /// The predictor's run: set the inputs from `polys`, step from `t` over
-    /// `h`, read the coupled outputs into `out`.
-    pub(crate) fn predict(
+    /// The predictor's run (only the read of the coupled outputs for an
+    /// instance the signals' sweep has stepped) and, with the same step, the
+    /// perturbed runs from the saved state, one per `(polys, out)` of
+    /// `perturbed`: handed to the instance together, since none depends on
+    /// another's outputs (docs/algorithm.md, Steps 2 and 3).
+    pub(crate) fn predict_and_perturb(
+        &mut self,
+        polys: &[Taylor],
+        (t, h): (f64, f64),
+        out: &mut [f64],
+        perturbed: Vec<(&[Taylor], &mut [f64])>,
+    ) -> Result<(), MasterError> {
+        let predictor = Planned {
+            step: (!self.stepped_ahead).then_some((polys, t, h)),
+            restore: false,
+            out: Some(out),
+            record: false,
+            run: Run::Predictor,
+        };
+        if self.verify_restore {
+            // Each restore is checked on its own (its outputs read back).
+            self.runs(&mut [predictor])?;
+            for (polys, out) in perturbed {
+                self.rerun(polys, t, h, Some(out))?;
+            }
+            return Ok(());
+        }
+        let mut planned = Vec::with_capacity(1 + perturbed.len());
+        planned.push(predictor);
+        planned.extend(perturbed.into_iter().map(|(polys, out)| Planned {
+            step: Some((polys, t, h)),
+            restore: true,
+            out: Some(out),
+            record: false,
+            run: Run::Perturbed,
+        }));
+        self.runs(&mut planned)
+    }
+
+    /// The corrector's run: from the saved state with the inputs from
+    /// `polys` over the step, the coupled outputs into `out` and the recorded
+    /// outputs read at T_{N+1}, the accepted point.
+    pub(crate) fn correct(
         &mut self,
         polys: &[Taylor],
         t: f64,
         h: f64,
         out: &mut [f64],
     ) -> Result<(), MasterError> {
-        self.run(polys, (t, h), false, Some(out), Run::Predictor)
+        if self.verify_restore {
+            self.rerun(polys, t, h, None)?;
+            return self.read_accepted(out, Run::Corrector);
+        }
+        assert!(self.saved, "correct is only called after save_state");
+        self.runs(&mut [Planned {
+            step: Some((polys, t, h)),
+            restore: true,
+            out: Some(out),
+            record: true,
+            run: Run::Corrector,
+        }])
     }
 
-    /// One run handed to the instance as one unit: from the saved state when
-    /// `restore`, the inputs from `polys`, the step `(t, h)`, and with `out`
-    /// the coupled outputs read into it (checked as read after `run`).
-    fn run(
-        &mut self,
-        polys: &[Taylor],
-        (t, h): (f64, f64),
-        restore: bool,
-        out: Option<&mut [f64]>,
-        run: Run,
-    ) -> Result<(), MasterError> {
+    /// The coupled outputs into `out` and the recorded outputs, at an
+    /// accepted point reached after `run`.
+    pub(crate) fn read_accepted(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
+        self.runs(&mut [Planned {
+            step: None,
+            restore: false,
+            out: Some(out),
+            record: true,
+            run,
+        }])
+    }
+
+    /// Runs handed to the instance as one unit ([`FmuInstance::run_batch`]),
+    /// in order: each from the saved state when `restore`, with the inputs
+    /// from its polynomials over its step, its coupled outputs read into its
+    /// `out` (checked as read after its `run`) and, with `record`, the
+    /// recorded outputs.
+    fn runs(&mut self, planned: &mut [Planned<'_>]) -> Result<(), MasterError> {
         let driven = !self.inputs.is_empty();
-        if driven {
-            combine_inputs(
-                &self.inputs,
-                polys,
-                &mut self.input.values,
-                &mut self.input.derivatives,
-            );
+        if self.run_inputs.len() < planned.len() {
+            self.run_inputs.resize(planned.len(), self.input.clone());
         }
-        let read = out.is_some();
-        let input = &self.input;
-        let request = RunRequest {
-            restore: restore.then_some(SAVED),
-            inputs: driven.then(|| input.as_inputs()),
-            step: Some((t, h)),
-            outputs: if read { &self.value_vrs } else { &[] },
-            output_derivatives: if read { &self.derivative_reads } else { &[] },
-            save: None,
-        };
-        let ran = self.backend.run(&request, &mut self.value_buf);
-        if restore {
-            self.counters.state_sets += 1;
+        let mut len = 0;
+        for (p, input) in planned.iter().zip(&mut self.run_inputs) {
+            if let (Some((polys, _, _)), true) = (p.step, driven) {
+                combine_inputs(
+                    &self.inputs,
+                    polys,
+                    &mut input.values,
+                    &mut input.derivatives,
+                );
+            }
+            if p.out.is_some() {
+                len += self.value_buf.len();
+            }
+            if p.record {
+                len += self.recorded_vrs.len();
+            }
         }
-        if driven {
-            self.count_inputs();
+        self.batch_buf.resize(len, 0.0);
+        let requests: Vec<RunRequest<'_>> = planned
+            .iter()
+            .zip(&self.run_inputs)
+            .map(|(p, input)| RunRequest {
+                restore: p.restore.then_some(SAVED),
+                inputs: (driven && p.step.is_some()).then(|| input.as_inputs()),
+                step: p.step.map(|(_, t, h)| (t, h)),
+                outputs: if p.out.is_some() {
+                    &self.value_vrs
+                } else {
+                    &[]
+                },
+                output_derivatives: if p.out.is_some() {
+                    &self.derivative_reads
+                } else {
+                    &[]
+                },
+                recorded: if p.record { &self.recorded_vrs } else { &[] },
+                save: None,
+            })
+            .collect();
+        let ran = self.backend.run_batch(&requests, &mut self.batch_buf);
+        drop(requests);
+        for p in planned.iter() {
+            if p.restore {
+                self.counters.state_sets += 1;
+            }
+            if p.step.is_some() {
+                if driven {
+                    self.count_inputs();
+                }
+                self.counters.do_steps += 1;
+            }
         }
-        self.counters.do_steps += 1;
         ran?;
-        match out {
-            Some(out) => self.take_coupled(out, run),
-            None => Ok(()),
-        }
+        let batch = std::mem::take(&mut self.batch_buf);
+        let mut values = batch.as_slice();
+        let taken = planned.iter_mut().try_for_each(|p| {
+            if let Some(out) = p.out.as_deref_mut() {
+                let (coupled, rest) = values.split_at(self.value_buf.len());
+                self.value_buf.copy_from_slice(coupled);
+                values = rest;
+                self.take_coupled(out, p.run)?;
+            }
+            if p.record {
+                let (recorded, rest) = values.split_at(self.recorded_vrs.len());
+                values = rest;
+                self.take_recorded(recorded, p.run)?;
+            }
+            Ok(())
+        });
+        self.batch_buf = batch;
+        taken
     }
 
-    /// Read every Real, Integer and Boolean output into `recorded_values`.
-    /// Every Real value must be finite, as in [`read_coupled`](Self::read_coupled).
-    pub(crate) fn read_recorded(&mut self, run: Run) -> Result<(), MasterError> {
-        let reals = self.recorded_vrs.len();
+    /// The recorded Real outputs `reals` as read, and the Integer and
+    /// Boolean ones read now, into `recorded_values`. Every Real value must be
+    /// finite, as in [`read_coupled`](Self::read_coupled).
+    fn take_recorded(&mut self, reals: &[f64], run: Run) -> Result<(), MasterError> {
+        self.recorded_values[..reals.len()].copy_from_slice(reals);
+        let reals = reals.len();
         if reals > 0 {
-            self.backend
-                .get_reals(&self.recorded_vrs, &mut self.recorded_values[..reals])?;
             self.counters.get_reals += 1;
         }
         if !self.recorded_ints.is_empty() {
@@ -788,15 +930,32 @@ impl Slave {
         &self.recorded_values
     }
 
-    /// Call counters.
-    pub fn counters(&self) -> &InstanceCounters {
-        &self.counters
+    /// Call counters, with the round trips to the instance's host process.
+    pub fn counters(&self) -> InstanceCounters {
+        InstanceCounters {
+            round_trips: self.backend.round_trips(),
+            ..self.counters.clone()
+        }
     }
+}
+
+/// One run of an instance as a macro step plans it ([`Slave::runs`]).
+struct Planned<'a> {
+    /// The inputs' polynomials and the step `(t, h)`; `None`: no step, a read.
+    step: Option<(&'a [Taylor], f64, f64)>,
+    /// From the saved state.
+    restore: bool,
+    /// Where the coupled outputs go, if read.
+    out: Option<&'a mut [f64]>,
+    /// Read the recorded outputs too (an accepted point).
+    record: bool,
+    /// What the outputs are read after, for messages.
+    run: Run,
 }
 
 /// The coupled inputs' values and their derivatives (the first derivatives
 /// of every input, then the second, as far as min(k, 2) asks).
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 struct InputBuffers {
     vrs: Vec<u32>,
     values: Vec<f64>,

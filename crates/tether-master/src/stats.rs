@@ -31,6 +31,9 @@ pub struct InstanceCounters {
     pub set_input_derivatives: u64,
     /// `fmi2GetRealOutputDerivatives` calls.
     pub get_output_derivatives: u64,
+    /// Messages to and from the instance's host process (0 in process):
+    /// [`FmuInstance::round_trips`](tether_fmi::FmuInstance::round_trips).
+    pub round_trips: u64,
 }
 
 /// Wall time spent in each phase of the macro steps. The setup is always
@@ -440,6 +443,7 @@ struct Calls {
     get_boolean: u64,
     set_real_input_derivatives: u64,
     get_real_output_derivatives: u64,
+    round_trips: u64,
 }
 
 #[derive(Serialize)]
@@ -539,6 +543,7 @@ impl Serialize for RunStats {
                             get_boolean: c.get_booleans,
                             set_real_input_derivatives: c.set_input_derivatives,
                             get_real_output_derivatives: c.get_output_derivatives,
+                            round_trips: c.round_trips,
                         };
                         (c.name.as_str(), calls)
                     })

@@ -78,7 +78,7 @@ def test_result_api(oscillator_toml):
     assert set(stats["instances"]["mass1"]) == {
         "do_step", "get_fmu_state", "set_fmu_state", "set_real", "get_real",
         "get_integer", "get_boolean",
-        "set_real_input_derivatives", "get_real_output_derivatives",
+        "set_real_input_derivatives", "get_real_output_derivatives", "round_trips",
     }
     assert set(stats["times"]) >= {"setup", "predictor", "jacobian", "solve", "corrector", "recording"}
     assert "macro steps: 100" in stats["summary"]

@@ -273,6 +273,7 @@ impl Reader {
             signals: annotation.signals.unwrap_or_default(),
             step_control: annotation.step_control,
             output: Default::default(),
+            export: None,
             source: None,
         };
         spec.validate()?;

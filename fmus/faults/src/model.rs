@@ -59,6 +59,8 @@ impl Model for Faults {
         default_experiment: declare::DEFAULT_EXPERIMENT,
         ..Declaration::EMPTY
     };
+    // The log flood (mode 6) goes through the environment's logger.
+    const LOGS: bool = true;
 
     fn new(p: &Parameters) -> Result<Self, String> {
         let oscillator = Oscillator::with_parameters(p, p.boolean("exact")?)?;

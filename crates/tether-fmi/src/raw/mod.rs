@@ -157,10 +157,11 @@ pub(crate) struct CallSite<'a> {
 /// passes OK, logs Warning at warn level and passes it, and turns every other status
 /// into the matching typed error.
 pub(crate) fn check(site: CallSite<'_>, code: fmi2Status) -> crate::Result<()> {
-    let fmi3 = site.function.starts_with("fmi3");
+    // Which standard is asked only of a status other than OK.
+    let fmi3 = || site.function.starts_with("fmi3");
     let status = match Status::from(code) {
         // fmi2Pending has no FMI 3.0 counterpart.
-        Status::Pending if fmi3 => Status::Unknown(code),
+        Status::Pending if fmi3() => Status::Unknown(code),
         status => status,
     };
     log::trace!(
@@ -179,7 +180,7 @@ pub(crate) fn check(site: CallSite<'_>, code: fmi2Status) -> crate::Result<()> {
         Status::Ok => Ok(()),
         Status::Warning => {
             let instance = site.instance;
-            let api = if fmi3 { "fmi3" } else { "fmi2" };
+            let api = if fmi3() { "fmi3" } else { "fmi2" };
             log::warn!(
                 target: "tether_fmi::call",
                 "{function} returned {api}Warning on instance '{instance}' at t={time}"

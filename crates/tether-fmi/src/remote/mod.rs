@@ -1,9 +1,16 @@
 //! Out-of-process instances: [`RemoteInstance`] runs an FMU instance in a host
 //! process of its own (`tether-fmi-host`), so that a crash, `exit()`, `abort()`
-//! or endless loop inside the FMU ends that process, not the caller's; every
-//! FMI call crosses a pair of pipes ([`protocol`]), FMU states included:
+//! or endless loop inside the FMU ends that process, not the caller's; the
+//! FMI calls cross a pair of pipes ([`protocol`]), FMU states included:
 //! they live in the host, named by slots, and cross as bytes only through
 //! [`RemoteInstance::serialize_state`].
+//!
+//! Through [`FmuInstance`](crate::FmuInstance) the calls that answer nothing
+//! (set values, step, save, restore, free) wait and travel with the next call
+//! that answers, and a batch of runs ([`FmuInstance::run_batch`](crate::FmuInstance::run_batch))
+//! is one request: one round trip. The host makes the calls in order and
+//! names the one that failed; it enforces `call_timeout` on each call itself.
+//! The inherent methods (`do_step`, `save_state`, …) make one round trip each.
 //!
 //! The host executable is found by [`host_command`] (docs/reliability.md).
 
@@ -93,7 +100,10 @@ pub struct RemoteInstance {
     reader: BufReader<ChildStdout>,
     /// `None` once closed (the host then ends).
     writer: Option<ChildStdin>,
+    /// The calls waiting to be sent, as one request.
     out: Out,
+    /// What each waiting call is, for errors (its FMI function and time).
+    calls: Vec<Call>,
     reply: Vec<u8>,
     name: crate::current::Name,
     fmu: Fmu,
@@ -102,9 +112,20 @@ pub struct RemoteInstance {
     /// How the host process ended, once it did.
     ended: Option<String>,
     timeout: Option<Duration>,
+    /// Requests sent and answered (or not): [`FmuInstance::round_trips`](crate::FmuInstance::round_trips).
+    round_trips: u64,
     /// Readable once the host process has ended ([`watch_exit`]), also while a
     /// process it started still holds the reply pipe.
     exit_watch: Option<OwnedFd>,
+}
+
+/// A call of the request being built: its FMI function, the instance's time
+/// when it is made and, for a step, the step's end.
+#[derive(Debug, Clone, Copy)]
+struct Call {
+    function: &'static str,
+    time: f64,
+    end: f64,
 }
 
 /// `exited with code 3`, `was killed by signal 11 (SIGSEGV)`.
@@ -172,6 +193,7 @@ impl RemoteInstance {
             reader: BufReader::with_capacity(1 << 16, reader),
             writer: Some(writer),
             out: Out::default(),
+            calls: Vec::new(),
             reply: Vec::new(),
             name: crate::current::Name::new(name),
             fmu: fmu.clone(),
@@ -179,6 +201,7 @@ impl RemoteInstance {
             fatal: false,
             ended: None,
             timeout,
+            round_trips: 0,
             exit_watch,
         };
         // The host logs FMU messages itself, at the level they are wanted here.
@@ -194,12 +217,11 @@ impl RemoteInstance {
         .find(|l| log::log_enabled!(target: &target, *l))
         .map_or(0, |l| l as u8);
         remote
-            .out
-            .start(op::HELLO)
+            .queue(op::HELLO)
             .u32(protocol::VERSION)
             .u8(log::max_level() as u8)
             .u8(fmu_level);
-        remote.call("fmi2Instantiate")?;
+        remote.send()?;
         let version = In::new(&remote.reply[1..])
             .u32()
             .map_err(|e| remote.protocol_error(e))?;
@@ -217,35 +239,117 @@ impl RemoteInstance {
             ))
         })?;
         remote
-            .out
-            .start(op::INSTANTIATE)
+            .queue(op::INSTANTIATE)
             .str(dir)
             .str(name)
             .bool(options.logging_on)
-            .bool(options.visible);
-        remote.call("fmi2Instantiate")?;
+            .bool(options.visible)
+            .f64(timeout.map_or(0.0, |t| t.as_secs_f64()));
+        remote.send()?;
         Ok(remote)
     }
 
-    /// Sends the request in `self.out`, waits for the reply in `self.reply`.
-    fn call(&mut self, function: &'static str) -> Result<()> {
+    /// One more call of the request: its operation `code`, whose arguments
+    /// follow on the returned message.
+    fn queue(&mut self, code: u8) -> &mut Out {
+        self.calls.push(Call {
+            function: protocol::op_function(code),
+            time: self.time,
+            end: self.time,
+        });
+        self.out.call(code)
+    }
+
+    /// `fmi2DoStep` from `t` over `h`, queued; the tracked time becomes `t + h`.
+    fn queue_step(&mut self, t: f64, h: f64, no_set_fmu_state_prior: bool) {
+        self.time = t;
+        self.queue(op::DO_STEP)
+            .f64(t)
+            .f64(h)
+            .bool(no_set_fmu_state_prior);
+        if let Some(call) = self.calls.last_mut() {
+            call.end = t + h;
+        }
+        self.time = t + h;
+    }
+
+    /// The coupled inputs, queued: `fmi2SetReal`, then
+    /// `fmi2SetRealInputDerivatives` when derivatives are given.
+    fn queue_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) {
+        self.queue(op::SET_REAL)
+            .u32s(inputs.vrs)
+            .f64s(inputs.values);
+        if !inputs.derivative_vrs.is_empty() {
+            self.queue(op::SET_REAL_INPUT_DERIVATIVES)
+                .u32s(inputs.derivative_vrs)
+                .i32s(inputs.orders)
+                .f64s(inputs.derivatives);
+        }
+    }
+
+    /// Sends the queued calls as one request and waits for the reply in
+    /// `self.reply`. An error names the call that failed; a host that ended
+    /// or timed out is blamed on the request's step if it has one (where an
+    /// FMU spends its time), else on its last call.
+    fn send(&mut self) -> Result<()> {
+        let blamed = self
+            .calls
+            .iter()
+            .find(|c| c.function == "fmi2DoStep")
+            .or(self.calls.last())
+            .copied()
+            .unwrap_or(Call {
+                function: "an FMI function",
+                time: self.time,
+                end: self.time,
+            });
         if let Some(how) = &self.ended {
+            let how = how.clone();
+            self.out.clear();
+            self.calls.clear();
             return Err(Error::HostEnded {
                 instance: self.name.to_string(),
-                function,
-                time: self.time,
-                how: how.clone(),
+                function: blamed.function,
+                time: blamed.time,
+                how,
             });
         }
-        let entered = crate::current::Entered::new(function, &self.name, self.time);
+        let entered = crate::current::Entered::new(blamed.function, &self.name, blamed.time);
+        self.round_trips += 1;
+        // The host enforces the time-out on each call; this is the backstop
+        // for a host that cannot (stopped, or its watch never scheduled).
+        let calls = u32::try_from(self.calls.len()).unwrap_or(u32::MAX);
+        let backstop = self.timeout.map(|t| {
+            t.saturating_mul(calls)
+                .saturating_add(Duration::from_secs(2))
+        });
         let received = match &mut self.writer {
             Some(writer) => self.out.send(writer).and_then(|()| {
-                wait_readable(&self.reader, self.exit_watch.as_ref(), self.timeout)?;
+                wait_readable(&self.reader, self.exit_watch.as_ref(), backstop)?;
                 protocol::receive(&mut self.reader, &mut self.reply)
             }),
             None => Err(io::ErrorKind::BrokenPipe.into()),
         };
         drop(entered);
+        self.out.clear();
+        let result = self.received(received, blamed);
+        self.calls.clear();
+        match result {
+            Err((error, Some(call))) if call.function == "fmi2DoStep" => {
+                self.time = call.time;
+                Err(crate::error::step_failure(error, self, call.end))
+            }
+            Err((error, _)) => Err(error),
+            Ok(()) => Ok(()),
+        }
+    }
+
+    /// The outcome of a request: the error with the call it names, if one.
+    fn received(
+        &mut self,
+        received: io::Result<bool>,
+        blamed: Call,
+    ) -> std::result::Result<(), (Error, Option<Call>)> {
         match received {
             Ok(true) => {}
             Err(e)
@@ -254,45 +358,54 @@ impl RemoteInstance {
                     io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
                 ) =>
             {
-                return Err(self.timed_out(function))
+                return Err((self.timed_out(blamed.function, blamed.time), None))
             }
-            Ok(false) | Err(_) => return Err(self.host_ended(function)),
+            Ok(false) | Err(_) => {
+                return Err((self.host_ended(blamed.function, blamed.time), None))
+            }
         }
         match self.reply.first() {
             Some(&protocol::OK) => Ok(()),
             Some(&protocol::ERR) => {
-                let error = In::new(&self.reply[1..])
-                    .error(self.name.as_str())
-                    .map_err(|e| self.protocol_error(e))?;
+                let mut input = In::new(&self.reply[1..]);
+                let read = input
+                    .u32()
+                    .and_then(|index| Ok((index, input.error(self.name.as_str())?)));
+                let (index, error) = read.map_err(|e| (self.protocol_error(e), None))?;
+                if let Error::CallTimeout { .. } = error {
+                    // The host answered for the call past its time-out and ends.
+                    self.kill_group();
+                    let status = self.reap();
+                    self.ended = Some(ended_after_timeout(status));
+                    return Err((error, None));
+                }
                 if matches!(error, Error::Fatal { .. }) {
                     self.fatal = true;
                 }
-                Err(error)
+                let call = self.calls.get(index as usize).copied();
+                Err((error, call))
             }
-            _ => Err(self.protocol_error(io::ErrorKind::InvalidData.into())),
+            _ => Err((self.protocol_error(io::ErrorKind::InvalidData.into()), None)),
         }
     }
 
     /// The host did not answer in time: kill it.
     #[cold]
-    fn timed_out(&mut self, function: &'static str) -> Error {
+    fn timed_out(&mut self, function: &'static str, time: f64) -> Error {
         self.kill_group();
         let status = self.reap();
-        self.ended = Some(match status {
-            Ok(status) => format!("{} after the call time-out", describe_exit(status)),
-            Err(e) => format!("could not be waited for ({e})"),
-        });
+        self.ended = Some(ended_after_timeout(status));
         Error::CallTimeout {
             instance: self.name.to_string(),
             function,
-            time: self.time,
+            time,
             seconds: self.timeout.map_or(0.0, |t| t.as_secs_f64()),
         }
     }
 
     /// The connection broke: the host ended; say how.
     #[cold]
-    fn host_ended(&mut self, function: &'static str) -> Error {
+    fn host_ended(&mut self, function: &'static str, time: f64) -> Error {
         let how = match self.reap() {
             Ok(status) => describe_exit(status),
             Err(e) => format!("could not be waited for ({e})"),
@@ -301,7 +414,7 @@ impl RemoteInstance {
         Error::HostEnded {
             instance: self.name.to_string(),
             function,
-            time: self.time,
+            time,
             how,
         }
     }
@@ -404,8 +517,8 @@ impl RemoteInstance {
 
     /// A request without an FMI call and its reply: the transport's round trip.
     pub fn ping(&mut self) -> Result<()> {
-        self.out.start(op::PING);
-        self.call("an FMI function")
+        self.queue(op::PING);
+        self.send()
     }
 
     /// `fmi2SetupExperiment`.
@@ -415,59 +528,58 @@ impl RemoteInstance {
         start: f64,
         stop: Option<f64>,
     ) -> Result<()> {
-        self.out
-            .start(op::SETUP_EXPERIMENT)
+        self.queue(op::SETUP_EXPERIMENT)
             .bool(tolerance.is_some())
             .f64(tolerance.unwrap_or(0.0))
             .f64(start)
             .bool(stop.is_some())
             .f64(stop.unwrap_or(0.0));
-        self.call("fmi2SetupExperiment")?;
+        self.send()?;
         self.time = start;
         Ok(())
     }
 
     /// `fmi2EnterInitializationMode`.
     pub fn enter_initialization_mode(&mut self) -> Result<()> {
-        self.out.start(op::ENTER_INITIALIZATION_MODE);
-        self.call("fmi2EnterInitializationMode")
+        self.queue(op::ENTER_INITIALIZATION_MODE);
+        self.send()
     }
 
     /// `fmi2ExitInitializationMode`.
     pub fn exit_initialization_mode(&mut self) -> Result<()> {
-        self.out.start(op::EXIT_INITIALIZATION_MODE);
-        self.call("fmi2ExitInitializationMode")
+        self.queue(op::EXIT_INITIALIZATION_MODE);
+        self.send()
     }
 
     /// `fmi2Terminate`.
     pub fn terminate(&mut self) -> Result<()> {
-        self.out.start(op::TERMINATE);
-        self.call("fmi2Terminate")
+        self.queue(op::TERMINATE);
+        self.send()
     }
 
     /// `fmi2Reset`.
     pub fn reset(&mut self) -> Result<()> {
-        self.out.start(op::RESET);
-        self.call("fmi2Reset")
+        self.queue(op::RESET);
+        self.send()
     }
 
     /// `fmi2SetReal`.
     pub fn set_real(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        self.out.start(op::SET_REAL).u32s(vrs).f64s(values);
-        self.call("fmi2SetReal")
+        self.queue(op::SET_REAL).u32s(vrs).f64s(values);
+        self.send()
     }
 
     /// `fmi2GetReal` into `out`.
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
-        self.out.start(op::GET_REAL).u32s(vrs);
-        self.call("fmi2GetReal")?;
+        self.queue(op::GET_REAL).u32s(vrs);
+        self.send()?;
         self.read_reals(out)
     }
 
     /// `fmi2GetInteger` into `out`.
     pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
-        self.out.start(op::GET_INTEGER).u32s(vrs);
-        self.call("fmi2GetInteger")?;
+        self.queue(op::GET_INTEGER).u32s(vrs);
+        self.send()?;
         let mut values = Vec::with_capacity(out.len());
         let read = In::new(&self.reply[1..]).i32s(&mut values);
         self.copy_reply(read, &values, out)
@@ -475,8 +587,8 @@ impl RemoteInstance {
 
     /// `fmi2GetBoolean` into `out`.
     pub fn get_boolean(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
-        self.out.start(op::GET_BOOLEAN).u32s(vrs);
-        self.call("fmi2GetBoolean")?;
+        self.queue(op::GET_BOOLEAN).u32s(vrs);
+        self.send()?;
         let mut values = Vec::with_capacity(out.len());
         let read = In::new(&self.reply[1..]).bools(&mut values);
         self.copy_reply(read, &values, out)
@@ -484,27 +596,26 @@ impl RemoteInstance {
 
     /// `fmi2SetInteger`.
     pub fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
-        self.out.start(op::SET_INTEGER).u32s(vrs).i32s(values);
-        self.call("fmi2SetInteger")
+        self.queue(op::SET_INTEGER).u32s(vrs).i32s(values);
+        self.send()
     }
 
     /// `fmi2SetBoolean`.
     pub fn set_boolean(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
-        self.out.start(op::SET_BOOLEAN).u32s(vrs).bools(values);
-        self.call("fmi2SetBoolean")
+        self.queue(op::SET_BOOLEAN).u32s(vrs).bools(values);
+        self.send()
     }
 
     /// `fmi2SetString`.
     pub fn set_string(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
         let out = self
-            .out
-            .start(op::SET_STRING)
+            .queue(op::SET_STRING)
             .u32s(vrs)
             .u32(values.len() as u32);
         for v in values {
             out.str(v);
         }
-        self.call("fmi2SetString")
+        self.send()
     }
 
     /// `fmi2SetRealInputDerivatives`.
@@ -514,12 +625,11 @@ impl RemoteInstance {
         orders: &[i32],
         values: &[f64],
     ) -> Result<()> {
-        self.out
-            .start(op::SET_REAL_INPUT_DERIVATIVES)
+        self.queue(op::SET_REAL_INPUT_DERIVATIVES)
             .u32s(vrs)
             .i32s(orders)
             .f64s(values);
-        self.call("fmi2SetRealInputDerivatives")
+        self.send()
     }
 
     /// `fmi2GetRealOutputDerivatives` into `out`.
@@ -529,65 +639,57 @@ impl RemoteInstance {
         orders: &[i32],
         out: &mut [f64],
     ) -> Result<()> {
-        self.out
-            .start(op::GET_REAL_OUTPUT_DERIVATIVES)
+        self.queue(op::GET_REAL_OUTPUT_DERIVATIVES)
             .u32s(vrs)
             .i32s(orders);
-        self.call("fmi2GetRealOutputDerivatives")?;
+        self.send()?;
         self.read_reals(out)
     }
 
     /// `fmi2DoStep`; on success the tracked time becomes `t + h`.
     pub fn do_step(&mut self, t: f64, h: f64, no_set_fmu_state_prior: bool) -> Result<()> {
-        self.time = t;
-        self.out
-            .start(op::DO_STEP)
-            .f64(t)
-            .f64(h)
-            .bool(no_set_fmu_state_prior);
-        self.call("fmi2DoStep")?;
-        self.time = t + h;
-        Ok(())
+        self.queue_step(t, h, no_set_fmu_state_prior);
+        self.send()
     }
 
     /// `fmi2GetBooleanStatus(fmi2Terminated)`.
     pub fn terminated(&mut self) -> Result<bool> {
-        self.out.start(op::GET_BOOLEAN_STATUS);
-        self.call("fmi2GetBooleanStatus")?;
+        self.queue(op::GET_BOOLEAN_STATUS);
+        self.send()?;
         let value = self.results().bool();
         value.map_err(|e| self.protocol_error(e))
     }
 
     /// `fmi2GetRealStatus(fmi2LastSuccessfulTime)`.
     pub fn last_successful_time(&mut self) -> Result<f64> {
-        self.out.start(op::GET_REAL_STATUS);
-        self.call("fmi2GetRealStatus")?;
+        self.queue(op::GET_REAL_STATUS);
+        self.send()?;
         let value = self.results().f64();
         value.map_err(|e| self.protocol_error(e))
     }
 
     /// `fmi2GetFMUstate` into the host's state `slot` (reusing the state there).
     pub fn save_state(&mut self, slot: u32) -> Result<()> {
-        self.out.start(op::SAVE_STATE).u32(slot);
-        self.call("fmi2GetFMUstate")
+        self.queue(op::SAVE_STATE).u32(slot);
+        self.send()
     }
 
     /// `fmi2SetFMUstate` from the host's state `slot`.
     pub fn restore_state(&mut self, slot: u32) -> Result<()> {
-        self.out.start(op::RESTORE_STATE).u32(slot);
-        self.call("fmi2SetFMUstate")
+        self.queue(op::RESTORE_STATE).u32(slot);
+        self.send()
     }
 
     /// `fmi2FreeFMUstate` of the host's state `slot`, if there is one.
     pub fn free_state(&mut self, slot: u32) -> Result<()> {
-        self.out.start(op::FREE_STATE).u32(slot);
-        self.call("fmi2FreeFMUstate")
+        self.queue(op::FREE_STATE).u32(slot);
+        self.send()
     }
 
     /// `fmi2SerializeFMUstate` of the host's state `slot` into `out`.
     pub fn serialize_state(&mut self, slot: u32, out: &mut Vec<u8>) -> Result<()> {
-        self.out.start(op::SERIALIZE_STATE).u32(slot);
-        self.call("fmi2SerializeFMUstate")?;
+        self.queue(op::SERIALIZE_STATE).u32(slot);
+        self.send()?;
         let bytes = self.results().bytes().map(<[u8]>::to_vec);
         let bytes = bytes.map_err(|e| self.protocol_error(e))?;
         out.clear();
@@ -597,8 +699,16 @@ impl RemoteInstance {
 
     /// `fmi2DeSerializeFMUstate` of `bytes` into the host's state `slot`.
     pub fn deserialize_state(&mut self, slot: u32, bytes: &[u8]) -> Result<()> {
-        self.out.start(op::DESERIALIZE_STATE).u32(slot).bytes(bytes);
-        self.call("fmi2DeSerializeFMUstate")
+        self.queue(op::DESERIALIZE_STATE).u32(slot).bytes(bytes);
+        self.send()
+    }
+}
+
+/// How a host ended that was killed after the call time-out.
+fn ended_after_timeout(status: io::Result<ExitStatus>) -> String {
+    match status {
+        Ok(status) => format!("{} after the call time-out", describe_exit(status)),
+        Err(e) => format!("could not be waited for ({e})"),
     }
 }
 
@@ -677,8 +787,14 @@ impl Drop for RemoteInstance {
             // fmi2FreeInstance in the host, then it ends on the closed request pipe;
             // a host that does not answer within the time-out (or 10 s) is killed.
             self.timeout = Some(self.timeout.unwrap_or(Duration::from_secs(10)));
-            self.out.start(op::FREE_INSTANCE);
-            if self.call("fmi2FreeInstance").is_err() && self.ended.is_none() {
+            self.queue(op::FREE_INSTANCE);
+            let mut freed = self.send();
+            if freed.is_err() && self.ended.is_none() {
+                // A waiting call failed first: fmi2FreeInstance on its own.
+                self.queue(op::FREE_INSTANCE);
+                freed = self.send();
+            }
+            if freed.is_err() && self.ended.is_none() {
                 self.kill_group();
             }
         }
@@ -720,19 +836,22 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.get_real(vrs, out)
     }
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        self.set_real(vrs, values)
+        self.queue(op::SET_REAL).u32s(vrs).f64s(values);
+        Ok(())
     }
     fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
         self.get_integer(vrs, out)
     }
     fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
-        self.set_integer(vrs, values)
+        self.queue(op::SET_INTEGER).u32s(vrs).i32s(values);
+        Ok(())
     }
     fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
         self.get_boolean(vrs, out)
     }
     fn set_booleans(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
-        self.set_boolean(vrs, values)
+        self.queue(op::SET_BOOLEAN).u32s(vrs).bools(values);
+        Ok(())
     }
     fn get_strings(&mut self, _vrs: &[ValueReference], _out: &mut [String]) -> Result<()> {
         Err(Error::InvalidArgument {
@@ -745,14 +864,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.set_string(vrs, values)
     }
     fn set_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) -> Result<()> {
-        self.set_real(inputs.vrs, inputs.values)?;
-        if !inputs.derivative_vrs.is_empty() {
-            self.set_real_input_derivatives(
-                inputs.derivative_vrs,
-                inputs.orders,
-                inputs.derivatives,
-            )?;
-        }
+        self.queue_inputs(inputs);
         Ok(())
     }
     fn get_output_derivatives(
@@ -764,28 +876,98 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.get_real_output_derivatives(vrs, orders, out)
     }
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
-        match self.do_step(t, h, true) {
-            Ok(()) => Ok(()),
-            Err(e) => Err(crate::error::step_failure(e, self, t + h)),
-        }
+        // A failed step is made a termination request where it is one when
+        // its error arrives (`send`).
+        self.queue_step(t, h, true);
+        Ok(())
     }
     fn save(&mut self, slot: crate::interface::Slot) -> Result<()> {
-        self.save_state(slot as u32)
+        self.queue(op::SAVE_STATE).u32(slot as u32);
+        Ok(())
     }
     fn restore(&mut self, slot: crate::interface::Slot) -> Result<()> {
-        self.restore_state(slot as u32)
+        self.queue(op::RESTORE_STATE).u32(slot as u32);
+        Ok(())
     }
     fn free(&mut self, slot: crate::interface::Slot) -> Result<()> {
-        self.free_state(slot as u32)
+        self.queue(op::FREE_STATE).u32(slot as u32);
+        Ok(())
     }
     fn serialize(&mut self, slot: crate::interface::Slot, out: &mut Vec<u8>) -> Result<()> {
         self.serialize_state(slot as u32, out)
     }
     fn deserialize(&mut self, slot: crate::interface::Slot, bytes: &[u8]) -> Result<()> {
-        self.deserialize_state(slot as u32, bytes)
+        self.queue(op::DESERIALIZE_STATE)
+            .u32(slot as u32)
+            .bytes(bytes);
+        Ok(())
     }
     fn reset(&mut self) -> Result<()> {
         RemoteInstance::reset(self)
+    }
+    fn round_trips(&self) -> u64 {
+        self.round_trips
+    }
+    fn run(&mut self, run: &crate::interface::RunRequest<'_>, out: &mut [f64]) -> Result<()> {
+        self.run_batch(std::slice::from_ref(run), out)
+    }
+    fn run_batch(
+        &mut self,
+        runs: &[crate::interface::RunRequest<'_>],
+        out: &mut [f64],
+    ) -> Result<()> {
+        // Every call of every run, queued after those waiting; sent when
+        // some run reads values.
+        for run in runs {
+            if let Some(slot) = run.restore {
+                self.queue(op::RESTORE_STATE).u32(slot as u32);
+            }
+            if let Some(inputs) = &run.inputs {
+                self.queue_inputs(inputs);
+            }
+            if let Some((t, h)) = run.step {
+                self.queue_step(t, h, true);
+            }
+            if !run.outputs.is_empty() {
+                self.queue(op::GET_REAL).u32s(run.outputs);
+            }
+            for &(vr, order) in run.output_derivatives {
+                self.queue(op::GET_REAL_OUTPUT_DERIVATIVES)
+                    .u32s(&[vr])
+                    .i32s(&[order]);
+            }
+            if !run.recorded.is_empty() {
+                self.queue(op::GET_REAL).u32s(run.recorded);
+            }
+            if let Some(slot) = run.save {
+                self.queue(op::SAVE_STATE).u32(slot as u32);
+            }
+        }
+        if runs.iter().all(|run| run.outputs_len() == 0) {
+            return Ok(());
+        }
+        self.send()?;
+        // The values, run after run, in the order they were asked for.
+        let mut input = In::new(&self.reply[1..]);
+        let mut rest = out;
+        let mut read = || -> io::Result<()> {
+            for run in runs {
+                let parts = std::iter::once(run.outputs.len())
+                    .chain(run.output_derivatives.iter().map(|_| 1))
+                    .chain(std::iter::once(run.recorded.len()));
+                for n in parts.filter(|&n| n > 0) {
+                    if rest.len() < n {
+                        return Err(io::ErrorKind::InvalidData.into());
+                    }
+                    let (part, tail) = std::mem::take(&mut rest).split_at_mut(n);
+                    input.f64s_into(part)?;
+                    rest = tail;
+                }
+            }
+            Ok(())
+        };
+        let read = read();
+        read.map_err(|e| self.protocol_error(e))
     }
     fn terminate(&mut self) -> Result<()> {
         RemoteInstance::terminate(self)

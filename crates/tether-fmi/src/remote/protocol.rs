@@ -1,16 +1,20 @@
 //! The messages between the master and an FMU host process
 //! (`tether-fmi-host`): one request, one reply, each a frame of a 4-byte
-//! little-endian length and the payload. A request is an operation code and
-//! its arguments; a reply is `OK` and the results, or `ERR` and an error.
-//! Numbers are little-endian, slices are a 4-byte count and the elements,
-//! strings and byte strings a 4-byte length and the bytes.
+//! little-endian length and the payload. A request is a sequence of calls,
+//! each an operation code and its arguments, which the host makes in order
+//! (a batch: the calls that answer nothing travel with the next that does);
+//! a reply is `OK` and the results of every call in order, or `ERR`, the
+//! index of the call that failed in the request, and the error (the calls
+//! after it are not made). Numbers are little-endian, slices are a 4-byte
+//! count and the elements, strings and byte strings a 4-byte length and the
+//! bytes.
 
 use std::io::{self, Read, Write};
 
 use crate::error::{Error, FmuMessages};
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -89,6 +93,37 @@ const FUNCTIONS: &[&str] = &[
     "fmi2FreeInstance",
 ];
 
+/// The FMI function operation `code` calls, for errors and time-outs.
+pub fn op_function(code: u8) -> &'static str {
+    match code {
+        op::INSTANTIATE => "fmi2Instantiate",
+        op::SETUP_EXPERIMENT => "fmi2SetupExperiment",
+        op::ENTER_INITIALIZATION_MODE => "fmi2EnterInitializationMode",
+        op::EXIT_INITIALIZATION_MODE => "fmi2ExitInitializationMode",
+        op::TERMINATE => "fmi2Terminate",
+        op::RESET => "fmi2Reset",
+        op::SET_REAL => "fmi2SetReal",
+        op::GET_REAL => "fmi2GetReal",
+        op::SET_INTEGER => "fmi2SetInteger",
+        op::SET_BOOLEAN => "fmi2SetBoolean",
+        op::SET_STRING => "fmi2SetString",
+        op::SET_REAL_INPUT_DERIVATIVES => "fmi2SetRealInputDerivatives",
+        op::GET_REAL_OUTPUT_DERIVATIVES => "fmi2GetRealOutputDerivatives",
+        op::DO_STEP => "fmi2DoStep",
+        op::GET_BOOLEAN_STATUS => "fmi2GetBooleanStatus",
+        op::GET_REAL_STATUS => "fmi2GetRealStatus",
+        op::SAVE_STATE => "fmi2GetFMUstate",
+        op::RESTORE_STATE => "fmi2SetFMUstate",
+        op::FREE_STATE => "fmi2FreeFMUstate",
+        op::SERIALIZE_STATE => "fmi2SerializeFMUstate",
+        op::DESERIALIZE_STATE => "fmi2DeSerializeFMUstate",
+        op::FREE_INSTANCE => "fmi2FreeInstance",
+        op::GET_INTEGER => "fmi2GetInteger",
+        op::GET_BOOLEAN => "fmi2GetBoolean",
+        _ => "an FMI function",
+    }
+}
+
 /// The static name of FMI function `name` ("an FMI function" if unknown).
 pub fn function_name(name: &str) -> &'static str {
     FUNCTIONS
@@ -109,6 +144,19 @@ impl Out {
         self.0.extend_from_slice(&[0; 4]);
         self.0.push(tag);
         self
+    }
+    /// One more call of a request: its operation `code` (the frame begins
+    /// with the first).
+    pub fn call(&mut self, code: u8) -> &mut Out {
+        if self.0.is_empty() {
+            self.0.extend_from_slice(&[0; 4]);
+        }
+        self.0.push(code);
+        self
+    }
+    /// Whether no call is waiting to be sent.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
     }
     /// A byte.
     pub fn u8(&mut self, v: u8) -> &mut Out {
@@ -219,6 +267,19 @@ impl Out {
                 time,
                 code,
             } => (5, *function, instance.as_str(), *time, *code, &none),
+            Error::CallTimeout {
+                function,
+                instance,
+                time,
+                seconds,
+            } => {
+                return self
+                    .u8(7)
+                    .str(function)
+                    .str(instance)
+                    .f64(*time)
+                    .f64(*seconds);
+            }
             other => {
                 return self.u8(6).str(&crate::error::one_line(&other.to_string()));
             }
@@ -239,6 +300,10 @@ impl Out {
         let n = u32::try_from(self.0.len() - 4).expect("a frame below 4 GiB");
         self.0[..4].copy_from_slice(&n.to_le_bytes());
         to.write_all(&self.0)
+    }
+    /// Forgets the frame (sent, or not to be sent).
+    pub fn clear(&mut self) {
+        self.0.clear();
     }
 }
 
@@ -270,7 +335,7 @@ pub fn receive(from: &mut impl Read, buf: &mut Vec<u8>) -> io::Result<bool> {
 }
 
 /// Reads the parts of a received frame in order.
-#[derive(Debug)]
+#[derive(Debug, Clone, Copy)]
 pub struct In<'a> {
     data: &'a [u8],
 }
@@ -292,6 +357,10 @@ impl<'a> In<'a> {
         let (head, rest) = self.data.split_at(n);
         self.data = rest;
         Ok(head)
+    }
+    /// Whether every part was read.
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
     }
     /// A byte.
     pub fn u8(&mut self) -> io::Result<u8> {
@@ -389,6 +458,14 @@ impl<'a> In<'a> {
             return Ok(Error::Host {
                 instance: instance.to_string(),
                 message: self.str()?.to_string(),
+            });
+        }
+        if kind == 7 {
+            return Ok(Error::CallTimeout {
+                function: function_name(self.str()?),
+                instance: self.str()?.to_string(),
+                time: self.f64()?,
+                seconds: self.f64()?,
             });
         }
         let function = function_name(self.str()?);

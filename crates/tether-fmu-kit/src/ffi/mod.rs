@@ -88,8 +88,9 @@ thread_local! {
 
 /// The environment's logger of the instance whose FMI call (`fmi2DoStep`,
 /// `fmi2GetReal`, …) is running on this thread, for a model's own messages; `None`
-/// outside calls and when the environment gave no logger. Valid for the duration of
-/// the call only: a model must not keep it.
+/// outside calls, when the environment gave no logger and when the model does not
+/// declare [`Model::LOGS`]. Valid for the duration of the call only: a model must
+/// not keep it.
 pub fn environment_logger() -> Option<EnvironmentLogger> {
     IN_CALL.get()
 }
@@ -174,7 +175,7 @@ unsafe fn with_instance<M: Model>(
     // SAFETY: per this function's contract, c is a live Box<Component<M>> from
     // instantiate.
     let component = unsafe { &mut *c.cast::<Component<M>>() };
-    let _logger = LoggerScope::enter(component.logger);
+    let _logger = M::LOGS.then(|| LoggerScope::enter(component.logger));
     let instance = &mut component.instance;
     match catch_unwind(AssertUnwindSafe(|| instance.call(call, f))) {
         Ok(status) => status as Fmi2Status,

@@ -182,11 +182,13 @@ std::thread_local! {
     static SEEN: std::cell::RefCell<Option<Seen>> = const { std::cell::RefCell::new(None) };
 }
 
-/// Decay, recording the logger hook from inside `fmi2DoStep`.
-struct Probe(Decay);
+/// Decay, recording the logger hook from inside `fmi2DoStep`; `LOGS` as the
+/// model declares it.
+struct Probe<const LOGS: bool>(Decay);
 
-impl Model for Probe {
+impl<const L: bool> Model for Probe<L> {
     const DECLARATION: crate::Declaration = Decay::DECLARATION;
+    const LOGS: bool = L;
     fn new(p: &crate::Parameters) -> Result<Self, String> {
         Decay::new(p).map(Probe)
     }
@@ -221,25 +223,25 @@ extern "C" fn never_called() {
 
 /// Runs one `fmi2DoStep` of a [`Probe`] named `probe` instantiated with
 /// `functions`; what the model saw of the logger hook.
-fn seen_by_the_model(functions: &Fmi2CallbackFunctions) -> Seen {
+fn seen_by_the_model<const LOGS: bool>(functions: &Fmi2CallbackFunctions) -> Seen {
     let name = CString::new("probe").unwrap();
-    let guid = CString::new(xml::guid(&Probe::DECLARATION)).unwrap();
+    let guid = CString::new(xml::guid(&Probe::<LOGS>::DECLARATION)).unwrap();
     SEEN.set(None);
     // SAFETY: valid NUL-terminated strings and a valid callback struct whose
     // logger is never called; c is used while live.
     unsafe {
-        let c = instantiate::<Probe>(name.as_ptr(), 1, guid.as_ptr(), functions, 0);
+        let c = instantiate::<Probe<LOGS>>(name.as_ptr(), 1, guid.as_ptr(), functions, 0);
         assert!(!c.is_null());
-        assert_eq!(enter_initialization_mode::<Probe>(c), OK);
-        assert_eq!(exit_initialization_mode::<Probe>(c), OK);
-        assert_eq!(do_step::<Probe>(c, 0.0, 0.1, 0), OK);
-        free_instance::<Probe>(c);
+        assert_eq!(enter_initialization_mode::<Probe<LOGS>>(c), OK);
+        assert_eq!(exit_initialization_mode::<Probe<LOGS>>(c), OK);
+        assert_eq!(do_step::<Probe<LOGS>>(c, 0.0, 0.1, 0), OK);
+        free_instance::<Probe<LOGS>>(c);
     }
     SEEN.take().expect("fmi2DoStep reached the model")
 }
 
-/// A model reaches its instance's logger through the hook during a call, and
-/// only then.
+/// A model that declares `LOGS` reaches its instance's logger through the hook
+/// during a call, and only then; one that does not never sees it.
 #[test]
 fn the_model_reaches_the_environments_logger_during_a_call() {
     assert!(environment_logger().is_none(), "outside any call");
@@ -254,9 +256,18 @@ fn the_model_reaches_the_environments_logger_during_a_call() {
     });
     functions.component_environment = (&raw mut environment).cast();
     assert_eq!(
-        seen_by_the_model(&functions),
+        seen_by_the_model::<true>(&functions),
         Some((&raw mut environment as usize, "probe".to_string()))
     );
     assert!(environment_logger().is_none(), "the call ended");
-    assert_eq!(seen_by_the_model(&callbacks()), None, "no logger given");
+    assert_eq!(
+        seen_by_the_model::<true>(&callbacks()),
+        None,
+        "no logger given"
+    );
+    assert_eq!(
+        seen_by_the_model::<false>(&functions),
+        None,
+        "the model does not declare LOGS"
+    );
 }

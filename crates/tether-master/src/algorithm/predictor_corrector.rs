@@ -131,16 +131,28 @@ impl PredictorCorrector {
     /// Step 2, predictor (eqs. 56–58): each unknown's polynomial extrapolated
     /// from its history, every instance stepped with it (but those the
     /// signals' Gauss–Seidel sweep has stepped already), g^p (ġ^p, g̈^p)
-    /// evaluated from the outputs at T_{N+1}.
-    fn predict(&mut self, system: &mut System, at: StepAt) -> Result<(), MasterError> {
+    /// evaluated from the outputs at T_{N+1}. With `perturb`, the perturbed
+    /// runs of Step 3 are handed to each instance with its predictor run:
+    /// they depend on u^p, not on the predictor's outputs.
+    fn predict(
+        &mut self,
+        system: &mut System,
+        at: StepAt,
+        perturb: bool,
+    ) -> Result<(), MasterError> {
         self.extrapolate(system, at);
-        for (slave, out) in system.slaves.iter_mut().zip(&mut self.predicted) {
-            if slave.stepped_ahead {
-                slave.read_coupled(out, Run::Predictor)?;
-            } else {
-                slave.predict(&self.polys, at.t, at.h, out)?;
-            }
+        if perturb {
+            self.perturbed_polynomials(system, at);
         }
+        let perturbed = perturb.then_some((&self.perturbed[..], &mut self.outputs[..]));
+        let slaves = &mut system.slaves;
+        self.runs.predict(
+            slaves,
+            (at.t, at.h),
+            &self.polys,
+            &mut self.predicted,
+            perturbed,
+        )?;
         let view = View::at(&self.predicted, &self.u_pred);
         let nu = system.coupling.len();
         for (&level, g) in self.levels.iter().zip(self.g.chunks_exact_mut(nu)) {
@@ -157,12 +169,9 @@ impl PredictorCorrector {
         }
     }
 
-    /// Step 3, perturbed predictors (eqs. 59–64): per group of unknowns, one
-    /// run from the saved states with u^p_m + Δu_m in the interpolation
-    /// polynomial of each unknown m of the group; column m of the interface
-    /// Jacobian is (g^{pp_m} − g^p)/Δu_m, with only m's own instances read
-    /// as perturbed and only the rows they touch evaluated.
-    fn perturb(&mut self, system: &mut System, at: StepAt) -> Result<(), MasterError> {
+    /// Per group of unknowns, the perturbed runs' polynomials: u^p_m + Δu_m
+    /// in the interpolation polynomial of each unknown m of the group.
+    fn perturbed_polynomials(&mut self, system: &System, at: StepAt) {
         for (group, polys) in system.groups.iter().zip(&mut self.perturbed) {
             polys.copy_from_slice(&self.polys);
             for &m in group {
@@ -171,9 +180,20 @@ impl PredictorCorrector {
                 polys[m] = interpolate(u, &system.history[m], at.degree.corrector, at.h, at.past);
             }
         }
-        let slaves = &mut system.slaves;
-        self.runs
-            .run(slaves, at.t, at.h, &self.perturbed, &mut self.outputs)?;
+    }
+
+    /// Step 3, perturbed predictors (eqs. 59–64): per group of unknowns, one
+    /// run from the saved states with its perturbed polynomials (made with
+    /// the predictor's runs, `made`, or now); column m of the interface
+    /// Jacobian is (g^{pp_m} − g^p)/Δu_m, with only m's own instances read
+    /// as perturbed and only the rows they touch evaluated.
+    fn perturb(&mut self, system: &mut System, at: StepAt, made: bool) -> Result<(), MasterError> {
+        if !made {
+            self.perturbed_polynomials(system, at);
+            let slaves = &mut system.slaves;
+            self.runs
+                .run(slaves, at.t, at.h, &self.perturbed, &mut self.outputs)?;
+        }
         let nu = system.coupling.len();
         for (group, outputs) in system.groups.iter().zip(&self.outputs) {
             for &m in group {
@@ -262,7 +282,7 @@ impl PredictorCorrector {
 
     /// Step 5, corrector: every driven instance repeats the step from its
     /// saved state with the interpolation polynomials through u_{N+1}, and
-    /// the outputs at T_{N+1} are read.
+    /// the outputs at T_{N+1} are read (with the run, one unit).
     fn correct(&mut self, system: &mut System, at: StepAt) -> Result<(), MasterError> {
         for (m, history) in system.history.iter().enumerate() {
             self.polys[m] = interpolate(
@@ -273,10 +293,14 @@ impl PredictorCorrector {
                 at.past,
             );
         }
-        for slave in system.slaves.iter_mut().filter(|s| s.is_coupled()) {
-            slave.rerun(&self.polys, at.t, at.h, None)?;
+        for (slave, out) in system.slaves.iter_mut().zip(&mut system.outputs) {
+            if slave.is_coupled() {
+                slave.correct(&self.polys, at.t, at.h, out)?;
+            } else {
+                slave.read_accepted(out, Run::Corrector)?;
+            }
         }
-        system.read_accepted(Run::Corrector)
+        Ok(())
     }
 
     /// Iterated correction (`[coupling] iterations`, beyond the paper): g
@@ -396,19 +420,21 @@ impl MacroStep for PredictorCorrector {
             system.read_accepted(Run::Corrector)?;
             return Ok(None);
         }
-        self.save(system)?;
-        self.predict(system, at)?;
-        lap.split_into(&mut stats.times.predictor);
         // Beyond the paper: with Jacobian reuse, perturbed runs only when
         // due, and when the reused Jacobian mispredicted the correction: then
         // the correction is made again from g^p with a fresh one.
+        let mut fresh = self.jacobian_due(at);
+        self.save(system)?;
+        self.predict(system, at, fresh)?;
+        lap.split_into(&mut stats.times.predictor);
         if self.reuse.is_some() {
             self.g_predicted.copy_from_slice(&self.g);
         }
-        let mut fresh = self.jacobian_due(at);
+        let mut made = fresh;
         let corrections = loop {
             if fresh {
-                self.perturb(system, at)?;
+                self.perturb(system, at, made)?;
+                made = false;
                 stats.jacobians += 1;
                 if let Some(reuse) = &mut self.reuse {
                     reuse.made(at.h);

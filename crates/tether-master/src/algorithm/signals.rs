@@ -14,6 +14,7 @@
 use tether_fmi::{BaseType, Causality, ScalarVariable};
 
 use crate::build::system::StepAt;
+use crate::linalg::solve::Solver;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::names::{describe, find_instance};
@@ -50,6 +51,8 @@ struct Link {
 /// The signal connections of a system and the senders' last values.
 pub(crate) struct Signals {
     links: Vec<Link>,
+    /// The direct-feedthrough loops: each a set of links (file order).
+    loops: Vec<Vec<usize>>,
     /// Per link: the sender's values `[y_N, y_{N-1}, y_{N-2}]`.
     history: Vec<[f64; 3]>,
     /// Per link: the sender's value at T_{N+1}, once read.
@@ -58,6 +61,9 @@ pub(crate) struct Signals {
     order: usize,
     /// Gauss–Seidel: the signal-only instances, stepped in this order.
     sequence: Vec<usize>,
+    scheme: SignalScheme,
+    /// `[signals] tolerance`: relative, on the exchanged values.
+    tolerance: f64,
     /// Per instance: stepped already in the current macro step.
     fresh: Vec<bool>,
     /// Adaptive steps: the Gauss–Seidel sweep saves each instance before
@@ -109,7 +115,7 @@ impl Signals {
             }
             links.push(link);
         }
-        check_loops(&links, slaves)?;
+        let loops = find_loops(&links, slaves);
         if let Some(e) = unit_errors.into_iter().next() {
             return Err(e);
         }
@@ -125,14 +131,84 @@ impl Signals {
             }
         }
         Ok(Signals {
+            loops,
             history: vec![[0.0; 3]; links.len()],
             next: vec![0.0; links.len()],
             links,
             order: spec.coupling.order,
             sequence,
+            scheme,
+            tolerance: spec.signals.tolerance(),
             fresh: vec![false; slaves.len()],
             save: false,
         })
+    }
+
+    /// Whether link `l` passes its sender's value at T_N (closes a loop at
+    /// the macro point) rather than the value at T_{N+1}: every link under
+    /// Jacobi; under Gauss–Seidel a link whose sender steps after its
+    /// receiver, or is stepped with the constraint-coupled block.
+    fn lagged(&self, l: usize) -> bool {
+        let link = &self.links[l];
+        let position = |s: usize| self.sequence.iter().position(|&q| q == s);
+        match (position(link.from), position(link.to)) {
+            (None, _) => true,
+            (Some(from), Some(to)) => to <= from,
+            (Some(_), None) => false,
+        }
+    }
+
+    /// One line per direct-feedthrough loop for the setup's note: the
+    /// instances in it, and where the macro points close it.
+    pub fn loop_notes(&self, slaves: &[Slave]) -> Vec<String> {
+        self.loops
+            .iter()
+            .map(|members| {
+                let mut instances: Vec<&str> = Vec::new();
+                for &l in members {
+                    for s in [self.links[l].from, self.links[l].to] {
+                        if !instances.contains(&slaves[s].name.as_str()) {
+                            instances.push(&slaves[s].name);
+                        }
+                    }
+                }
+                let lagged = members.iter().filter(|&&l| self.lagged(l)).count();
+                let how = match self.scheme {
+                    SignalScheme::Jacobi => format!(
+                        "Jacobi passes each of its {} connections the sender's value at T_N",
+                        members.len()
+                    ),
+                    SignalScheme::GaussSeidel => format!(
+                        "Gauss–Seidel steps its instances in file order and {lagged} of its {} \
+                         connections (those into an instance stepped before its sender) pass \
+                         the value at T_N",
+                        members.len()
+                    ),
+                };
+                format!(
+                    "direct-feedthrough loop through {} is closed only at macro points: {how} \
+                     (-v names the connections)",
+                    instances.join(", ")
+                )
+            })
+            .collect()
+    }
+
+    /// The connections of each loop, with the value each passes (for `-v`).
+    pub fn loop_connections(&self) -> Vec<String> {
+        self.loops
+            .iter()
+            .map(|members| {
+                let names: Vec<String> = members
+                    .iter()
+                    .map(|&l| {
+                        let at = if self.lagged(l) { "T_N" } else { "T_{N+1}" };
+                        format!("{} (value at {at})", self.links[l].name)
+                    })
+                    .collect();
+                names.join(", ")
+            })
+            .collect()
     }
 
     /// Adaptive steps: a rejected step restores every instance to its state
@@ -144,27 +220,162 @@ impl Signals {
         self.save = true;
     }
 
+    /// Whether the connections make a direct-feedthrough loop.
+    pub fn has_loops(&self) -> bool {
+        !self.loops.is_empty()
+    }
+
     /// Values at T_0: read the senders and set the receivers until nothing
-    /// changes (as often as the longest chain of direct feedthrough needs;
-    /// there are no loops), then start every history there.
+    /// changes (as often as the longest chain of direct feedthrough needs,
+    /// when there are no loops), then start every history there. A system
+    /// with loops then solves them ([`solve_loops`](Self::solve_loops)).
     pub fn initialize(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
         for _ in 0..=self.links.len() {
-            let mut changed = false;
-            for l in 0..self.links.len() {
-                let value = self.read(slaves, l, Run::Initial)?;
-                changed |= value.to_bits() != self.history[l][0].to_bits();
-                self.history[l] = [value; 3];
-                let held = Taylor {
-                    value,
-                    ..Taylor::default()
-                };
-                self.set(slaves, l, held)?;
-            }
-            if !changed {
+            if !self.sweep(slaves)? {
                 break;
             }
         }
+        if self.has_loops() {
+            self.solve_loops(slaves)?;
+        }
         Ok(())
+    }
+
+    /// One pass over the links in file order: read the sender, set the
+    /// receiver (held) and start the history there. Whether a value changed.
+    fn sweep(&mut self, slaves: &mut [Slave]) -> Result<bool, MasterError> {
+        let mut changed = false;
+        for l in 0..self.links.len() {
+            let value = self.read(slaves, l, Run::Initial)?;
+            changed |= value.to_bits() != self.history[l][0].to_bits();
+            self.hold(slaves, l, value)?;
+        }
+        Ok(changed)
+    }
+
+    /// Link `l`'s value `value` as its history and its receiver's held input.
+    fn hold(&mut self, slaves: &mut [Slave], l: usize, value: f64) -> Result<(), MasterError> {
+        self.history[l] = [value; 3];
+        let held = Taylor {
+            value,
+            ..Taylor::default()
+        };
+        self.set(slaves, l, held)
+    }
+
+    /// Consistent values of the loops at T_0, v = G(v) with G: set every
+    /// receiver to its link's value, read every sender. Fixed-point sweeps
+    /// first (they converge when the loop gain is below 1), then Newton on
+    /// the Real links with a finite-difference Jacobian of G (one run of G
+    /// per link; exact after one step for linear feedthrough). Converged:
+    /// |v − G(v)| ≤ tolerance·max(1, |v|) for every link. Otherwise an
+    /// error naming the first loop.
+    pub fn solve_loops(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
+        const SWEEPS: usize = 50;
+        const NEWTON: usize = 20;
+        let n = self.links.len();
+        let mut v: Vec<f64> = self.history.iter().map(|h| h[0]).collect();
+        let mut g = vec![0.0; n];
+        let mut residual = self.apply(slaves, &v, &mut g)?;
+        for _ in 0..SWEEPS {
+            if residual <= 1.0 {
+                return self.settle(slaves, &g);
+            }
+            v.copy_from_slice(&g);
+            residual = self.apply(slaves, &v, &mut g)?;
+        }
+        let real: Vec<usize> = (0..n)
+            .filter(|&l| self.links[l].kind == Kind::Real)
+            .collect();
+        let mut bumped = vec![0.0; n];
+        let mut gb = vec![0.0; n];
+        let mut solver = Solver::default();
+        for _ in 0..NEWTON {
+            if residual <= 1.0 {
+                return self.settle(slaves, &g);
+            }
+            // Non-Real links take G's value; the Real ones a Newton step on
+            // r(v) = v − G(v), ∂r/∂v = I − ∂G/∂v.
+            for l in 0..n {
+                if self.links[l].kind != Kind::Real {
+                    v[l] = g[l];
+                }
+            }
+            let k = real.len();
+            let mut w = vec![0.0; k * k];
+            for (j, &lj) in real.iter().enumerate() {
+                let delta = 1e-7 * v[lj].abs().max(1.0);
+                bumped.copy_from_slice(&v);
+                bumped[lj] += delta;
+                self.apply(slaves, &bumped, &mut gb)?;
+                for (i, &li) in real.iter().enumerate() {
+                    let identity = if i == j { 1.0 } else { 0.0 };
+                    w[i + j * k] = identity - (gb[li] - g[li]) / delta;
+                }
+            }
+            let (a, b) = solver.system(k);
+            a.copy_from_slice(&w);
+            for (i, &li) in real.iter().enumerate() {
+                b[i] = v[li] - g[li];
+            }
+            let step = solver
+                .solve(0.0, "signal loop", 1e14)
+                .map_err(|_| self.unsolved(residual, "its Jacobian is singular"))?;
+            for (&li, s) in real.iter().zip(step) {
+                v[li] -= s;
+            }
+            residual = self.apply(slaves, &v, &mut g)?;
+        }
+        if residual <= 1.0 {
+            return self.settle(slaves, &g);
+        }
+        Err(self.unsolved(residual, "fixed-point sweeps and Newton did not converge"))
+    }
+
+    /// G(v) into `g`: every receiver set to its link's value `v`, every
+    /// sender read. Returns max |v − G(v)| / (tolerance·max(1, |v|)).
+    fn apply(&self, slaves: &mut [Slave], v: &[f64], g: &mut [f64]) -> Result<f64, MasterError> {
+        for (l, &value) in v.iter().enumerate() {
+            let held = Taylor {
+                value,
+                ..Taylor::default()
+            };
+            self.set(slaves, l, held)?;
+        }
+        let mut worst: f64 = 0.0;
+        for (l, out) in g.iter_mut().enumerate() {
+            *out = self.read(slaves, l, Run::Initial)?;
+            let scale = self.tolerance * v[l].abs().max(1.0);
+            worst = worst.max((v[l] - *out).abs() / scale);
+        }
+        Ok(worst)
+    }
+
+    /// Take the converged values `g` (read from the senders at the last
+    /// inputs): set the receivers and start the histories there.
+    fn settle(&mut self, slaves: &mut [Slave], g: &[f64]) -> Result<(), MasterError> {
+        for (l, &value) in g.iter().enumerate() {
+            self.hold(slaves, l, value)?;
+        }
+        Ok(())
+    }
+
+    /// The error for loops without consistent values at T_0.
+    fn unsolved(&self, residual: f64, why: &str) -> MasterError {
+        let members = &self.loops[0];
+        let names: Vec<&str> = members
+            .iter()
+            .map(|&l| self.links[l].name.as_str())
+            .collect();
+        MasterError::Connection {
+            connection: names[0].to_string(),
+            reason: format!(
+                "direct-feedthrough loop {} has no consistent values at T_0: {why} \
+                 (largest |v − G(v)| is {residual:.1e} times the [signals] tolerance {:e})",
+                names.join(", then "),
+                self.tolerance
+            ),
+        }
     }
 
     /// Before the method's step T_N → T_{N+1}: set every receiving input.
@@ -426,58 +637,39 @@ fn feeds_through(slave: &Slave, input: u32, output: u32) -> bool {
     }
 }
 
-/// An error naming the first loop of connections that passes through
-/// direct feedthrough only (an algebraic loop the macro points cannot
-/// resolve): link a feeds link b when b's sender output depends directly on
-/// a's receiver input.
-fn check_loops(links: &[Link], slaves: &[Slave]) -> Result<(), MasterError> {
+/// The direct-feedthrough loops among the connections: link a feeds link b
+/// when b's sender output depends directly on a's receiver input; a loop is
+/// a set of links each reachable from every other (a strongly connected
+/// part with a cycle), its links in file order. Loops are in the order of
+/// their first link.
+fn find_loops(links: &[Link], slaves: &[Slave]) -> Vec<Vec<usize>> {
+    let n = links.len();
     let feeds =
         |a: &Link, b: &Link| a.to == b.from && feeds_through(&slaves[a.to], a.to_vr, b.from_vr);
-    // Depth-first search with colours: 0 new, 1 on the path, 2 done.
-    let mut colour = vec![0u8; links.len()];
-    let mut path = Vec::new();
-    fn visit(
-        l: usize,
-        links: &[Link],
-        feeds: &dyn Fn(&Link, &Link) -> bool,
-        colour: &mut [u8],
-        path: &mut Vec<usize>,
-    ) -> Option<Vec<usize>> {
-        colour[l] = 1;
-        path.push(l);
-        for next in 0..links.len() {
-            if !feeds(&links[l], &links[next]) {
-                continue;
-            }
-            if colour[next] == 1 {
-                let start = path.iter().position(|&p| p == next).unwrap_or(0);
-                return Some(path[start..].to_vec());
-            }
-            if colour[next] == 0 {
-                if let Some(cycle) = visit(next, links, feeds, colour, path) {
-                    return Some(cycle);
+    // reach[a][b]: b is reachable from a in one or more links.
+    let mut reach = vec![vec![false; n]; n];
+    for (start, row) in reach.iter_mut().enumerate() {
+        let mut stack = vec![start];
+        while let Some(l) = stack.pop() {
+            for next in 0..n {
+                if !row[next] && feeds(&links[l], &links[next]) {
+                    row[next] = true;
+                    stack.push(next);
                 }
             }
         }
-        path.pop();
-        colour[l] = 2;
-        None
     }
-    for l in 0..links.len() {
-        if colour[l] == 0 {
-            if let Some(cycle) = visit(l, links, &feeds, &mut colour, &mut path) {
-                let names: Vec<&str> = cycle.iter().map(|&c| links[c].name.as_str()).collect();
-                return Err(MasterError::Connection {
-                    connection: names[0].to_string(),
-                    reason: format!(
-                        "direct-feedthrough loop: {} (each sender's output depends directly on \
-                         the input the previous connection sets); break it with an FMU \
-                         whose output does not depend on its input",
-                        names.join(", then ")
-                    ),
-                });
-            }
+    let mut placed = vec![false; n];
+    let mut loops = Vec::new();
+    for l in 0..n {
+        if placed[l] || !reach[l][l] {
+            continue;
         }
+        let members: Vec<usize> = (l..n).filter(|&m| reach[l][m] && reach[m][l]).collect();
+        for &m in &members {
+            placed[m] = true;
+        }
+        loops.push(members);
     }
-    Ok(())
+    loops
 }

@@ -19,7 +19,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crate::algorithm::runs::{PerturbedRuns, Sequential};
+use crate::algorithm::runs::{predictor_runs, Perturbed, PerturbedRuns, Sequential};
 use crate::polynomial::Taylor;
 use crate::slave::Slave;
 use crate::spec::{InstanceSpec, Parallel};
@@ -183,6 +183,29 @@ impl PerturbedRuns for Threads {
         Ok(())
     }
 
+    fn predict(
+        &mut self,
+        slaves: &mut [Slave],
+        (t, h): (f64, f64),
+        polys: &[Taylor],
+        predicted: &mut [Vec<f64>],
+        perturbed: Option<Perturbed<'_>>,
+    ) -> Result<(), MasterError> {
+        // "auto" decided for the main thread: its runs go as sequentially.
+        let decided = self.auto && self.steps > CALIBRATION_STEPS && !self.active;
+        match perturbed {
+            Some(perturbed) if decided => {
+                self.sequential
+                    .predict(slaves, (t, h), polys, predicted, Some(perturbed))
+            }
+            Some((runs, outputs)) => {
+                predictor_runs(slaves, (t, h), polys, predicted)?;
+                self.run(slaves, t, h, runs, outputs)
+            }
+            None => predictor_runs(slaves, (t, h), polys, predicted),
+        }
+    }
+
     fn terminate(&mut self) -> Result<(), MasterError> {
         for lane in &self.lanes {
             // The worker is idle between jobs: its copies are ours to call.
@@ -200,7 +223,7 @@ impl PerturbedRuns for Threads {
             add(counters, &self.retired[s]);
             for lane in &self.lanes {
                 if let Some(extra) = &lock(&lane.shared).extras[s] {
-                    add(counters, &extra.counters);
+                    add(counters, &extra.counters());
                 }
             }
         }
@@ -270,7 +293,7 @@ impl Threads {
         for lane in &self.lanes {
             for (s, extra) in lock(&lane.shared).extras.iter().enumerate() {
                 if let Some(extra) = extra {
-                    add(&mut self.retired[s], &extra.counters);
+                    add(&mut self.retired[s], &extra.counters());
                 }
             }
         }
@@ -504,6 +527,7 @@ fn add(into: &mut InstanceCounters, from: &InstanceCounters) {
     into.get_reals += from.get_reals;
     into.set_input_derivatives += from.set_input_derivatives;
     into.get_output_derivatives += from.get_output_derivatives;
+    into.round_trips += from.round_trips;
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

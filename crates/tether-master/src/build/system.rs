@@ -73,7 +73,7 @@ impl System {
         let exp = spec.experiment;
         let every_step = spec.coupling.check_rollback == CheckRollback::EveryStep;
         for slave in &mut slaves {
-            slave.initialize(exp.start, stop, exp.tolerance)?;
+            slave.enter_initialization(exp.start, stop, exp.tolerance)?;
             slave.verify_restore = every_step && method.needs_rollback() && slave.is_coupled();
         }
         let history = coupling
@@ -96,6 +96,15 @@ impl System {
             epsilon: spec.coupling.epsilon,
             max_condition: spec.coupling.max_condition,
         })
+    }
+
+    /// Every instance leaves initialization mode ([`System::new`] leaves
+    /// them in it, for the loops' values at T_0).
+    pub fn exit_initialization(&mut self) -> Result<(), MasterError> {
+        for slave in &mut self.slaves {
+            slave.exit_initialization()?;
+        }
+        Ok(())
     }
 
     /// The finite-difference increment of unknown `m`: `ε·max(1, |u_{m,N}|)`.
@@ -142,8 +151,7 @@ impl System {
     /// `run` names the call they come after, for a non-finite value.
     pub fn read_accepted(&mut self, run: Run) -> Result<(), MasterError> {
         for (slave, out) in self.slaves.iter_mut().zip(&mut self.outputs) {
-            slave.read_coupled(out, run)?;
-            slave.read_recorded(run)?;
+            slave.read_accepted(out, run)?;
         }
         Ok(())
     }

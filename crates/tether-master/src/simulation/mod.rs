@@ -5,12 +5,14 @@
 
 use std::time::Instant;
 
+mod export;
 mod grid;
 mod health;
 mod row;
 mod state;
 mod tune;
 
+pub use export::{ExportKind, ExportVariable};
 pub use state::{MasterState, SystemState};
 
 use crate::algorithm::explicit::Explicit;
@@ -21,7 +23,7 @@ use crate::build::feedthrough::Feedthrough;
 use crate::build::system::{MacroStep, StepAt, System};
 use crate::coupling::rows::RowLevel;
 use crate::observer::Observer;
-use crate::slave::Run;
+use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, SystemSpec};
 use crate::stats::{Lap, RunStats, Termination};
 use crate::step_control::Controller;
@@ -46,6 +48,8 @@ pub struct Simulation {
     /// Divergence, residuals, the failure.
     health: Health,
     stats: RunStats,
+    /// Lines for the user before the run (the direct-feedthrough loops).
+    notes: Vec<String>,
     /// Whether the phases of each macro step are timed (off by default),
     /// and the clock reading that ended the last macro step's phases, for
     /// the recording phase that follows it in [`Simulation::run`].
@@ -84,6 +88,16 @@ impl Simulation {
         };
         let mut system = System::new(spec, &method, stop)?;
         let mut signals = Signals::build(spec, &mut system.slaves)?;
+        let notes = signals.loop_notes(&system.slaves);
+        for (k, connections) in signals.loop_connections().iter().enumerate() {
+            log::info!("direct-feedthrough loop {}: {connections}", k + 1);
+        }
+        // A loop's values at T_0 are solved in initialization mode, where
+        // FMI 2.0 lets a master set inputs and read outputs.
+        if signals.has_loops() {
+            signals.initialize(&mut system.slaves)?;
+        }
+        system.exit_initialization()?;
         let (step, initial_level): (Box<dyn MacroStep>, _) = match method {
             Method::Explicit { mu } => (
                 Box::new(Explicit::new(&system, mu)),
@@ -227,6 +241,7 @@ impl Simulation {
             row,
             health,
             stats,
+            notes,
             timing: Timing::default(),
             recheck: (method.needs_rollback()
                 && matches!(
@@ -235,6 +250,12 @@ impl Simulation {
                 ))
             .then_some(exp.step),
         })
+    }
+
+    /// Lines for the user before the run, each a note (not a warning): the
+    /// direct-feedthrough loops closed only at macro points.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     /// Number of perturbed runs per macro step of the predictor/corrector
@@ -341,12 +362,7 @@ impl Simulation {
         stats.residuals = self.health.residuals(self.row.all_columns()).collect();
         stats.residual_warning = self.health.residual_warning();
         stats.adaptive = self.grid.adaptive_stats();
-        stats.instances = self
-            .system
-            .slaves
-            .iter()
-            .map(|s| s.counters().clone())
-            .collect();
+        stats.instances = self.system.slaves.iter().map(Slave::counters).collect();
         self.method.report(&mut stats);
         stats
     }

@@ -5,11 +5,13 @@
 //! checked against the FMUs when the [`crate::Simulation`] is built.
 
 mod arrays;
+mod export;
 pub(crate) mod names;
 mod output;
 pub(crate) mod overrides;
 mod validate;
 
+pub use export::{ExportLink, ExportSource, ExportSpec};
 pub use output::{matches_pattern, OutputSpec};
 
 use std::collections::BTreeMap;
@@ -61,6 +63,10 @@ pub struct SystemSpec {
     /// What is recorded: the output grid and the columns (`[output]`).
     #[serde(default, skip_serializing_if = "OutputSpec::is_default")]
     pub output: OutputSpec,
+    /// The interface of the system exported as one FMU (`[export]`,
+    /// docs/fmu-export.md); ignored by `tether run`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub export: Option<ExportSpec>,
     /// The file this description was read from (set by
     /// [`SystemSpec::from_file`]), named in its error messages.
     #[serde(skip)]
@@ -140,11 +146,20 @@ pub struct ConnectionSpec {
 pub struct SignalSettings {
     /// `"jacobi"` (the default) or `"gauss_seidel"`.
     pub scheme: SignalScheme,
+    /// Relative tolerance on the exchanged values of direct-feedthrough
+    /// loops (at T_0, and per step when iterated); default 1e-10.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
 }
 
 impl SignalSettings {
     fn is_default(&self) -> bool {
         *self == SignalSettings::default()
+    }
+
+    /// `tolerance`, or its default 1e-10.
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance.unwrap_or(1e-10)
     }
 }
 

@@ -49,7 +49,7 @@ impl SystemSpec {
     }
 
     /// The file named in errors: [`source`](Self::source), else `<system>`.
-    fn source_name(&self) -> PathBuf {
+    pub(crate) fn source_name(&self) -> PathBuf {
         self.source
             .clone()
             .unwrap_or_else(|| PathBuf::from("<system>"))
@@ -97,6 +97,15 @@ impl SystemSpec {
         if let Some(tol) = e.tolerance {
             if !tol.is_finite() || tol <= 0.0 {
                 return Err(param("tolerance", tol, "a finite tolerance > 0"));
+            }
+        }
+        if let Some(tol) = self.signals.tolerance {
+            if !tol.is_finite() || tol <= 0.0 {
+                return Err(param(
+                    "[signals] tolerance",
+                    tol,
+                    "a finite relative tolerance > 0",
+                ));
             }
         }
         self.method.validate()?;
@@ -267,7 +276,7 @@ impl SystemSpec {
                 }
             }
         }
-        Ok(())
+        self.validate_export()
     }
 
     /// Number of macro steps: the stop time rounded to the grid `start + n·step`.

@@ -1,0 +1,108 @@
+//! A batch of runs crosses to the host as one message and computes what the
+//! same runs in process do, bit for bit; the calls that answer nothing wait
+//! for the next that does; an error inside a batch names the call that
+//! failed, as in process.
+
+use tether_fmi::{instantiate, Fmu, FmuInstance, Inputs, Placement, RunRequest};
+
+fn started(fmu: &Fmu, placement: Placement) -> Box<dyn FmuInstance> {
+    let mut instance = instantiate(fmu, "m", Default::default(), placement).unwrap();
+    instance.setup(None, 0.0, Some(1.0)).unwrap();
+    instance.enter_initialization().unwrap();
+    instance.exit_initialization().unwrap();
+    instance
+}
+
+#[test]
+fn a_batch_is_one_round_trip_and_names_the_call_that_failed() {
+    let fmu = Fmu::open(tether_fmu_build::workspace_fmu("oscillator").unwrap()).unwrap();
+    let md = fmu.model_description();
+    let vr = |name: &str| md.value_reference(name).unwrap();
+    let (x, v, force) = (vr("x"), vr("v"), vr("F"));
+    let mut local = started(&fmu, Placement::InProcess);
+    let mut remote = started(&fmu, Placement::Process { timeout: None });
+    let force = [force];
+    let inputs = |f: &'static [f64]| Inputs {
+        vrs: &force,
+        values: f,
+        derivative_vrs: &[],
+        orders: &[],
+        derivatives: &[],
+    };
+    let outputs = [x, v];
+    // A predictor run and two perturbed runs from the state saved before.
+    let runs = [
+        RunRequest {
+            inputs: Some(inputs(&[1.0])),
+            step: Some((0.0, 0.01)),
+            outputs: &outputs,
+            ..Default::default()
+        },
+        RunRequest {
+            restore: Some(0),
+            inputs: Some(inputs(&[1.5])),
+            step: Some((0.0, 0.01)),
+            outputs: &outputs,
+            ..Default::default()
+        },
+        RunRequest {
+            restore: Some(0),
+            inputs: Some(inputs(&[2.0])),
+            step: Some((0.0, 0.01)),
+            outputs: &outputs,
+            recorded: &[v],
+            ..Default::default()
+        },
+    ];
+    let (mut a, mut b) = ([0.0; 7], [0.0; 7]);
+    let before = remote.round_trips();
+    for (instance, out) in [(&mut local, &mut a), (&mut remote, &mut b)] {
+        instance.save(0).unwrap();
+        instance.run_batch(&runs, out).unwrap();
+    }
+    assert_eq!(remote.round_trips() - before, 1, "the save and the batch");
+    assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+    assert_ne!(a[0], a[2], "the perturbed runs differ from the predictor");
+    assert_eq!(a[5..], [a[5], a[6]], "x, v, then v recorded");
+    assert_eq!(a[6].to_bits(), a[5].to_bits());
+
+    // A run that reads nothing waits for the next call that answers.
+    let corrector = RunRequest {
+        restore: Some(0),
+        inputs: Some(inputs(&[1.25])),
+        step: Some((0.0, 0.01)),
+        ..Default::default()
+    };
+    let before = remote.round_trips();
+    for instance in [&mut local, &mut remote] {
+        instance.run(&corrector, &mut []).unwrap();
+    }
+    assert_eq!(remote.round_trips(), before, "deferred");
+    let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
+    local.get_reals(&outputs, &mut a).unwrap();
+    remote.get_reals(&outputs, &mut b).unwrap();
+    assert_eq!(remote.round_trips() - before, 1);
+    assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+
+    // The second run of a batch reads a variable the FMU does not have: the
+    // error names fmi2GetReal and the time of that run, as in process.
+    let failing = [
+        RunRequest {
+            restore: Some(0),
+            ..runs[0]
+        },
+        RunRequest {
+            restore: Some(0),
+            step: Some((0.0, 0.01)),
+            outputs: &[9999],
+            ..Default::default()
+        },
+    ];
+    let mut out = [0.0; 3];
+    let in_process = local.run_batch(&failing, &mut out).unwrap_err();
+    let isolated = remote.run_batch(&failing, &mut out).unwrap_err();
+    assert_eq!(isolated.function(), Some("fmi2GetReal"), "{isolated}");
+    assert_eq!(isolated.to_string(), in_process.to_string());
+    // The host goes on after an FMI error.
+    remote.get_reals(&outputs, &mut b).unwrap();
+}

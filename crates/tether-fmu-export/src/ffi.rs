@@ -1,0 +1,646 @@
+//! The C side: every `fmi2*` function of the co-simulation interface, on the
+//! FMI types, the state table and the logger of the FMU kit
+//! (`tether_fmu_kit::ffi`, `machine`). Each function checks its pointers,
+//! runs the call inside `catch_unwind` (a panic becomes fmi2Fatal, logged)
+//! and logs a failure through the importer's logger of that instance. An
+//! instance owns all its data: instances share nothing.
+
+#![allow(non_snake_case, clippy::missing_safety_doc)]
+
+use std::cell::Cell;
+use std::ffi::{c_char, c_int, c_void, CStr, CString};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::ptr;
+
+use tether_fmu_kit::ffi::{
+    EnvironmentLogger, Fmi2Boolean as B, Fmi2CallbackFunctions, Fmi2Component as C,
+    Fmi2FmuState as S, Fmi2Status as St, Fmi2String as Str, Fmi2ValueReference as Vr,
+};
+use tether_fmu_kit::instance::{Failure, Outcome, Status};
+use tether_fmu_kit::machine::{Call, MachineState};
+
+use crate::runtime::{uri_path, Exported, Saved};
+
+const OK: St = Status::Ok as St;
+const ERROR: St = Status::Error as St;
+
+/// What a component pointer points at.
+struct Component {
+    exported: Exported,
+    logger: Option<EnvironmentLogger>,
+    logging_on: bool,
+    /// The instance name `logger.instance_name` points into.
+    _name: CString,
+}
+
+impl Component {
+    /// Errors are always logged, the rest with debug logging on.
+    fn log(&self, status: Status, message: &str) {
+        let category = match status {
+            Status::Ok => "logEvents",
+            Status::Warning => "logStatusWarning",
+            Status::Discard => "logStatusDiscard",
+            Status::Error => "logStatusError",
+            Status::Fatal => "logStatusFatal",
+        };
+        if let Some(logger) = &self.logger {
+            if self.logging_on || status as i32 >= Status::Error as i32 {
+                logger.log(status, category, message);
+            }
+        }
+    }
+
+    fn fail(&mut self, call: Call, failure: Failure) -> St {
+        if failure.status == Status::Fatal {
+            self.exported.machine = MachineState::Fatal;
+        } else if failure.enters_error_state {
+            self.exported.machine = MachineState::Error;
+        }
+        self.log(
+            failure.status,
+            &format!("{}: {}", call.name(), failure.message),
+        );
+        failure.status as St
+    }
+}
+
+thread_local! {
+    /// The logger of the instance whose call runs on this thread, and
+    /// whether its debug logging is on: where the members' messages and the
+    /// master's warnings (the `log` facade) go.
+    static IN_CALL: Cell<Option<(EnvironmentLogger, bool)>> = const { Cell::new(None) };
+}
+
+/// Puts an instance's logger in scope for one call; the previous one comes
+/// back on drop (also after a panic).
+struct Scope(Option<(EnvironmentLogger, bool)>);
+
+impl Scope {
+    fn enter(logger: Option<EnvironmentLogger>, logging_on: bool) -> Scope {
+        Scope(IN_CALL.replace(logger.map(|l| (l, logging_on))))
+    }
+}
+
+impl Drop for Scope {
+    fn drop(&mut self) {
+        IN_CALL.set(self.0);
+    }
+}
+
+/// Forwards `log` records (the member FMUs' messages, as tether-fmi
+/// reports them, and the master's) to the importer's logger of the instance
+/// in the call: warnings and errors always, the rest with debug logging on.
+struct Forward;
+
+impl log::Log for Forward {
+    fn enabled(&self, metadata: &log::Metadata) -> bool {
+        IN_CALL
+            .get()
+            .is_some_and(|(_, on)| on || metadata.level() <= log::Level::Warn)
+    }
+
+    fn log(&self, record: &log::Record) {
+        let Some((logger, on)) = IN_CALL.get() else {
+            return;
+        };
+        let (status, category) = match record.level() {
+            log::Level::Error => (Status::Error, "logStatusError"),
+            log::Level::Warn => (Status::Warning, "logStatusWarning"),
+            _ if on => (Status::Ok, "logEvents"),
+            _ => return,
+        };
+        let message = format!("{}: {}", record.target(), record.args());
+        logger.log(status, category, &message);
+    }
+
+    fn flush(&self) {}
+}
+
+/// Installs [`Forward`] once per process (this library's own `log` facade).
+fn forward_log() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if log::set_logger(&Forward).is_ok() {
+            log::set_max_level(log::LevelFilter::Info);
+        }
+    });
+}
+
+fn c_string(text: &str) -> CString {
+    CString::new(text.replace('\0', " ")).unwrap_or_default()
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    let text = payload.downcast_ref::<&str>().map(|s| s.to_string());
+    text.or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".into())
+}
+
+/// Runs `f` on the instance behind `c` after the state-table check; a
+/// failure is logged and applied, a panic becomes fmi2Fatal.
+///
+/// # Safety
+/// `c` must be null or a live pointer from [`fmi2Instantiate`].
+unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Outcome) -> St {
+    if c.is_null() {
+        return ERROR;
+    }
+    // SAFETY: per the contract, c is a live Box<Component> from fmi2Instantiate.
+    let component = unsafe { &mut *c.cast::<Component>() };
+    let _scope = Scope::enter(component.logger, component.logging_on);
+    let exported = &mut component.exported;
+    let result = catch_unwind(AssertUnwindSafe(|| {
+        let state = exported.machine;
+        if call.allowed_in(state) {
+            f(exported)
+        } else {
+            Err(Failure::usage(format!("not allowed in state {state:?}")))
+        }
+    }));
+    let failure = match result {
+        Ok(Ok(())) => return OK,
+        Ok(Err(failure)) => failure,
+        Err(payload) => Failure {
+            status: Status::Fatal,
+            message: format!("panic: {}", panic_message(payload.as_ref())),
+            enters_error_state: true,
+        },
+    };
+    let status = catch_unwind(AssertUnwindSafe(|| component.fail(call, failure)));
+    status.unwrap_or(Status::Fatal as St)
+}
+
+/// Borrows `n` items at `p`; `None` if `p` is null while `n > 0`.
+///
+/// # Safety
+/// A non-null `p` must point at `n` valid items that outlive the borrow.
+unsafe fn slice<'a, T>(p: *const T, n: usize) -> Option<&'a [T]> {
+    match (p.is_null(), n) {
+        (_, 0) => Some(&[]),
+        (true, _) => None,
+        // SAFETY: non-null, and the caller guarantees n valid items.
+        (false, _) => Some(unsafe { std::slice::from_raw_parts(p, n) }),
+    }
+}
+
+/// Mutable [`slice`].
+///
+/// # Safety
+/// As [`slice`], and the items must not be aliased during the borrow.
+unsafe fn slice_mut<'a, T>(p: *mut T, n: usize) -> Option<&'a mut [T]> {
+    match (p.is_null(), n) {
+        (_, 0) => Some(&mut []),
+        (true, _) => None,
+        // SAFETY: non-null, and the caller guarantees n valid unaliased items.
+        (false, _) => Some(unsafe { std::slice::from_raw_parts_mut(p, n) }),
+    }
+}
+
+fn null(what: &str) -> Failure {
+    Failure::usage(format!("{what} is a null pointer"))
+}
+
+/// # Safety
+/// `p` null or NUL-terminated.
+unsafe fn text(p: Str) -> Option<String> {
+    // SAFETY: non-null, and the caller guarantees a NUL-terminated string.
+    (!p.is_null()).then(|| unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned())
+}
+
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2GetTypesPlatform() -> *const c_char {
+    tether_fmu_kit::ffi::get_types_platform()
+}
+
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2GetVersion() -> *const c_char {
+    tether_fmu_kit::ffi::get_version()
+}
+
+/// Null with a logged reason when the resources are missing or broken.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2Instantiate(
+    name: Str,
+    fmu_type: c_int,
+    guid: Str,
+    resources: Str,
+    functions: *const Fmi2CallbackFunctions,
+    _visible: B,
+    logging_on: B,
+) -> C {
+    let made = catch_unwind(AssertUnwindSafe(|| {
+        if functions.is_null() {
+            return ptr::null_mut();
+        }
+        // SAFETY: the FMI contract: a NUL-terminated name or null.
+        let Some(name) = (unsafe { text(name) }) else {
+            return ptr::null_mut();
+        };
+        // SAFETY: non-null, and the FMI contract gives a valid callback struct.
+        let callbacks = unsafe { &*functions };
+        let name = c_string(&name);
+        let logger = callbacks.logger.map(|logger| EnvironmentLogger {
+            logger,
+            component_environment: callbacks.component_environment,
+            instance_name: name.as_ptr(),
+        });
+        // SAFETY: the FMI contract: NUL-terminated strings or null.
+        let (guid, resources) = unsafe { (text(guid), text(resources)) };
+        forward_log();
+        let _scope = Scope::enter(logger, logging_on != 0);
+        let exported = if fmu_type != 1 {
+            Err("this FMU supports co-simulation only (fmuType must be fmi2CoSimulation)".into())
+        } else {
+            let resources = resources
+                .ok_or_else(|| "no fmuResourceLocation given".to_string())
+                .and_then(|r| uri_path(&r));
+            resources.and_then(|r| Exported::new(&r, guid.as_deref().unwrap_or("")))
+        };
+        match exported {
+            Ok(exported) => {
+                let component = Component {
+                    exported,
+                    logger,
+                    logging_on: logging_on != 0,
+                    _name: name,
+                };
+                Box::into_raw(Box::new(component)).cast::<c_void>()
+            }
+            Err(reason) => {
+                if let Some(logger) = logger {
+                    let message = format!("fmi2Instantiate: {reason}");
+                    logger.log(Status::Error, "logStatusError", &message);
+                }
+                ptr::null_mut()
+            }
+        }
+    }));
+    made.unwrap_or(ptr::null_mut())
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2FreeInstance(c: C) {
+    if !c.is_null() {
+        // SAFETY: c came from Box::into_raw in fmi2Instantiate and is freed only here.
+        let component = unsafe { Box::from_raw(c.cast::<Component>()) };
+        let _ = catch_unwind(AssertUnwindSafe(|| drop(component)));
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetDebugLogging(
+    c: C,
+    on: B,
+    _n: usize,
+    _categories: *const Str,
+) -> St {
+    if c.is_null() {
+        return ERROR;
+    }
+    // SAFETY: a live Box<Component> from fmi2Instantiate (the FMI contract).
+    unsafe { &mut *c.cast::<Component>() }.logging_on = on != 0;
+    OK
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetupExperiment(
+    c: C,
+    _tol_defined: B,
+    _tol: f64,
+    start: f64,
+    stop_defined: B,
+    stop: f64,
+) -> St {
+    let stop = (stop_defined != 0).then_some(stop);
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, Call::SetupExperiment, |e| {
+            e.setup_experiment(start, stop)
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2EnterInitializationMode(c: C) -> St {
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, Call::EnterInitializationMode, |e| {
+            e.machine = MachineState::InitializationMode;
+            Ok(())
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2ExitInitializationMode(c: C) -> St {
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, Call::ExitInitializationMode, |e| {
+            e.exit_initialization_mode()?;
+            e.machine = MachineState::StepComplete;
+            Ok(())
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2Terminate(c: C) -> St {
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, Call::Terminate, |e| {
+            e.machine = MachineState::Terminated;
+            Ok(())
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2Reset(c: C) -> St {
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, Call::Reset, |e| {
+            e.reset();
+            e.machine = MachineState::Instantiated;
+            Ok(())
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetReal(c: C, vr: *const Vr, n: usize, v: *mut f64) -> St {
+    // SAFETY: the FMI contract: n value references and n writable values.
+    let (vr, v) = unsafe { (slice(vr, n), slice_mut(v, n)) };
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, Call::GetReal, |e| {
+            e.get_real(
+                vr.ok_or_else(|| null("vr"))?,
+                v.ok_or_else(|| null("value"))?,
+            )
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetReal(c: C, vr: *const Vr, n: usize, v: *const f64) -> St {
+    // SAFETY: the FMI contract: n value references and n values.
+    let (vr, v) = unsafe { (slice(vr, n), slice(v, n)) };
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, Call::SetReal, |e| {
+            e.set_real(
+                vr.ok_or_else(|| null("vr"))?,
+                v.ok_or_else(|| null("value"))?,
+            )
+        })
+    }
+}
+
+/// The exported FMU has Real variables only: any Integer, Boolean or String
+/// value reference is refused.
+///
+/// # Safety
+/// See `with`.
+unsafe fn no_such(c: C, call: Call, n: usize, kind: &str) -> St {
+    // SAFETY: the FMI contract (see `with`).
+    unsafe {
+        with(c, call, |_| match n {
+            0 => Ok(()),
+            _ => Err(Failure::usage(format!("the FMU has no {kind} variables"))),
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetInteger(c: C, _vr: *const Vr, n: usize, _v: *mut c_int) -> St {
+    // SAFETY: see no_such.
+    unsafe { no_such(c, Call::GetInteger, n, "Integer") }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetBoolean(c: C, _vr: *const Vr, n: usize, _v: *mut B) -> St {
+    // SAFETY: see no_such.
+    unsafe { no_such(c, Call::GetBoolean, n, "Boolean") }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetString(c: C, _vr: *const Vr, n: usize, _v: *mut Str) -> St {
+    // SAFETY: see no_such.
+    unsafe { no_such(c, Call::GetString, n, "String") }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetInteger(c: C, _vr: *const Vr, n: usize, _v: *const c_int) -> St {
+    // SAFETY: see no_such.
+    unsafe { no_such(c, Call::SetInteger, n, "Integer") }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetBoolean(c: C, _vr: *const Vr, n: usize, _v: *const B) -> St {
+    // SAFETY: see no_such.
+    unsafe { no_such(c, Call::SetBoolean, n, "Boolean") }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetString(c: C, _vr: *const Vr, n: usize, _v: *const Str) -> St {
+    // SAFETY: see no_such.
+    unsafe { no_such(c, Call::SetString, n, "String") }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2DoStep(c: C, t: f64, h: f64, _no_prior: B) -> St {
+    // SAFETY: the FMI contract (see `with`).
+    unsafe { with(c, Call::DoStep, |e| e.do_step(t, h)) }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetFMUstate(c: C, s: *mut S) -> St {
+    // SAFETY: the FMI contract (see `with`); s is checked for null.
+    unsafe {
+        with(c, Call::GetFMUstate, |e| {
+            if s.is_null() {
+                return Err(null("FMUstate"));
+            }
+            let saved = e.get_state()?;
+            // SAFETY (of the enclosing block): s is non-null and writable
+            // (FMI contract); a non-null *s is a state of this FMU from
+            // fmi2GetFMUstate, reused here.
+            if (*s).is_null() {
+                *s = Box::into_raw(Box::new(saved)).cast::<c_void>();
+            } else {
+                *(*s).cast::<Saved>() = saved;
+            }
+            Ok(())
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetFMUstate(c: C, s: S) -> St {
+    // SAFETY: the FMI contract (see `with`); s is checked for null.
+    unsafe {
+        with(c, Call::SetFMUstate, |e| {
+            if s.is_null() {
+                return Err(null("FMUstate"));
+            }
+            // SAFETY: a non-null state from this FMU's fmi2GetFMUstate.
+            e.set_state(&*s.cast::<Saved>())
+        })
+    }
+}
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2FreeFMUstate(c: C, s: *mut S) -> St {
+    // SAFETY: the FMI contract (see `with`); s and *s are checked for null.
+    unsafe {
+        with(c, Call::FreeFMUstate, |_| {
+            if !s.is_null() && !(*s).is_null() {
+                // SAFETY: *s came from Box::into_raw in fmi2GetFMUstate.
+                drop(Box::from_raw((*s).cast::<Saved>()));
+                *s = ptr::null_mut();
+            }
+            Ok(())
+        })
+    }
+}
+
+/// The state functions the FMU declares it lacks, and the other optional
+/// ones: fmi2Error with the reason.
+///
+/// # Safety
+/// See `with`.
+unsafe fn unsupported(c: C, call: Call, reason: &str) -> St {
+    // SAFETY: the FMI contract (see `with`).
+    unsafe { with(c, call, |_| Err(Failure::usage(reason.to_string()))) }
+}
+
+const NO_SERIALIZE: &str = "canSerializeFMUstate is false: the master's state is not serialized";
+
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: C, _s: S, _size: *mut usize) -> St {
+    // SAFETY: see unsupported.
+    unsafe { unsupported(c, Call::SerializedFMUstateSize, NO_SERIALIZE) }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SerializeFMUstate(c: C, _s: S, _b: *mut c_char, _n: usize) -> St {
+    // SAFETY: see unsupported.
+    unsafe { unsupported(c, Call::SerializeFMUstate, NO_SERIALIZE) }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
+    c: C,
+    _b: *const c_char,
+    _n: usize,
+    _s: *mut S,
+) -> St {
+    // SAFETY: see unsupported.
+    unsafe { unsupported(c, Call::DeSerializeFMUstate, NO_SERIALIZE) }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
+    c: C,
+    _u: *const Vr,
+    _nu: usize,
+    _z: *const Vr,
+    _nz: usize,
+    _dz: *const f64,
+    _du: *mut f64,
+) -> St {
+    // SAFETY: see unsupported.
+    unsafe {
+        unsupported(
+            c,
+            Call::GetDirectionalDerivative,
+            "providesDirectionalDerivative is false",
+        )
+    }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
+    c: C,
+    _vr: *const Vr,
+    _n: usize,
+    _order: *const c_int,
+    _v: *const f64,
+) -> St {
+    // SAFETY: see unsupported.
+    unsafe {
+        unsupported(
+            c,
+            Call::SetRealInputDerivatives,
+            "canInterpolateInputs is false: inputs are held over a step",
+        )
+    }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(
+    c: C,
+    _vr: *const Vr,
+    _n: usize,
+    _order: *const c_int,
+    _v: *mut f64,
+) -> St {
+    // SAFETY: see unsupported.
+    unsafe {
+        unsupported(
+            c,
+            Call::GetRealOutputDerivatives,
+            "maxOutputDerivativeOrder is 0",
+        )
+    }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2CancelStep(c: C) -> St {
+    // SAFETY: see unsupported.
+    unsafe {
+        unsupported(
+            c,
+            Call::CancelStep,
+            "fmi2DoStep never runs asynchronously: there is nothing to cancel",
+        )
+    }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetStatus(c: C, _kind: c_int, _v: *mut c_int) -> St {
+    // SAFETY: see unsupported.
+    unsafe { unsupported(c, Call::GetStatus, "no asynchronous step: no status") }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetRealStatus(c: C, kind: c_int, v: *mut f64) -> St {
+    // SAFETY: the FMI contract (see `with`); v is checked for null.
+    unsafe {
+        with(c, Call::GetRealStatus, |e| {
+            // fmi2LastSuccessfulTime = 2.
+            match (kind, e.time()) {
+                (2, Some(t)) if !v.is_null() => {
+                    // SAFETY: non-null and writable (FMI contract).
+                    *v = t;
+                    Ok(())
+                }
+                _ => Err(Failure::usage(format!("no Real status of kind {kind}"))),
+            }
+        })
+    }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetIntegerStatus(c: C, _kind: c_int, _v: *mut c_int) -> St {
+    // SAFETY: see unsupported.
+    unsafe { unsupported(c, Call::GetIntegerStatus, "no Integer status") }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetBooleanStatus(c: C, kind: c_int, v: *mut B) -> St {
+    // SAFETY: the FMI contract (see `with`); v is checked for null.
+    unsafe {
+        with(c, Call::GetBooleanStatus, |_| {
+            // fmi2Terminated = 3: the system never asks to end early here.
+            match kind {
+                3 if !v.is_null() => {
+                    // SAFETY: non-null and writable (FMI contract).
+                    *v = 0;
+                    Ok(())
+                }
+                _ => Err(Failure::usage(format!("no Boolean status of kind {kind}"))),
+            }
+        })
+    }
+}
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetStringStatus(c: C, _kind: c_int, _v: *mut Str) -> St {
+    // SAFETY: see unsupported.
+    unsafe { unsupported(c, Call::GetStringStatus, "no String status") }
+}

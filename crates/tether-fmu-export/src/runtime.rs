@@ -1,0 +1,286 @@
+//! One instance of the exported FMU: the system file from `resources/`, the
+//! values of the exported parameters and inputs, and the
+//! [`Simulation`] built at initialization. Safe code; [`crate::ffi`] calls it.
+
+use std::path::{Path, PathBuf};
+
+use tether_fmu_kit::instance::{Failure, Outcome};
+use tether_fmu_kit::machine::MachineState;
+use tether_master::{
+    ExportKind, ExportVariable, Parallel, Simulation, StartValue, SystemSpec, SystemState,
+};
+
+use crate::SYSTEM_FILE;
+
+/// A saved state of the exported FMU (`fmi2GetFMUstate`): the whole
+/// system's and the exported parameters' and inputs' values.
+pub struct Saved {
+    system: SystemState,
+    values: Vec<f64>,
+}
+
+pub struct Exported {
+    spec: SystemSpec,
+    variables: Vec<ExportVariable>,
+    /// The exported parameters' and inputs' values (outputs: unused).
+    values: Vec<f64>,
+    /// `fmi2SetupExperiment`'s start and stop time.
+    start: f64,
+    stop: Option<f64>,
+    /// Built at initialization, with the parameters and inputs set so far.
+    sim: Option<Simulation>,
+    pub machine: MachineState,
+    /// Whether the state functions may be used (every member can).
+    can_save: bool,
+}
+
+/// `file:///a/b%20c/` → `/a/b c/`.
+pub fn uri_path(uri: &str) -> Result<PathBuf, String> {
+    let rest = uri
+        .strip_prefix("file://")
+        .map(|r| r.strip_prefix("localhost").unwrap_or(r))
+        .or_else(|| uri.strip_prefix("file:"))
+        .ok_or_else(|| format!("fmuResourceLocation '{uri}' is not a file:// URI"))?;
+    let bytes = rest.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = |b: u8| (b as char).to_digit(16);
+        if bytes[i] == b'%' && i + 2 < bytes.len() {
+            if let (Some(h), Some(l)) = (hex(bytes[i + 1]), hex(bytes[i + 2])) {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(bytes[i]);
+        i += 1;
+    }
+    let path =
+        String::from_utf8(out).map_err(|_| format!("fmuResourceLocation '{uri}' is not UTF-8"))?;
+    Ok(PathBuf::from(path))
+}
+
+impl Exported {
+    /// Reads `resources/system.toml`, checks the GUID against it and resolves
+    /// the exported interface (the members are loaded once for that).
+    pub fn new(resources: &Path, guid: &str) -> Result<Exported, String> {
+        let file = resources.join(SYSTEM_FILE);
+        let text = std::fs::read_to_string(&file)
+            .map_err(|e| format!("cannot read {}: {e}", file.display()))?;
+        let expected = crate::description::guid(&text);
+        if guid != expected {
+            return Err(format!(
+                "GUID {guid} does not match the system file's {expected} ({})",
+                file.display()
+            ));
+        }
+        let mut spec = SystemSpec::from_file(&file).map_err(|e| e.to_string())?;
+        if spec.step_control.is_some() {
+            return Err(
+                "systems with [step_control] are not exported (fixed macro steps only)".into(),
+            );
+        }
+        // Inner perturbed runs stay on the importer's thread unless the
+        // system file asks for threads.
+        if spec.coupling.parallel == Parallel::Auto {
+            spec.coupling.parallel = Parallel::Off;
+        }
+        let sim = Simulation::new(&spec).map_err(|e| e.to_string())?;
+        let variables = sim.export_interface(&spec).map_err(|e| e.to_string())?;
+        let can_save = sim.can_save_state();
+        drop(sim);
+        let values = variables.iter().map(|v| v.start.unwrap_or(0.0)).collect();
+        let start = spec.experiment.start;
+        Ok(Exported {
+            spec,
+            variables,
+            values,
+            start,
+            stop: None,
+            sim: None,
+            machine: MachineState::Instantiated,
+            can_save,
+        })
+    }
+
+    pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Outcome {
+        if !start.is_finite() || stop.is_some_and(|s| !(s.is_finite() && s > start)) {
+            return Err(Failure::usage(format!(
+                "start time {start} and stop time {stop:?}: expected finite times, stop after start"
+            )));
+        }
+        self.start = start;
+        self.stop = stop;
+        self.sim = None;
+        Ok(())
+    }
+
+    /// The simulation, built with the values set so far if it is not yet.
+    fn simulation(&mut self) -> Outcome<&mut Simulation> {
+        if self.sim.is_none() {
+            let mut spec = self.spec.clone();
+            let step = spec.experiment.step;
+            spec.experiment.stop = match self.stop {
+                Some(stop) => stop,
+                None => self.start + (spec.end_time() - spec.experiment.start),
+            };
+            spec.experiment.start = self.start;
+            if spec.experiment.stop - spec.experiment.start < step * (1.0 - 1e-9) {
+                return Err(Failure::usage(format!(
+                    "stop time {} is less than one macro step ({step}) after the start time {}",
+                    spec.experiment.stop, spec.experiment.start
+                )));
+            }
+            for (v, &value) in self.variables.iter().zip(&self.values) {
+                if v.kind == ExportKind::Output {
+                    continue;
+                }
+                let (instance, variable) = v.target.split_once('.').unwrap_or_default();
+                if let Some(i) = spec.instances.iter_mut().find(|i| i.name == instance) {
+                    i.parameters
+                        .insert(variable.to_string(), StartValue::Real(value));
+                }
+            }
+            let sim = Simulation::new(&spec).map_err(|e| Failure::model(e.to_string()))?;
+            self.sim = Some(sim);
+        }
+        Ok(self.sim.as_mut().expect("built above"))
+    }
+
+    pub fn exit_initialization_mode(&mut self) -> Outcome {
+        self.simulation().map(|_| ())
+    }
+
+    pub fn reset(&mut self) {
+        self.sim = None;
+        self.values = self
+            .variables
+            .iter()
+            .map(|v| v.start.unwrap_or(0.0))
+            .collect();
+        self.stop = None;
+        self.start = self.spec.experiment.start;
+    }
+
+    fn variable(&self, vr: u32) -> Outcome<&ExportVariable> {
+        self.variables.get(vr as usize).ok_or_else(|| {
+            Failure::usage(format!(
+                "value reference {vr} is not a variable (0 to {})",
+                self.variables.len().saturating_sub(1)
+            ))
+        })
+    }
+
+    pub fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Outcome {
+        for (&vr, value) in vrs.iter().zip(values.iter_mut()) {
+            let v = self.variable(vr)?;
+            *value = match v.column {
+                Some(column) => self.simulation()?.values()[column],
+                None => self.values[vr as usize],
+            };
+        }
+        Ok(())
+    }
+
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Outcome {
+        let stepping = self.machine == MachineState::StepComplete;
+        for (&vr, &value) in vrs.iter().zip(values) {
+            let v = self.variable(vr)?.clone();
+            if !value.is_finite() {
+                return Err(Failure::usage(format!(
+                    "{} = {value}: not a finite number",
+                    v.name
+                )));
+            }
+            match (v.kind, stepping) {
+                (ExportKind::Output, _) => {
+                    return Err(Failure::usage(format!(
+                        "{} is an output: it cannot be set",
+                        v.name
+                    )))
+                }
+                (ExportKind::Parameter, true) => {
+                    return Err(Failure::usage(format!(
+                        "{} is a fixed parameter: set it before fmi2ExitInitializationMode",
+                        v.name
+                    )))
+                }
+                (ExportKind::Input, true) => {
+                    let sim = self.simulation()?;
+                    sim.set_parameter(&v.target, &StartValue::Real(value))
+                        .map_err(|e| Failure::usage(e.to_string()))?;
+                }
+                // Before the run: taken when the simulation is built.
+                (_, false) => self.sim = None,
+            }
+            self.values[vr as usize] = value;
+        }
+        Ok(())
+    }
+
+    /// `fmi2DoStep(t, h)`: the macro steps over [t, t + h]; h must be a
+    /// whole multiple of the system's step H (within 1e-9·H) and t the
+    /// current time.
+    pub fn do_step(&mut self, t: f64, h: f64) -> Outcome {
+        let step = self.spec.experiment.step;
+        let sim = self.simulation()?;
+        let now = sim.time();
+        if (t - now).abs() > 1e-9 * step {
+            return Err(Failure::usage(format!(
+                "communication point {t} is not the FMU's time {now}"
+            )));
+        }
+        let n = (h / step).round();
+        if !(n >= 1.0 && (h - n * step).abs() <= 1e-9 * step) {
+            return Err(Failure::usage(format!(
+                "communication step {h} is not a whole multiple of the system's macro step {step} \
+                 (within 1e-9 of a step)"
+            )));
+        }
+        for _ in 0..n as u64 {
+            if sim.finished() {
+                return Err(Failure::usage(format!(
+                    "step to {} goes beyond the stop time (the run ends at {})",
+                    t + h,
+                    sim.time()
+                )));
+            }
+            sim.step().map_err(|e| Failure::model(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    pub fn time(&self) -> Option<f64> {
+        self.sim.as_ref().map(Simulation::time)
+    }
+
+    fn require_state(&self) -> Outcome {
+        if self.can_save {
+            Ok(())
+        } else {
+            Err(Failure::usage(
+                "a member FMU cannot save its state (canGetAndSetFMUstate and canSerializeFMUstate), so neither can the system",
+            ))
+        }
+    }
+
+    pub fn get_state(&mut self) -> Outcome<Saved> {
+        self.require_state()?;
+        let values = self.values.clone();
+        let system = self
+            .simulation()?
+            .save_state()
+            .map_err(|e| Failure::model(e.to_string()))?;
+        Ok(Saved { system, values })
+    }
+
+    pub fn set_state(&mut self, saved: &Saved) -> Outcome {
+        self.require_state()?;
+        self.simulation()?
+            .restore_state(&saved.system)
+            .map_err(|e| Failure::model(e.to_string()))?;
+        self.values.clone_from(&saved.values);
+        Ok(())
+    }
+}

@@ -1,0 +1,184 @@
+//! The interface of the system exported as one FMU (`[export]`,
+//! docs/fmu-export.md), resolved against the instances: what each exported
+//! variable sets or reads, with the member FMU's unit and description.
+
+use tether_fmi::{Causality, Variability};
+
+use super::Simulation;
+use crate::spec::names::{describe, find_instance, fmu_file, suggest, variable};
+use crate::MasterError;
+
+/// What an exported variable is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExportKind {
+    /// Set before initialization: an instance parameter's start value.
+    Parameter,
+    /// Set between steps: an instance input the coupling does not drive.
+    Input,
+    /// Read at the current point: a column of the system.
+    Output,
+}
+
+/// One exported Real variable; its value reference is its index in
+/// [`Simulation::export_interface`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExportVariable {
+    pub kind: ExportKind,
+    /// The exported FMU's variable name.
+    pub name: String,
+    /// `instance.variable` it sets, or the column it reads.
+    pub target: String,
+    /// Index of the column among [`Simulation::columns`] (outputs).
+    pub column: Option<usize>,
+    /// The start value (the instance's, or as the system file sets it).
+    pub start: Option<f64>,
+    pub unit: Option<String>,
+    pub description: Option<String>,
+}
+
+impl Simulation {
+    /// The `[export]` variables of `spec` (parameters, inputs, outputs, in
+    /// value-reference order), each checked against the instances: a name
+    /// that does not resolve (with suggestions), an input the coupling or a
+    /// signal connection drives, a non-Real variable, a parameter that is not
+    /// one or an output that is not a column: one error each.
+    pub fn export_interface(
+        &self,
+        spec: &crate::SystemSpec,
+    ) -> Result<Vec<ExportVariable>, MasterError> {
+        let Some(export) = &spec.export else {
+            return Err(MasterError::SystemFile {
+                path: spec.source_name(),
+                reason: "no [export] table: it declares the exported FMU's model_name and variables (docs/fmu-export.md)".into(),
+            });
+        };
+        let bad = |kind: &str, name: &str, reason: String| MasterError::SystemFile {
+            path: spec.source_name(),
+            reason: format!("[[export.{kind}]] '{name}': {reason}"),
+        };
+        let mut variables = Vec::new();
+        for (kind, name, target) in export.variables() {
+            let place = format!("[[export.{kind}]] '{name}'");
+            if kind == "output" {
+                let columns = self.columns();
+                let Some(column) = columns.iter().position(|c| c == target) else {
+                    let hint = suggest(target, columns.iter().map(String::as_str));
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is not a column of the system{hint}"),
+                    ));
+                };
+                let (unit, description) = self.column_unit(target);
+                variables.push(ExportVariable {
+                    kind: ExportKind::Output,
+                    name: name.to_string(),
+                    target: target.to_string(),
+                    column: Some(column),
+                    start: None,
+                    unit,
+                    description,
+                });
+                continue;
+            }
+            let (instance, var) = target
+                .split_once('.')
+                .filter(|(i, v)| !i.is_empty() && !v.is_empty())
+                .ok_or_else(|| bad(kind, name, format!("'{target}' is not INSTANCE.VARIABLE")))?;
+            let names = self.system.slaves.iter().map(|s| s.name.as_str());
+            let s = find_instance(&place, instance, names)?;
+            let slave = &self.system.slaves[s];
+            let md = slave.fmu.model_description();
+            let v = variable(md, &place, instance, || fmu_file(slave.fmu.path()), var)?;
+            let Some(real) = v.real() else {
+                return Err(bad(
+                    kind,
+                    name,
+                    format!(
+                        "'{target}' is {}: only Real variables are exported",
+                        describe(v)
+                    ),
+                ));
+            };
+            let export_kind = if kind == "input" {
+                if v.causality != Causality::Input {
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is {}, not an input", describe(v)),
+                    ));
+                }
+                let coupled = slave.inputs.iter().any(|i| i.vr == v.value_reference);
+                let signal = spec.connections.iter().any(|c| c.to == target);
+                if coupled || signal {
+                    let by = if coupled {
+                        "the coupling"
+                    } else {
+                        "a [[connection]]"
+                    };
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is driven by {by}; export an input nothing drives"),
+                    ));
+                }
+                ExportKind::Input
+            } else {
+                let settable =
+                    v.causality == Causality::Parameter && v.variability != Variability::Constant;
+                if !settable {
+                    return Err(bad(
+                        kind,
+                        name,
+                        format!("'{target}' is {}, not a parameter", describe(v)),
+                    ));
+                }
+                ExportKind::Parameter
+            };
+            let set = spec.instances[s]
+                .parameters
+                .get(var)
+                .and_then(|value| match value {
+                    crate::StartValue::Real(x) => Some(*x),
+                    crate::StartValue::Integer(i) => Some(*i as f64),
+                    _ => None,
+                });
+            variables.push(ExportVariable {
+                kind: export_kind,
+                name: name.to_string(),
+                target: target.to_string(),
+                column: None,
+                start: set.or(real.start).or(Some(0.0)),
+                unit: real.attributes.unit.clone(),
+                description: v.description.clone(),
+            });
+        }
+        Ok(variables)
+    }
+
+    /// The unit and description of an instance output column.
+    fn column_unit(&self, column: &str) -> (Option<String>, Option<String>) {
+        let Some((instance, var)) = column.split_once('.') else {
+            return (None, None);
+        };
+        let slave = self.system.slaves.iter().find(|s| s.name == instance);
+        let v = slave.and_then(|s| s.fmu.model_description().variable(var).ok());
+        match v {
+            Some(v) => (
+                v.real().and_then(|r| r.attributes.unit.clone()),
+                v.description.clone(),
+            ),
+            None => (None, None),
+        }
+    }
+
+    /// Whether every instance can save and restore its FMU state
+    /// (`canGetAndSetFMUstate` and `canSerializeFMUstate`), which
+    /// [`Simulation::save_state`] needs.
+    pub fn can_save_state(&self) -> bool {
+        self.system.slaves.iter().all(|s| {
+            let cs = &s.fmu.model_description().co_simulation;
+            cs.can_get_and_set_fmu_state && cs.can_serialize_fmu_state
+        })
+    }
+}

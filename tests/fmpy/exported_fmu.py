@@ -1,0 +1,171 @@
+"""fmpy against an FMU made by `tether fmu export` (crates/tether-cli/tests/fmu_export.rs).
+
+usage: exported_fmu.py FMU OUT.csv
+
+1. fmpy.validate: no problems with the model description (exit 1 otherwise).
+2. fmpy.simulate_fmu on the DefaultExperiment's step: every output, written to
+   OUT.csv with repr() (round-trips every double).
+3. fmpy-driven fmi2GetFMUstate / fmi2SetFMUstate: a repeated two-step
+   fmi2DoStep after setting the input gives the same outputs bit for bit.
+4. A communication step of 1.5 macro steps is refused with fmi2Error.
+5. Two instances in one process do not share state: instance A stepped
+   alone and interleaved with instance B (another parameter value) gives the
+   same outputs bit for bit.
+6. fmi2Instantiate with a wrong GUID returns NULL, the reason reaching the
+   logger the importer gave.
+7. A member's error (mass1 with m = -1 through the exported parameter)
+   fails fmi2ExitInitializationMode with fmi2Error, and the member's own
+   message reaches the importer's logger of that instance.
+Prints one line per check; exit 1 on the first that fails.
+"""
+
+import shutil
+import sys
+
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+from fmpy.validation import validate_fmu
+
+
+def fail(message):
+    print(message)
+    sys.exit(1)
+
+
+fmu, out = sys.argv[1], sys.argv[2]
+problems = validate_fmu(fmu)
+if problems:
+    fail("validate: " + "; ".join(problems))
+print("validate: no problems")
+
+md = read_model_description(fmu)
+H = float(md.defaultExperiment.stepSize)
+names = [v.name for v in md.modelVariables if v.causality == "output"]
+result = simulate_fmu(fmu, output_interval=H, output=names)
+with open(out, "w") as f:
+    f.write(",".join(["time"] + names) + "\n")
+    for row in result:
+        f.write(",".join(repr(float(x)) for x in row) + "\n")
+print(f"simulate_fmu: {len(result)} rows")
+
+vr = {v.name: v.valueReference for v in md.modelVariables}
+outs = [vr[n] for n in names]
+inputs = [v.valueReference for v in md.modelVariables if v.causality == "input"]
+parameters = [v.valueReference for v in md.modelVariables if v.causality == "parameter"]
+unzipped = extract(fmu)
+
+
+def instance(name, parameter):
+    s = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+    s.instantiate()
+    s.setupExperiment(startTime=float(md.defaultExperiment.startTime))
+    if parameters:
+        s.setReal(parameters[:1], [parameter])
+    s.enterInitializationMode()
+    s.exitInitializationMode()
+    return s
+
+
+s = instance("a", 1.5)
+t = 0.0
+for n in range(100):
+    s.doStep(t, H)
+    t += H
+if inputs:
+    s.setReal(inputs[:1], [50.0])
+state = s.getFMUstate()
+s.doStep(t, 2 * H)
+first = s.getReal(outs)
+s.setFMUstate(state)
+s.doStep(t, 2 * H)
+second = s.getReal(outs)
+s.freeFMUstate(state)
+if first != second:
+    fail(f"state: the repeated step differs: {first} vs {second}")
+print(f"state: repeated step identical: {first}")
+
+try:
+    s.doStep(t + 2 * H, 1.5 * H)
+    fail("doStep of 1.5 H was accepted")
+except FMICallException as e:
+    if e.status != 3:
+        fail(f"doStep of 1.5 H: status {e.status}, expected 3 (fmi2Error)")
+print("doStep of 1.5 H: fmi2Error")
+s.terminate()
+s.freeInstance()
+
+alone = instance("alone", 1.5)
+rows_alone = []
+for n in range(50):
+    alone.doStep(n * H, H)
+    rows_alone.append(alone.getReal(outs))
+alone.terminate()
+alone.freeInstance()
+a, b = instance("a", 1.5), instance("b", 3.0)
+rows_a, rows_b = [], []
+for n in range(50):
+    a.doStep(n * H, H)
+    b.doStep(n * H, H)
+    rows_a.append(a.getReal(outs))
+    rows_b.append(b.getReal(outs))
+for s in (a, b):
+    s.terminate()
+    s.freeInstance()
+if rows_a != rows_alone:
+    fail("two instances: instance a differs from the same instance stepped alone")
+if rows_a == rows_b:
+    fail("two instances: a and b (other parameter) give the same outputs")
+print("two instances: independent")
+
+from ctypes import byref  # noqa: E402
+
+from fmpy import calloc, free  # noqa: E402
+from fmpy.fmi2 import (  # noqa: E402
+    fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE)
+from fmpy.logging import addLoggerProxy  # noqa: E402
+
+messages = []
+
+
+def logger(component, name, status, category, message):
+    messages.append((name.decode(), status, message.decode()))
+
+
+callbacks = fmi2CallbackFunctions()
+callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+addLoggerProxy(byref(callbacks))
+wrong = FMU2Slave(guid="{00000000-0000-0000-0000-000000000000}", unzipDirectory=unzipped,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="wrong")
+try:
+    wrong.instantiate(callbacks=callbacks)
+    fail("a wrong GUID was accepted")
+except Exception:
+    pass
+if not any(n == "wrong" and st == 3 and "GUID" in m for n, st, m in messages):
+    fail(f"wrong GUID: no logged reason: {messages}")
+print(f"wrong GUID: NULL, logged: {messages[-1][2]}")
+
+messages.clear()
+negative = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                     modelIdentifier=md.coSimulation.modelIdentifier, instanceName="negative")
+negative.instantiate(callbacks=callbacks)
+negative.setupExperiment(startTime=0.0)
+negative.setReal(parameters[:1], [-1.0])
+negative.enterInitializationMode()
+try:
+    negative.exitInitializationMode()
+    fail("m = -1 was accepted")
+except FMICallException as e:
+    if e.status != 3:
+        fail(f"m = -1: status {e.status}, expected 3 (fmi2Error)")
+member = [m for n, st, m in messages if n == "negative" and st == 3 and m.startswith("fmu::mass1")]
+if not member:
+    fail(f"m = -1: the member's message was not forwarded: {messages}")
+print(f"member error: fmi2Error, forwarded: {member[0]}")
+negative.freeInstance()
+shutil.rmtree(unzipped, ignore_errors=True)
