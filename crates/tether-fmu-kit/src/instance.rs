@@ -400,9 +400,6 @@ impl<M: Model> Instance<M> {
                 MachineState::Instantiated | MachineState::InitializationMode
             );
         self.data.clone_from(snapshot);
-        if let Restore::Perturbed(e) = how {
-            self.data.states.iter_mut().for_each(|x| *x += e);
-        }
         if !same_model {
             self.model = None;
         }

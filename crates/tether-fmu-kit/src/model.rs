@@ -86,6 +86,4 @@ pub enum Restore {
     Exact,
     /// Nothing: the call returns fmi2OK and the instance stays as it is.
     Ignore,
-    /// The saved state with this added to every continuous state.
-    Perturbed(f64),
 }

@@ -54,7 +54,7 @@ pub use spec::{
 };
 pub use start::apply_start_value;
 pub use stats::{
-    AdaptiveStats, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, Termination,
+    AdaptiveStats, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, Termination,
     SUMMARY_SCHEMA,
 };
 pub use step_control::StepControl;

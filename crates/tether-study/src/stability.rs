@@ -162,9 +162,6 @@ fn cell_spec(v: &Variant, study: &Stability, x: f64, y: f64) -> Result<SystemSpe
     }
     let mut spec = v.spec.clone();
     set.apply(&mut spec)?;
-    // A map explores unstable settings on purpose and classifies a cell by
-    // divergence and growth: a broken constraint is not a failed cell here.
-    spec.coupling.residual_limit = tether_master::ResidualLimit(None);
     Ok(spec)
 }
 

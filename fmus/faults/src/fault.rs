@@ -54,11 +54,16 @@ pub struct Fault {
     pub delay: f64,
     pub pause: f64,
     pub flood: u32,
-    /// Mode 13: the largest offset a restore adds to every state.
+    /// Mode 13: the largest offset the step after a restore adds to every
+    /// state.
     pub noise: f64,
     /// Mode 13: the state of the pseudo-random offsets (xorshift64), so that
-    /// two restores of one state give different states.
+    /// two steps from one restored state end in different states.
     pub seed: Cell<u64>,
+    /// Mode 13: the offset the next `fmi2DoStep` adds to the states before it
+    /// integrates (0 when no restore came before it): state that
+    /// `fmi2SetFMUstate` leaves behind, invisible in the outputs until then.
+    pub pending: Cell<f64>,
 }
 
 impl Fault {
@@ -103,8 +108,11 @@ impl Fault {
         }
     }
 
-    /// What `fmi2SetFMUstate` does when the instance is at `t`: modes 12 and
-    /// 13 break it once `t` reaches `at` (after the master's setup check).
+    /// What `fmi2SetFMUstate` does when the instance is at `t`: mode 12
+    /// ignores it once `t` reaches `at` (after the master's setup check); mode
+    /// 13 restores the states exactly (the outputs read back are those of the
+    /// saved state) but leaves an offset behind for the next step
+    /// ([`Fault::disturb`]): the step repeated after a restore is not the same.
     pub fn restore(&self, t: f64) -> Restore {
         if t < self.at {
             return Restore::Exact;
@@ -119,9 +127,19 @@ impl Fault {
                 self.seed.set(x);
                 // Uniform in [-noise, noise].
                 let unit = (x >> 11) as f64 / (1u64 << 53) as f64;
-                Restore::Perturbed(self.noise * (2.0 * unit - 1.0))
+                self.pending.set(self.noise * (2.0 * unit - 1.0));
+                Restore::Exact
             }
             _ => Restore::Exact,
+        }
+    }
+
+    /// Runs at the start of every `fmi2DoStep`, on the states it starts from:
+    /// mode 13 adds the offset its last restore left behind.
+    pub fn disturb(&self, x: &mut [f64]) {
+        let e = self.pending.replace(0.0);
+        if e != 0.0 {
+            x.iter_mut().for_each(|x| *x += e);
         }
     }
 }

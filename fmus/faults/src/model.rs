@@ -37,11 +37,11 @@ impl Model for Faults {
             Real::new("noise", 0.01)
                 .min(0.0)
                 .unit("m")
-                .description("Mode 13: the largest offset each fmi2SetFMUstate from `at` on adds to the states"),
+                .description("Mode 13: the largest offset the fmi2DoStep after each fmi2SetFMUstate from `at` on adds to the states"),
         ],
         integer_parameters: &[
             Integer::new("mode", 0).min(0).max(13).description(
-                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate does nothing, 13 fmi2SetFMUstate adds noise",
+                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate does nothing, 13 the step after fmi2SetFMUstate adds noise",
             ),
             Integer::new("flood", 2000)
                 .min(0)
@@ -78,6 +78,7 @@ impl Model for Faults {
                     .map_err(|_| format!("flood must be >= 0, got {flood}"))?,
                 noise: p.real("noise")?,
                 seed: std::cell::Cell::new(0x9E37_79B9_7F4A_7C15),
+                pending: std::cell::Cell::new(0.0),
             },
         })
     }
@@ -105,10 +106,11 @@ impl Model for Faults {
         self.oscillator.output_derivatives_under(x, u[0], order, dy)
     }
 
-    /// Called first by every fmi2DoStep: the fault happens here, then the step
-    /// itself (exact, or `false` for Dop853) as the oscillator's.
+    /// Called first by every fmi2DoStep: the fault happens here (and mode 13's
+    /// offset after a restore), then the step itself (exact, or `false` for Dop853) as the oscillator's.
     fn exact_step(&self, t: f64, h: f64, x: &mut [f64], u: &[InputJet]) -> bool {
         self.fault.strike(t, h);
+        self.fault.disturb(x);
         self.oscillator.exact_step_under(h, x, u[0])
     }
 

@@ -1,6 +1,7 @@
 //! The run's health: divergence limits on every column, the largest
 //! residuals so far, and the error that stopped the run.
 
+use crate::stats::Failure;
 use crate::MasterError;
 
 /// What is checked at every accepted point, and how the run failed.
@@ -17,7 +18,7 @@ pub(crate) struct Health {
     /// `[coupling] residual_limit`: a larger |g| fails the run.
     residual_limit: Option<f64>,
     /// The error that stopped the run, if any.
-    failure: Option<String>,
+    failure: Option<Failure>,
 }
 
 impl Health {
@@ -102,12 +103,17 @@ impl Health {
     }
 
     /// The error that stopped the run, if any.
-    pub(crate) fn failure(&self) -> Option<&str> {
-        self.failure.as_deref()
+    pub(crate) fn failure(&self) -> Option<&Failure> {
+        self.failure.as_ref()
+    }
+
+    /// `[coupling] residual_limit`.
+    pub(crate) fn residual_limit(&self) -> Option<f64> {
+        self.residual_limit
     }
 
     /// Note the error that stopped the run.
     pub(crate) fn fail(&mut self, error: &MasterError) {
-        self.failure = Some(error.to_string());
+        self.failure = Some(Failure::from(error));
     }
 }

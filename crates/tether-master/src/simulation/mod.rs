@@ -54,14 +54,17 @@ pub struct Simulation {
     /// and the clock reading that ended the last macro step's phases, for
     /// the recording phase that follows it in [`Simulation::run`].
     timing: Timing,
-    /// `check_rollback = "periodic"`: the step size H of the rollback
-    /// self-check repeated every [`RECHECK_EVERY`] accepted macro steps.
+    /// `check_rollback = "periodic"` (and `"every_step"`): the step size H of
+    /// the rollback self-check repeated every [`RECHECK_EVERY`] accepted macro
+    /// steps and after every rejected step.
     recheck: Option<f64>,
 }
 
 /// With `check_rollback = "periodic"` (the default), the rollback self-check
-/// is repeated from the accepted point after this many macro steps, and
-/// every this many after.
+/// is repeated from the accepted point every this many macro steps (and after
+/// every rejected adaptive step): per coupled instance two `fmi2DoStep` more
+/// every 100 macro steps, where the predictor/corrector makes at least 3 a
+/// step (docs/reliability.md).
 pub const RECHECK_EVERY: u64 = 100;
 
 /// Phase timing of the macro steps.
@@ -351,7 +354,7 @@ impl Simulation {
         let failure = self.health.failure();
         stats.completed = failure.is_none() && (self.finished() || stats.termination.is_some());
         stats.stop_reason = match (failure, &stats.termination) {
-            (Some(e), _) => e.to_string(),
+            (Some(e), _) => e.message.clone(),
             (None, Some(end)) => format!(
                 "instance '{}' requested the end of the simulation at t = {}",
                 end.instance, end.requested_at
@@ -361,6 +364,8 @@ impl Simulation {
         };
         stats.residuals = self.health.residuals(self.row.all_columns()).collect();
         stats.residual_warning = self.health.residual_warning();
+        stats.residual_limit = self.health.residual_limit();
+        stats.failure = failure.cloned();
         stats.adaptive = self.grid.adaptive_stats();
         stats.instances = self.system.slaves.iter().map(Slave::counters).collect();
         self.method.report(&mut stats);
@@ -381,13 +386,20 @@ impl Simulation {
         let mut lap = Lap::start(self.timing.on);
         let (signals, method, system) = (&mut self.signals, &mut self.method, &mut self.system);
         let stats = &mut self.stats;
+        let recheck = self.recheck.is_some();
         let stepped = self.grid.advance(|at| {
-            step_at(
+            let error = step_at(
                 (&mut *signals, &mut *method, &mut *system),
                 at,
                 stats,
                 &mut lap,
-            )
+            )?;
+            if recheck && error.is_some_and(|e| e.is_nan() || e > 1.0) {
+                // A rejected step rolled every instance back: the rollback
+                // self-check from there, before the smaller step.
+                system.check_rollback(at.t, at.h)?;
+            }
+            Ok(error)
         });
         if let Err(e) = stepped {
             // The instance whose output diverged first in the step, if any.
