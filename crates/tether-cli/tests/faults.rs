@@ -1283,16 +1283,16 @@ fn a_signal_during_the_open_ends_the_run() {
     }
 }
 
-/// A run of the faults FMU in `mode` with `coupling` keys added to
-/// `[coupling]`, quiet, with its summary in `summary.json`, in process or
-/// isolated: the process, the results and the summary.
+/// A run of the faults FMU in `mode` with `extra` parameters and `coupling`
+/// keys added to `[coupling]`, quiet, with its summary in `summary.json`, in
+/// process or isolated: the process, the results and the summary.
 fn broken_rollback_run(
-    mode: i32,
+    (mode, extra): (i32, &str),
     coupling: &str,
     isolate: bool,
 ) -> (Scratch, Output, Csv, serde_json::Value) {
     let s = Scratch::new();
-    let sys = system(s.path(), mode, "");
+    let sys = system(s.path(), mode, extra);
     let text = std::fs::read_to_string(&sys).unwrap();
     assert!(text.contains("[coupling]\n"), "example changed");
     let text = text.replace("[coupling]\n", &format!("[coupling]\n{coupling}\n"));
@@ -1358,7 +1358,7 @@ fn a_rollback_that_breaks_mid_run_fails_the_run() {
     ];
     for (mode, what) in cases {
         for isolate in [false, true] {
-            let (s, out, csv, summary) = broken_rollback_run(mode, "", isolate);
+            let (s, out, csv, summary) = broken_rollback_run((mode, ""), "", isolate);
             let reason = failed_with(&s, &out, &csv, 0.5);
             let head = format!("rollback self-check failed for instance 'mass2': {what}");
             assert!(reason.starts_with(&head), "mode {mode}: {reason}");
@@ -1378,14 +1378,17 @@ fn a_rollback_that_breaks_mid_run_fails_the_run() {
 /// rollbacks break the link: the residual limit stops the run at the first
 /// accepted point whose |link.g| exceeds it, naming the condition, its value
 /// and the limit, in the trailer, the error line and the summary; in process
-/// and isolated. The default limit (1) catches both.
+/// and isolated. The default limit (1) catches both; mode 13 with an offset of
+/// up to 0.2 (with the default 0.01 the link drifts by up to 0.77: broken, but
+/// within the limit, which is a bound, not an accuracy; the periodic check
+/// catches that one).
 #[test]
 fn a_broken_constraint_fails_the_run_with_check_rollback_setup() {
-    for mode in [12, 13] {
+    for (mode, extra) in [(12, ""), (13, ", noise = 0.2")] {
         let mut ends = Vec::new();
         for isolate in [false, true] {
             let setup = "check_rollback = \"setup\"";
-            let (s, out, csv, summary) = broken_rollback_run(mode, setup, isolate);
+            let (s, out, csv, summary) = broken_rollback_run((mode, extra), setup, isolate);
             let until = summary["end_time"].as_f64().expect("rows");
             assert!(
                 until >= 0.5,
@@ -1429,7 +1432,7 @@ fn a_broken_constraint_fails_the_run_with_check_rollback_setup() {
 #[test]
 fn residual_limit_off_runs_a_broken_constraint_anyway() {
     let keys = "check_rollback = \"setup\"\nresidual_limit = \"off\"";
-    let (_s, out, csv, summary) = broken_rollback_run(12, keys, false);
+    let (_s, out, csv, summary) = broken_rollback_run((12, ""), keys, false);
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!((csv.rows.len(), csv.trailer), (1001, None));
     assert_eq!(summary["completed"], true);

@@ -388,9 +388,6 @@ impl<M: Model> Instance<M> {
             .model
             .as_ref()
             .map_or(Restore::Exact, |m| m.restore(self.data.time));
-        if how == Restore::Ignore {
-            return Ok(());
-        }
         let d = &self.data;
         let same_model = d.reals == snapshot.reals
             && d.integers == snapshot.integers
@@ -399,7 +396,13 @@ impl<M: Model> Instance<M> {
                 snapshot.machine,
                 MachineState::Instantiated | MachineState::InitializationMode
             );
-        self.data.clone_from(snapshot);
+        if how == Restore::KeepStates {
+            let states = std::mem::take(&mut self.data.states);
+            self.data.clone_from(snapshot);
+            self.data.states = states;
+        } else {
+            self.data.clone_from(snapshot);
+        }
         if !same_model {
             self.model = None;
         }

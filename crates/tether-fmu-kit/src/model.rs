@@ -84,6 +84,7 @@ pub trait Model: Sized + 'static {
 pub enum Restore {
     /// The saved state, exactly (FMI 2.0).
     Exact,
-    /// Nothing: the call returns fmi2OK and the instance stays as it is.
-    Ignore,
+    /// Everything but the continuous states, which stay as they are: the
+    /// call returns fmi2OK, the time goes back, the states do not.
+    KeepStates,
 }

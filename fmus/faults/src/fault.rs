@@ -109,7 +109,7 @@ impl Fault {
     }
 
     /// What `fmi2SetFMUstate` does when the instance is at `t`: mode 12
-    /// ignores it once `t` reaches `at` (after the master's setup check); mode
+    /// restores the time but not the states once `t` reaches `at` (after the master's setup check); mode
     /// 13 restores the states exactly (the outputs read back are those of the
     /// saved state) but leaves an offset behind for the next step
     /// ([`Fault::disturb`]): the step repeated after a restore is not the same.
@@ -118,7 +118,7 @@ impl Fault {
             return Restore::Exact;
         }
         match self.mode {
-            Mode::RestoreIgnored => Restore::Ignore,
+            Mode::RestoreIgnored => Restore::KeepStates,
             Mode::RestoreNoisy => {
                 let mut x = self.seed.get();
                 x ^= x << 13;

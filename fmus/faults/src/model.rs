@@ -41,7 +41,7 @@ impl Model for Faults {
         ],
         integer_parameters: &[
             Integer::new("mode", 0).min(0).max(13).description(
-                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate does nothing, 13 the step after fmi2SetFMUstate adds noise",
+                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise",
             ),
             Integer::new("flood", 2000)
                 .min(0)
