@@ -350,9 +350,15 @@ fn the_setup_check_leaves_results_and_per_step_counts_unchanged() {
     let dir = tempfile::tempdir().unwrap();
     let csv = |name: &str| dir.path().join(name);
     let mut results = Vec::new();
-    for (label, mode) in [("setup", "setup"), ("off", "off"), ("every", "every_step")] {
+    // 250 steps: the periodic check (the default) runs at steps 100 and 200.
+    for (label, mode) in [
+        ("setup", "setup"),
+        ("off", "off"),
+        ("every", "every_step"),
+        ("periodic", "periodic"),
+    ] {
         let coupling = format!("check_rollback = \"{mode}\"");
-        let sys = system_with(dir.path(), "", INDEX1, &coupling, 0.05, 1e-3);
+        let sys = system_with(dir.path(), "", INDEX1, &coupling, 0.25, 1e-3);
         let out_csv = csv(&format!("{label}.csv"));
         let out = tether(
             &[
@@ -371,18 +377,20 @@ fn the_setup_check_leaves_results_and_per_step_counts_unchanged() {
         "the check changes no result bit"
     );
     assert_eq!(results[0].0, results[2].0, "nor does every_step");
+    assert_eq!(results[0].0, results[3].0, "nor does the periodic check");
     let counts = |text: &str| {
         text.lines()
             .filter(|l| l.trim_start().starts_with("mass"))
             .map(str::to_string)
             .collect::<Vec<_>>()
     };
-    // 50 steps, 2 instances, one unknown: 3 doStep, 1 getFMUstate, 2
-    // setFMUstate per instance and step; the setup check is not counted.
+    // 250 steps, 2 instances, one unknown: 3 doStep, 1 getFMUstate, 2
+    // setFMUstate per instance and step; the checks are not counted.
     assert_eq!(counts(&results[0].1), counts(&results[1].1));
+    assert_eq!(counts(&results[0].1), counts(&results[3].1));
     assert!(
         counts(&results[0].1)[0]
-            .contains("doStep:       150   getFMUstate:       50   setFMUstate:      100"),
+            .contains("doStep:       750   getFMUstate:      250   setFMUstate:      500"),
         "{}",
         results[0].1
     );

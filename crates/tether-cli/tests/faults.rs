@@ -1291,6 +1291,16 @@ fn broken_rollback_run(
     coupling: &str,
     isolate: bool,
 ) -> (Scratch, Output, Csv, serde_json::Value) {
+    broken_rollback_run_with((mode, extra), coupling, isolate, &[])
+}
+
+/// [`broken_rollback_run`] with more command-line `flags`.
+fn broken_rollback_run_with(
+    (mode, extra): (i32, &str),
+    coupling: &str,
+    isolate: bool,
+    more: &[&str],
+) -> (Scratch, Output, Csv, serde_json::Value) {
     let s = Scratch::new();
     let sys = system(s.path(), mode, extra);
     let text = std::fs::read_to_string(&sys).unwrap();
@@ -1301,6 +1311,7 @@ fn broken_rollback_run(
     if isolate {
         flags.push("--isolate");
     }
+    flags.extend_from_slice(more);
     let out = s.run(&sys, "out.csv", &flags);
     let csv = read_csv(&s.path().join("out.csv"));
     let summary = std::fs::read_to_string(s.path().join("summary.json")).unwrap();
@@ -1440,4 +1451,43 @@ fn residual_limit_off_runs_a_broken_constraint_anyway() {
     assert_eq!(summary["failure"], serde_json::Value::Null);
     let g = summary["max_abs_g"]["link.g"].as_f64().unwrap();
     assert!(g > 1.0, "max |link.g| = {g}");
+}
+
+/// Adaptive steps: a rejected step rolls every instance back, and the check
+/// runs from there before the smaller step. With the residual limit off and
+/// fewer than 100 accepted steps before the fault, that check, not the
+/// periodic one nor the limit, stops the run at the rejected step's start,
+/// just before t = 0.5; in process and isolated.
+#[test]
+fn a_rollback_that_breaks_mid_run_is_caught_after_a_rejected_step() {
+    for isolate in [false, true] {
+        let off = "residual_limit = \"off\"";
+        let adaptive = ["--step-rtol", "1e-3"];
+        let (s, out, csv, summary) = broken_rollback_run_with((12, ""), off, isolate, &adaptive);
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        assert_eq!(text.lines().count(), 1, "one line: {text}");
+        let failure = &summary["failure"];
+        assert_eq!(failure["kind"], "rollback_check", "{failure}");
+        assert_eq!(failure["instance"], "mass2");
+        let accepted = summary["adaptive"]["accepted"].as_u64().unwrap();
+        assert!(summary["adaptive"]["rejected"].as_u64().unwrap() > 0);
+        assert!(
+            accepted % 100 != 0,
+            "not the periodic check: {accepted} steps"
+        );
+        let end = summary["end_time"].as_f64().unwrap();
+        assert!((0.45..0.5).contains(&end), "{end}");
+        assert_eq!(last_time(&csv), end);
+        assert_eq!(csv.rows.len() as u64, accepted + 1, "every row");
+        let reason = failure["message"].as_str().unwrap();
+        assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+        assert!(
+            reason.contains(&format!(
+                "after fmi2SetFMUstate back to t = {end}, output 'x'"
+            )),
+            "{reason}"
+        );
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    }
 }

@@ -623,6 +623,38 @@ mod tests {
         );
     }
 
+    /// `[coupling] residual_limit`: 1 by default, a number > 0, or `"off"`;
+    /// anything else is one error naming the key's line.
+    #[test]
+    fn residual_limit_is_a_positive_number_or_off() {
+        let text = "[experiment]\nstop = 1.0\nstep = 1e-3\n\n[coupling]\n\n[[instance]]\n\
+                    name = \"m\"\nfmu = \"o.fmu\"\n";
+        let with = |value: &str| {
+            let text = text.replace(
+                "[coupling]\n",
+                &format!("[coupling]\nresidual_limit = {value}\n"),
+            );
+            SystemSpec::from_toml(&text).and_then(|s| s.validate().map(|()| s))
+        };
+        let limit = |value: &str| with(value).unwrap().coupling.residual_limit;
+        assert_eq!(
+            SystemSpec::from_toml(text).unwrap().coupling.residual_limit,
+            ResidualLimit(Some(1.0))
+        );
+        assert_eq!(limit("0.25"), ResidualLimit(Some(0.25)));
+        assert_eq!(limit("3"), ResidualLimit(Some(3.0)));
+        assert_eq!(limit("\"off\""), ResidualLimit(None));
+        let e = with("\"of\"").unwrap_err().to_string();
+        assert!(
+            e.starts_with("system file <text>: line 6, column 18: invalid value: string \"of\", expected a number > 0 or \"off\""),
+            "{e}"
+        );
+        for bad in ["0", "-1", "nan", "inf"] {
+            let e = with(bad).unwrap_err().to_string();
+            assert!(e.contains("residual_limit"), "{bad}: {e}");
+        }
+    }
+
     /// `*` matches any characters (also none), everything else only itself:
     /// brackets, commas and dots are literal.
     #[test]
