@@ -209,9 +209,9 @@ fn integer_and_boolean_outputs_are_recorded_as_numbers() {
     let faults = tether_fmu_build::workspace_fmu("faults").expect("package the faults FMU");
     let edited = tether_tests::faulty::edited_fmu(&faults, dir.path(), "typed", |xml| {
         xml.replace(
-            "name=\"flood\" valueReference=\"10\" description=\"Mode 6: warnings logged by each \
+            "name=\"flood\" valueReference=\"11\" description=\"Mode 6: warnings logged by each \
              fmi2DoStep from `at` on\" causality=\"parameter\" variability=\"fixed\"",
-            "name=\"flood\" valueReference=\"10\" description=\"Mode 6\" causality=\"output\" \
+            "name=\"flood\" valueReference=\"11\" description=\"Mode 6\" causality=\"output\" \
              variability=\"discrete\"",
         )
         .replace(
