@@ -261,7 +261,7 @@ def _from_document(doc):
     limit = coupling.take("residual_limit", "any", RESIDUAL_LIMIT)
     if limit == "off":
         system.residual_limit = None
-    elif _is_number(limit) and finite(float(limit)) and limit > 0:
+    elif _is_number(limit) and math.isfinite(limit) and limit > 0:
         system.residual_limit = float(limit)
     else:
         raise RunError(f"[coupling]: `residual_limit` must be a finite number > 0 or \"off\", found {limit!r}")
