@@ -250,6 +250,9 @@ fn every_example_round_trips_through_ssp() {
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        // Its member is an FMU that `tether fmu export` writes first; the
+        // CLI's tests/fmu_export.rs runs it.
+        .filter(|p| !p.ends_with("nested_three_masses.toml"))
         .collect();
     examples.sort();
     assert!(examples.len() >= 10);
@@ -278,9 +281,13 @@ fn every_example_round_trips_through_ssp() {
             );
             a.fmu = b.fmu.clone();
         }
+        // `[export]` (docs/fmu-export.md) is Tether's own; an SSD has no
+        // place for it.
+        let mut without_export = spec.clone();
+        without_export.export = None;
         assert_eq!(
             toml::to_string(&back).unwrap(),
-            toml::to_string(&spec).unwrap(),
+            toml::to_string(&without_export).unwrap(),
             "{}",
             example.display()
         );

@@ -1,7 +1,7 @@
 //! Running fmpy (the reference FMI importer) from tests.
 //!
 //! Python comes from `TETHER_PYTHON` if set, else from a virtualenv at
-//! `<root>/target/fmpy-venv` with `fmpy==0.3.32`, created once under a file lock so
+//! `<root>/target/fmpy-venv` with `fmpy==0.3.32` and `pythonfmu3==0.3.4`, created once under a file lock so
 //! parallel test binaries share it.
 
 use std::fs::{self, File};
@@ -11,6 +11,9 @@ use std::sync::OnceLock;
 
 /// The fmpy version the tests are written against.
 pub const FMPY_VERSION: &str = "0.3.32";
+
+/// The pythonfmu3 version the FMI 3.0 tests build their Python FMU with.
+pub const PYTHONFMU3_VERSION: &str = "0.3.4";
 
 /// The workspace root (the root test package's manifest directory).
 pub fn workspace_root() -> PathBuf {
@@ -106,7 +109,9 @@ fn run(command: &mut Command) -> Result<(), String> {
 fn venv_python(target: &Path) -> Result<PathBuf, String> {
     let venv = target.join("fmpy-venv");
     let python = venv.join("bin").join("python");
-    let ready = venv.join(format!(".fmpy-{FMPY_VERSION}-installed"));
+    let ready = venv.join(format!(
+        ".fmpy-{FMPY_VERSION}-pythonfmu3-{PYTHONFMU3_VERSION}-installed"
+    ));
     fs::create_dir_all(target).map_err(|e| format!("cannot create {}: {e}", target.display()))?;
     let lock_path = target.join("fmpy-venv.lock");
     let lock = File::create(&lock_path)
@@ -123,6 +128,7 @@ fn venv_python(target: &Path) -> Result<PathBuf, String> {
             "install",
             "--quiet",
             &format!("fmpy=={FMPY_VERSION}"),
+            &format!("pythonfmu3=={PYTHONFMU3_VERSION}"),
         ]))?;
         fs::write(&ready, "").map_err(|e| format!("cannot write {}: {e}", ready.display()))?;
     }

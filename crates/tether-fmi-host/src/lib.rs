@@ -22,7 +22,7 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
-use tether_fmi::{Error, Fmu, FmuState, Instance, InstanceOptions, StatusKind};
+use tether_fmi::{Error, FmiStandard, Fmu, FmuInstance, Inputs, InstanceOptions, Placement};
 
 /// Serves the master on standard input and output; the exit code is 0 when
 /// the master closed the connection, 2 when standard input and output are not
@@ -111,15 +111,17 @@ fn watch_hangup(requests: &File) {
     });
 }
 
-/// The instance being served and what its calls need.
+/// The instance being served and what its calls need: the instance is made by
+/// [`tether_fmi::instantiate`] in this process, an FMI 2.0 or FMI 3.0 one, and
+/// keeps its FMU states in its own slots.
 #[derive(Default)]
 struct Host {
-    fmu: Option<Fmu>,
-    instance: Option<Instance>,
-    states: Vec<Option<FmuState>>,
+    instance: Option<Box<dyn FmuInstance>>,
     vrs: Vec<u32>,
+    derivative_vrs: Vec<u32>,
     ints: Vec<i32>,
     reals: Vec<f64>,
+    derivatives: Vec<f64>,
     bools: Vec<bool>,
     bytes: Vec<u8>,
     /// `call_timeout` of the instance, sent with `INSTANTIATE`.
@@ -154,7 +156,8 @@ fn serve(requests: File, writer: File) -> std::io::Result<()> {
             index += 1;
         }
         if let (Some(timeout), Some(instance), false) = (host.timeout, &host.instance, watching) {
-            watch_calls(&clock, &writer, timeout, instance.name().to_string());
+            let standard = instance.model_description().standard;
+            watch_calls(&clock, &writer, timeout, instance.name(), standard);
             watching = true;
         }
         out.send(&mut *lock(&writer))?;
@@ -198,16 +201,19 @@ impl CallClock {
 }
 
 /// Enforces `call_timeout` on every FMI call: a call still running past it is
-/// answered with [`Error::CallTimeout`] naming it, and the host ends with its
-/// process group (the FMU cannot be stopped otherwise). The watch wakes about
-/// once per time-out, not per call.
+/// answered with [`Error::CallTimeout`] naming it (the function of the
+/// instance's FMI `standard`), and the host ends with its process group (the
+/// FMU cannot be stopped otherwise). The watch wakes about once per time-out,
+/// not per call.
 fn watch_calls(
     clock: &Arc<CallClock>,
     writer: &Arc<Mutex<File>>,
     timeout: Duration,
-    instance: String,
+    instance: &str,
+    standard: FmiStandard,
 ) {
     let (clock, writer) = (Arc::clone(clock), Arc::clone(writer));
+    let instance = instance.to_string();
     let limit = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
     std::thread::spawn(move || loop {
         let sequence = clock.sequence.load(Ordering::Acquire);
@@ -227,7 +233,7 @@ fn watch_calls(
             continue;
         }
         let error = Error::CallTimeout {
-            function: protocol::op_function(clock.code.load(Ordering::Relaxed)),
+            function: protocol::op_function(clock.code.load(Ordering::Relaxed), standard),
             instance: instance.clone(),
             time: f64::from_bits(clock.time.load(Ordering::Relaxed)),
             seconds: timeout.as_secs_f64(),
@@ -250,8 +256,10 @@ fn watch_calls(
 }
 
 /// The instance, or the error for a call before `INSTANTIATE`.
-fn live(instance: &mut Option<Instance>) -> Result<&mut Instance, Error> {
-    instance.as_mut().ok_or_else(|| Error::Host {
+fn live(
+    instance: &mut Option<Box<dyn FmuInstance>>,
+) -> Result<&mut (dyn FmuInstance + 'static), Error> {
+    instance.as_deref_mut().ok_or_else(|| Error::Host {
         instance: String::new(),
         message: "the host has no instance yet".into(),
     })
@@ -262,7 +270,7 @@ impl Host {
     fn call_time(&self, code: u8, mut input: In<'_>) -> f64 {
         match code {
             op::DO_STEP => input.f64().unwrap_or(0.0),
-            _ => self.instance.as_ref().map_or(0.0, Instance::time),
+            _ => self.instance.as_deref().map_or(0.0, |i| i.time()),
         }
     }
 
@@ -295,16 +303,12 @@ impl Host {
                 self.timeout = (timeout > 0.0).then(|| Duration::from_secs_f64(timeout));
                 Fmu::open(dir)
                     .and_then(|fmu| {
-                        let instance = fmu.instantiate(name, options)?;
-                        self.fmu = Some(fmu);
-                        Ok(instance)
+                        tether_fmi::instantiate(&fmu, name, options, Placement::InProcess)
                     })
                     .map(|instance| self.instance = Some(instance))
             }
             op::FREE_INSTANCE => {
-                self.states.clear();
                 self.instance = None;
-                self.fmu = None;
                 Ok(())
             }
             _ => self.call(code, input, out)?,
@@ -328,50 +332,50 @@ impl Host {
                 let start = input.f64()?;
                 let has_stop = input.bool()?;
                 let stop = input.f64()?;
-                i.setup_experiment(tolerance, start, has_stop.then_some(stop))
+                i.setup(tolerance, start, has_stop.then_some(stop))
             }
-            op::ENTER_INITIALIZATION_MODE => i.enter_initialization_mode(),
-            op::EXIT_INITIALIZATION_MODE => i.exit_initialization_mode(),
+            op::ENTER_INITIALIZATION_MODE => i.enter_initialization(),
+            op::EXIT_INITIALIZATION_MODE => i.exit_initialization(),
             op::TERMINATE => i.terminate(),
             op::RESET => i.reset(),
             op::SET_REAL => {
                 input.u32s(&mut self.vrs)?;
                 input.f64s(&mut self.reals)?;
-                i.set_real(&self.vrs, &self.reals)
+                i.set_reals(&self.vrs, &self.reals)
             }
             op::GET_REAL => {
                 input.u32s(&mut self.vrs)?;
                 self.reals.clear();
-                self.reals.resize(self.vrs.len(), 0.0);
-                i.get_real(&self.vrs, &mut self.reals).map(|()| {
+                self.reals.resize(input.u32()? as usize, 0.0);
+                i.get_reals(&self.vrs, &mut self.reals).map(|()| {
                     out.f64s(&self.reals);
                 })
             }
             op::GET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
                 self.ints.clear();
-                self.ints.resize(self.vrs.len(), 0);
-                i.get_integer(&self.vrs, &mut self.ints).map(|()| {
+                self.ints.resize(input.u32()? as usize, 0);
+                i.get_integers(&self.vrs, &mut self.ints).map(|()| {
                     out.i32s(&self.ints);
                 })
             }
             op::GET_BOOLEAN => {
                 input.u32s(&mut self.vrs)?;
                 self.bools.clear();
-                self.bools.resize(self.vrs.len(), false);
-                i.get_boolean(&self.vrs, &mut self.bools).map(|()| {
+                self.bools.resize(input.u32()? as usize, false);
+                i.get_booleans(&self.vrs, &mut self.bools).map(|()| {
                     out.bools(&self.bools);
                 })
             }
             op::SET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
                 input.i32s(&mut self.ints)?;
-                i.set_integer(&self.vrs, &self.ints)
+                i.set_integers(&self.vrs, &self.ints)
             }
             op::SET_BOOLEAN => {
                 input.u32s(&mut self.vrs)?;
                 input.bools(&mut self.bools)?;
-                i.set_boolean(&self.vrs, &self.bools)
+                i.set_booleans(&self.vrs, &self.bools)
             }
             op::SET_STRING => {
                 input.u32s(&mut self.vrs)?;
@@ -380,20 +384,28 @@ impl Host {
                 for _ in 0..n {
                     strings.push(input.str()?);
                 }
-                i.set_string(&self.vrs, &strings)
+                i.set_strings(&self.vrs, &strings)
             }
-            op::SET_REAL_INPUT_DERIVATIVES => {
+            op::SET_INPUTS => {
                 input.u32s(&mut self.vrs)?;
-                input.i32s(&mut self.ints)?;
                 input.f64s(&mut self.reals)?;
-                i.set_real_input_derivatives(&self.vrs, &self.ints, &self.reals)
+                input.u32s(&mut self.derivative_vrs)?;
+                input.i32s(&mut self.ints)?;
+                input.f64s(&mut self.derivatives)?;
+                i.set_inputs(&Inputs {
+                    vrs: &self.vrs,
+                    values: &self.reals,
+                    derivative_vrs: &self.derivative_vrs,
+                    orders: &self.ints,
+                    derivatives: &self.derivatives,
+                })
             }
             op::GET_REAL_OUTPUT_DERIVATIVES => {
                 input.u32s(&mut self.vrs)?;
                 input.i32s(&mut self.ints)?;
                 self.reals.clear();
                 self.reals.resize(self.vrs.len(), 0.0);
-                i.get_real_output_derivatives(&self.vrs, &self.ints, &mut self.reals)
+                i.get_output_derivatives(&self.vrs, &self.ints, &mut self.reals)
                     .map(|()| {
                         out.f64s(&self.reals);
                     })
@@ -401,43 +413,23 @@ impl Host {
             op::DO_STEP => {
                 let t = input.f64()?;
                 let h = input.f64()?;
-                let no_prior = input.bool()?;
-                i.do_step(t, h, no_prior)
+                let _no_prior = input.bool()?;
+                // A request to end the simulation comes back as
+                // Error::TerminationRequested, which crosses as such.
+                i.step(t, h)
             }
-            op::GET_BOOLEAN_STATUS => i.get_boolean_status(StatusKind::Terminated).map(|b| {
-                out.bool(b);
+            op::SAVE_STATE => slot(input.u32()?, code, i).and_then(|s| i.save(s)),
+            op::RESTORE_STATE => slot(input.u32()?, code, i).and_then(|s| i.restore(s)),
+            op::FREE_STATE => slot(input.u32()?, code, i).and_then(|s| i.free(s)),
+            op::SERIALIZE_STATE => slot(input.u32()?, code, i).and_then(|s| {
+                i.serialize(s, &mut self.bytes).map(|()| {
+                    out.bytes(&self.bytes);
+                })
             }),
-            op::GET_REAL_STATUS => i.get_real_status(StatusKind::LastSuccessfulTime).map(|t| {
-                out.f64(t);
-            }),
-            op::SAVE_STATE => {
-                let slot = slot(&mut self.states, input.u32()?);
-                match slot {
-                    Some(state) => i.update_fmu_state(state),
-                    None => i.get_fmu_state().map(|s| *slot = Some(s)),
-                }
-            }
-            op::RESTORE_STATE => match &self.states[..].get(input.u32()? as usize) {
-                Some(Some(state)) => i.set_fmu_state(state),
-                _ => Err(no_state(i)),
-            },
-            op::FREE_STATE => {
-                *slot(&mut self.states, input.u32()?) = None;
-                Ok(())
-            }
-            op::SERIALIZE_STATE => match self.states.get(input.u32()? as usize) {
-                Some(Some(state)) => i
-                    .serialize_fmu_state_into(state, &mut self.bytes)
-                    .map(|()| {
-                        out.bytes(&self.bytes);
-                    }),
-                _ => Err(no_state(i)),
-            },
             op::DESERIALIZE_STATE => {
                 let index = input.u32()?;
                 let bytes = input.bytes()?;
-                i.deserialize_fmu_state(bytes)
-                    .map(|s| *slot(&mut self.states, index) = Some(s))
+                slot(index, code, i).and_then(|s| i.deserialize(s, bytes))
             }
             _ => {
                 return Err(std::io::Error::new(
@@ -449,19 +441,21 @@ impl Host {
     }
 }
 
-/// State slot `index`, made if new.
-fn slot(states: &mut Vec<Option<FmuState>>, index: u32) -> &mut Option<FmuState> {
+/// State slot `index` of request `code`, or the error for a slot the
+/// instance does not have.
+fn slot(index: u32, code: u8, i: &dyn FmuInstance) -> Result<tether_fmi::Slot, Error> {
     let index = index as usize;
-    if states.len() <= index {
-        states.resize_with(index + 1, || None);
-    }
-    &mut states[index]
-}
-
-fn no_state(i: &Instance) -> Error {
-    Error::Host {
-        instance: i.name().to_string(),
-        message: format!("instance '{}': no saved FMU state in that slot", i.name()),
+    if index < tether_fmi::SLOTS {
+        Ok(index)
+    } else {
+        Err(Error::InvalidArgument {
+            function: protocol::op_function(code, i.model_description().standard),
+            instance: i.name().to_string(),
+            message: format!(
+                "no state slot {index} (an instance has {})",
+                tether_fmi::SLOTS
+            ),
+        })
     }
 }
 

@@ -106,3 +106,98 @@ fn a_batch_is_one_round_trip_and_names_the_call_that_failed() {
     // The host goes on after an FMI error.
     remote.get_reals(&outputs, &mut b).unwrap();
 }
+
+/// An FMI 3.0 Reference FMU (Modelica Association, `../shared/reference-fmus/fmi3`
+/// from the repository root).
+fn reference3(model: &str) -> Fmu {
+    Fmu::open(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/reference-fmus/fmi3")
+            .join(format!("{model}.fmu")),
+    )
+    .unwrap()
+}
+
+/// FMI 3.0 instances go through the same batches: a batch of runs is one
+/// round trip and equal to the runs in process bit for bit, a failing call
+/// is named by its FMI 3.0 function, and a request to end the simulation
+/// (the Reference `Stair`) crosses as `Error::TerminationRequested`, word for
+/// word as in process, with the next call that answers.
+#[test]
+fn fmi3_instances_are_batched_and_their_errors_cross_as_in_process() {
+    let fmu = reference3("Dahlquist");
+    let x = [fmu.model_description().value_reference("x").unwrap()];
+    let mut local = started(&fmu, Placement::InProcess);
+    let mut remote = started(&fmu, Placement::Process { timeout: None });
+    // One step of 0.1, then from the saved state one of 0.2.
+    let runs = [
+        RunRequest {
+            step: Some((0.0, 0.1)),
+            outputs: &x,
+            ..Default::default()
+        },
+        RunRequest {
+            restore: Some(0),
+            step: Some((0.0, 0.2)),
+            outputs: &x,
+            recorded: &x,
+            ..Default::default()
+        },
+    ];
+    let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
+    let before = remote.round_trips();
+    for (instance, out) in [(&mut local, &mut a), (&mut remote, &mut b)] {
+        instance.save(0).unwrap();
+        instance.run_batch(&runs, out).unwrap();
+    }
+    assert_eq!(remote.round_trips() - before, 1, "the save and the batch");
+    assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+    // Forward Euler with k = 1 and internal steps of 0.1 from x = 1.
+    assert!(
+        (a[0] - 0.9).abs() < 1e-15 && (a[1] - 0.81).abs() < 1e-15,
+        "{a:?}"
+    );
+    assert_eq!(a[2].to_bits(), a[1].to_bits());
+
+    let failing = [RunRequest {
+        restore: Some(0),
+        step: Some((0.0, 0.1)),
+        outputs: &[9999],
+        ..Default::default()
+    }];
+    let mut out = [0.0];
+    let in_process = local.run_batch(&failing, &mut out).unwrap_err();
+    let isolated = remote.run_batch(&failing, &mut out).unwrap_err();
+    assert_eq!(isolated.function(), Some("fmi3GetFloat64"), "{isolated}");
+    assert_eq!(isolated.to_string(), in_process.to_string());
+
+    let stair = reference3("Stair");
+    let counter = [stair
+        .model_description()
+        .value_reference("counter")
+        .unwrap()];
+    let ended = |placement| {
+        let mut i = instantiate(&stair, "m", Default::default(), placement).unwrap();
+        i.setup(None, 0.0, Some(20.0)).unwrap();
+        i.enter_initialization().unwrap();
+        i.exit_initialization().unwrap();
+        let mut value = [0];
+        for n in 0..20 {
+            // In process the step fails; isolated, the read after it.
+            let stepped = i.step(f64::from(n), 1.0);
+            if let Err(e) = stepped.and_then(|()| i.get_integers(&counter, &mut value)) {
+                return e;
+            }
+        }
+        panic!("no termination request");
+    };
+    let (in_process, isolated) = (
+        ended(Placement::InProcess),
+        ended(Placement::Process { timeout: None }),
+    );
+    assert!(
+        matches!(isolated, tether_fmi::Error::TerminationRequested { .. }),
+        "{isolated}"
+    );
+    assert_eq!(isolated.to_string(), in_process.to_string());
+}

@@ -70,11 +70,17 @@ fn the_host_is_found_and_computes_what_in_process_instances_do() {
     remote.restore_state(1).unwrap();
     local.set_fmu_state(&saved).unwrap();
     assert_eq!(step(&mut local, &mut remote, 0.01, 2.0), first);
-    // FMI errors cross with their kind; a missing state is one line.
+    // FMI errors cross with their kind; a missing state is one line, and
+    // so is a slot the instance does not have; the host goes on.
+    let e = remote.restore_state(3).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "fmi2SetFMUstate on instance 'm': no FMU state saved in slot 3"
+    );
     let e = remote.restore_state(7).unwrap_err();
     assert_eq!(
         e.to_string(),
-        "instance 'm': no saved FMU state in that slot"
+        "fmi2SetFMUstate on instance 'm': no state slot 7 (an instance has 4)"
     );
     remote.ping().unwrap();
     remote.terminate().unwrap();

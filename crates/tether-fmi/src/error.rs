@@ -296,7 +296,7 @@ pub enum Error {
 
     /// The FMU asked to end the simulation: its step returned Discard and it
     /// reports that it terminated (FMI 2.0: `fmi2GetBooleanStatus(fmi2Terminated)`).
-    #[error("instance '{instance}' requested the end of the simulation at t = {time} ({})", how.unwrap_or("fmi2DoStep returned fmi2Discard with fmi2Terminated = true"))]
+    #[error("instance '{instance}' requested the end of the simulation at t = {time} ({})", how.as_deref().unwrap_or("fmi2DoStep returned fmi2Discard with fmi2Terminated = true"))]
     TerminationRequested {
         /// The instance name.
         instance: String,
@@ -305,7 +305,7 @@ pub enum Error {
         time: f64,
         /// How the FMU asked, when not as FMI 2.0 does (`None`: fmi2DoStep returned
         /// fmi2Discard with fmi2Terminated = true).
-        how: Option<&'static str>,
+        how: Option<String>,
     },
 
     /// A function returned `fmi2Error`.

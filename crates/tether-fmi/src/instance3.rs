@@ -614,7 +614,7 @@ impl FmuInstance for Fmi3Instance {
             Error::TerminationRequested {
                 instance: this.raw.name().to_owned(),
                 time,
-                how: Some("fmi3DoStep returned terminateSimulation = true"),
+                how: Some("fmi3DoStep returned terminateSimulation = true".into()),
             }
         };
         match result {

@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::fmu::{Fmu, InstanceOptions};
 use crate::interface::{FmuInstance, LocalInstance};
 
@@ -27,22 +27,13 @@ pub fn instantiate(
     options: InstanceOptions,
     placement: Placement,
 ) -> Result<Box<dyn FmuInstance>> {
-    let md = fmu.model_description();
-    if md.standard == crate::model_description::FmiStandard::Fmi3 {
-        return match placement {
-            Placement::InProcess => Ok(Box::new(crate::instance3::Fmi3Instance::new(
-                fmu, name, options,
-            )?)),
-            Placement::Process { .. } => Err(Error::Unsupported {
-                model: md.model_name.clone(),
-                reason: format!(
-                    "instance '{name}' is of an FMI 3.0 FMU, which runs in this process only: the host process (isolation) does not load FMI 3.0 FMUs yet"
-                ),
-            }),
-        };
-    }
+    let fmi3 = fmu.model_description().standard == crate::model_description::FmiStandard::Fmi3;
     Ok(match placement {
+        Placement::InProcess if fmi3 => {
+            Box::new(crate::instance3::Fmi3Instance::new(fmu, name, options)?)
+        }
         Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
+        // The host makes its instance with this function, in its process.
         Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(
             fmu, name, options, timeout,
         )?),

@@ -14,7 +14,6 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::slave::Slave;
 use crate::MasterError;
 
 /// Orders the notes of all instances: the earliest read is the culprit.
@@ -68,29 +67,31 @@ fn may_follow_a_divergence(error: &MasterError) -> bool {
 
 /// `error`, which stopped the step after the accepted point at `last`, with
 /// the instance named whose coupled output went beyond its limit first in
-/// that step, if any.
-pub(crate) fn blame(error: MasterError, slaves: &[Slave], last: f64) -> MasterError {
+/// that step, if any (`noted`: each instance's name and what was noted).
+pub(crate) fn blame<'a>(
+    error: MasterError,
+    noted: impl Iterator<Item = (&'a str, &'a Beyond)>,
+    last: f64,
+) -> MasterError {
     if !may_follow_a_divergence(&error) {
         return error;
     }
-    let first = slaves
-        .iter()
-        .filter_map(|s| s.beyond.as_ref().map(|b| (s, b)))
+    let first = noted
         .filter(|(_, b)| b.time > last)
         .min_by_key(|(_, b)| b.sequence);
-    let Some((slave, beyond)) = first else {
+    let Some((name, beyond)) = first else {
         return error;
     };
     if let MasterError::NonFiniteOutput {
         instance, variable, ..
     } = &error
     {
-        if *instance == slave.name && *variable == beyond.variable {
+        if instance == name && *variable == beyond.variable {
             return error;
         }
     }
     MasterError::DivergedOutput {
-        instance: slave.name.clone(),
+        instance: name.to_string(),
         variable: beyond.variable.clone(),
         value: beyond.value,
         limit: beyond.limit,

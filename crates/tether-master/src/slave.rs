@@ -89,6 +89,10 @@ pub struct Slave {
     run_inputs: Vec<InputBuffers>,
     /// The outputs of a batch of runs, run after run.
     batch_buf: Vec<f64>,
+    /// The allocations of a batch's plan and requests, kept between steps
+    /// (emptied; see [`recycle`]).
+    planned_buf: Vec<Planned<'static>>,
+    request_buf: Vec<RunRequest<'static>>,
     /// The degree k of the unknowns' polynomials (`finalize`).
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
@@ -310,6 +314,8 @@ impl Slave {
             input: InputBuffers::default(),
             run_inputs: Vec::new(),
             batch_buf: Vec::new(),
+            planned_buf: Vec::new(),
+            request_buf: Vec::new(),
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
@@ -733,12 +739,12 @@ impl Slave {
     /// perturbed runs from the saved state, one per `(polys, out)` of
     /// `perturbed`: handed to the instance together, since none depends on
     /// another's outputs (docs/algorithm.md, Steps 2 and 3).
-    pub(crate) fn predict_and_perturb(
+    pub(crate) fn predict_and_perturb<'p>(
         &mut self,
         polys: &[Taylor],
         (t, h): (f64, f64),
         out: &mut [f64],
-        perturbed: Vec<(&[Taylor], &mut [f64])>,
+        perturbed: impl Iterator<Item = (&'p [Taylor], &'p mut [f64])>,
     ) -> Result<(), MasterError> {
         let predictor = Planned {
             step: (!self.stepped_ahead).then_some((polys, t, h)),
@@ -755,16 +761,18 @@ impl Slave {
             }
             return Ok(());
         }
-        let mut planned = Vec::with_capacity(1 + perturbed.len());
+        let mut planned = recycle(std::mem::take(&mut self.planned_buf));
         planned.push(predictor);
-        planned.extend(perturbed.into_iter().map(|(polys, out)| Planned {
+        planned.extend(perturbed.map(|(polys, out)| Planned {
             step: Some((polys, t, h)),
             restore: true,
             out: Some(out),
             record: false,
             run: Run::Perturbed,
         }));
-        self.runs(&mut planned)
+        let ran = self.runs(&mut planned);
+        self.planned_buf = recycle(planned);
+        ran
     }
 
     /// The corrector's run: from the saved state with the inputs from
@@ -831,29 +839,31 @@ impl Slave {
             }
         }
         self.batch_buf.resize(len, 0.0);
-        let requests: Vec<RunRequest<'_>> = planned
-            .iter()
-            .zip(&self.run_inputs)
-            .map(|(p, input)| RunRequest {
-                restore: p.restore.then_some(SAVED),
-                inputs: (driven && p.step.is_some()).then(|| input.as_inputs()),
-                step: p.step.map(|(_, t, h)| (t, h)),
-                outputs: if p.out.is_some() {
-                    &self.value_vrs
-                } else {
-                    &[]
-                },
-                output_derivatives: if p.out.is_some() {
-                    &self.derivative_reads
-                } else {
-                    &[]
-                },
-                recorded: if p.record { &self.recorded_vrs } else { &[] },
-                save: None,
-            })
-            .collect();
+        let mut requests = recycle(std::mem::take(&mut self.request_buf));
+        requests.extend(
+            planned
+                .iter()
+                .zip(&self.run_inputs)
+                .map(|(p, input)| RunRequest {
+                    restore: p.restore.then_some(SAVED),
+                    inputs: (driven && p.step.is_some()).then(|| input.as_inputs()),
+                    step: p.step.map(|(_, t, h)| (t, h)),
+                    outputs: if p.out.is_some() {
+                        &self.value_vrs
+                    } else {
+                        &[]
+                    },
+                    output_derivatives: if p.out.is_some() {
+                        &self.derivative_reads
+                    } else {
+                        &[]
+                    },
+                    recorded: if p.record { &self.recorded_vrs } else { &[] },
+                    save: None,
+                }),
+        );
         let ran = self.backend.run_batch(&requests, &mut self.batch_buf);
-        drop(requests);
+        self.request_buf = recycle(requests);
         for p in planned.iter() {
             if p.restore {
                 self.counters.state_sets += 1;
@@ -946,6 +956,16 @@ impl Slave {
 }
 
 /// One run of an instance as a macro step plans it ([`Slave::runs`]).
+/// An empty vector with `v`'s allocation, for items of another lifetime, so
+/// that a step's plan and requests allocate nothing after the first step
+/// (collecting the emptied vector's own iterator reuses its allocation).
+fn recycle<T, U>(mut v: Vec<T>) -> Vec<U> {
+    v.clear();
+    v.into_iter()
+        .map(|_| -> U { unreachable!("the vector was emptied") })
+        .collect()
+}
+
 struct Planned<'a> {
     /// The inputs' polynomials and the step `(t, h)`; `None`: no step, a read.
     step: Option<(&'a [Taylor], f64, f64)>,

@@ -119,13 +119,13 @@ pub struct RemoteInstance {
     exit_watch: Option<OwnedFd>,
 }
 
-/// A call of the request being built: its FMI function, the instance's time
-/// when it is made and, for a step, the step's end.
+/// A call of the request being built: its operation, its FMI function (of
+/// the instance's FMI version) and the instance's time when it is made.
 #[derive(Debug, Clone, Copy)]
 struct Call {
+    code: u8,
     function: &'static str,
     time: f64,
-    end: f64,
 }
 
 /// `exited with code 3`, `was killed by signal 11 (SIGSEGV)`.
@@ -252,39 +252,35 @@ impl RemoteInstance {
     /// One more call of the request: its operation `code`, whose arguments
     /// follow on the returned message.
     fn queue(&mut self, code: u8) -> &mut Out {
+        let standard = self.fmu.model_description().standard;
         self.calls.push(Call {
-            function: protocol::op_function(code),
+            code,
+            function: protocol::op_function(code, standard),
             time: self.time,
-            end: self.time,
         });
         self.out.call(code)
     }
 
-    /// `fmi2DoStep` from `t` over `h`, queued; the tracked time becomes `t + h`.
+    /// The step from `t` over `h` (`fmi2DoStep`, `fmi3DoStep`), queued; the
+    /// tracked time becomes `t + h`.
     fn queue_step(&mut self, t: f64, h: f64, no_set_fmu_state_prior: bool) {
         self.time = t;
         self.queue(op::DO_STEP)
             .f64(t)
             .f64(h)
             .bool(no_set_fmu_state_prior);
-        if let Some(call) = self.calls.last_mut() {
-            call.end = t + h;
-        }
         self.time = t + h;
     }
 
-    /// The coupled inputs, queued: `fmi2SetReal`, then
-    /// `fmi2SetRealInputDerivatives` when derivatives are given.
+    /// The coupled inputs, queued as one call: their values, then their
+    /// derivatives ([`crate::interface::Inputs`]).
     fn queue_inputs(&mut self, inputs: &crate::interface::Inputs<'_>) {
-        self.queue(op::SET_REAL)
+        self.queue(op::SET_INPUTS)
             .u32s(inputs.vrs)
-            .f64s(inputs.values);
-        if !inputs.derivative_vrs.is_empty() {
-            self.queue(op::SET_REAL_INPUT_DERIVATIVES)
-                .u32s(inputs.derivative_vrs)
-                .i32s(inputs.orders)
-                .f64s(inputs.derivatives);
-        }
+            .f64s(inputs.values)
+            .u32s(inputs.derivative_vrs)
+            .i32s(inputs.orders)
+            .f64s(inputs.derivatives);
     }
 
     /// Sends the queued calls as one request and waits for the reply in
@@ -295,13 +291,13 @@ impl RemoteInstance {
         let blamed = self
             .calls
             .iter()
-            .find(|c| c.function == "fmi2DoStep")
+            .find(|c| c.code == op::DO_STEP)
             .or(self.calls.last())
             .copied()
             .unwrap_or(Call {
+                code: op::PING,
                 function: "an FMI function",
                 time: self.time,
-                end: self.time,
             });
         if let Some(how) = &self.ended {
             let how = how.clone();
@@ -335,9 +331,12 @@ impl RemoteInstance {
         let result = self.received(received, blamed);
         self.calls.clear();
         match result {
-            Err((error, Some(call))) if call.function == "fmi2DoStep" => {
+            Err((error, Some(call))) if call.code == op::DO_STEP => {
+                // The step did not complete: the instance stays at its start.
+                // (The host's `step` made a request to end the simulation
+                // `Error::TerminationRequested` already.)
                 self.time = call.time;
-                Err(crate::error::step_failure(error, self, call.end))
+                Err(error)
             }
             Err((error, _)) => Err(error),
             Ok(()) => Ok(()),
@@ -571,14 +570,14 @@ impl RemoteInstance {
 
     /// `fmi2GetReal` into `out`.
     pub fn get_real(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
-        self.queue(op::GET_REAL).u32s(vrs);
+        self.queue(op::GET_REAL).u32s(vrs).u32(count(out.len()));
         self.send()?;
         self.read_reals(out)
     }
 
     /// `fmi2GetInteger` into `out`.
     pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
-        self.queue(op::GET_INTEGER).u32s(vrs);
+        self.queue(op::GET_INTEGER).u32s(vrs).u32(count(out.len()));
         self.send()?;
         let mut values = Vec::with_capacity(out.len());
         let read = In::new(&self.reply[1..]).i32s(&mut values);
@@ -587,7 +586,7 @@ impl RemoteInstance {
 
     /// `fmi2GetBoolean` into `out`.
     pub fn get_boolean(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
-        self.queue(op::GET_BOOLEAN).u32s(vrs);
+        self.queue(op::GET_BOOLEAN).u32s(vrs).u32(count(out.len()));
         self.send()?;
         let mut values = Vec::with_capacity(out.len());
         let read = In::new(&self.reply[1..]).bools(&mut values);
@@ -618,20 +617,6 @@ impl RemoteInstance {
         self.send()
     }
 
-    /// `fmi2SetRealInputDerivatives`.
-    pub fn set_real_input_derivatives(
-        &mut self,
-        vrs: &[ValueReference],
-        orders: &[i32],
-        values: &[f64],
-    ) -> Result<()> {
-        self.queue(op::SET_REAL_INPUT_DERIVATIVES)
-            .u32s(vrs)
-            .i32s(orders)
-            .f64s(values);
-        self.send()
-    }
-
     /// `fmi2GetRealOutputDerivatives` into `out`.
     pub fn get_real_output_derivatives(
         &mut self,
@@ -650,22 +635,6 @@ impl RemoteInstance {
     pub fn do_step(&mut self, t: f64, h: f64, no_set_fmu_state_prior: bool) -> Result<()> {
         self.queue_step(t, h, no_set_fmu_state_prior);
         self.send()
-    }
-
-    /// `fmi2GetBooleanStatus(fmi2Terminated)`.
-    pub fn terminated(&mut self) -> Result<bool> {
-        self.queue(op::GET_BOOLEAN_STATUS);
-        self.send()?;
-        let value = self.results().bool();
-        value.map_err(|e| self.protocol_error(e))
-    }
-
-    /// `fmi2GetRealStatus(fmi2LastSuccessfulTime)`.
-    pub fn last_successful_time(&mut self) -> Result<f64> {
-        self.queue(op::GET_REAL_STATUS);
-        self.send()?;
-        let value = self.results().f64();
-        value.map_err(|e| self.protocol_error(e))
     }
 
     /// `fmi2GetFMUstate` into the host's state `slot` (reusing the state there).
@@ -876,8 +845,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.get_real_output_derivatives(vrs, orders, out)
     }
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
-        // A failed step is made a termination request where it is one when
-        // its error arrives (`send`).
+        // The host's instance turns a request to end the simulation into
+        // `Error::TerminationRequested` (the same `step` as in process),
+        // which crosses as such.
         self.queue_step(t, h, true);
         Ok(())
     }
@@ -929,7 +899,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
                 self.queue_step(t, h, true);
             }
             if !run.outputs.is_empty() {
-                self.queue(op::GET_REAL).u32s(run.outputs);
+                self.queue(op::GET_REAL)
+                    .u32s(run.outputs)
+                    .u32(count(run.outputs.len()));
             }
             for &(vr, order) in run.output_derivatives {
                 self.queue(op::GET_REAL_OUTPUT_DERIVATIVES)
@@ -937,7 +909,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
                     .i32s(&[order]);
             }
             if !run.recorded.is_empty() {
-                self.queue(op::GET_REAL).u32s(run.recorded);
+                self.queue(op::GET_REAL)
+                    .u32s(run.recorded)
+                    .u32(count(run.recorded.len()));
             }
             if let Some(slot) = run.save {
                 self.queue(op::SAVE_STATE).u32(slot as u32);
@@ -974,14 +948,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
     }
 }
 
-impl crate::error::StepStatus for RemoteInstance {
-    fn name(&self) -> &str {
-        self.name.as_str()
-    }
-    fn terminated(&mut self) -> Result<bool> {
-        RemoteInstance::terminated(self)
-    }
-    fn last_successful_time(&mut self) -> Result<f64> {
-        RemoteInstance::last_successful_time(self)
-    }
+/// A count of values for a request.
+fn count(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
 }

@@ -12,9 +12,10 @@
 use std::io::{self, Read, Write};
 
 use crate::error::{Error, FmuMessages};
+use crate::model_description::FmiStandard;
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -31,11 +32,10 @@ pub mod op {
     pub const SET_INTEGER: u8 = 10;
     pub const SET_BOOLEAN: u8 = 11;
     pub const SET_STRING: u8 = 12;
-    pub const SET_REAL_INPUT_DERIVATIVES: u8 = 13;
+    /// The coupled inputs of a run ([`crate::interface::Inputs`]).
+    pub const SET_INPUTS: u8 = 13;
     pub const GET_REAL_OUTPUT_DERIVATIVES: u8 = 14;
     pub const DO_STEP: u8 = 15;
-    pub const GET_BOOLEAN_STATUS: u8 = 16;
-    pub const GET_REAL_STATUS: u8 = 17;
     pub const SAVE_STATE: u8 = 18;
     pub const RESTORE_STATE: u8 = 19;
     pub const FREE_STATE: u8 = 20;
@@ -91,36 +91,88 @@ const FUNCTIONS: &[&str] = &[
     "fmi2GetDirectionalDerivative",
     "fmi2SetDebugLogging",
     "fmi2FreeInstance",
+    "fmi3InstantiateCoSimulation",
+    "fmi3EnterConfigurationMode",
+    "fmi3ExitConfigurationMode",
+    "fmi3EnterInitializationMode",
+    "fmi3ExitInitializationMode",
+    "fmi3Terminate",
+    "fmi3Reset",
+    "fmi3GetFloat64",
+    "fmi3SetFloat64",
+    "fmi3GetFloat32",
+    "fmi3SetFloat32",
+    "fmi3GetInt8",
+    "fmi3SetInt8",
+    "fmi3GetUInt8",
+    "fmi3SetUInt8",
+    "fmi3GetInt16",
+    "fmi3SetInt16",
+    "fmi3GetUInt16",
+    "fmi3SetUInt16",
+    "fmi3GetInt32",
+    "fmi3SetInt32",
+    "fmi3GetUInt32",
+    "fmi3SetUInt32",
+    "fmi3GetInt64",
+    "fmi3SetInt64",
+    "fmi3GetUInt64",
+    "fmi3SetUInt64",
+    "fmi3GetBoolean",
+    "fmi3SetBoolean",
+    "fmi3GetString",
+    "fmi3SetString",
+    "fmi3GetBinary",
+    "fmi3SetBinary",
+    "fmi3GetOutputDerivatives",
+    "fmi3DoStep",
+    "fmi3GetFMUState",
+    "fmi3SetFMUState",
+    "fmi3FreeFMUState",
+    "fmi3SerializedFMUStateSize",
+    "fmi3SerializeFMUState",
+    "fmi3DeserializeFMUState",
+    "fmi3SetDebugLogging",
+    "fmi3FreeInstance",
 ];
 
-/// The FMI function operation `code` calls, for errors and time-outs.
-pub fn op_function(code: u8) -> &'static str {
-    match code {
-        op::INSTANTIATE => "fmi2Instantiate",
-        op::SETUP_EXPERIMENT => "fmi2SetupExperiment",
-        op::ENTER_INITIALIZATION_MODE => "fmi2EnterInitializationMode",
-        op::EXIT_INITIALIZATION_MODE => "fmi2ExitInitializationMode",
-        op::TERMINATE => "fmi2Terminate",
-        op::RESET => "fmi2Reset",
-        op::SET_REAL => "fmi2SetReal",
-        op::GET_REAL => "fmi2GetReal",
-        op::SET_INTEGER => "fmi2SetInteger",
-        op::SET_BOOLEAN => "fmi2SetBoolean",
-        op::SET_STRING => "fmi2SetString",
-        op::SET_REAL_INPUT_DERIVATIVES => "fmi2SetRealInputDerivatives",
-        op::GET_REAL_OUTPUT_DERIVATIVES => "fmi2GetRealOutputDerivatives",
-        op::DO_STEP => "fmi2DoStep",
-        op::GET_BOOLEAN_STATUS => "fmi2GetBooleanStatus",
-        op::GET_REAL_STATUS => "fmi2GetRealStatus",
-        op::SAVE_STATE => "fmi2GetFMUstate",
-        op::RESTORE_STATE => "fmi2SetFMUstate",
-        op::FREE_STATE => "fmi2FreeFMUstate",
-        op::SERIALIZE_STATE => "fmi2SerializeFMUstate",
-        op::DESERIALIZE_STATE => "fmi2DeSerializeFMUstate",
-        op::FREE_INSTANCE => "fmi2FreeInstance",
-        op::GET_INTEGER => "fmi2GetInteger",
-        op::GET_BOOLEAN => "fmi2GetBoolean",
-        _ => "an FMI function",
+/// The FMI function operation `code` calls on an instance of FMI `standard`,
+/// for errors and time-outs.
+pub fn op_function(code: u8, standard: FmiStandard) -> &'static str {
+    let (fmi2, fmi3) = match code {
+        op::INSTANTIATE => ("fmi2Instantiate", "fmi3InstantiateCoSimulation"),
+        // FMI 3.0 passes the experiment to fmi3EnterInitializationMode.
+        op::SETUP_EXPERIMENT => ("fmi2SetupExperiment", "fmi3EnterInitializationMode"),
+        op::ENTER_INITIALIZATION_MODE => {
+            ("fmi2EnterInitializationMode", "fmi3EnterInitializationMode")
+        }
+        op::EXIT_INITIALIZATION_MODE => {
+            ("fmi2ExitInitializationMode", "fmi3ExitInitializationMode")
+        }
+        op::TERMINATE => ("fmi2Terminate", "fmi3Terminate"),
+        op::RESET => ("fmi2Reset", "fmi3Reset"),
+        op::SET_REAL | op::SET_INPUTS => ("fmi2SetReal", "fmi3SetFloat64"),
+        op::GET_REAL => ("fmi2GetReal", "fmi3GetFloat64"),
+        op::SET_INTEGER => ("fmi2SetInteger", "fmi3SetInt32"),
+        op::GET_INTEGER => ("fmi2GetInteger", "fmi3GetInt32"),
+        op::SET_BOOLEAN => ("fmi2SetBoolean", "fmi3SetBoolean"),
+        op::GET_BOOLEAN => ("fmi2GetBoolean", "fmi3GetBoolean"),
+        op::SET_STRING => ("fmi2SetString", "fmi3SetString"),
+        op::GET_REAL_OUTPUT_DERIVATIVES => {
+            ("fmi2GetRealOutputDerivatives", "fmi3GetOutputDerivatives")
+        }
+        op::DO_STEP => ("fmi2DoStep", "fmi3DoStep"),
+        op::SAVE_STATE => ("fmi2GetFMUstate", "fmi3GetFMUState"),
+        op::RESTORE_STATE => ("fmi2SetFMUstate", "fmi3SetFMUState"),
+        op::FREE_STATE => ("fmi2FreeFMUstate", "fmi3FreeFMUState"),
+        op::SERIALIZE_STATE => ("fmi2SerializeFMUstate", "fmi3SerializeFMUState"),
+        op::DESERIALIZE_STATE => ("fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"),
+        op::FREE_INSTANCE => ("fmi2FreeInstance", "fmi3FreeInstance"),
+        _ => ("an FMI function", "an FMI function"),
+    };
+    match standard {
+        FmiStandard::Fmi2 => fmi2,
+        FmiStandard::Fmi3 => fmi3,
     }
 }
 
@@ -279,6 +331,18 @@ impl Out {
                     .str(instance)
                     .f64(*time)
                     .f64(*seconds);
+            }
+            Error::TerminationRequested {
+                instance,
+                time,
+                how,
+            } => {
+                return self
+                    .u8(8)
+                    .str(instance)
+                    .f64(*time)
+                    .bool(how.is_some())
+                    .str(how.as_deref().unwrap_or(""));
             }
             other => {
                 return self.u8(6).str(&crate::error::one_line(&other.to_string()));
@@ -468,6 +532,17 @@ impl<'a> In<'a> {
                 seconds: self.f64()?,
             });
         }
+        if kind == 8 {
+            let instance = self.str()?.to_string();
+            let time = self.f64()?;
+            let has_how = self.bool()?;
+            let how = self.str()?;
+            return Ok(Error::TerminationRequested {
+                instance,
+                time,
+                how: has_how.then(|| how.to_string()),
+            });
+        }
         let function = function_name(self.str()?);
         let instance = self.str()?.to_string();
         let time = self.f64()?;
@@ -557,5 +632,86 @@ mod tests {
         // A truncated frame is an error, not a panic.
         assert!(receive(&mut &wire[..wire.len() - 1], &mut buf).is_err());
         assert!(!receive(&mut &wire[..0], &mut buf).unwrap());
+    }
+
+    /// A time-out and a request to end the simulation cross as themselves,
+    /// with an FMI 3.0 function name kept as the static name.
+    #[test]
+    fn time_outs_and_termination_requests_cross_as_such() {
+        let sent = [
+            Error::CallTimeout {
+                function: op_function(op::DO_STEP, FmiStandard::Fmi3),
+                instance: "mass2".into(),
+                time: 0.25,
+                seconds: 0.5,
+            },
+            Error::TerminationRequested {
+                instance: "stair".into(),
+                time: 9.0,
+                how: Some("fmi3DoStep returned terminateSimulation = true".into()),
+            },
+            Error::TerminationRequested {
+                instance: "osc".into(),
+                time: 1.5,
+                how: None,
+            },
+        ];
+        let mut out = Out::default();
+        out.start(ERR);
+        for e in &sent {
+            out.error(e);
+        }
+        let mut wire = Vec::new();
+        out.send(&mut wire).unwrap();
+        let mut buf = Vec::new();
+        assert!(receive(&mut wire.as_slice(), &mut buf).unwrap());
+        let mut input = In::new(&buf[1..]);
+        for e in &sent {
+            let received = input.error("other").unwrap();
+            assert_eq!(format!("{received:?}"), format!("{e:?}"));
+        }
+        assert!(input.is_empty());
+    }
+
+    /// Every operation's FMI function, of either standard, is one the
+    /// protocol can report (an error keeps its name when it crosses).
+    #[test]
+    fn every_operation_names_a_function_the_protocol_knows() {
+        let codes = [
+            op::INSTANTIATE,
+            op::SETUP_EXPERIMENT,
+            op::ENTER_INITIALIZATION_MODE,
+            op::EXIT_INITIALIZATION_MODE,
+            op::TERMINATE,
+            op::RESET,
+            op::SET_REAL,
+            op::GET_REAL,
+            op::SET_INTEGER,
+            op::SET_BOOLEAN,
+            op::SET_STRING,
+            op::SET_INPUTS,
+            op::GET_REAL_OUTPUT_DERIVATIVES,
+            op::DO_STEP,
+            op::SAVE_STATE,
+            op::RESTORE_STATE,
+            op::FREE_STATE,
+            op::SERIALIZE_STATE,
+            op::DESERIALIZE_STATE,
+            op::FREE_INSTANCE,
+            op::GET_INTEGER,
+            op::GET_BOOLEAN,
+        ];
+        for standard in [FmiStandard::Fmi2, FmiStandard::Fmi3] {
+            let prefix = match standard {
+                FmiStandard::Fmi2 => "fmi2",
+                FmiStandard::Fmi3 => "fmi3",
+            };
+            for code in codes {
+                let name = op_function(code, standard);
+                assert!(name.starts_with(prefix), "{code}: {name}");
+                assert_eq!(function_name(name), name, "{code}");
+            }
+        }
+        assert_eq!(op_function(op::DO_STEP, FmiStandard::Fmi3), "fmi3DoStep");
     }
 }

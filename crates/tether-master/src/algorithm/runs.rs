@@ -61,7 +61,7 @@ pub(crate) fn predictor_runs(
     predicted: &mut [Vec<f64>],
 ) -> Result<(), MasterError> {
     for (slave, out) in slaves.iter_mut().zip(predicted) {
-        slave.predict_and_perturb(polys, (t, h), out, Vec::new())?;
+        slave.predict_and_perturb(polys, (t, h), out, std::iter::empty())?;
     }
     Ok(())
 }
@@ -111,8 +111,7 @@ impl PerturbedRuns for Sequential {
                 .zip(perturbed)
                 .zip(outputs.iter_mut())
                 .filter(|((members, _), _)| members.contains(&s))
-                .map(|((_, polys), outputs)| (&polys[..], &mut outputs[s][..]))
-                .collect();
+                .map(|((_, polys), outputs)| (&polys[..], &mut outputs[s][..]));
             slave.predict_and_perturb(polys, (t, h), out, runs)?;
         }
         Ok(())

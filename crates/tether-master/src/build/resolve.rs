@@ -494,6 +494,15 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                 capability,
                 needed_by,
             };
+        let fmi3 = slave.fmu.model_description().standard == tether_fmi::FmiStandard::Fmi3;
+        if order > 0 && fmi3 {
+            // FMI 3.0 has no input derivatives: a polynomial input goes through
+            // intermediate update, which Tether does not offer yet.
+            return Err(capability(
+                "input derivatives (FMI 3.0 has none, and Tether does not pass a polynomial input by intermediate update yet)",
+                format!("coupling polynomials of degree k = {order} (use order = 0)"),
+            ));
+        }
         if order > 0 && !slave.can_interpolate_inputs {
             return Err(capability(
                 "canInterpolateInputs",
