@@ -376,7 +376,10 @@ impl Simulation {
     /// steps: one accepted step, after as many rejected tries as it takes).
     pub fn step(&mut self) -> Result<(), MasterError> {
         let n = self.stats.macro_steps;
-        if let Some(h) = self.recheck.filter(|_| n > 0 && n.is_multiple_of(RECHECK_EVERY)) {
+        if let Some(h) = self
+            .recheck
+            .filter(|_| n > 0 && n.is_multiple_of(RECHECK_EVERY))
+        {
             // The rollback self-check again, from the accepted point: a
             // restore that stopped being exact after the first check.
             self.system
