@@ -17,7 +17,10 @@ mod oscillator {
                 Some(errors(&rec)),
                 stats.corrections as f64 / stats.macro_steps as f64,
             ),
-            Err(MasterError::Diverged { .. }) => (None, f64::NAN),
+            // Unstable: stopped as diverged, or as a constraint broken first.
+            Err(MasterError::Diverged { .. } | MasterError::ResidualLimit { .. }) => {
+                (None, f64::NAN)
+            }
             Err(e) => panic!("{e}"),
         }
     }

@@ -131,6 +131,11 @@ fn slider_crank_energy_drift_shrinks_with_k() {
             Err(MasterError::Diverged { time, quantity, .. }) => {
                 println!("slider-crank {label}, k = 1: diverged at t = {time} ({quantity})")
             }
+            Err(MasterError::ResidualLimit {
+                time, condition, ..
+            }) => {
+                println!("slider-crank {label}, k = 1: {condition} broken at t = {time}")
+            }
             other => panic!(
                 "{label} with k = 1 was expected to diverge: {:?}",
                 other.map(|_| ())

@@ -567,6 +567,15 @@ class Master:
         for name, v, limit in zip(self.columns, self.row, self.limits):
             if not math.isfinite(v) or abs(v) > limit:
                 raise RunError(f"coupling diverged at t = {self.time()}: {name} = {v:e} (limit {limit:.1e})")
+        # Then the residuals (the last columns) against `residual_limit`.
+        limit = self.system.residual_limit
+        n = sum(1 for r in self.rows if r.residual is not None)
+        if limit is None or n == 0:
+            return
+        for name, g in zip(self.columns[-n:], self.row[-n:]):
+            if abs(g) > limit:
+                raise RunError(f"constraint broken at t = {self.time()}: |{name}| = {abs(g):e} "
+                               f"exceeds residual_limit = {limit:e}")
 
 
 class Control:

@@ -82,6 +82,10 @@ class VariableSpec:
     initial: float | None  # None: "consistent"
 
 
+# Tether's default `[coupling] residual_limit`.
+RESIDUAL_LIMIT = 1.0
+
+
 @dataclass
 class System:
     name: str | None
@@ -94,6 +98,9 @@ class System:
     epsilon: float = 1e-5
     max_condition: float = 1e12
     divergence_factor: float = 1e6
+    # `[coupling] residual_limit`: a larger |g| at an accepted point fails the
+    # run (None: "off"); Tether's default (docs/system-file.md).
+    residual_limit: float | None = RESIDUAL_LIMIT
     iterations: int = 1
     iteration_tol: float = 1e-10
     jacobian: str = "every_step"
@@ -251,6 +258,13 @@ def _from_document(doc):
     system.epsilon = coupling.take("epsilon", "number", 1e-5)
     system.max_condition = coupling.take("max_condition", "number", 1e12)
     system.divergence_factor = coupling.take("divergence_factor", "number", 1e6)
+    limit = coupling.take("residual_limit", "any", RESIDUAL_LIMIT)
+    if limit == "off":
+        system.residual_limit = None
+    elif _is_number(limit) and math.isfinite(limit) and limit > 0:
+        system.residual_limit = float(limit)
+    else:
+        raise RunError(f"[coupling]: `residual_limit` must be a finite number > 0 or \"off\", found {limit!r}")
     system.iterations = coupling.take("iterations", "integer", 1)
     system.iteration_tol = coupling.take("iteration_tol", "number", 1e-10)
     system.jacobian = coupling.take("jacobian", "string", "every_step")

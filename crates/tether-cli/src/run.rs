@@ -225,13 +225,16 @@ pub fn main(args: Args) -> Result<()> {
                 out.display()
             )))
         }
-        // A divergence of a formulation known to be unstable says so again.
-        Err(e @ tether_master::MasterError::Diverged { .. }) if unstable.is_some() => Err(
-            anyhow::anyhow!("{e}; {}", unstable.unwrap_or_default()).context(format!(
+        // A divergence (or a constraint it broke) of a formulation known to be
+        // unstable says so again.
+        Err(
+            e @ (tether_master::MasterError::Diverged { .. }
+            | tether_master::MasterError::ResidualLimit { .. }),
+        ) if unstable.is_some() => Err(anyhow::anyhow!("{e}; {}", unstable.unwrap_or_default())
+            .context(format!(
                 "run stopped; results up to t = {last} kept in {} (marked incomplete)",
                 out.display()
-            )),
-        ),
+            ))),
         Err(e) => Err(anyhow::Error::new(e).context(format!(
             "run stopped; results up to t = {last} kept in {} (marked incomplete)",
             out.display()

@@ -304,27 +304,32 @@ fn a_repeated_step_that_differs_is_caught_at_setup() {
     );
 }
 
+/// `check_rollback = "off"` skips the check: the broken rollback then breaks
+/// the link, which `residual_limit` catches; with both off the run goes on.
 #[test]
 fn check_rollback_off_runs_a_broken_rollback_anyway() {
     let dir = tempfile::tempdir().unwrap();
-    let sys = system_with(
-        dir.path(),
-        ", rollback = 1",
-        INDEX1,
-        "check_rollback = \"off\"",
-        0.01,
-        1e-3,
-    );
+    let off = "check_rollback = \"off\"";
+    let sys = system_with(dir.path(), ", rollback = 1", INDEX1, off, 0.01, 1e-3);
+    let line = error_line(&run(dir.path(), &sys, &[]));
+    assert!(line.contains("constraint broken at t = "), "{line}");
+    let both = "check_rollback = \"off\"\nresidual_limit = \"off\"";
+    let sys = system_with(dir.path(), ", rollback = 1", INDEX1, both, 0.01, 1e-3);
     success(&run(dir.path(), &sys, &[]));
 }
 
 #[test]
 fn every_step_catches_a_rollback_that_breaks_mid_run() {
     let dir = tempfile::tempdir().unwrap();
-    // The rollback breaks from t = 0.05 on: the setup check passes.
+    // The rollback breaks from t = 0.05 on: the setup check passes, the next
+    // check would be at t = 0.1; by default the broken link stops the run.
     let quirk = ", rollback = 1, rollback_after = 0.05";
     let sys = system(dir.path(), quirk, INDEX1, 0.1, 1e-3);
-    success(&run(dir.path(), &sys, &[]));
+    let line = error_line(&run(dir.path(), &sys, &[]));
+    assert!(
+        line.contains("constraint broken at t = 0.064: |link.g| = "),
+        "{line}"
+    );
     let every = "check_rollback = \"every_step\"";
     let sys = system_with(dir.path(), quirk, INDEX1, every, 0.1, 1e-3);
     let line = error_line(&run(dir.path(), &sys, &[]));
@@ -345,9 +350,15 @@ fn the_setup_check_leaves_results_and_per_step_counts_unchanged() {
     let dir = tempfile::tempdir().unwrap();
     let csv = |name: &str| dir.path().join(name);
     let mut results = Vec::new();
-    for (label, mode) in [("setup", "setup"), ("off", "off"), ("every", "every_step")] {
+    // 250 steps: the periodic check (the default) runs at steps 100 and 200.
+    for (label, mode) in [
+        ("setup", "setup"),
+        ("off", "off"),
+        ("every", "every_step"),
+        ("periodic", "periodic"),
+    ] {
         let coupling = format!("check_rollback = \"{mode}\"");
-        let sys = system_with(dir.path(), "", INDEX1, &coupling, 0.05, 1e-3);
+        let sys = system_with(dir.path(), "", INDEX1, &coupling, 0.25, 1e-3);
         let out_csv = csv(&format!("{label}.csv"));
         let out = tether(
             &[
@@ -366,18 +377,20 @@ fn the_setup_check_leaves_results_and_per_step_counts_unchanged() {
         "the check changes no result bit"
     );
     assert_eq!(results[0].0, results[2].0, "nor does every_step");
+    assert_eq!(results[0].0, results[3].0, "nor does the periodic check");
     let counts = |text: &str| {
         text.lines()
             .filter(|l| l.trim_start().starts_with("mass"))
             .map(str::to_string)
             .collect::<Vec<_>>()
     };
-    // 50 steps, 2 instances, one unknown: 3 doStep, 1 getFMUstate, 2
-    // setFMUstate per instance and step; the setup check is not counted.
+    // 250 steps, 2 instances, one unknown: 3 doStep, 1 getFMUstate, 2
+    // setFMUstate per instance and step; the checks are not counted.
     assert_eq!(counts(&results[0].1), counts(&results[1].1));
+    assert_eq!(counts(&results[0].1), counts(&results[3].1));
     assert!(
         counts(&results[0].1)[0]
-            .contains("doStep:       150   getFMUstate:       50   setFMUstate:      100"),
+            .contains("doStep:       750   getFMUstate:      250   setFMUstate:      500"),
         "{}",
         results[0].1
     );
@@ -521,15 +534,26 @@ fn the_summary_prints_max_g_and_warns_above_the_threshold() {
     assert!(text.contains("\n  max |g|:  link.g 2.88e-5\n"), "{text}");
     assert!(!text.contains("warning"), "{text}");
     let mut args = base.to_vec();
-    args.extend(["--method", "explicit", "--mu", "1", "--step", "0.1"]);
+    args.extend(["--method", "explicit", "--mu", "1", "--step", "0.02"]);
     let text = success(&tether(&args, dir.path()));
     assert!(
         text.contains(
-            "  max |g|:  link.g 1.75e0\n  warning: max |link.g| = 1.75e0 exceeds \
+            "  max |g|:  link.g 5.82e-1\n  warning: max |link.g| = 5.82e-1 exceeds \
              residual_warning = 1e-3: the constraint is not held to that accuracy (a smaller \
              step, another index or method, or a larger residual_warning)\n"
         ),
         "{text}"
+    );
+    // Beyond residual_limit (default 1) the constraint is broken: the run fails.
+    let mut args = base.to_vec();
+    args.extend(["--method", "explicit", "--mu", "1", "--step", "0.1"]);
+    let line = error_line(&tether(&args, dir.path()));
+    assert!(
+        line.contains(
+            "(marked incomplete): constraint broken at t = 0.1: |link.g| = 1.7481069035190133e0 \
+             exceeds residual_limit = 1e0 (in the condition's units)"
+        ),
+        "{line}"
     );
 }
 

@@ -299,7 +299,8 @@ fn a_log_flood_is_rate_limited() {
 fn the_log_rate_limit_is_switchable() {
     let s = Scratch::new();
     // 3 warnings per fmi2DoStep from t = 0.5: 500 macro steps, each with a
-    // predictor, a perturbed and a corrector run.
+    // predictor, a perturbed and a corrector run, and the two steps of the
+    // periodic rollback check at t = 0.5, 0.6, 0.7, 0.8 and 0.9.
     let flood = system(s.path(), 6, ", flood = 3");
     let shown = |extra: &[&str]| {
         let out = s.run(&flood, "out.csv", extra);
@@ -318,7 +319,11 @@ fn the_log_rate_limit_is_switchable() {
         // 5 a second: a run of a few seconds shows a few tens at most.
         assert!((5..500).contains(&count), "{count} shown, {isolate:?}");
         let (count, text) = shown(&with(&["--fmu-log-limit", "off"]));
-        assert_eq!(count, 3 * 3 * 500, "every message with off, {isolate:?}");
+        assert_eq!(
+            count,
+            3 * (3 * 500 + 2 * 5),
+            "every message with off, {isolate:?}"
+        );
         assert!(!text.contains("suppressed"), "{isolate:?}");
     }
     let out = s.run(&flood, "out.csv", &["--fmu-log-limit", "many"]);
@@ -741,6 +746,215 @@ fn a_signal_during_the_open_ends_the_run() {
             "error: interrupted by Ctrl-C or a termination signal before the run started (nothing was written)\n"
         );
         assert!(!s.path().join("out.csv").exists());
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    }
+}
+
+/// A run of the faults FMU in `mode` with `extra` parameters and `coupling`
+/// keys added to `[coupling]`, quiet, with its summary in `summary.json`, in
+/// process or isolated: the process, the results and the summary.
+fn broken_rollback_run(
+    (mode, extra): (i32, &str),
+    coupling: &str,
+    isolate: bool,
+) -> (Scratch, Output, Csv, serde_json::Value) {
+    broken_rollback_run_with((mode, extra), coupling, isolate, &[])
+}
+
+/// [`broken_rollback_run`] with more command-line `flags`.
+fn broken_rollback_run_with(
+    (mode, extra): (i32, &str),
+    coupling: &str,
+    isolate: bool,
+    more: &[&str],
+) -> (Scratch, Output, Csv, serde_json::Value) {
+    let s = Scratch::new();
+    let sys = system(s.path(), mode, extra);
+    let text = std::fs::read_to_string(&sys).unwrap();
+    assert!(text.contains("[coupling]\n"), "example changed");
+    let text = text.replace("[coupling]\n", &format!("[coupling]\n{coupling}\n"));
+    std::fs::write(&sys, text).unwrap();
+    let mut flags = vec!["--quiet", "--summary-json", "summary.json"];
+    if isolate {
+        flags.push("--isolate");
+    }
+    flags.extend_from_slice(more);
+    let out = s.run(&sys, "out.csv", &flags);
+    let csv = read_csv(&s.path().join("out.csv"));
+    let summary = std::fs::read_to_string(s.path().join("summary.json")).unwrap();
+    let summary = serde_json::from_str(&summary).unwrap();
+    (s, out, csv, summary)
+}
+
+/// The one error line of a failed quiet run: exit code 1, the line names
+/// where the results are and ends with the trailer's reason; every row up to
+/// `until` is kept, one per macro step; nothing is left in TMPDIR.
+fn failed_with(s: &Scratch, out: &Output, csv: &Csv, until: f64) -> String {
+    let text = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert_eq!(text.lines().count(), 1, "one line: {text}");
+    let prefix = format!(
+        "error: run stopped; results up to t = {until} kept in out.csv (marked incomplete): "
+    );
+    let reason = text
+        .trim_end()
+        .strip_prefix(&prefix)
+        .unwrap_or_else(|| panic!("{text}"));
+    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+    assert_eq!(last_time(csv), until);
+    assert_eq!(
+        csv.rows.len() as f64 - 1.0,
+        (until * 1000.0).round(),
+        "every row"
+    );
+    for (n, row) in csv.rows.iter().enumerate() {
+        assert_eq!(row[0], n as f64 * 1e-3, "row {n}");
+    }
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    reason.to_string()
+}
+
+/// The faults FMU's rollback breaks at t = 0.5, after the setup check: from
+/// then on `fmi2SetFMUstate` does nothing (mode 12), or restores the outputs
+/// but leaves an offset the next step adds (mode 13, not caught by reading
+/// the outputs back). The default check, repeated every 100 macro steps,
+/// repeats the step from T = 0.5 after a restore and stops the run there:
+/// exit code 1, one line with `-q`, every row up to t = 0.5, the trailer, and
+/// `completed: false` with the failure in the summary; in process and isolated.
+#[test]
+fn a_rollback_that_breaks_mid_run_fails_the_run() {
+    let cases = [
+        (
+            12,
+            "after fmi2SetFMUstate back to t = 0.5, output 'x' reads ",
+        ),
+        (
+            13,
+            "the step from t = 0.5 to 0.501 repeated after fmi2SetFMUstate with the same \
+             inputs gives output 'x' = ",
+        ),
+    ];
+    for (mode, what) in cases {
+        for isolate in [false, true] {
+            let (s, out, csv, summary) = broken_rollback_run((mode, ""), "", isolate);
+            let reason = failed_with(&s, &out, &csv, 0.5);
+            let head = format!("rollback self-check failed for instance 'mass2': {what}");
+            assert!(reason.starts_with(&head), "mode {mode}: {reason}");
+            assert_eq!(summary["completed"], false);
+            assert_eq!(summary["stop_reason"], reason.as_str());
+            let failure = &summary["failure"];
+            assert_eq!(failure["kind"], "rollback_check", "{failure}");
+            assert_eq!(failure["instance"], "mass2");
+            assert_eq!(failure["variable"], "x");
+            assert_eq!(failure["message"], reason.as_str());
+            assert_eq!(summary["end_time"], 0.5);
+        }
+    }
+}
+
+/// With the check only at setup (`check_rollback = "setup"`), the same broken
+/// rollbacks break the link: the residual limit stops the run at the first
+/// accepted point whose |link.g| exceeds it, naming the condition, its value
+/// and the limit, in the trailer, the error line and the summary; in process
+/// and isolated. The default limit (1) catches both; mode 13 with an offset of
+/// up to 0.2 (with the default 0.01 the link drifts by up to 0.77: broken, but
+/// within the limit, which is a bound, not an accuracy; the periodic check
+/// catches that one).
+#[test]
+fn a_broken_constraint_fails_the_run_with_check_rollback_setup() {
+    for (mode, extra) in [(12, ""), (13, ", noise = 0.2")] {
+        let mut ends = Vec::new();
+        for isolate in [false, true] {
+            let setup = "check_rollback = \"setup\"";
+            let (s, out, csv, summary) = broken_rollback_run((mode, extra), setup, isolate);
+            let until = summary["end_time"].as_f64().expect("rows");
+            assert!(
+                until >= 0.5,
+                "mode {mode}: the link held up to t = 0.5: {until}"
+            );
+            let reason = failed_with(&s, &out, &csv, until);
+            let failure = &summary["failure"];
+            assert_eq!(failure["kind"], "residual_limit", "{failure}");
+            assert_eq!(failure["column"], "link.g");
+            assert_eq!(failure["limit"], 1.0);
+            assert_eq!(summary["residual_limit"], 1.0);
+            let time = failure["time"].as_f64().unwrap();
+            let value = failure["value"].as_f64().unwrap();
+            assert!(
+                value > 1.0 && (time - until - 1e-3).abs() < 1e-12,
+                "{failure}"
+            );
+            assert_eq!(
+                reason,
+                format!(
+                    "constraint broken at t = {time}: |link.g| = {value:e} exceeds \
+                     residual_limit = 1e0 (in the condition's units); the coupling does not \
+                     hold it: a smaller step, another index or method \
+                     (docs/paper-reproduction.md), check_rollback = \"every_step\" to test \
+                     the FMUs' rollback at every restore, or residual_limit = \"off\" to run \
+                     anyway"
+                )
+            );
+            // Every row kept is within the limit.
+            let g = csv.rows[0].len() - 1;
+            assert!(csv.rows.iter().all(|r| r[g].abs() <= 1.0));
+            assert_eq!(summary["completed"], false);
+            ends.push(std::fs::read(s.path().join("out.csv")).unwrap());
+        }
+        assert!(ends[0] == ends[1], "mode {mode}: isolated results differ");
+    }
+}
+
+/// `residual_limit = "off"` runs the broken rollback to the end (exit code 0):
+/// the limit, not something else, stopped the runs above.
+#[test]
+fn residual_limit_off_runs_a_broken_constraint_anyway() {
+    let keys = "check_rollback = \"setup\"\nresidual_limit = \"off\"";
+    let (_s, out, csv, summary) = broken_rollback_run((12, ""), keys, false);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!((csv.rows.len(), csv.trailer), (1001, None));
+    assert_eq!(summary["completed"], true);
+    assert_eq!(summary["residual_limit"], serde_json::Value::Null);
+    assert_eq!(summary["failure"], serde_json::Value::Null);
+    let g = summary["max_abs_g"]["link.g"].as_f64().unwrap();
+    assert!(g > 1.0, "max |link.g| = {g}");
+}
+
+/// Adaptive steps: a rejected step rolls every instance back, and the check
+/// runs from there before the smaller step. With the residual limit off and
+/// fewer than 100 accepted steps before the fault, that check, not the
+/// periodic one nor the limit, stops the run at the rejected step's start,
+/// just before t = 0.5; in process and isolated.
+#[test]
+fn a_rollback_that_breaks_mid_run_is_caught_after_a_rejected_step() {
+    for isolate in [false, true] {
+        let off = "residual_limit = \"off\"";
+        let adaptive = ["--step-rtol", "1e-3"];
+        let (s, out, csv, summary) = broken_rollback_run_with((12, ""), off, isolate, &adaptive);
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        assert_eq!(text.lines().count(), 1, "one line: {text}");
+        let failure = &summary["failure"];
+        assert_eq!(failure["kind"], "rollback_check", "{failure}");
+        assert_eq!(failure["instance"], "mass2");
+        let accepted = summary["adaptive"]["accepted"].as_u64().unwrap();
+        assert!(summary["adaptive"]["rejected"].as_u64().unwrap() > 0);
+        assert!(
+            accepted % 100 != 0,
+            "not the periodic check: {accepted} steps"
+        );
+        let end = summary["end_time"].as_f64().unwrap();
+        assert!((0.45..0.5).contains(&end), "{end}");
+        assert_eq!(last_time(&csv), end);
+        assert_eq!(csv.rows.len() as u64, accepted + 1, "every row");
+        let reason = failure["message"].as_str().unwrap();
+        assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+        assert!(
+            reason.contains(&format!(
+                "after fmi2SetFMUstate back to t = {end}, output 'x'"
+            )),
+            "{reason}"
+        );
         assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
     }
 }

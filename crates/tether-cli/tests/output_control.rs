@@ -209,9 +209,9 @@ fn integer_and_boolean_outputs_are_recorded_as_numbers() {
     let faults = tether_fmu_build::workspace_fmu("faults").expect("package the faults FMU");
     let edited = tether_tests::faulty::edited_fmu(&faults, dir.path(), "typed", |xml| {
         xml.replace(
-            "name=\"flood\" valueReference=\"10\" description=\"Mode 6: warnings logged by each \
+            "name=\"flood\" valueReference=\"11\" description=\"Mode 6: warnings logged by each \
              fmi2DoStep from `at` on\" causality=\"parameter\" variability=\"fixed\"",
-            "name=\"flood\" valueReference=\"10\" description=\"Mode 6\" causality=\"output\" \
+            "name=\"flood\" valueReference=\"11\" description=\"Mode 6\" causality=\"output\" \
              variability=\"discrete\"",
         )
         .replace(
@@ -297,6 +297,8 @@ fn the_json_summary_says_how_the_run_went() {
     assert!(g > 0.0 && g < 1e-4, "{g}");
     assert!(text.contains(&format!("link.g {g:.2e}")), "{text}");
     assert_eq!(json["residual_warning"], 1e-3);
+    assert_eq!(json["residual_limit"], 1.0);
+    assert!(json["failure"].is_null());
     assert!(json["termination"].is_null());
 
     // A run that fails: the summary is still written, with the reason.
@@ -328,6 +330,10 @@ fn the_json_summary_says_how_the_run_went() {
     );
     let end = json["end_time"].as_f64().unwrap();
     assert!((0.49..0.5).contains(&end), "{end}");
+    let failure = &json["failure"];
+    assert_eq!(failure["kind"], "non_finite_output", "{failure}");
+    assert_eq!(failure["instance"], "mass1");
+    assert_eq!(failure["message"], reason);
 }
 
 /// `run --plot` labels the axes with the units the FMUs declare; ticks at

@@ -6,7 +6,7 @@ use crate::declaration::{Parameters, Slot};
 use crate::input::{eval_all, InputJet};
 use crate::integrate;
 use crate::machine::{Call, MachineState};
-use crate::model::Model;
+use crate::model::{Model, Restore};
 use crate::snapshot::{Shape, Snapshot};
 use crate::xml::LOG_CATEGORIES;
 
@@ -384,6 +384,10 @@ impl<M: Model> Instance<M> {
         // precomputed) unless the state brings other parameter values, or is from
         // before the end of initialization, where building the model also sets the
         // initial states.
+        let how = self
+            .model
+            .as_ref()
+            .map_or(Restore::Exact, |m| m.restore(self.data.time));
         let d = &self.data;
         let same_model = d.reals == snapshot.reals
             && d.integers == snapshot.integers
@@ -392,7 +396,13 @@ impl<M: Model> Instance<M> {
                 snapshot.machine,
                 MachineState::Instantiated | MachineState::InitializationMode
             );
-        self.data.clone_from(snapshot);
+        if how == Restore::KeepStates {
+            let states = std::mem::take(&mut self.data.states);
+            self.data.clone_from(snapshot);
+            self.data.states = states;
+        } else {
+            self.data.clone_from(snapshot);
+        }
         if !same_model {
             self.model = None;
         }

@@ -70,4 +70,21 @@ pub trait Model: Sized + 'static {
     fn terminate(&self, _t: f64, _x: &[f64]) -> bool {
         false
     }
+
+    /// What `fmi2SetFMUstate` does at the instance's time `t` (before the
+    /// restore). The default, and every model but a fault-injecting one:
+    /// [`Restore::Exact`].
+    fn restore(&self, _t: f64) -> Restore {
+        Restore::Exact
+    }
+}
+
+/// How `fmi2SetFMUstate` restores a state ([`Model::restore`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Restore {
+    /// The saved state, exactly (FMI 2.0).
+    Exact,
+    /// Everything but the continuous states, which stay as they are: the
+    /// call returns fmi2OK, the time goes back, the states do not.
+    KeepStates,
 }

@@ -178,6 +178,19 @@ pub enum MasterError {
         /// The bound it crossed.
         limit: f64,
     },
+    /// A constraint or joint condition is broken: its |g| at an accepted point
+    /// exceeds `[coupling] residual_limit`.
+    #[error("constraint broken at t = {time}: |{condition}| = {value:e} exceeds residual_limit = {limit:e} (in the condition's units); the coupling does not hold it: a smaller step, another index or method (docs/paper-reproduction.md), check_rollback = \"every_step\" to test the FMUs' rollback at every restore, or residual_limit = \"off\" to run anyway")]
+    ResidualLimit {
+        /// Time of the accepted point.
+        time: f64,
+        /// The residual's column name, e.g. `link.g`.
+        condition: String,
+        /// Its magnitude |g|.
+        value: f64,
+        /// `[coupling] residual_limit`.
+        limit: f64,
+    },
     /// Adaptive steps: a step at the smallest allowed size still misses the
     /// tolerances.
     #[error("adaptive macro steps: at t = {time} the local error estimate is {error:.2} times the tolerance even at h_min = {h_min:e}; loosen [step_control] rtol/atol or lower h_min, or, if smaller steps do not lower the estimate, choose a method, index and k stable for this system (docs/paper-reproduction.md)")]
@@ -296,6 +309,44 @@ pub enum MasterError {
 }
 
 impl MasterError {
+    /// The error's kind, as the run summary's `failure.kind` names it
+    /// (docs/run-summary.md): the variant's name in snake case.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            MasterError::SystemFile { .. } => "system_file",
+            MasterError::InvalidOutput(_) => "invalid_output",
+            MasterError::InvalidParameter { .. } => "invalid_parameter",
+            MasterError::InvalidTimeSpan { .. } => "invalid_time_span",
+            MasterError::Expression { .. } => "expression",
+            MasterError::UnknownInstance { .. } => "unknown_instance",
+            MasterError::UnknownVariable(_) => "unknown_variable",
+            MasterError::UnknownMarker { .. } => "unknown_marker",
+            MasterError::IncompleteMarker { .. } => "incomplete_marker",
+            MasterError::MissingPort { .. } => "missing_port",
+            MasterError::Joint { .. } => "joint",
+            MasterError::WrongVariable { .. } => "wrong_variable",
+            MasterError::MissingLevel { .. } => "missing_level",
+            MasterError::MissingCapability { .. } => "missing_capability",
+            MasterError::StartValue { .. } => "start_value",
+            MasterError::SingularJacobian { .. } => "singular_jacobian",
+            MasterError::Diverged { .. } => "diverged",
+            MasterError::ResidualLimit { .. } => "residual_limit",
+            MasterError::StepSizeTooSmall { .. } => "step_size_too_small",
+            MasterError::Interrupted { .. } => "interrupted",
+            MasterError::TerminationRequested { .. } => "termination_requested",
+            MasterError::RollbackCheck { .. } => "rollback_check",
+            MasterError::DivergedOutput { .. } => "diverged_output",
+            MasterError::NonFiniteOutput { .. } => "non_finite_output",
+            MasterError::Fmi(_) => "fmi",
+            MasterError::InstanceFmu { .. } => "instance_fmu",
+            MasterError::DrivesCancel { .. } => "drives_cancel",
+            MasterError::Recording(_) => "recording",
+            MasterError::Thread(_) => "thread",
+            MasterError::Connection { .. } => "connection",
+            MasterError::Worker => "worker",
+        }
+    }
+
     /// A singular Jacobian met while correcting a macro step of size `h`
     /// names H in its message; other errors pass unchanged.
     pub(crate) fn in_step(mut self, h: f64) -> MasterError {

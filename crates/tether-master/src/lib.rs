@@ -40,19 +40,21 @@ mod step_control;
 pub use error::{MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
-pub use simulation::{ExportKind, ExportVariable, MasterState, Simulation, SystemState};
+pub use simulation::{
+    ExportKind, ExportVariable, MasterState, Simulation, SystemState, RECHECK_EVERY,
+};
 pub use single::{SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun};
 pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use spec::Parallel;
 pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
     Experiment, ExportLink, ExportSource, ExportSpec, InitialMultiplier, InstanceSpec,
-    JacobianMode, JointInitial, JointSpec, OutputSpec, SignalScheme, SignalSettings, StartValue,
-    SystemSpec,
+    JacobianMode, JointInitial, JointSpec, OutputSpec, ResidualLimit, SignalScheme, SignalSettings,
+    StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
 pub use stats::{
-    AdaptiveStats, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, Termination,
+    AdaptiveStats, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, Termination,
     SUMMARY_SCHEMA,
 };
 pub use step_control::StepControl;

@@ -121,6 +121,91 @@ pub struct RunStats {
     /// The threshold above which the summary warns about a residual
     /// (`[coupling] residual_warning`).
     pub residual_warning: f64,
+    /// The |g| beyond which the run fails (`[coupling] residual_limit`;
+    /// `None`: off).
+    pub residual_limit: Option<f64>,
+    /// The error that stopped the run, if any.
+    pub failure: Option<Failure>,
+}
+
+/// The error that stopped a run, for the run summary's `failure` entry
+/// (docs/run-summary.md).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Failure {
+    /// [`MasterError::kind`](crate::MasterError::kind): `residual_limit`,
+    /// `rollback_check`, `diverged`, `fmi`, …
+    pub kind: &'static str,
+    /// The one-line error (the run's `stop_reason`).
+    pub message: String,
+    /// `residual_limit` and `diverged`: the time of the accepted point.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time: Option<f64>,
+    /// `residual_limit`: the condition's `.g` column; `diverged`: the
+    /// quantity's column.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub column: Option<String>,
+    /// `residual_limit`: |g|; `diverged`: the value.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub value: Option<f64>,
+    /// `residual_limit`: `[coupling] residual_limit`; `diverged`: the bound
+    /// crossed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub limit: Option<f64>,
+    /// `rollback_check`, `diverged_output`, `non_finite_output`: the instance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instance: Option<String>,
+    /// `rollback_check`, `diverged_output`, `non_finite_output`: its output.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub variable: Option<String>,
+}
+
+impl From<&crate::MasterError> for Failure {
+    fn from(error: &crate::MasterError) -> Failure {
+        use crate::MasterError as E;
+        let mut failure = Failure {
+            kind: error.kind(),
+            message: error.to_string(),
+            time: None,
+            column: None,
+            value: None,
+            limit: None,
+            instance: None,
+            variable: None,
+        };
+        match error {
+            E::ResidualLimit {
+                time,
+                condition: column,
+                value,
+                limit,
+            }
+            | E::Diverged {
+                time,
+                quantity: column,
+                value,
+                limit,
+            } => {
+                failure.time = Some(*time);
+                failure.column = Some(column.clone());
+                failure.value = Some(*value);
+                failure.limit = Some(*limit);
+            }
+            E::RollbackCheck {
+                instance, variable, ..
+            }
+            | E::DivergedOutput {
+                instance, variable, ..
+            }
+            | E::NonFiniteOutput {
+                instance, variable, ..
+            } => {
+                failure.instance = Some(instance.clone());
+                failure.variable = Some(variable.clone());
+            }
+            _ => {}
+        }
+        failure
+    }
 }
 
 /// What the step-size controller of adaptive macro steps did.
@@ -491,6 +576,8 @@ struct Summary<'a> {
     wall_time: f64,
     max_abs_g: Ordered<'a, Option<f64>>,
     residual_warning: f64,
+    residual_limit: Option<f64>,
+    failure: Option<&'a Failure>,
     instances: Ordered<'a, Calls>,
     times: Times,
     parallel: Parallel,
@@ -529,6 +616,8 @@ impl Serialize for RunStats {
                     .collect(),
             ),
             residual_warning: self.residual_warning,
+            residual_limit: self.residual_limit,
+            failure: self.failure.as_ref(),
             instances: Ordered(
                 self.instances
                     .iter()

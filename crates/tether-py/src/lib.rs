@@ -52,6 +52,7 @@ fn kind_of(e: &MasterError) -> &'static str {
         | MasterError::InstanceFmu { .. }
         | MasterError::MissingCapability { .. } => "fmu",
         MasterError::Diverged { .. }
+        | MasterError::ResidualLimit { .. }
         | MasterError::DivergedOutput { .. }
         | MasterError::SingularJacobian { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
@@ -528,7 +529,10 @@ fn run(
             let stats = stats_dict(py, &stats, &message(&e))?.into_any().unbind();
             let partial = rows.into_py(py, stats)?;
             match (&e, unstable) {
-                (MasterError::Diverged { .. }, Some(advice)) => Err(failure(
+                (
+                    MasterError::Diverged { .. } | MasterError::ResidualLimit { .. },
+                    Some(advice),
+                ) => Err(failure(
                     kind_of(&e),
                     format!("{}; {advice}", message(&e)),
                     Some(partial),
@@ -708,7 +712,11 @@ impl PySimulation {
                 let text = message(&e);
                 self.failed = Some(text.clone());
                 // A formulation known to be unstable says so again, as the CLI does.
-                if let (MasterError::Diverged { .. }, Some(advice)) = (&e, &self.unstable) {
+                if let (
+                    MasterError::Diverged { .. } | MasterError::ResidualLimit { .. },
+                    Some(advice),
+                ) = (&e, &self.unstable)
+                {
                     return Err(failure(kind_of(&e), format!("{text}; {advice}"), None));
                 }
                 return Err(master_failure(&e, None));

@@ -1,6 +1,9 @@
 //! The faults themselves, struck from inside `fmi2DoStep`.
 
+use std::cell::Cell;
 use std::time::Duration;
+
+use tether_fmu_kit::model::Restore;
 
 /// What goes wrong from `at` on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -17,6 +20,8 @@ pub enum Mode {
     ForkedChildExits,
     ForkedChildLingersThenSegfault,
     Helper,
+    RestoreIgnored,
+    RestoreNoisy,
 }
 
 impl Mode {
@@ -35,18 +40,30 @@ impl Mode {
             9 => Mode::ForkedChildExits,
             10 => Mode::ForkedChildLingersThenSegfault,
             11 => Mode::Helper,
+            12 => Mode::RestoreIgnored,
+            13 => Mode::RestoreNoisy,
             _ => return None,
         })
     }
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Fault {
     pub mode: Mode,
     pub at: f64,
     pub delay: f64,
     pub pause: f64,
     pub flood: u32,
+    /// Mode 13: the largest offset the step after a restore adds to every
+    /// state.
+    pub noise: f64,
+    /// Mode 13: the state of the pseudo-random offsets (xorshift64), so that
+    /// two steps from one restored state end in different states.
+    pub seed: Cell<u64>,
+    /// Mode 13: the offset the next `fmi2DoStep` adds to the states before it
+    /// integrates (0 when no restore came before it): state that
+    /// `fmi2SetFMUstate` leaves behind, invisible in the outputs until then.
+    pub pending: Cell<f64>,
 }
 
 impl Fault {
@@ -87,7 +104,42 @@ impl Fault {
                 crate::crash()
             }
             Mode::Helper if t < self.at + 0.5 * h => crate::start_helper(),
-            Mode::Helper => {}
+            Mode::Helper | Mode::RestoreIgnored | Mode::RestoreNoisy => {}
+        }
+    }
+
+    /// What `fmi2SetFMUstate` does when the instance is at `t`: mode 12
+    /// restores the time but not the states once `t` reaches `at` (after the master's setup check); mode
+    /// 13 restores the states exactly (the outputs read back are those of the
+    /// saved state) but leaves an offset behind for the next step
+    /// ([`Fault::disturb`]): the step repeated after a restore is not the same.
+    pub fn restore(&self, t: f64) -> Restore {
+        if t < self.at {
+            return Restore::Exact;
+        }
+        match self.mode {
+            Mode::RestoreIgnored => Restore::KeepStates,
+            Mode::RestoreNoisy => {
+                let mut x = self.seed.get();
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                self.seed.set(x);
+                // Uniform in [-noise, noise].
+                let unit = (x >> 11) as f64 / (1u64 << 53) as f64;
+                self.pending.set(self.noise * (2.0 * unit - 1.0));
+                Restore::Exact
+            }
+            _ => Restore::Exact,
+        }
+    }
+
+    /// Runs at the start of every `fmi2DoStep`, on the states it starts from:
+    /// mode 13 adds the offset its last restore left behind.
+    pub fn disturb(&self, x: &mut [f64]) {
+        let e = self.pending.replace(0.0);
+        if e != 0.0 {
+            x.iter_mut().for_each(|x| *x += e);
         }
     }
 }

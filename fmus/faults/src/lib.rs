@@ -21,6 +21,8 @@
 //! | 9 | `fork()`, and the child calls `exit(0)` (the parent waits for it and goes on; only in the step from `at`) |
 //! | 10 | `fork()`, the child sleeps 15 s (holding every descriptor), the parent segfaults |
 //! | 11 | a helper process (`system("sleep 15 &")`), and the run goes on (only in the step from `at`) |
+//! | 12 | `fmi2SetFMUstate` restores the time but not the states (and returns fmi2OK) once the instance is at `at` or later |
+//! | 13 | once the instance is at `at` or later, `fmi2SetFMUstate` restores the states (the outputs read back are the saved ones) but the next `fmi2DoStep` starts from them plus a pseudo-random offset in [-`noise`, `noise`] (default 0.01): a restore that is not deterministic |
 //!
 //! `delay` (seconds, default 0) makes every `fmi2DoStep` sleep, in every mode, to
 //! slow a run down to wall-clock scales.

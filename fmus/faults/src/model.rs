@@ -2,6 +2,7 @@
 //! force input F alone, plus the fault parameters.
 
 use oscillator_model::{declare, Oscillator};
+use tether_fmu_kit::model::Restore;
 use tether_fmu_kit::{Declaration, InputJet, Integer, Model, Parameters, Real};
 
 use crate::fault::{Fault, Mode};
@@ -33,10 +34,14 @@ impl Model for Faults {
                 .min(0.0)
                 .unit("s")
                 .description("Mode 7: wall time each fmi2DoStep from `at` on sleeps"),
+            Real::new("noise", 0.01)
+                .min(0.0)
+                .unit("m")
+                .description("Mode 13: the largest offset the fmi2DoStep after each fmi2SetFMUstate from `at` on adds to the states"),
         ],
         integer_parameters: &[
-            Integer::new("mode", 0).min(0).max(11).description(
-                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process",
+            Integer::new("mode", 0).min(0).max(13).description(
+                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise",
             ),
             Integer::new("flood", 2000)
                 .min(0)
@@ -71,6 +76,9 @@ impl Model for Faults {
                 pause: p.real("pause")?,
                 flood: u32::try_from(flood)
                     .map_err(|_| format!("flood must be >= 0, got {flood}"))?,
+                noise: p.real("noise")?,
+                seed: std::cell::Cell::new(0x9E37_79B9_7F4A_7C15),
+                pending: std::cell::Cell::new(0.0),
             },
         })
     }
@@ -98,10 +106,15 @@ impl Model for Faults {
         self.oscillator.output_derivatives_under(x, u[0], order, dy)
     }
 
-    /// Called first by every fmi2DoStep: the fault happens here, then the step
-    /// itself (exact, or `false` for Dop853) as the oscillator's.
+    /// Called first by every fmi2DoStep: the fault happens here (and mode 13's
+    /// offset after a restore), then the step itself (exact, or `false` for Dop853) as the oscillator's.
     fn exact_step(&self, t: f64, h: f64, x: &mut [f64], u: &[InputJet]) -> bool {
         self.fault.strike(t, h);
+        self.fault.disturb(x);
         self.oscillator.exact_step_under(h, x, u[0])
+    }
+
+    fn restore(&self, t: f64) -> Restore {
+        self.fault.restore(t)
     }
 }

@@ -1,6 +1,7 @@
 //! The run's health: divergence limits on every column, the largest
 //! residuals so far, and the error that stopped the run.
 
+use crate::stats::Failure;
 use crate::MasterError;
 
 /// What is checked at every accepted point, and how the run failed.
@@ -14,8 +15,10 @@ pub(crate) struct Health {
     max_residuals: Vec<f64>,
     /// `[coupling] residual_warning`, for the summary.
     residual_warning: f64,
+    /// `[coupling] residual_limit`: a larger |g| fails the run.
+    residual_limit: Option<f64>,
     /// The error that stopped the run, if any.
-    failure: Option<String>,
+    failure: Option<Failure>,
 }
 
 impl Health {
@@ -26,6 +29,7 @@ impl Health {
         first_residual: usize,
         factor: f64,
         residual_warning: f64,
+        residual_limit: Option<f64>,
     ) -> Health {
         Health {
             limits: initial
@@ -35,12 +39,14 @@ impl Health {
             first_residual,
             max_residuals: vec![0.0; initial.len() - first_residual],
             residual_warning,
+            residual_limit,
             failure: None,
         }
     }
 
     /// Take in an accepted point's row: track the residuals, and an error
-    /// naming the first value that is not finite or beyond its limit.
+    /// naming the first value that is not finite or beyond its divergence
+    /// limit, else the first residual beyond `residual_limit`.
     pub(crate) fn check(
         &mut self,
         row: &[f64],
@@ -55,13 +61,27 @@ impl Health {
             *max = max.max(residual.abs());
         }
         let beyond = |(&value, &limit): (&f64, &f64)| value.is_nan() || value.abs() > limit;
-        match row.iter().zip(&self.limits).position(beyond) {
-            None => Ok(()),
-            Some(i) => Err(MasterError::Diverged {
+        if let Some(i) = row.iter().zip(&self.limits).position(beyond) {
+            return Err(MasterError::Diverged {
                 time,
                 quantity: columns[i].clone(),
                 value: row[i],
                 limit: self.limits[i],
+            });
+        }
+        let Some(limit) = self.residual_limit else {
+            return Ok(());
+        };
+        match row[self.first_residual..]
+            .iter()
+            .position(|g| g.abs() > limit)
+        {
+            None => Ok(()),
+            Some(i) => Err(MasterError::ResidualLimit {
+                time,
+                condition: columns[self.first_residual + i].clone(),
+                value: row[self.first_residual + i].abs(),
+                limit,
             }),
         }
     }
@@ -83,12 +103,17 @@ impl Health {
     }
 
     /// The error that stopped the run, if any.
-    pub(crate) fn failure(&self) -> Option<&str> {
-        self.failure.as_deref()
+    pub(crate) fn failure(&self) -> Option<&Failure> {
+        self.failure.as_ref()
+    }
+
+    /// `[coupling] residual_limit`.
+    pub(crate) fn residual_limit(&self) -> Option<f64> {
+        self.residual_limit
     }
 
     /// Note the error that stopped the run.
     pub(crate) fn fail(&mut self, error: &MasterError) {
-        self.failure = Some(error.to_string());
+        self.failure = Some(Failure::from(error));
     }
 }

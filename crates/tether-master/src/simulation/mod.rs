@@ -54,7 +54,18 @@ pub struct Simulation {
     /// and the clock reading that ended the last macro step's phases, for
     /// the recording phase that follows it in [`Simulation::run`].
     timing: Timing,
+    /// `check_rollback = "periodic"` (and `"every_step"`): the step size H of
+    /// the rollback self-check repeated every [`RECHECK_EVERY`] accepted macro
+    /// steps and after every rejected step.
+    recheck: Option<f64>,
 }
+
+/// With `check_rollback = "periodic"` (the default), the rollback self-check
+/// is repeated from the accepted point every this many macro steps (and after
+/// every rejected adaptive step): per coupled instance two `fmi2DoStep` more
+/// every 100 macro steps, where the predictor/corrector makes at least 3 a
+/// step (docs/reliability.md).
+pub const RECHECK_EVERY: u64 = 100;
 
 /// Phase timing of the macro steps.
 #[derive(Default)]
@@ -216,6 +227,7 @@ impl Simulation {
             first_residual,
             settings.divergence_factor,
             settings.residual_warning,
+            settings.residual_limit.0,
         );
         health.check(row.all_values(), row.all_columns(), exp.start)?;
         stats.method = method;
@@ -234,6 +246,12 @@ impl Simulation {
             stats,
             notes,
             timing: Timing::default(),
+            recheck: (method.needs_rollback()
+                && matches!(
+                    settings.check_rollback,
+                    CheckRollback::Periodic | CheckRollback::EveryStep
+                ))
+            .then_some(exp.step),
         })
     }
 
@@ -336,7 +354,7 @@ impl Simulation {
         let failure = self.health.failure();
         stats.completed = failure.is_none() && (self.finished() || stats.termination.is_some());
         stats.stop_reason = match (failure, &stats.termination) {
-            (Some(e), _) => e.to_string(),
+            (Some(e), _) => e.message.clone(),
             (None, Some(end)) => format!(
                 "instance '{}' requested the end of the simulation at t = {}",
                 end.instance, end.requested_at
@@ -346,6 +364,8 @@ impl Simulation {
         };
         stats.residuals = self.health.residuals(self.row.all_columns()).collect();
         stats.residual_warning = self.health.residual_warning();
+        stats.residual_limit = self.health.residual_limit();
+        stats.failure = failure.cloned();
         stats.adaptive = self.grid.adaptive_stats();
         stats.instances = self.system.slaves.iter().map(Slave::counters).collect();
         self.method.report(&mut stats);
@@ -355,16 +375,34 @@ impl Simulation {
     /// Advance one macro step with the configured method (with adaptive
     /// steps: one accepted step, after as many rejected tries as it takes).
     pub fn step(&mut self) -> Result<(), MasterError> {
+        let n = self.stats.macro_steps;
+        if let Some(h) = self
+            .recheck
+            .filter(|_| n > 0 && n.is_multiple_of(RECHECK_EVERY))
+        {
+            // The rollback self-check again, from the accepted point: a
+            // restore that stopped being exact after the first check.
+            self.system
+                .check_rollback(self.grid.time(), h)
+                .inspect_err(|e| self.health.fail(e))?;
+        }
         let mut lap = Lap::start(self.timing.on);
         let (signals, method, system) = (&mut self.signals, &mut self.method, &mut self.system);
         let stats = &mut self.stats;
+        let recheck = self.recheck.is_some();
         let stepped = self.grid.advance(|at| {
-            step_at(
+            let error = step_at(
                 (&mut *signals, &mut *method, &mut *system),
                 at,
                 stats,
                 &mut lap,
-            )
+            )?;
+            if recheck && error.is_some_and(|e| e.is_nan() || e > 1.0) {
+                // A rejected step rolled every instance back: the rollback
+                // self-check from there, before the smaller step.
+                system.check_rollback(at.t, at.h)?;
+            }
+            Ok(error)
         });
         if let Err(e) = stepped {
             // The instance whose output diverged first in the step, if any.

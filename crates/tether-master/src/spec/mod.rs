@@ -210,12 +210,17 @@ pub struct CouplingSettings {
     /// Perturbed runs on other threads: auto, on or off (docs/algorithm.md).
     pub parallel: Parallel,
     /// When the rollback of the instances the method rolls back is checked
-    /// (docs/reliability.md): at setup (the default), also after every
+    /// (docs/reliability.md): at setup, at setup and every
+    /// [`crate::RECHECK_EVERY`] macro steps (the default), also after every
     /// restore, or never.
     pub check_rollback: CheckRollback,
     /// The run summary warns when the largest |g| of a constraint or joint
     /// condition over the run exceeds this (in the condition's units).
     pub residual_warning: f64,
+    /// A run whose |g| of a constraint or joint condition exceeds this (in
+    /// the condition's units) at an accepted point fails: the constraint is
+    /// broken (docs/reliability.md). `"off"` disables it.
+    pub residual_limit: ResidualLimit,
     /// Corrections per macro step (1 = the paper): after the corrector run,
     /// g is evaluated again and corrected with the same Jacobian, up to this
     /// many corrections in all (docs/algorithm.md, iterated correction).
@@ -238,14 +243,68 @@ pub enum CheckRollback {
     /// Once, before the first macro step: save, step, restore, compare the
     /// outputs with those at the save, repeat the step and require
     /// bit-identical outputs, restore.
-    #[default]
     Setup,
+    /// The setup check, repeated from the accepted point every
+    /// [`crate::RECHECK_EVERY`] macro steps (the default): a restore that
+    /// stops being exact, or was never deterministic, later in the run.
+    #[default]
+    Periodic,
     /// At setup, and after every restore of a macro step the coupled outputs
     /// are read back and compared with those at the save (one more
     /// `fmi2GetReal` per save and per restore).
     EveryStep,
     /// Never.
     Off,
+}
+
+/// `[coupling] residual_limit`: a number (in the constraint's units), or
+/// `"off"`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResidualLimit(pub Option<f64>);
+
+impl ResidualLimit {
+    /// The default limit, 1 in the condition's units (m, rad, …): three
+    /// times the largest |g| of the paper's convergence runs that complete
+    /// (0.35, Method 1 index 1 with β = 0.2 at H = 1e-2), far above every
+    /// example's (docs/system-file.md).
+    pub const DEFAULT: ResidualLimit = ResidualLimit(Some(1.0));
+}
+
+impl Serialize for ResidualLimit {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self.0 {
+            Some(v) => s.serialize_f64(v),
+            None => s.serialize_str("off"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for ResidualLimit {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = ResidualLimit;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number > 0 or \"off\"")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<ResidualLimit, E> {
+                Ok(ResidualLimit(Some(v)))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<ResidualLimit, E> {
+                Ok(ResidualLimit(Some(v as f64)))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<ResidualLimit, E> {
+                Ok(ResidualLimit(Some(v as f64)))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<ResidualLimit, E> {
+                match v {
+                    "off" => Ok(ResidualLimit(None)),
+                    _ => Err(E::invalid_value(serde::de::Unexpected::Str(v), &self)),
+                }
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
 }
 
 impl Default for CouplingSettings {
@@ -256,8 +315,9 @@ impl Default for CouplingSettings {
             max_condition: 1e12,
             divergence_factor: 1e6,
             parallel: Parallel::Auto,
-            check_rollback: CheckRollback::Setup,
+            check_rollback: CheckRollback::Periodic,
             residual_warning: 1e-3,
+            residual_limit: ResidualLimit::DEFAULT,
             iterations: 1,
             iteration_tol: 1e-10,
             jacobian: JacobianMode::EveryStep,
@@ -571,6 +631,38 @@ mod tests {
             e.starts_with("system file <text>: line 2, column 1: unknown field `sotp`"),
             "{e}"
         );
+    }
+
+    /// `[coupling] residual_limit`: 1 by default, a number > 0, or `"off"`;
+    /// anything else is one error naming the key's line.
+    #[test]
+    fn residual_limit_is_a_positive_number_or_off() {
+        let text = "[experiment]\nstop = 1.0\nstep = 1e-3\n\n[coupling]\n\n[[instance]]\n\
+                    name = \"m\"\nfmu = \"o.fmu\"\n";
+        let with = |value: &str| {
+            let text = text.replace(
+                "[coupling]\n",
+                &format!("[coupling]\nresidual_limit = {value}\n"),
+            );
+            SystemSpec::from_toml(&text).and_then(|s| s.validate().map(|()| s))
+        };
+        let limit = |value: &str| with(value).unwrap().coupling.residual_limit;
+        assert_eq!(
+            SystemSpec::from_toml(text).unwrap().coupling.residual_limit,
+            ResidualLimit(Some(1.0))
+        );
+        assert_eq!(limit("0.25"), ResidualLimit(Some(0.25)));
+        assert_eq!(limit("3"), ResidualLimit(Some(3.0)));
+        assert_eq!(limit("\"off\""), ResidualLimit(None));
+        let e = with("\"of\"").unwrap_err().to_string();
+        assert!(
+            e.starts_with("system file <text>: line 6, column 18: invalid value: string \"of\", expected a number > 0 or \"off\""),
+            "{e}"
+        );
+        for bad in ["0", "-1", "nan", "inf"] {
+            let e = with(bad).unwrap_err().to_string();
+            assert!(e.contains("residual_limit"), "{bad}: {e}");
+        }
     }
 
     /// `*` matches any characters (also none), everything else only itself:

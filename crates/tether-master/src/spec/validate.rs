@@ -145,6 +145,9 @@ impl SystemSpec {
                 "a finite number > 0",
             ));
         }
+        if let Some(l) = c.residual_limit.0.filter(|l| !l.is_finite() || *l <= 0.0) {
+            return Err(param("residual_limit", l, "a finite number > 0 or \"off\""));
+        }
         for i in &self.instances {
             let remote = |key: &str, reason: String| MasterError::SystemFile {
                 path: self.source_name(),
