@@ -12,23 +12,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-const M1: f64 = 1.0;
-const M2: f64 = 2.0;
-const C: f64 = 1000.0;
-const D: f64 = 10.0;
-const V0: f64 = 100.0;
-
-/// Closed form of the coupled oscillator (m = m1 + m2, c = 2C, d = 2D): (x, v, λ).
-fn reference(t: f64) -> (f64, f64, f64) {
-    let (m, c, d) = (M1 + M2, 2.0 * C, 2.0 * D);
-    let delta = d / (2.0 * m);
-    let wd = (c / m - delta * delta).sqrt();
-    let (s, co, e) = ((wd * t).sin(), (wd * t).cos(), (-delta * t).exp());
-    let x = e * V0 / wd * s;
-    let v = e * V0 * (co - delta / wd * s);
-    let lambda = M1 * M2 / (M1 + M2) * ((C / M1 - C / M2) * x + (D / M1 - D / M2) * v);
-    (x, v, lambda)
-}
+// The closed form of the coupled oscillator (m = m1 + m2, c = 2C, d = 2D) and
+// its parameters, as the master's tests use them.
+use tether_tests::oscillator::{reference, C, D, M1, M2, V0};
 
 /// The Python FMU and the libpython it needs, built once; `None` (skip) without
 /// Python or pythonfmu3 outside CI.

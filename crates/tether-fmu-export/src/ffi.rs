@@ -13,8 +13,9 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::ptr;
 
 use tether_fmu_kit::ffi::{
-    EnvironmentLogger, Fmi2Boolean as B, Fmi2CallbackFunctions, Fmi2Component as C,
-    Fmi2FmuState as S, Fmi2Status as St, Fmi2String as Str, Fmi2ValueReference as Vr,
+    null, slice, slice_mut, EnvironmentLogger, Fmi2Boolean as B, Fmi2CallbackFunctions,
+    Fmi2Component as C, Fmi2FmuState as S, Fmi2Status as St, Fmi2String as Str,
+    Fmi2ValueReference as Vr,
 };
 use tether_fmu_kit::instance::{Failure, Outcome, Status};
 use tether_fmu_kit::machine::{Call, MachineState};
@@ -168,36 +169,6 @@ unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Outcome) -> St
     };
     let status = catch_unwind(AssertUnwindSafe(|| component.fail(call, failure)));
     status.unwrap_or(Status::Fatal as St)
-}
-
-/// Borrows `n` items at `p`; `None` if `p` is null while `n > 0`.
-///
-/// # Safety
-/// A non-null `p` must point at `n` valid items that outlive the borrow.
-unsafe fn slice<'a, T>(p: *const T, n: usize) -> Option<&'a [T]> {
-    match (p.is_null(), n) {
-        (_, 0) => Some(&[]),
-        (true, _) => None,
-        // SAFETY: non-null, and the caller guarantees n valid items.
-        (false, _) => Some(unsafe { std::slice::from_raw_parts(p, n) }),
-    }
-}
-
-/// Mutable [`slice`].
-///
-/// # Safety
-/// As [`slice`], and the items must not be aliased during the borrow.
-unsafe fn slice_mut<'a, T>(p: *mut T, n: usize) -> Option<&'a mut [T]> {
-    match (p.is_null(), n) {
-        (_, 0) => Some(&mut []),
-        (true, _) => None,
-        // SAFETY: non-null, and the caller guarantees n valid unaliased items.
-        (false, _) => Some(unsafe { std::slice::from_raw_parts_mut(p, n) }),
-    }
-}
-
-fn null(what: &str) -> Failure {
-    Failure::usage(format!("{what} is a null pointer"))
 }
 
 /// # Safety

@@ -126,7 +126,7 @@ const FATAL: Fmi2Status = Status::Fatal as Fmi2Status;
 ///
 /// # Safety
 /// A non-null `p` must point at `n` valid, initialized items that outlive the borrow.
-unsafe fn slice<'a, T>(p: *const T, n: usize) -> Option<&'a [T]> {
+pub unsafe fn slice<'a, T>(p: *const T, n: usize) -> Option<&'a [T]> {
     match (p.is_null(), n) {
         (_, 0) => Some(&[]),
         (true, _) => None,
@@ -139,7 +139,7 @@ unsafe fn slice<'a, T>(p: *const T, n: usize) -> Option<&'a [T]> {
 ///
 /// # Safety
 /// As [`slice`], and the items must not be aliased during the borrow.
-unsafe fn slice_mut<'a, T>(p: *mut T, n: usize) -> Option<&'a mut [T]> {
+pub unsafe fn slice_mut<'a, T>(p: *mut T, n: usize) -> Option<&'a mut [T]> {
     match (p.is_null(), n) {
         (_, 0) => Some(&mut []),
         (true, _) => None,
@@ -148,7 +148,8 @@ unsafe fn slice_mut<'a, T>(p: *mut T, n: usize) -> Option<&'a mut [T]> {
     }
 }
 
-fn null(what: &str) -> Failure {
+/// The failure of a call given a null pointer for `what`.
+pub fn null(what: &str) -> Failure {
     Failure::usage(format!("{what} is a null pointer"))
 }
 
