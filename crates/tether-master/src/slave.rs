@@ -93,6 +93,8 @@ pub struct Slave {
     /// (emptied; see [`recycle`]).
     planned_buf: Vec<Planned<'static>>,
     request_buf: Vec<RunRequest<'static>>,
+    /// The rollback check's four readings of the coupled outputs.
+    check_buf: Vec<f64>,
     /// The degree k of the unknowns' polynomials (`finalize`).
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
@@ -329,6 +331,7 @@ impl Slave {
             batch_buf: Vec::new(),
             planned_buf: Vec::new(),
             request_buf: Vec::new(),
+            check_buf: Vec::new(),
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
@@ -507,23 +510,32 @@ impl Slave {
         t: f64,
         h: f64,
     ) -> Result<(), MasterError> {
-        let counters = self.counters.clone();
+        // The counts as they were (the names are not copied: the periodic
+        // check allocates nothing after the first).
+        let mut counters = InstanceCounters {
+            name: String::new(),
+            model: String::new(),
+            ..self.counters
+        };
         let trips = self.backend.round_trips();
         let n = self.coupled_len();
-        let (mut at_save, mut first, mut back, mut second) =
-            (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let mut buf = std::mem::take(&mut self.check_buf);
+        buf.resize(4 * n, 0.0);
+        let (at_save, rest) = buf.split_at_mut(n);
+        let (first, rest) = rest.split_at_mut(n);
+        let (back, second) = rest.split_at_mut(n);
         self.backend.save(CHECK)?;
-        self.read_coupled(&mut at_save, Run::Rollback)?;
+        self.read_coupled(at_save, Run::Rollback)?;
         self.apply_inputs(polys)?;
         self.do_step(t, h)?;
-        self.read_coupled(&mut first, Run::Rollback)?;
+        self.read_coupled(first, Run::Rollback)?;
         self.backend.restore(CHECK)?;
-        self.read_coupled(&mut back, Run::Rollback)?;
-        self.compare_restored(&at_save, &back, t)?;
+        self.read_coupled(back, Run::Rollback)?;
+        self.compare_restored(at_save, back, t)?;
         self.apply_inputs(polys)?;
         self.do_step(t, h)?;
-        self.read_coupled(&mut second, Run::Rollback)?;
-        if let Some(i) = first_difference(&first, &second) {
+        self.read_coupled(second, Run::Rollback)?;
+        if let Some(i) = first_difference(first, second) {
             let variable = self.coupled_name(i);
             return Err(MasterError::RollbackCheck {
                 instance: self.name.clone(),
@@ -538,8 +550,11 @@ impl Slave {
                 variable,
             });
         }
+        self.check_buf = buf;
         self.backend.restore(CHECK)?;
         self.backend.free(CHECK)?;
+        counters.name = std::mem::take(&mut self.counters.name);
+        counters.model = std::mem::take(&mut self.counters.model);
         self.counters = counters;
         self.check_trips += self.backend.round_trips() - trips;
         Ok(())

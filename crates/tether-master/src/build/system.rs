@@ -31,6 +31,8 @@ pub(crate) struct System {
     pub epsilon: f64,
     /// Largest condition number a linear solve accepts (`coupling.max_condition`).
     pub max_condition: f64,
+    /// The rollback check's polynomials (the unknowns held), reused.
+    check_polys: Vec<Taylor>,
 }
 
 impl System {
@@ -105,6 +107,7 @@ impl System {
             touched,
             epsilon: spec.coupling.epsilon,
             max_condition: spec.coupling.max_condition,
+            check_polys: Vec::new(),
         })
     }
 
@@ -134,17 +137,17 @@ impl System {
     /// an unknown drives), from the current state with the unknowns u_N held
     /// constant over [t, t + h]; each is left in its current state.
     pub fn check_rollback(&mut self, t: f64, h: f64) -> Result<(), MasterError> {
-        let polys: Vec<Taylor> = self
-            .history
-            .iter()
-            .map(|u| Taylor {
-                value: u[0],
-                ..Taylor::default()
-            })
-            .collect();
+        // The unknowns held at their values (buffer kept between checks).
+        let mut polys = std::mem::take(&mut self.check_polys);
+        polys.clear();
+        polys.extend(self.history.iter().map(|u| Taylor {
+            value: u[0],
+            ..Taylor::default()
+        }));
         for slave in self.slaves.iter_mut().filter(|s| s.is_coupled()) {
             slave.check_rollback(&polys, t, h)?;
         }
+        self.check_polys = polys;
         Ok(())
     }
 
