@@ -350,10 +350,15 @@ class System:
         parameters: Optional[Mapping[str, ParameterValue]] = None,
         isolation: Optional[str] = None,
         call_timeout: Optional[float] = None,
+        host: Optional[str] = None,
+        token_file: Optional[PathLike] = None,
+        fmu_on_host: Optional[str] = None,
     ) -> "System":
         """An FMU instance named ``name`` (the column prefix) with start values;
         ``isolation="process"`` runs it in a host process of its own and
-        ``call_timeout`` (seconds) bounds each FMI call (docs/reliability.md)."""
+        ``call_timeout`` (seconds) bounds each FMI call (docs/reliability.md).
+        ``host="tcp://ADDR:PORT"`` with ``token_file`` runs it on a ``tether
+        host`` (docs/remote.md); ``fmu_on_host`` names an FMU already there."""
         inst: Dict[str, Any] = {"name": name, "fmu": os.path.abspath(os.fspath(fmu))}
         if parameters:
             inst["parameters"] = dict(parameters)
@@ -361,6 +366,12 @@ class System:
             inst["isolation"] = isolation
         if call_timeout is not None:
             inst["call_timeout"] = float(call_timeout)
+        if host is not None:
+            inst["host"] = host
+        if token_file is not None:
+            inst["token_file"] = os.path.abspath(os.fspath(token_file))
+        if fmu_on_host is not None:
+            inst["fmu_on_host"] = fmu_on_host
         self._data["instance"].append(inst)
         return self
 
