@@ -27,18 +27,31 @@ def pair(oscillator_fmu, **mass2):
     )
 
 
-def test_an_instance_on_a_remote_host_runs_bit_for_bit(tmp_path, tether_bin, oscillator_fmu):
-    token = tmp_path / "host.token"
-    token.write_text(secrets.token_hex(32))
-    os.chmod(token, 0o600)
+def token_file(path):
+    """A token file only its owner may read."""
+    path.write_text(secrets.token_hex(32))
+    os.chmod(path, 0o600)
+    return path
+
+
+def start_host(tether_bin, token):
+    """A `tether host` on a free port of 127.0.0.1: the process and its address."""
     host = subprocess.Popen(
         [str(tether_bin), "host", "--listen", "127.0.0.1:0", "--token-file", str(token)],
         stderr=subprocess.PIPE, text=True)
+    line = host.stderr.readline()
+    found = re.search(r"listening on (127\.0\.0\.1:\d+)", line)
+    if not found:
+        host.kill()
+        raise AssertionError(line)
+    return host, f"tcp://{found.group(1)}"
+
+
+def test_an_instance_on_a_remote_host_runs_bit_for_bit(tmp_path, tether_bin, oscillator_fmu):
+    token = token_file(tmp_path / "host.token")
+    host, address = start_host(tether_bin, token)
     try:
-        line = host.stderr.readline()
-        found = re.search(r"listening on 127\.0\.0\.1:(\d+)", line)
-        assert found, line
-        remote = pair(oscillator_fmu, host=f"tcp://127.0.0.1:{found.group(1)}", token_file=token)
+        remote = pair(oscillator_fmu, host=address, token_file=token)
         assert 'host = "tcp://127.0.0.1:' in remote.to_toml()
         a = tether.run(pair(oscillator_fmu))
         b = tether.run(remote)
@@ -50,16 +63,9 @@ def test_an_instance_on_a_remote_host_runs_bit_for_bit(tmp_path, tether_bin, osc
 
 
 def test_a_wrong_token_is_one_clear_error(tmp_path, tether_bin, oscillator_fmu):
-    token, wrong = tmp_path / "host.token", tmp_path / "wrong.token"
-    for path in (token, wrong):
-        path.write_text(secrets.token_hex(32))
-        os.chmod(path, 0o600)
-    host = subprocess.Popen(
-        [str(tether_bin), "host", "--listen", "127.0.0.1:0", "--token-file", str(token)],
-        stderr=subprocess.PIPE, text=True)
+    host, address = start_host(tether_bin, token_file(tmp_path / "host.token"))
     try:
-        port = re.search(r":(\d+) ", host.stderr.readline()).group(1)
-        system = pair(oscillator_fmu, host=f"tcp://127.0.0.1:{port}", token_file=wrong)
+        system = pair(oscillator_fmu, host=address, token_file=token_file(tmp_path / "wrong.token"))
         try:
             tether.run(system)
         except tether.TetherError as e:
