@@ -1,24 +1,12 @@
 //! `tether simulate` and `fmpy.simulate_fmu` give the same trajectory for the
 //! oscillator: the same FMU driven by two independent FMI hosts.
 
+mod common;
+
 use std::ffi::OsStr;
-use std::path::Path;
 use std::process::Command;
 
-fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::to_string)
-        .collect();
-    let rows = lines
-        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
-        .collect();
-    (header, rows)
-}
+use common::read_csv;
 
 #[test]
 fn tether_simulate_matches_fmpy_simulate_fmu() {

@@ -660,16 +660,25 @@ fn a_call_past_its_time_out_ends_the_run() {
         .replace("delay = 0.002,", "mode = 7, pause = 2.0,");
     std::fs::write(&sys, text).unwrap();
     let out = run(dir.path(), &sys, "out.csv", &[]);
-    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
-    let reason = "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.25 s; its host process was killed";
+    stopped_at_0_5(
+        dir.path(),
+        &out,
+        "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.25 s; its host process was killed",
+    );
+    host.wait_clean();
+}
+
+/// The run ended with exit 1 and `error` after t = 0.5: the one error line,
+/// every row up to 0.5 in out.csv and the trailer naming it.
+fn stopped_at_0_5(dir: &Path, out: &Output, reason: &str) {
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(out));
     assert_eq!(
-        last_line(&out),
+        last_line(out),
         format!("error: run stopped; results up to t = 0.5 kept in out.csv (marked incomplete): {reason}")
     );
-    let (rows, trailer) = rows_and_trailer(&dir.path().join("out.csv"));
+    let (rows, trailer) = rows_and_trailer(&dir.join("out.csv"));
     assert_eq!(rows, 501);
     assert_eq!(trailer, Some(format!("# incomplete: {reason}")));
-    host.wait_clean();
 }
 
 /// An FMU that crashes on the host: its host process ends, the run ends as
@@ -685,18 +694,11 @@ fn a_crashing_fmu_on_the_host_ends_the_run() {
         .replace("delay = 0.002,", "mode = 1,");
     std::fs::write(&sys, text).unwrap();
     let out = run(dir.path(), &sys, "out.csv", &[]);
-    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
     let reason = format!(
         "instance 'mass2': its host process lost the connection to 127.0.0.1:{} during fmi2DoStep at t=0.5",
         host.port
     );
-    assert_eq!(
-        last_line(&out),
-        format!("error: run stopped; results up to t = 0.5 kept in out.csv (marked incomplete): {reason}")
-    );
-    let (rows, trailer) = rows_and_trailer(&dir.path().join("out.csv"));
-    assert_eq!(rows, 501);
-    assert_eq!(trailer, Some(format!("# incomplete: {reason}")));
+    stopped_at_0_5(dir.path(), &out, &reason);
     host.wait_clean();
     same_on(&host, dir.path());
 }

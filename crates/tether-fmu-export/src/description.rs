@@ -5,7 +5,7 @@
 
 use std::fmt::Write;
 
-use tether_fmu_kit::xml::{escape, text_guid, LOG_CATEGORIES};
+use tether_fmu_kit::xml::{escape, text_guid, units_and_log_categories};
 use tether_master::{ExportKind, ExportVariable, SystemSpec};
 
 /// The GUID of an exported system: the hash of its system file's text.
@@ -56,22 +56,7 @@ pub fn model_description(
     let mut units: Vec<&str> = variables.iter().filter_map(|v| v.unit.as_deref()).collect();
     units.sort_unstable();
     units.dedup();
-    if !units.is_empty() {
-        let _ = writeln!(x, "  <UnitDefinitions>");
-        for unit in units {
-            let _ = writeln!(x, r#"    <Unit name="{}"/>"#, escape(unit));
-        }
-        let _ = writeln!(x, "  </UnitDefinitions>");
-    }
-    let _ = writeln!(x, "  <LogCategories>");
-    for (category, description) in LOG_CATEGORIES {
-        let _ = writeln!(
-            x,
-            r#"    <Category name="{category}" description="{}"/>"#,
-            escape(description)
-        );
-    }
-    let _ = writeln!(x, "  </LogCategories>");
+    units_and_log_categories(&mut x, &units);
     let _ = writeln!(
         x,
         r#"  <DefaultExperiment startTime="{:?}" stopTime="{:?}" stepSize="{:?}"/>"#,

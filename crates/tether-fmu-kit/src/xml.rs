@@ -99,6 +99,28 @@ pub fn escape(text: &str) -> String {
 }
 
 /// Shortest text that parses back to the same f64 (Rust's `{:?}` is round-trip exact).
+/// `<UnitDefinitions>` of `units` (each by name; none: no element) and the
+/// `<LogCategories>` of [`LOG_CATEGORIES`], as every model description of
+/// the kit (and the exported system's) has them.
+pub fn units_and_log_categories(x: &mut String, units: &[&str]) {
+    if !units.is_empty() {
+        let _ = writeln!(x, "  <UnitDefinitions>");
+        for unit in units {
+            let _ = writeln!(x, r#"    <Unit name="{}"/>"#, escape(unit));
+        }
+        let _ = writeln!(x, "  </UnitDefinitions>");
+    }
+    let _ = writeln!(x, "  <LogCategories>");
+    for (name, description) in LOG_CATEGORIES {
+        let _ = writeln!(
+            x,
+            r#"    <Category name="{name}" description="{}"/>"#,
+            escape(description)
+        );
+    }
+    let _ = writeln!(x, "  </LogCategories>");
+}
+
 fn real(x: f64) -> String {
     format!("{x:?}")
 }
@@ -135,24 +157,7 @@ fn render(d: &Declaration, guid: &str) -> String {
         d.capabilities.can_get_and_set_fmu_state,
     );
 
-    let units = used_units(d);
-    if !units.is_empty() {
-        let _ = writeln!(x, "  <UnitDefinitions>");
-        for unit in units {
-            let _ = writeln!(x, r#"    <Unit name="{}"/>"#, escape(unit));
-        }
-        let _ = writeln!(x, "  </UnitDefinitions>");
-    }
-
-    let _ = writeln!(x, "  <LogCategories>");
-    for (name, description) in LOG_CATEGORIES {
-        let _ = writeln!(
-            x,
-            r#"    <Category name="{name}" description="{}"/>"#,
-            escape(description)
-        );
-    }
-    let _ = writeln!(x, "  </LogCategories>");
+    units_and_log_categories(&mut x, &used_units(d));
 
     let e = d.default_experiment;
     let _ = writeln!(

@@ -43,3 +43,20 @@ pub fn error_line(out: &Output) -> String {
     assert!(!text.contains("panicked"), "{text}");
     text.lines().last().unwrap_or_default().to_string()
 }
+
+/// A results file's header and rows (every line after the header a row of
+/// numbers: a trailer line fails the parse).
+pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    (header, rows)
+}
