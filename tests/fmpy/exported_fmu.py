@@ -16,6 +16,11 @@ usage: exported_fmu.py FMU OUT.csv
 7. A member's error (mass1 with m = -1 through the exported parameter)
    fails fmi2ExitInitializationMode with fmi2Error, and the member's own
    message reaches the importer's logger of that instance.
+8. Serialized state (canSerializeFMUstate true): the state of check 3 as
+   bytes, read into a fresh state by a fresh instance (made with another
+   parameter value: the exported values are part of the state), repeats the
+   two-step fmi2DoStep of check 3 bit for bit; the bytes cut short, with one
+   byte changed, or empty give fmi2Error with the reason logged.
 Prints one line per check; exit 1 on the first that fails.
 """
 
@@ -76,6 +81,9 @@ for n in range(100):
 if inputs:
     s.setReal(inputs[:1], [50.0])
 state = s.getFMUstate()
+if not md.coSimulation.canSerializeFMUstate:
+    fail("canSerializeFMUstate is false")
+serialized = s.serializeFMUstate(state)
 s.doStep(t, 2 * H)
 first = s.getReal(outs)
 s.setFMUstate(state)
@@ -168,4 +176,41 @@ if not member:
     fail(f"m = -1: the member's message was not forwarded: {messages}")
 print(f"member error: fmi2Error, forwarded: {member[0]}")
 negative.freeInstance()
+
+messages.clear()
+fresh = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                  modelIdentifier=md.coSimulation.modelIdentifier, instanceName="fresh")
+fresh.instantiate(callbacks=callbacks)
+fresh.setupExperiment(startTime=float(md.defaultExperiment.startTime))
+if parameters:
+    fresh.setReal(parameters[:1], [3.0])
+fresh.enterInitializationMode()
+fresh.exitInitializationMode()
+fresh.doStep(0.0, H)
+restored = fresh.deSerializeFMUstate(serialized)
+fresh.setFMUstate(restored)
+fresh.doStep(t, 2 * H)
+third = fresh.getReal(outs)
+if third != first:
+    fail(f"serialized state: the repeated step differs: {first} vs {third}")
+print(f"serialized state: {len(serialized)} bytes, repeated step identical in a fresh instance")
+changed = bytearray(serialized)
+changed[len(changed) // 2] ^= 0x40
+for what, bad in [("cut short", serialized[:-9]), ("one byte changed", bytes(changed)),
+                  ("empty", b"")]:
+    messages.clear()
+    try:
+        fresh.deSerializeFMUstate(bad)
+        fail(f"serialized state {what} was accepted")
+    except FMICallException as e:
+        if e.status != 3:
+            fail(f"serialized state {what}: status {e.status}, expected 3 (fmi2Error)")
+    reason = [m for n, st, m in messages if n == "fresh" and st == 3]
+    if not reason or "not a state of this FMU" not in reason[0]:
+        fail(f"serialized state {what}: no logged reason: {messages}")
+    print(f"serialized state {what}: fmi2Error, logged: {reason[0]}")
+fresh.doStep(t + 2 * H, H)
+fresh.freeFMUstate(restored)
+fresh.terminate()
+fresh.freeInstance()
 shutil.rmtree(unzipped, ignore_errors=True)

@@ -1,7 +1,8 @@
 //! `tether fmu export` (docs/fmu-export.md): the rigid oscillator pair
 //! exported as one FMI 2.0 co-simulation FMU and run by fmpy gives `tether
 //! run`'s numbers bit for bit; fmpy validates it, repeats a step from a
-//! saved state bit for bit, gets fmi2Error for a step off the grid and runs
+//! saved state bit for bit (also through serialized bytes read by a fresh
+//! instance; cut or changed bytes are refused), gets fmi2Error for a step off the grid and runs
 //! two independent instances in one process (tests/fmpy/exported_fmu.py).
 //! Bad `[export]` tables get one clear line each.
 
@@ -46,6 +47,10 @@ fn the_exported_rigid_pair_runs_in_fmpy_bit_for_bit_as_tether_run() {
         "two instances: independent",
         "wrong GUID: NULL, logged",
         "member error: fmi2Error, forwarded",
+        "repeated step identical in a fresh instance",
+        "serialized state cut short: fmi2Error",
+        "serialized state one byte changed: fmi2Error",
+        "serialized state empty: fmi2Error",
     ] {
         assert!(report.contains(check), "{check}: {report}");
     }

@@ -15,7 +15,8 @@ pub fn guid(system_text: &str) -> String {
 
 /// What the model description says besides the variables.
 pub struct Capabilities {
-    /// `canGetAndSetFMUstate`: every member can save and restore its state.
+    /// `canGetAndSetFMUstate` and `canSerializeFMUstate`: every member can
+    /// save, restore and serialize its state.
     pub state: bool,
 }
 
@@ -49,8 +50,9 @@ pub fn model_description(
     );
     let _ = writeln!(
         x,
-        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="false" maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="{}" canSerializeFMUstate="false" providesDirectionalDerivative="false"/>"#,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="false" maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
         escape(name),
+        yes(capabilities.state),
         yes(capabilities.state),
     );
     let mut units: Vec<&str> = variables.iter().filter_map(|v| v.unit.as_deref()).collect();

@@ -480,27 +480,74 @@ unsafe fn unsupported(c: C, call: Call, reason: &str) -> St {
     unsafe { with(c, call, |_| Err(Failure::usage(reason.to_string()))) }
 }
 
-const NO_SERIALIZE: &str = "canSerializeFMUstate is false: the master's state is not serialized";
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: C, s: S, size: *mut usize) -> St {
+    // SAFETY: the FMI contract (see `with`); s and size are checked for null.
+    unsafe {
+        with(c, Call::SerializedFMUstateSize, |e| {
+            if s.is_null() || size.is_null() {
+                return Err(null(if s.is_null() { "FMUstate" } else { "size" }));
+            }
+            // SAFETY (of the enclosing block): s is a state of this FMU's
+            // fmi2GetFMUstate or fmi2DeSerializeFMUstate, size is writable.
+            *size = e.serialize(&mut *s.cast::<Saved>())?.len();
+            Ok(())
+        })
+    }
+}
 
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: C, _s: S, _size: *mut usize) -> St {
-    // SAFETY: see unsupported.
-    unsafe { unsupported(c, Call::SerializedFMUstateSize, NO_SERIALIZE) }
+pub unsafe extern "C" fn fmi2SerializeFMUstate(c: C, s: S, b: *mut c_char, n: usize) -> St {
+    // SAFETY: the FMI contract: n writable bytes at b (checked for null).
+    let buffer = unsafe { slice_mut(b.cast::<u8>(), n) };
+    // SAFETY: the FMI contract (see `with`); s is checked for null.
+    unsafe {
+        with(c, Call::SerializeFMUstate, |e| {
+            if s.is_null() {
+                return Err(null("FMUstate"));
+            }
+            let buffer = buffer.ok_or_else(|| null("serializedState"))?;
+            // SAFETY (of the enclosing block): a state of this FMU.
+            let bytes = e.serialize(&mut *s.cast::<Saved>())?;
+            if buffer.len() < bytes.len() {
+                return Err(Failure::usage(format!(
+                    "a buffer of {} bytes for a state of {} (fmi2SerializedFMUstateSize)",
+                    buffer.len(),
+                    bytes.len()
+                )));
+            }
+            buffer[..bytes.len()].copy_from_slice(bytes);
+            Ok(())
+        })
+    }
 }
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn fmi2SerializeFMUstate(c: C, _s: S, _b: *mut c_char, _n: usize) -> St {
-    // SAFETY: see unsupported.
-    unsafe { unsupported(c, Call::SerializeFMUstate, NO_SERIALIZE) }
-}
+
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
     c: C,
-    _b: *const c_char,
-    _n: usize,
-    _s: *mut S,
+    b: *const c_char,
+    n: usize,
+    s: *mut S,
 ) -> St {
-    // SAFETY: see unsupported.
-    unsafe { unsupported(c, Call::DeSerializeFMUstate, NO_SERIALIZE) }
+    // SAFETY: the FMI contract: n readable bytes at b (checked for null).
+    let bytes = unsafe { slice(b.cast::<u8>(), n) };
+    // SAFETY: the FMI contract (see `with`); s is checked for null.
+    unsafe {
+        with(c, Call::DeSerializeFMUstate, |e| {
+            if s.is_null() {
+                return Err(null("FMUstate"));
+            }
+            let saved = e.deserialize(bytes.ok_or_else(|| null("serializedState"))?)?;
+            // SAFETY (of the enclosing block): s is writable; a non-null *s is
+            // a state of this FMU, reused here.
+            if (*s).is_null() {
+                *s = Box::into_raw(Box::new(saved)).cast::<c_void>();
+            } else {
+                *(*s).cast::<Saved>() = saved;
+            }
+            Ok(())
+        })
+    }
 }
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi2GetDirectionalDerivative(

@@ -4,8 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use tether_fmi::remote::protocol::{In, Out};
 use tether_fmu_kit::instance::{Failure, Outcome};
 use tether_fmu_kit::machine::MachineState;
+use tether_fmu_kit::xml::fnv1a64;
 use tether_master::{
     ExportKind, ExportVariable, Parallel, Simulation, StartValue, SystemSpec, SystemState,
 };
@@ -17,10 +19,20 @@ use crate::SYSTEM_FILE;
 pub struct Saved {
     system: SystemState,
     values: Vec<f64>,
+    /// Its bytes, once `fmi2SerializedFMUstateSize` has made them.
+    bytes: Vec<u8>,
 }
+
+/// The first bytes of a serialized state of an exported FMU, and the
+/// format's version (docs/fmu-export.md).
+const MAGIC: &[u8; 16] = b"tether-fmu-state";
+const VERSION: u32 = 1;
+const CHECKSUM_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
 
 pub struct Exported {
     spec: SystemSpec,
+    /// The GUID, which a serialized state carries.
+    guid: String,
     variables: Vec<ExportVariable>,
     /// The exported parameters' and inputs' values (outputs: unused).
     values: Vec<f64>,
@@ -94,6 +106,7 @@ impl Exported {
         let start = spec.experiment.start;
         Ok(Exported {
             spec,
+            guid: guid.to_string(),
             variables,
             values,
             start,
@@ -272,7 +285,11 @@ impl Exported {
             .simulation()?
             .save_state()
             .map_err(|e| Failure::model(e.to_string()))?;
-        Ok(Saved { system, values })
+        Ok(Saved {
+            system,
+            values,
+            bytes: Vec::new(),
+        })
     }
 
     pub fn set_state(&mut self, saved: &Saved) -> Outcome {
@@ -282,5 +299,78 @@ impl Exported {
             .map_err(|e| Failure::model(e.to_string()))?;
         self.values.clone_from(&saved.values);
         Ok(())
+    }
+
+    /// `saved` as bytes (`fmi2SerializeFMUstate`): the magic and format
+    /// version, the GUID, the exported parameters' and inputs' values, the
+    /// whole system's state ([`SystemState::write`]) and an FNV-1a checksum
+    /// of all that. Made once per saved state.
+    pub fn serialize<'s>(&self, saved: &'s mut Saved) -> Outcome<&'s [u8]> {
+        self.require_state()?;
+        if saved.bytes.is_empty() {
+            let mut out = Out(MAGIC.to_vec());
+            out.u32(VERSION).str(&self.guid).f64s(&saved.values);
+            saved.system.write(&mut out).map_err(Failure::usage)?;
+            let checksum = fnv1a64(&out.0, CHECKSUM_BASIS);
+            out.u64(checksum);
+            saved.bytes = out.0;
+        }
+        Ok(&saved.bytes)
+    }
+
+    /// A state from bytes of [`serialize`](Self::serialize) of this FMU
+    /// (`fmi2DeSerializeFMUstate`): bytes that are cut short, changed, of
+    /// another format version or of another exported system are refused
+    /// with the reason.
+    pub fn deserialize(&mut self, bytes: &[u8]) -> Outcome<Saved> {
+        self.require_state()?;
+        let refuse = |why: String| Failure::usage(format!("not a state of this FMU: {why}"));
+        let n = bytes.len();
+        if n < MAGIC.len() + 8 || !bytes.starts_with(MAGIC) {
+            return Err(refuse(format!(
+                "{n} bytes that do not begin with '{}'",
+                String::from_utf8_lossy(MAGIC)
+            )));
+        }
+        let (body, sum) = bytes.split_at(n - 8);
+        let sum = u64::from_le_bytes(sum.try_into().expect("8 bytes"));
+        if fnv1a64(body, CHECKSUM_BASIS) != sum {
+            return Err(refuse(format!(
+                "the checksum of its {n} bytes does not match (cut short or changed)"
+            )));
+        }
+        let mut input = In::new(&body[MAGIC.len()..]);
+        let short = |_| refuse("the bytes end early".into());
+        let version = input.u32().map_err(short)?;
+        if version != VERSION {
+            return Err(refuse(format!(
+                "format version {version}, this FMU reads version {VERSION}"
+            )));
+        }
+        let guid = input.str().map_err(short)?;
+        if guid != self.guid {
+            return Err(refuse(format!(
+                "it was saved by the FMU with GUID {guid}, this one is {}",
+                self.guid
+            )));
+        }
+        let mut values = Vec::new();
+        input.f64s(&mut values).map_err(short)?;
+        if values.len() != self.values.len() {
+            return Err(refuse(format!(
+                "{} exported values, this FMU has {}",
+                values.len(),
+                self.values.len()
+            )));
+        }
+        let system = self.simulation()?.read_state(&mut input).map_err(refuse)?;
+        if !input.is_empty() {
+            return Err(refuse("bytes are left after the state".into()));
+        }
+        Ok(Saved {
+            system,
+            values,
+            bytes: Vec::new(),
+        })
     }
 }

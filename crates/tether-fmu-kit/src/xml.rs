@@ -75,7 +75,8 @@ pub fn model_guid<M: crate::Model>() -> &'static str {
     guid
 }
 
-fn fnv1a64(bytes: &[u8], offset_basis: u64) -> u64 {
+/// The 64-bit FNV-1a hash of `bytes` from `offset_basis`.
+pub fn fnv1a64(bytes: &[u8], offset_basis: u64) -> u64 {
     bytes.iter().fold(offset_basis, |h, &b| {
         (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
     })

@@ -34,6 +34,7 @@ mod single;
 mod slave;
 pub mod spec;
 mod start;
+mod state_bytes;
 mod stats;
 mod step_control;
 

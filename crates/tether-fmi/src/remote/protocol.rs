@@ -224,6 +224,11 @@ impl Out {
         self.0.extend_from_slice(&v.to_le_bytes());
         self
     }
+    /// A 64-bit unsigned integer.
+    pub fn u64(&mut self, v: u64) -> &mut Out {
+        self.0.extend_from_slice(&v.to_le_bytes());
+        self
+    }
     /// A 32-bit signed integer.
     pub fn i32(&mut self, v: i32) -> &mut Out {
         self.0.extend_from_slice(&v.to_le_bytes());
@@ -438,6 +443,12 @@ impl<'a> In<'a> {
     pub fn u32(&mut self) -> io::Result<u32> {
         Ok(u32::from_le_bytes(
             self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+    /// A 64-bit unsigned integer.
+    pub fn u64(&mut self) -> io::Result<u64> {
+        Ok(u64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
         ))
     }
     /// A 32-bit signed integer.

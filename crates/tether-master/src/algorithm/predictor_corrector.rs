@@ -15,7 +15,28 @@ use crate::spec::CouplingSettings;
 use crate::spec::JacobianMode;
 use crate::stats::{Lap, RunStats};
 use crate::step_control::StepControl;
+use crate::state_bytes::{Pass, Passed};
 use crate::{MasterError, Method};
+
+/// The method's own state ([`MacroStep::save`]): the Jacobians, their reuse,
+/// the error estimate's scales.
+type Saved = (Jacobians, Option<Reuse>, Option<Vec<Vec<f64>>>);
+
+/// The numbers of a method's saved state through `p`, for the saved state's
+/// bytes: this method's, or none (the explicit method keeps nothing).
+pub(crate) fn pass_saved(state: &mut MethodState, p: &mut Pass) -> Passed {
+    match state.downcast_mut::<Saved>() {
+        Some((jac, reuse, peaks)) => {
+            p.same(1, "the coupling method")?;
+            jac.pass(p)?;
+            p.option(reuse, "Jacobian reuse", |p, r| r.pass(p))?;
+            p.option(peaks, "[step_control]", |p, peaks| {
+                peaks.iter_mut().try_for_each(|v| p.f64s(v, "the error scales"))
+            })
+        }
+        None => p.same(0, "the coupling method"),
+    }
+}
 
 /// The predictor/corrector method with the buffers its steps reuse (sized
 /// at setup: a step allocates nothing).
@@ -476,11 +497,11 @@ impl MacroStep for PredictorCorrector {
 
     fn save(&self) -> MethodState {
         let peaks = self.estimate.as_ref().map(ErrorEstimate::peaks);
-        Box::new((self.jac.clone(), self.reuse.clone(), peaks))
+        let saved: Saved = (self.jac.clone(), self.reuse.clone(), peaks);
+        Box::new(saved)
     }
 
     fn restore(&mut self, state: &MethodState) {
-        type Saved = (Jacobians, Option<Reuse>, Option<Vec<Vec<f64>>>);
         let (jac, reuse, peaks) = state
             .downcast_ref::<Saved>()
             .expect("a state saved by this method");

@@ -15,6 +15,7 @@ use crate::coupling::touched::Touched;
 use crate::linalg::lu::{inverse, lu_in_place, norm1};
 use crate::linalg::sparse_lu::{Singular, SparseLu};
 use crate::MasterError;
+use crate::state_bytes::{Pass, Passed};
 
 /// The interface Jacobians ∂g/∂u of every level a method evaluates
 /// (position first), on the pattern of the rows each unknown touches
@@ -674,5 +675,19 @@ mod tests {
         }
         let err = with(&a).unwrap_err();
         assert!(err.contains("inf"), "{err}");
+    }
+}
+
+impl Jacobians {
+    /// Its numbers through `p`, for the saved state's bytes (the pattern
+    /// must be this system's).
+    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
+        p.same(self.n, "the unknowns")?;
+        p.same(self.levels, "the Jacobian's levels")?;
+        for (what, indices) in [("the Jacobian's columns", &self.ptr), ("its rows", &self.rows)] {
+            p.same(indices.len(), what)?;
+            indices.iter().try_for_each(|&i| p.same(i, what))?;
+        }
+        p.f64s(&mut self.data, "the Jacobian's entries")
     }
 }

@@ -8,6 +8,7 @@ use crate::build::system::{Degree, StepAt};
 use crate::stats::AdaptiveStats;
 use crate::step_control::Controller;
 use crate::MasterError;
+use crate::state_bytes::{Pass, Passed};
 
 /// Where the run is in time, and how it steps.
 #[derive(Debug, Clone)]
@@ -265,6 +266,41 @@ impl Adaptive {
                 });
             }
             self.h = next;
+        }
+    }
+}
+
+impl Grid {
+    /// Its numbers through `p`, for the saved state's bytes.
+    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
+        p.f64(&mut self.start)?;
+        p.f64(&mut self.step)?;
+        p.u64(&mut self.n)?;
+        p.u64(&mut self.steps)?;
+        p.same(self.order, "the polynomials' degree")?;
+        match &mut self.kind {
+            Kind::Uniform { every } => {
+                p.same(0, "[step_control]")?;
+                p.u64(every)
+            }
+            Kind::Adaptive(a) => {
+                p.same(1, "[step_control]")?;
+                a.controller.pass(p)?;
+                for x in [&mut a.t, &mut a.stop, &mut a.h] {
+                    p.f64(x)?;
+                }
+                p.f64s(&mut a.past, "the past steps")?;
+                p.option(&mut a.output, "[output] interval", Pass::f64)?;
+                p.u64(&mut a.next_output)?;
+                p.bool(&mut a.on_output)?;
+                let s = &mut a.stats;
+                p.u64(&mut s.accepted)?;
+                p.u64(&mut s.rejected)?;
+                for x in [&mut s.h_smallest, &mut s.h_largest, &mut s.last_error] {
+                    p.f64(x)?;
+                }
+                Ok(())
+            }
         }
     }
 }

@@ -3,6 +3,7 @@
 
 use crate::stats::Failure;
 use crate::MasterError;
+use crate::state_bytes::{Pass, Passed};
 
 /// What is checked at every accepted point, and how the run failed.
 #[derive(Debug, Clone)]
@@ -115,5 +116,21 @@ impl Health {
     /// Note the error that stopped the run.
     pub(crate) fn fail(&mut self, error: &MasterError) {
         self.failure = Some(Failure::from(error));
+    }
+}
+
+impl Health {
+    /// Its numbers through `p`, for the saved state's bytes; a run that has
+    /// failed has no state to write.
+    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
+        if let (Pass::Write(_), Some(failure)) = (&p, &self.failure) {
+            return Err(format!("the run has stopped: {failure:?}"));
+        }
+        self.failure = None;
+        p.f64s(&mut self.limits, "the divergence limits")?;
+        p.same(self.first_residual, "the first residual column")?;
+        p.f64s(&mut self.max_residuals, "the residual columns")?;
+        p.f64(&mut self.residual_warning)?;
+        p.option(&mut self.residual_limit, "[coupling] residual_limit", Pass::f64)
     }
 }

@@ -5,8 +5,12 @@
 //! state. Restoring it and repeating a step gives the same results bit for
 //! bit (tests/master_state.rs).
 
+use tether_fmi::remote::protocol::{In, Out};
+
 use super::{grid::Grid, health::Health, Simulation};
+use crate::algorithm::predictor_corrector::pass_saved;
 use crate::build::system::MethodState;
+use crate::state_bytes::{Pass, Passed};
 use crate::MasterError;
 
 /// The master's own state at an accepted point ([`Simulation::save_master`]).
@@ -104,5 +108,51 @@ impl Simulation {
         }
         self.restore_master(&state.master);
         Ok(())
+    }
+}
+
+impl MasterState {
+    /// Its numbers through `p`, in a fixed order.
+    fn pass(&mut self, p: &mut Pass) -> Passed {
+        p.f64s(self.history.as_flattened_mut(), "the unknowns")?;
+        for (what, lists) in [
+            ("the coupled outputs", &mut self.outputs),
+            ("the recorded outputs", &mut self.recorded),
+        ] {
+            p.same(lists.len(), what)?;
+            lists.iter_mut().try_for_each(|l| p.f64s(l, what))?;
+        }
+        self.grid.pass(p)?;
+        self.health.pass(p)?;
+        p.f64s(self.signals.0.as_flattened_mut(), "the signal links")?;
+        p.f64s(&mut self.signals.1, "the signal links")?;
+        pass_saved(&mut self.method, p)
+    }
+}
+
+impl SystemState {
+    /// Appends the state to `out` as bytes: every instance's serialized FMU
+    /// state, then the master's numbers (little-endian; the sizes of the
+    /// system with them). [`Simulation::read_state`] reads them back.
+    pub fn write(&mut self, out: &mut Out) -> Result<(), String> {
+        let mut p = Pass::Write(out);
+        p.same(self.instances.len(), "the number of instances")?;
+        self.instances.iter_mut().try_for_each(|b| p.bytes(b))?;
+        self.master.pass(&mut p)
+    }
+}
+
+impl Simulation {
+    /// A state of [`SystemState::write`] read from `input`, for this
+    /// simulation: a state of a system of other sizes or options, or bytes
+    /// that end early, are refused with the reason.
+    pub fn read_state(&self, input: &mut In) -> Result<SystemState, String> {
+        let mut p = Pass::Read(input);
+        let mut instances = vec![Vec::new(); self.system.slaves.len()];
+        p.same(instances.len(), "the number of instances")?;
+        instances.iter_mut().try_for_each(|b| p.bytes(b))?;
+        let mut master = self.save_master();
+        master.pass(&mut p)?;
+        Ok(SystemState { master, instances })
     }
 }
