@@ -3,8 +3,11 @@
 //! (the unknowns' history, the polynomials' past points, step control,
 //! Jacobian reuse, signal values) saved as one value. Restoring it and
 //! repeating the steps that followed gives every recorded value and every
-//! unknown again bit for bit.
+//! unknown again bit for bit — also when the state goes through its bytes
+//! (`SystemState::write`, `Simulation::read_state`, as the exported FMU's
+//! fmi2SerializeFMUstate does) into another simulation of the system.
 
+use tether_fmi::remote::protocol::{In, Out};
 use tether_master::{JacobianMode, Simulation, StepControl, SystemSpec};
 
 /// An example file with its FMUs packaged where it points.
@@ -18,12 +21,16 @@ fn example(name: &str) -> SystemSpec {
 
 /// Run `before` steps, save, run `after` steps and keep every row; restore
 /// and run the `after` steps again: the rows must be the same bit for bit.
+/// Then the same from the saved state's bytes, read by another simulation
+/// of `spec` that has taken one step.
 fn repeat_after_restore(spec: &SystemSpec, before: usize, after: usize) {
     let mut sim = Simulation::new(spec).expect("simulation");
     for _ in 0..before {
         sim.step().expect("step");
     }
-    let saved = sim.save_state().expect("save");
+    let mut saved = sim.save_state().expect("save");
+    let mut bytes = Out::default();
+    saved.write(&mut bytes).expect("write the state");
     let time = sim.time();
     let mut first = Vec::new();
     for _ in 0..after {
@@ -31,6 +38,22 @@ fn repeat_after_restore(spec: &SystemSpec, before: usize, after: usize) {
         first.push((sim.time(), sim.values().to_vec(), sim.unknowns()));
     }
     sim.restore_state(&saved).expect("restore");
+    repeat(&mut sim, time, &first);
+    let mut other = Simulation::new(spec).expect("simulation");
+    other.step().expect("step");
+    let mut input = In::new(&bytes.0);
+    let read = other.read_state(&mut input).expect("read the state");
+    assert!(input.is_empty(), "every byte read");
+    other.restore_state(&read).expect("restore from bytes");
+    repeat(&mut other, time, &first);
+    // Bytes cut short are refused.
+    let cut = &bytes.0[..bytes.0.len() - 3];
+    let error = other.read_state(&mut In::new(cut)).err().expect("cut");
+    assert!(error.contains("end early"), "{error}");
+}
+
+/// Step `sim` from `time` and require the rows of `first` bit for bit.
+fn repeat(sim: &mut Simulation, time: f64, first: &[(f64, Vec<f64>, Vec<f64>)]) {
     assert_eq!(sim.time().to_bits(), time.to_bits(), "time after restore");
     for (i, (t, values, unknowns)) in first.iter().enumerate() {
         sim.step().expect("step");
@@ -112,4 +135,18 @@ fn an_instance_without_fmu_state_is_named_when_the_state_is_saved() {
     let message = error.to_string();
     assert!(message.contains("'ctrl'"), "{message}");
     assert!(message.contains("canGetAndSetFMUstate"), "{message}");
+}
+
+#[test]
+fn the_state_of_another_system_is_refused_with_the_reason() {
+    let mut pendulum = Simulation::new(&example("double_pendulum.toml")).expect("simulation");
+    let mut bytes = Out::default();
+    let mut saved = pendulum.save_state().expect("save");
+    saved.write(&mut bytes).expect("write the state");
+    let oscillator = Simulation::new(&example("oscillator.toml")).expect("simulation");
+    let error = oscillator
+        .read_state(&mut In::new(&bytes.0))
+        .err()
+        .expect("a state of another system");
+    assert!(error.contains("in this system"), "{error}");
 }
