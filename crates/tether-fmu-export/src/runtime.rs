@@ -219,6 +219,10 @@ impl Exported {
                         v.name
                     )))
                 }
+                // Before the first step an input is a start value of the
+                // run: built again with it, the run is `tether run`'s with
+                // that value (consistent multipliers included).
+                (ExportKind::Input, true) if self.time() == Some(self.start) => self.sim = None,
                 (ExportKind::Input, true) => {
                     let sim = self.simulation()?;
                     sim.set_parameter(&v.target, &StartValue::Real(value))

@@ -5,8 +5,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::MasterError;
 use crate::state_bytes::{Pass, Passed};
+use crate::MasterError;
 
 /// `[step_control]`: the macro step follows a local error estimate instead of
 /// the fixed `[experiment] step`. Absent (the default): fixed steps.

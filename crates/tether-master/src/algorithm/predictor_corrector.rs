@@ -13,9 +13,9 @@ use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::CouplingSettings;
 use crate::spec::JacobianMode;
+use crate::state_bytes::{Pass, Passed};
 use crate::stats::{Lap, RunStats};
 use crate::step_control::StepControl;
-use crate::state_bytes::{Pass, Passed};
 use crate::{MasterError, Method};
 
 /// The method's own state ([`MacroStep::save`]): the Jacobians, their reuse,
@@ -31,7 +31,9 @@ pub(crate) fn pass_saved(state: &mut MethodState, p: &mut Pass) -> Passed {
             jac.pass(p)?;
             p.option(reuse, "Jacobian reuse", |p, r| r.pass(p))?;
             p.option(peaks, "[step_control]", |p, peaks| {
-                peaks.iter_mut().try_for_each(|v| p.f64s(v, "the error scales"))
+                peaks
+                    .iter_mut()
+                    .try_for_each(|v| p.f64s(v, "the error scales"))
             })
         }
         None => p.same(0, "the coupling method"),

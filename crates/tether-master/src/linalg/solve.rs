@@ -14,8 +14,8 @@ use nalgebra::{DMatrix, DVector};
 use crate::coupling::touched::Touched;
 use crate::linalg::lu::{inverse, lu_in_place, norm1};
 use crate::linalg::sparse_lu::{Singular, SparseLu};
-use crate::MasterError;
 use crate::state_bytes::{Pass, Passed};
+use crate::MasterError;
 
 /// The interface Jacobians ∂g/∂u of every level a method evaluates
 /// (position first), on the pattern of the rows each unknown touches
@@ -684,7 +684,10 @@ impl Jacobians {
     pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
         p.same(self.n, "the unknowns")?;
         p.same(self.levels, "the Jacobian's levels")?;
-        for (what, indices) in [("the Jacobian's columns", &self.ptr), ("its rows", &self.rows)] {
+        for (what, indices) in [
+            ("the Jacobian's columns", &self.ptr),
+            ("its rows", &self.rows),
+        ] {
             p.same(indices.len(), what)?;
             indices.iter().try_for_each(|&i| p.same(i, what))?;
         }

@@ -5,10 +5,10 @@
 //! libcosim's `algorithm::do_step` does.
 
 use crate::build::system::{Degree, StepAt};
+use crate::state_bytes::{Pass, Passed};
 use crate::stats::AdaptiveStats;
 use crate::step_control::Controller;
 use crate::MasterError;
-use crate::state_bytes::{Pass, Passed};
 
 /// Where the run is in time, and how it steps.
 #[derive(Debug, Clone)]

@@ -1,9 +1,9 @@
 //! The run's health: divergence limits on every column, the largest
 //! residuals so far, and the error that stopped the run.
 
+use crate::state_bytes::{Pass, Passed};
 use crate::stats::Failure;
 use crate::MasterError;
-use crate::state_bytes::{Pass, Passed};
 
 /// What is checked at every accepted point, and how the run failed.
 #[derive(Debug, Clone)]
@@ -131,6 +131,10 @@ impl Health {
         p.same(self.first_residual, "the first residual column")?;
         p.f64s(&mut self.max_residuals, "the residual columns")?;
         p.f64(&mut self.residual_warning)?;
-        p.option(&mut self.residual_limit, "[coupling] residual_limit", Pass::f64)
+        p.option(
+            &mut self.residual_limit,
+            "[coupling] residual_limit",
+            Pass::f64,
+        )
     }
 }
