@@ -18,7 +18,12 @@
 //!   the transports a host could use (round trips between two processes), the
 //!   cost of one FMI call, and the macro step against in-process instances.
 //!
-//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|isolation ...]`;
+//! * `export`: the rigid pair exported as one FMU (docs/fmu-export.md):
+//!   10⁵ `fmi2DoStep` calls, each with one `fmi2GetReal` of the outputs, from
+//!   a native driver (libloading on the runtime library) against the same
+//!   system's macro steps in the library without recording.
+//!
+//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|isolation|export ...]`;
 //! `TETHER_BENCH_REPS` repetitions (default 10, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
@@ -652,7 +657,71 @@ fn main() -> std::process::ExitCode {
     if run("isolation") {
         bench_isolation();
     }
+    if run("export") {
+        bench_export();
+    }
     std::process::ExitCode::SUCCESS
+}
+
+/// The exported FMU's own cost: the rigid pair with exact FMUs, 10⁵
+/// `fmi2DoStep(t, H)` calls each followed by one `fmi2GetReal` of the four
+/// outputs (setup not timed), against 10⁵ macro steps of the same system in
+/// the library without recording; alternated repetitions, medians and their
+/// ratio from the same run. The last outputs must be the library's bit for
+/// bit.
+fn bench_export() {
+    use tether_bench::{export_runtime, exported_system, ExportedFmu};
+    use tether_master::ExportKind;
+    println!("\n== export: the rigid pair as one FMU against the library ==");
+    let steps = 100_000;
+    let case = Case {
+        steps,
+        ..Case::example(true, 0)
+    };
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let (_, guid) = exported_system(&case, dir.path()).expect("the exported system");
+    let file = dir.path().join(tether_fmu_export::SYSTEM_FILE);
+    let spec = SystemSpec::from_file(&file).expect("the exported system file");
+    let runtime = export_runtime().expect("the runtime library");
+    let sim = Simulation::new(&spec).expect("simulation");
+    let variables = sim.export_interface(&spec).expect("the exported interface");
+    drop(sim);
+    let outputs: Vec<(u32, usize)> = variables
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.kind == ExportKind::Output)
+        .map(|(vr, v)| (vr as u32, v.column.expect("an output's column")))
+        .collect();
+    let vrs: Vec<u32> = outputs.iter().map(|o| o.0).collect();
+    let (mut fmu_times, mut library_times) = (Vec::new(), Vec::new());
+    for _ in 0..reps() {
+        let mut sim = Simulation::new(&spec).expect("simulation");
+        library_times.push(time_steps(&mut sim, steps) * steps as f64);
+        let mut fmu = ExportedFmu::new(&runtime, dir.path(), &guid).expect("instantiate");
+        let mut values = vec![0.0; vrs.len()];
+        fmu_times.push(fmu.run(case.step, steps, &vrs, &mut values).expect("run"));
+        for (value, (_, column)) in values.iter().zip(&outputs) {
+            let library = sim.values()[*column];
+            assert_eq!(
+                value.to_bits(),
+                library.to_bits(),
+                "output {value} vs the library's {library}"
+            );
+        }
+    }
+    let (fmu, library) = (median(fmu_times), median(library_times));
+    println!(
+        "library, {steps} macro steps:             {:8.3} ms",
+        library * 1e3
+    );
+    println!(
+        "exported FMU, {steps} fmi2DoStep + GetReal: {:8.3} ms",
+        fmu * 1e3
+    );
+    println!(
+        "exported FMU / library: {:.3} (goal ≤ 1.2; last outputs identical bit for bit)",
+        fmu / library
+    );
 }
 
 /// Transports, one FMI call, and the macro step of the oscillator pair and the

@@ -508,3 +508,174 @@ mod tests {
             .contains("has no rows"));
     }
 }
+
+/// The rigid pair of `case` as the system file of an exported FMU
+/// (`tether fmu export`, docs/fmu-export.md), written into `resources` with
+/// its [export] table (input F on mass 1, outputs x, v, a and the multiplier)
+/// and sequential perturbed runs, as the exported FMU runs them. Returns the
+/// system and the FMU's GUID (the hash of the file's text).
+pub fn exported_system(case: &Case, resources: &Path) -> Result<(SystemSpec, String), String> {
+    let mut spec = case.spec();
+    spec.coupling.parallel = tether_master::Parallel::Off;
+    let mut text = toml::to_string(&spec).map_err(|e| e.to_string())?;
+    text.push_str(
+        "\n[export]\nmodel_name = \"rigid_pair\"\n\
+         [[export.input]]\nname = \"F\"\nto = \"mass1.F_ext\"\n\
+         [[export.output]]\nname = \"x\"\nfrom = \"mass1.x\"\n\
+         [[export.output]]\nname = \"v\"\nfrom = \"mass1.v\"\n\
+         [[export.output]]\nname = \"a\"\nfrom = \"mass1.a\"\n\
+         [[export.output]]\nname = \"lambda\"\nfrom = \"link.lambda\"\n",
+    );
+    let file = resources.join(tether_fmu_export::SYSTEM_FILE);
+    std::fs::write(&file, &text).map_err(|e| format!("{}: {e}", file.display()))?;
+    Ok((spec, tether_fmu_export::description::guid(&text)))
+}
+
+/// The exported FMU's runtime library (the binary `tether fmu export`
+/// packs), built with this bench.
+pub fn export_runtime() -> Result<PathBuf, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let name = "libtether_fmu_export.so";
+    exe.ancestors()
+        .skip(1)
+        .take(2)
+        .map(|d| d.join(name))
+        .find(|p| p.is_file())
+        .ok_or_else(|| format!("{name} is not beside {}", exe.display()))
+}
+
+/// A native FMI 2.0 importer of the exported FMU: the runtime library loaded
+/// with libloading, one instance on the system in `resources`.
+pub struct ExportedFmu {
+    library: libloading::Library,
+    component: tether_fmi::raw::fmi2Component,
+    _callbacks: Box<tether_fmi::raw::fmi2CallbackFunctions>,
+}
+
+type Fmi2Status = tether_fmi::raw::fmi2Status;
+
+impl ExportedFmu {
+    /// Load `library`, instantiate on `resources` (with `guid`) and
+    /// initialize from t = 0.
+    pub fn new(library: &Path, resources: &Path, guid: &str) -> Result<ExportedFmu, String> {
+        use tether_fmi::raw::{fmi2CallbackFunctions, fmi2Component, fmi2String};
+        // SAFETY: loading the exported FMU's runtime, a Rust cdylib whose
+        // initialisers only set up its own statics.
+        let library = unsafe { libloading::Library::new(library) }.map_err(|e| e.to_string())?;
+        let callbacks = Box::new(fmi2CallbackFunctions {
+            logger: None,
+            allocateMemory: None,
+            freeMemory: None,
+            stepFinished: None,
+            componentEnvironment: std::ptr::null_mut(),
+        });
+        let uri = format!("file://{}/", resources.display());
+        let texts = ["bench", guid, &uri].map(|t| CString::new(t).expect("no NUL"));
+        type Instantiate = unsafe extern "C" fn(
+            fmi2String,
+            c_int,
+            fmi2String,
+            fmi2String,
+            *const fmi2CallbackFunctions,
+            c_int,
+            c_int,
+        ) -> fmi2Component;
+        // SAFETY: the FMI 2.0 signature of fmi2Instantiate; the strings and
+        // the callbacks outlive the call (the callbacks the instance).
+        let component = unsafe {
+            let instantiate = library
+                .get::<Instantiate>(b"fmi2Instantiate")
+                .map_err(|e| e.to_string())?;
+            instantiate(
+                texts[0].as_ptr(),
+                1,
+                texts[1].as_ptr(),
+                texts[2].as_ptr(),
+                &*callbacks,
+                0,
+                0,
+            )
+        };
+        if component.is_null() {
+            return Err("fmi2Instantiate returned NULL".into());
+        }
+        let fmu = ExportedFmu {
+            library,
+            component,
+            _callbacks: callbacks,
+        };
+        type Setup =
+            unsafe extern "C" fn(*mut std::ffi::c_void, c_int, f64, f64, c_int, f64) -> Fmi2Status;
+        type Mode = unsafe extern "C" fn(*mut std::ffi::c_void) -> Fmi2Status;
+        // SAFETY: FMI 2.0 signatures, called on the live instance in order.
+        let status = unsafe {
+            let setup = fmu.symbol::<Setup>(b"fmi2SetupExperiment")?;
+            let enter = fmu.symbol::<Mode>(b"fmi2EnterInitializationMode")?;
+            let exit = fmu.symbol::<Mode>(b"fmi2ExitInitializationMode")?;
+            [
+                setup(fmu.component, 0, 0.0, 0.0, 0, 0.0),
+                enter(fmu.component),
+                exit(fmu.component),
+            ]
+        };
+        match status.iter().find(|&&s| s != 0) {
+            Some(s) => Err(format!("initialization returned status {s}")),
+            None => Ok(fmu),
+        }
+    }
+
+    /// # Safety
+    /// `T` is the symbol's C signature.
+    unsafe fn symbol<T: Copy>(&self, name: &[u8]) -> Result<T, String> {
+        // SAFETY: per the contract, T is the symbol's type.
+        unsafe { self.library.get::<T>(name) }
+            .map(|s| *s)
+            .map_err(|e| e.to_string())
+    }
+
+    /// `steps` calls of `fmi2DoStep(t, h)`, each followed by one
+    /// `fmi2GetReal` of `outputs` into `values`; the wall time in seconds.
+    pub fn run(
+        &mut self,
+        h: f64,
+        steps: u64,
+        outputs: &[u32],
+        values: &mut [f64],
+    ) -> Result<f64, String> {
+        type DoStep = unsafe extern "C" fn(*mut std::ffi::c_void, f64, f64, c_int) -> Fmi2Status;
+        type GetReal =
+            unsafe extern "C" fn(*mut std::ffi::c_void, *const u32, usize, *mut f64) -> Fmi2Status;
+        // SAFETY: FMI 2.0 signatures.
+        let (do_step, get_real) = unsafe {
+            (
+                self.symbol::<DoStep>(b"fmi2DoStep")?,
+                self.symbol::<GetReal>(b"fmi2GetReal")?,
+            )
+        };
+        let n = outputs.len().min(values.len());
+        let clock = std::time::Instant::now();
+        for i in 0..steps {
+            let t = i as f64 * h;
+            // SAFETY: the live instance; `n` value references and values.
+            let status = unsafe {
+                do_step(self.component, t, h, 1)
+                    | get_real(self.component, outputs.as_ptr(), n, values.as_mut_ptr())
+            };
+            if status != 0 {
+                return Err(format!("step {i} at t = {t}: status {status}"));
+            }
+        }
+        Ok(clock.elapsed().as_secs_f64())
+    }
+}
+
+impl Drop for ExportedFmu {
+    fn drop(&mut self) {
+        type Free = unsafe extern "C" fn(*mut std::ffi::c_void);
+        // SAFETY: the FMI 2.0 signature; the instance is freed once, here.
+        if let Ok(free) = unsafe { self.symbol::<Free>(b"fmi2FreeInstance") } {
+            // SAFETY: as above.
+            unsafe { free(self.component) };
+        }
+    }
+}
