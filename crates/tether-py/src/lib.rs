@@ -763,6 +763,34 @@ impl PySimulation {
 // One FMU
 
 /// A model description as a dict, with fmpy's attribute names.
+/// Export a system with an `[export]` table as one FMI 2.0 co-simulation
+/// FMU at `out`, its binary the runtime library `runtime` (shipped in the
+/// package); returns the numbers of parameters, inputs, outputs and member
+/// FMU files.
+#[pyfunction]
+#[pyo3(signature = (out, runtime, path=None, text=None))]
+fn export_fmu(
+    py: Python<'_>,
+    out: PathBuf,
+    runtime: PathBuf,
+    path: Option<PathBuf>,
+    text: Option<&str>,
+) -> PyResult<(usize, usize, usize, usize)> {
+    let source = path
+        .as_ref()
+        .map_or("(text)".to_string(), |p| p.display().to_string());
+    let spec = load_spec(path, text, None)?;
+    let packaged = py
+        .detach(move || tether_fmu_export::package::package(spec, &source, &runtime, &out))
+        .map_err(|e| failure("settings", e, None))?;
+    Ok((
+        packaged.parameters,
+        packaged.inputs,
+        packaged.outputs,
+        packaged.members,
+    ))
+}
+
 #[pyfunction]
 fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, PyDict>> {
     let opened = Fmu::open(&fmu).map_err(|e| failure("fmu", message(&e), None))?;
@@ -1116,6 +1144,7 @@ fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(info, m)?)?;
+    m.add_function(wrap_pyfunction!(export_fmu, m)?)?;
     m.add_function(wrap_pyfunction!(load_system, m)?)?;
     m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
     m.add_function(wrap_pyfunction!(use_fmi_host, m)?)?;

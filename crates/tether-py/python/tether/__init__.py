@@ -64,6 +64,7 @@ __all__ = [
     "ConvergenceCurve",
     "simulate",
     "info",
+    "export_fmu",
     "Simulation",
     "System",
     "Result",
@@ -815,6 +816,32 @@ def info(fmu: PathLike) -> Dict[str, Any]:
         return _tether.info(os.fspath(fmu))
     except _tether.Failure as f:
         raise _error(f) from None
+
+
+#: The exported FMU's binary (libtether_fmu_export.so), package data of the
+#: wheel: ``.ci/run`` builds it and copies it into python/tether before the
+#: wheel is built (docs/fmu-export.md).
+_EXPORT_RUNTIME = "libtether_fmu_export.so"
+
+
+def export_fmu(system: Union[PathLike, "System"], path: PathLike) -> str:
+    """Export ``system`` (a system file path or a :class:`System`) with its
+    ``[export]`` table as one FMI 2.0 co-simulation FMU at ``path``, as
+    ``tether fmu export`` does (docs/fmu-export.md); returns the path. The
+    FMU's binary is the runtime library shipped in this package."""
+    runtime = os.path.join(os.path.dirname(os.path.abspath(__file__)), _EXPORT_RUNTIME)
+    if not os.path.isfile(runtime):
+        raise SettingsError(
+            f"the FMU runtime {runtime} is not installed with the tether package "
+            "(build it with `cargo build --profile wheel -p tether-fmu-export` and copy "
+            "target/wheel/libtether_fmu_export.so to crates/tether-py/python/tether/ "
+            "before building the wheel, as .ci/run does)"
+        )
+    try:
+        _tether.export_fmu(os.fspath(path), runtime, **_source(system))
+    except _tether.Failure as f:
+        raise _error(f) from None
+    return os.fspath(path)
 
 
 from .studies import (  # noqa: E402  (they use the classes above)
