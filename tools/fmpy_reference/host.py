@@ -131,10 +131,10 @@ class Host:
         set and outputs read before the first step (a loop's values at T_0)."""
         self.fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
         self.fmu.enterInitializationMode()
-        self.initialized = True
 
     def exit_initialization(self):
         self.fmu.exitInitializationMode()
+        self.initialized = True  # fmi2Terminate is allowed from here on
 
     # -- during the run ---------------------------------------------------------
 
