@@ -466,49 +466,6 @@ impl tether_master::Observer for StateError {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_written_system_file_is_the_case() {
-        let dir = tempfile::tempdir().expect("temporary directory");
-        for exact in [true, false] {
-            let case = Case::example(exact, 1);
-            let path = dir.path().join("system.toml");
-            case.write_system(&path).expect("write the system file");
-            let written = SystemSpec::from_file(&path).expect("the written file reads back");
-            let expected = case.spec();
-            assert_eq!(written.instances.len(), expected.instances.len());
-            for (w, e) in written.instances.iter().zip(&expected.instances) {
-                assert_eq!(w.name, e.name);
-                assert!(w.fmu.is_absolute() && w.fmu.exists(), "{}", w.fmu.display());
-                assert_eq!(w.fmu.canonicalize().ok(), e.fmu.canonicalize().ok());
-                assert_eq!(w.parameters, e.parameters, "instance {}", w.name);
-            }
-        }
-    }
-
-    #[test]
-    fn last_value_reads_the_named_column_of_the_last_row() {
-        let dir = tempfile::tempdir().expect("temporary directory");
-        let path = dir.path().join("out.csv");
-        std::fs::write(
-            &path,
-            "time,link.lambda,link.g\n0.0,1.5,0.0\n0.001,333.25,-2e-9\n",
-        )
-        .expect("write");
-        assert_eq!(last_value(&path, "link.lambda"), Ok(333.25));
-        assert_eq!(last_value(&path, "link.g"), Ok(-2e-9));
-        let missing = last_value(&path, "link.x").unwrap_err();
-        assert!(missing.contains("has no column link.x"), "{missing}");
-        std::fs::write(&path, "time,link.lambda\n").expect("write");
-        assert!(last_value(&path, "link.lambda")
-            .unwrap_err()
-            .contains("has no rows"));
-    }
-}
-
 /// The rigid pair of `case` as the system file of an exported FMU
 /// (`tether fmu export`, docs/fmu-export.md), written into `resources` with
 /// its [export] table (input F on mass 1, outputs x, v, a and the multiplier)
@@ -677,5 +634,48 @@ impl Drop for ExportedFmu {
             // SAFETY: as above.
             unsafe { free(self.component) };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_written_system_file_is_the_case() {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        for exact in [true, false] {
+            let case = Case::example(exact, 1);
+            let path = dir.path().join("system.toml");
+            case.write_system(&path).expect("write the system file");
+            let written = SystemSpec::from_file(&path).expect("the written file reads back");
+            let expected = case.spec();
+            assert_eq!(written.instances.len(), expected.instances.len());
+            for (w, e) in written.instances.iter().zip(&expected.instances) {
+                assert_eq!(w.name, e.name);
+                assert!(w.fmu.is_absolute() && w.fmu.exists(), "{}", w.fmu.display());
+                assert_eq!(w.fmu.canonicalize().ok(), e.fmu.canonicalize().ok());
+                assert_eq!(w.parameters, e.parameters, "instance {}", w.name);
+            }
+        }
+    }
+
+    #[test]
+    fn last_value_reads_the_named_column_of_the_last_row() {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let path = dir.path().join("out.csv");
+        std::fs::write(
+            &path,
+            "time,link.lambda,link.g\n0.0,1.5,0.0\n0.001,333.25,-2e-9\n",
+        )
+        .expect("write");
+        assert_eq!(last_value(&path, "link.lambda"), Ok(333.25));
+        assert_eq!(last_value(&path, "link.g"), Ok(-2e-9));
+        let missing = last_value(&path, "link.x").unwrap_err();
+        assert!(missing.contains("has no column link.x"), "{missing}");
+        std::fs::write(&path, "time,link.lambda\n").expect("write");
+        assert!(last_value(&path, "link.lambda")
+            .unwrap_err()
+            .contains("has no rows"));
     }
 }

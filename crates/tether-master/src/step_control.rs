@@ -154,6 +154,15 @@ impl Controller {
     }
 }
 
+impl Controller {
+    /// Its numbers through `p`, for the saved state's bytes.
+    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
+        p.f64(&mut self.order)?;
+        p.f64(&mut self.previous)?;
+        p.bool(&mut self.rejected)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -194,14 +203,5 @@ mod tests {
         let mut c = controller();
         let (h4, ok) = c.next(1e-3, 1.0);
         assert!(ok && (h4 - 0.9e-3).abs() < 1e-15, "{h4}");
-    }
-}
-
-impl Controller {
-    /// Its numbers through `p`, for the saved state's bytes.
-    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
-        p.f64(&mut self.order)?;
-        p.f64(&mut self.previous)?;
-        p.bool(&mut self.rejected)
     }
 }

@@ -141,6 +141,23 @@ impl Reuse {
     }
 }
 
+impl Reuse {
+    /// Its numbers through `p`, for the saved state's bytes.
+    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
+        let mut made = self.age.is_some();
+        let mut age = self.age.unwrap_or(0);
+        p.bool(&mut made)?;
+        p.u64(&mut age)?;
+        self.age = made.then_some(age);
+        p.f64(&mut self.h)?;
+        p.bool(&mut self.mispredicted)?;
+        p.f64s(&mut self.du, "the unknowns")?;
+        p.f64s(&mut self.dg, "the rows")?;
+        p.f64s(&mut self.predicted, "the rows")?;
+        p.f64s(&mut self.row_du2, "the unknowns")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -284,22 +301,5 @@ mod tests {
         reuse.accepted(&mut jac);
         assert!((jac.column_mut(0).1[0] - 1.0e-6 + 0.05e-6).abs() < 1e-18);
         assert!(!reuse.due(1e-3, false));
-    }
-}
-
-impl Reuse {
-    /// Its numbers through `p`, for the saved state's bytes.
-    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
-        let mut made = self.age.is_some();
-        let mut age = self.age.unwrap_or(0);
-        p.bool(&mut made)?;
-        p.u64(&mut age)?;
-        self.age = made.then_some(age);
-        p.f64(&mut self.h)?;
-        p.bool(&mut self.mispredicted)?;
-        p.f64s(&mut self.du, "the unknowns")?;
-        p.f64s(&mut self.dg, "the rows")?;
-        p.f64s(&mut self.predicted, "the rows")?;
-        p.f64s(&mut self.row_du2, "the unknowns")
     }
 }

@@ -408,6 +408,23 @@ pub fn solve_times(n: usize, tree: bool, reps: usize) -> (f64, f64) {
     (median(d), median(s))
 }
 
+impl Jacobians {
+    /// Its numbers through `p`, for the saved state's bytes (the pattern
+    /// must be this system's).
+    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
+        p.same(self.n, "the unknowns")?;
+        p.same(self.levels, "the Jacobian's levels")?;
+        for (what, indices) in [
+            ("the Jacobian's columns", &self.ptr),
+            ("its rows", &self.rows),
+        ] {
+            p.same(indices.len(), what)?;
+            indices.iter().try_for_each(|&i| p.same(i, what))?;
+        }
+        p.f64s(&mut self.data, "the Jacobian's entries")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -675,22 +692,5 @@ mod tests {
         }
         let err = with(&a).unwrap_err();
         assert!(err.contains("inf"), "{err}");
-    }
-}
-
-impl Jacobians {
-    /// Its numbers through `p`, for the saved state's bytes (the pattern
-    /// must be this system's).
-    pub(crate) fn pass(&mut self, p: &mut Pass) -> Passed {
-        p.same(self.n, "the unknowns")?;
-        p.same(self.levels, "the Jacobian's levels")?;
-        for (what, indices) in [
-            ("the Jacobian's columns", &self.ptr),
-            ("its rows", &self.rows),
-        ] {
-            p.same(indices.len(), what)?;
-            indices.iter().try_for_each(|&i| p.same(i, what))?;
-        }
-        p.f64s(&mut self.data, "the Jacobian's entries")
     }
 }
