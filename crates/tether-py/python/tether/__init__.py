@@ -839,7 +839,7 @@ def info(fmu: PathLike) -> Dict[str, Any]:
 
 
 #: The exported FMU's binary (libtether_fmu_export.so), package data of the
-#: wheel: ``.ci/run`` builds it and copies it into python/tether before the
+#: wheel: ``.ci/run`` builds it and copies it into python/tether while the
 #: wheel is built (docs/fmu-export.md).
 _EXPORT_RUNTIME = "libtether_fmu_export.so"
 
