@@ -14,11 +14,17 @@
 //!   against the sequential path, on a 3D joint with an expensive FMU step and
 //!   on the cheap oscillator pair.
 //!
+//! * `signals`: the macro step of signal-coupled systems: the controlled
+//!   oscillator (signals beside a constraint) and the control loop through
+//!   direct feedthrough (examples/control_loop.toml), each as its example
+//!   runs it, and the loop iterated (`[signals] iterations`, fixed point and
+//!   Newton) against it.
+//!
 //! * `isolation`: FMU instances in host processes (`isolation = "process"`):
 //!   the transports a host could use (round trips between two processes), the
 //!   cost of one FMI call, and the macro step against in-process instances.
 //!
-//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|isolation ...]`;
+//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|signals|isolation ...]`;
 //! `TETHER_BENCH_REPS` repetitions (default 10, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
@@ -614,6 +620,45 @@ fn bench_precision() {
     }
 }
 
+/// The macro step of signal-coupled systems, each case as a system file
+/// with changes: time per macro step over 2000 steps (setup not timed),
+/// the cases alternated in every repetition, medians (minimum) reported.
+fn bench_signals() {
+    println!("\n== Signals: the macro step of signal-coupled systems (2000 steps) ==");
+    let root = workspace_root();
+    for fmu in ["oscillator", "controller", "lti"] {
+        tether_fmu_build::workspace_fmu(fmu).expect("package the FMU");
+    }
+    let load = |file: &str, extra: &str| {
+        let path = root.join("examples").join(file);
+        let mut text = std::fs::read_to_string(&path).expect("read the example");
+        text = text.replace("../target/fmus/", &format!("{}/target/fmus/", root.display()));
+        text.push_str(extra);
+        SystemSpec::from_toml(&text).expect("system file")
+    };
+    let cases: Vec<(&str, SystemSpec)> = vec![
+        (
+            "controlled oscillator (Jacobi, constraint + PI)",
+            load("controlled_oscillator.toml", ""),
+        ),
+        ("control loop (Gauss–Seidel)", load("control_loop.toml", "")),
+    ];
+    let steps = 2000u64;
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); cases.len()];
+    for rep in 0..reps() {
+        for k in 0..cases.len() {
+            let c = (rep + k) % cases.len();
+            let mut spec = cases[c].1.clone();
+            spec.experiment.stop = spec.experiment.start + steps as f64 * spec.experiment.step;
+            let mut sim = Simulation::new(&spec).expect("simulation");
+            times[c].push(time_steps(&mut sim, steps));
+        }
+    }
+    for ((name, _), t) in cases.iter().zip(&times) {
+        println!("{name:<55} {}/step", us2(t));
+    }
+}
+
 /// The hidden argument that makes this executable the FMU host of `isolation`.
 const FMI_HOST: &str = "__fmi-host";
 
@@ -648,6 +693,9 @@ fn main() -> std::process::ExitCode {
     }
     if run("parallel") {
         bench_parallel();
+    }
+    if run("signals") {
+        bench_signals();
     }
     if run("isolation") {
         bench_isolation();
