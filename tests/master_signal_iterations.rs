@@ -16,7 +16,7 @@
 //!
 //! two linear equations in U and Y per step (φ₁(z) = (e^z − 1)/z).
 
-use tether_master::{MemoryRecorder, Simulation, SignalSolver, SystemSpec};
+use tether_master::{MemoryRecorder, SignalSolver, Simulation, SystemSpec};
 
 const A_S: f64 = -2.0;
 const KP: f64 = 1.0;
@@ -111,9 +111,9 @@ fn run(spec: &SystemSpec) -> (Vec<f64>, (u64, u64, u64)) {
     let mut rec = MemoryRecorder::default();
     let stats = sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
     let y = rec.columns.iter().position(|c| c == "plant.y").unwrap();
-    let counts = stats
-        .signals
-        .map_or((0, 0, 0), |s| (s.iterations, s.max_iterations, s.not_converged));
+    let counts = stats.signals.map_or((0, 0, 0), |s| {
+        (s.iterations, s.max_iterations, s.not_converged)
+    });
     (rec.rows.iter().map(|row| row[y]).collect(), counts)
 }
 
@@ -244,7 +244,10 @@ fn steps_that_do_not_converge_are_counted_or_fail_the_run() {
     let spec = system(H, 20, 0, "iterations = 2\nstrict = true");
     let mut sim = Simulation::new(&spec).unwrap();
     let mut rec = MemoryRecorder::default();
-    let message = sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap_err().to_string();
+    let message = sim
+        .run(&mut [&mut rec], &mut |_, _| {})
+        .unwrap_err()
+        .to_string();
     assert!(
         message.starts_with(
             "[signals] strict: the macro step from t = 0 did not converge in 2 iterations: \
@@ -315,7 +318,10 @@ fn signal_keys_that_do_not_fit_are_refused() {
             "[signals] scheme does not apply with solver = \"newton\"",
         ),
         ("iterations = 0", "[signals] iterations = 0"),
-        ("solver = \"newton\"", "[signals] solver needs iterations = N"),
+        (
+            "solver = \"newton\"",
+            "[signals] solver needs iterations = N",
+        ),
         ("strict = true", "[signals] strict needs iterations = N"),
     ] {
         let spec = system(H, 10, 0, signals);
@@ -331,7 +337,12 @@ fn signal_keys_that_do_not_fit_are_refused() {
 /// The keys survive SSP (the Tether annotation) and give the same rows.
 #[test]
 fn iterated_signals_run_from_ssp() {
-    let spec = system(H, 20, 0, "solver = \"newton\"\niterations = 10\nstrict = true");
+    let spec = system(
+        H,
+        20,
+        0,
+        "solver = \"newton\"\niterations = 10\nstrict = true",
+    );
     assert_eq!(spec.signals.solver, Some(SignalSolver::Newton));
     let dir = tempfile::tempdir().unwrap();
     let ssp = dir.path().join("loop.ssp");

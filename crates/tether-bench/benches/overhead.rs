@@ -632,7 +632,10 @@ fn bench_signals() {
     let load = |file: &str, extra: &str| {
         let path = root.join("examples").join(file);
         let mut text = std::fs::read_to_string(&path).expect("read the example");
-        text = text.replace("../target/fmus/", &format!("{}/target/fmus/", root.display()));
+        text = text.replace(
+            "../target/fmus/",
+            &format!("{}/target/fmus/", root.display()),
+        );
         text.push_str(extra);
         SystemSpec::from_toml(&text).expect("system file")
     };

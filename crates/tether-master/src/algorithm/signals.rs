@@ -404,19 +404,26 @@ impl Signals {
         let mut newton = std::mem::take(&mut self.newton);
         self.iterating = true;
         let tolerance = self.tolerance;
-        let solved = solve_loop((&mut v, &mut g), &real, limits, tolerance, &mut newton, |v, g| {
-            for slave in &mut system.slaves {
-                slave.restore_state()?;
-            }
-            system.history.clone_from(&unknowns);
-            method.restore(&state);
-            self.next.copy_from_slice(v);
-            self.send(&mut system.slaves, at)?;
-            method.step(system, at, stats, lap)?;
-            self.read_next(&mut system.slaves)?;
-            g.copy_from_slice(&self.next);
-            Ok(())
-        });
+        let solved = solve_loop(
+            (&mut v, &mut g),
+            &real,
+            limits,
+            tolerance,
+            &mut newton,
+            |v, g| {
+                for slave in &mut system.slaves {
+                    slave.restore_state()?;
+                }
+                system.history.clone_from(&unknowns);
+                method.restore(&state);
+                self.next.copy_from_slice(v);
+                self.send(&mut system.slaves, at)?;
+                method.step(system, at, stats, lap)?;
+                self.read_next(&mut system.slaves)?;
+                g.copy_from_slice(&self.next);
+                Ok(())
+            },
+        );
         self.iterating = false;
         self.newton = newton;
         let solved = solved?;
