@@ -646,6 +646,68 @@ fn bench_signals() {
         ),
         ("control loop (Gauss–Seidel)", load("control_loop.toml", "")),
     ];
+    // The loop with a PI controller that can roll back (docs/system-file.md,
+    // "[signals]"): not iterated, and iterated to 1e-12.
+    let lti = root.join("target/fmus/lti.fmu");
+    let rollback_loop = |signals: &str| {
+        let text = format!(
+            r#"
+            [experiment]
+            stop = 1.0
+            step = 1e-3
+
+            [signals]
+            tolerance = 1e-12
+            {signals}
+
+            [[instance]]
+            name = "source"
+            fmu = "{lti}"
+            parameters = {{ a = -2.0, b1 = 0.0, c = 1.0, x0 = 1.0 }}
+
+            [[instance]]
+            name = "controller"
+            fmu = "{lti}"
+            parameters = {{ a = 0.0, b1 = 1.0, b2 = -1.0, c = 2.0, d1 = 1.0, d2 = -1.0, u1 = 1.0 }}
+
+            [[instance]]
+            name = "plant"
+            fmu = "{lti}"
+            parameters = {{ a = -1.0, b1 = 1.0, b2 = 1.0, c = 1.0, d1 = 0.5, d2 = 0.5, x0 = 0.0 }}
+
+            [[connection]]
+            from = "source.y"
+            to = "plant.u2"
+
+            [[connection]]
+            from = "controller.y"
+            to = "plant.u1"
+
+            [[connection]]
+            from = "plant.y"
+            to = "controller.u2"
+            "#,
+            lti = lti.display()
+        );
+        SystemSpec::from_toml(&text).expect("system file")
+    };
+    let cases: Vec<(&str, SystemSpec)> = cases
+        .into_iter()
+        .chain([
+            (
+                "loop, lti PI (Gauss–Seidel, not iterated)",
+                rollback_loop("scheme = \"gauss_seidel\""),
+            ),
+            (
+                "loop, lti PI (Gauss–Seidel, iterated)",
+                rollback_loop("scheme = \"gauss_seidel\"\niterations = 100"),
+            ),
+            (
+                "loop, lti PI (Newton)",
+                rollback_loop("solver = \"newton\"\niterations = 10"),
+            ),
+        ])
+        .collect();
     let steps = 2000u64;
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); cases.len()];
     for rep in 0..reps() {
@@ -658,7 +720,7 @@ fn bench_signals() {
         }
     }
     for ((name, _), t) in cases.iter().zip(&times) {
-        println!("{name:<55} {}/step", us2(t));
+        println!("{name:<45} {}/step", us2(t));
     }
 }
 

@@ -561,7 +561,10 @@ fn an_iterated_step_that_does_not_converge_is_counted_or_fails_with_strict() {
         path
     };
     let lenient = write(false);
-    let out = tether(&["run", lenient.to_str().unwrap(), "--out", "a.csv"], dir.path());
+    let out = tether(
+        &["run", lenient.to_str().unwrap(), "--out", "a.csv"],
+        dir.path(),
+    );
     let text = success(&out);
     assert!(
         text.contains(
@@ -575,7 +578,10 @@ fn an_iterated_step_that_does_not_converge_is_counted_or_fails_with_strict() {
         "{text}"
     );
     let strict = write(true);
-    let out = tether(&["run", strict.to_str().unwrap(), "--out", "b.csv"], dir.path());
+    let out = tether(
+        &["run", strict.to_str().unwrap(), "--out", "b.csv"],
+        dir.path(),
+    );
     let line = error_line(&out);
     assert!(
         line.contains(
