@@ -309,6 +309,32 @@ fn an_instance_without_rollback_is_refused_by_name() {
     );
 }
 
+/// The setup's note says the loop is iterated, and how.
+#[test]
+fn the_note_says_how_the_loop_is_iterated() {
+    let notes = |signals: &str| {
+        Simulation::new(&system(H, 1, 0, signals))
+            .unwrap()
+            .notes()
+            .to_vec()
+    };
+    assert_eq!(
+        notes("solver = \"newton\"\niterations = 10"),
+        [
+            "direct-feedthrough loop through controller, plant is iterated at every macro step \
+          (Newton, at most 10 updates; -v names the connections)"
+        ]
+    );
+    assert_eq!(
+        notes("scheme = \"gauss_seidel\"\niterations = 50"),
+        [
+            "direct-feedthrough loop through controller, plant is iterated at every macro step \
+          (Gauss–Seidel fixed point, at most 50 repetitions of the step; -v names the \
+          connections)"
+        ]
+    );
+}
+
 /// The keys that do not fit together, one line each, naming the key.
 #[test]
 fn signal_keys_that_do_not_fit_are_refused() {

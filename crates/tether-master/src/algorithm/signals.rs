@@ -222,6 +222,22 @@ impl Signals {
                         }
                     }
                 }
+                if let Some(n) = self.iterations {
+                    let how = match (self.solver, self.scheme) {
+                        (SignalSolver::Newton, _) => format!("Newton, at most {n} updates"),
+                        (_, SignalScheme::Jacobi) => {
+                            format!("Jacobi fixed point, at most {n} repetitions of the step")
+                        }
+                        (_, SignalScheme::GaussSeidel) => {
+                            format!("Gauss–Seidel fixed point, at most {n} repetitions of the step")
+                        }
+                    };
+                    return format!(
+                        "direct-feedthrough loop through {} is iterated at every macro step \
+                         ({how}; -v names the connections)",
+                        instances.join(", ")
+                    );
+                }
                 let lagged = members.iter().filter(|&&l| self.lagged(l)).count();
                 let how = match self.scheme {
                     SignalScheme::Jacobi => format!(
@@ -252,7 +268,11 @@ impl Signals {
                 let names: Vec<String> = members
                     .iter()
                     .map(|&l| {
-                        let at = if self.lagged(l) { "T_N" } else { "T_{N+1}" };
+                        let at = if self.lagged(l) && !self.iterated() {
+                            "T_N"
+                        } else {
+                            "T_{N+1}"
+                        };
                         format!("{} (value at {at})", self.links[l].name)
                     })
                     .collect();
