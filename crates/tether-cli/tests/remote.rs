@@ -761,3 +761,62 @@ fn bad_remote_keys_are_one_line_errors() {
         assert!(line.starts_with("error: ") && line.ends_with(&error), "{line}");
     }
 }
+
+/// `resources` (placement on Dask workers from Python): `tether run` runs the
+/// instances here, bit for bit as without the key, and says so in one note;
+/// a value that is not a table of positive numbers is one line naming it.
+#[test]
+fn resources_are_noted_by_the_cli_and_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = dir.path().join("oscillator.toml");
+    system(dir.path(), "oscillator", "resources = { licence = 1, gpu = 0.5 }\n");
+    let out = tether()
+        .arg("run")
+        .arg(&sys)
+        .args(["--out", "placed.csv", "--stop", "0.1"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let notes: Vec<_> = stderr(&out)
+        .lines()
+        .filter(|l| l.starts_with("note: resources"))
+        .map(str::to_string)
+        .collect();
+    assert_eq!(
+        notes,
+        ["note: resources of mass1, mass2 place instances on Dask workers from Python (tether.run(system, client=…)); tether run runs them on this machine"]
+    );
+    system(dir.path(), "oscillator", "");
+    let out = run(dir.path(), &sys, "plain.csv", &["--stop", "0.1"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        std::fs::read(dir.path().join("placed.csv")).unwrap()
+            == std::fs::read(dir.path().join("plain.csv")).unwrap()
+    );
+    for (value, error) in [
+        (
+            "{ licence = \"yes\" }",
+            "invalid type: string \"yes\", expected a number of units of a Dask worker resource, e.g. { licence = 1 }",
+        ),
+        (
+            "\"licence\"",
+            "invalid type: string \"licence\", expected a table of Dask worker resources, e.g. { licence = 1 }",
+        ),
+        (
+            "{ licence = 0 }",
+            "instance 'mass1': resources: licence = 0: expected a finite number of units > 0",
+        ),
+        (
+            "{ licence = -2.5 }",
+            "instance 'mass1': resources: licence = -2.5: expected a finite number of units > 0",
+        ),
+    ] {
+        system(dir.path(), "oscillator", &format!("resources = {value}\n"));
+        let out = run(dir.path(), &sys, "out.csv", &[]);
+        assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+        assert_eq!(stderr(&out).lines().count(), 1, "{}", stderr(&out));
+        let line = last_line(&out);
+        assert!(line.starts_with("error: system file ") && line.ends_with(error), "{line}");
+    }
+}
