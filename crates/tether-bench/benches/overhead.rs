@@ -682,7 +682,9 @@ fn loopback_host(dir: &std::path::Path) -> (String, PathBuf) {
     };
     std::thread::spawn(move || tether_fmi_host::listen::listen(&options));
     let address = format!("127.0.0.1:{port}");
-    while std::net::TcpStream::connect(&address).is_err() {
+    // Listening once the port cannot be bound (a probe connection would be
+    // a master the host complains about).
+    while std::net::TcpListener::bind(&address).is_ok() {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
     (format!("tcp://{address}"), token)
@@ -712,6 +714,7 @@ fn bench_isolation() {
         ("socket pair", Transport::SocketPair),
         ("shared memory + futex", Transport::SharedMemoryFutex),
         ("shared memory, spinning", Transport::SharedMemorySpin),
+        ("TCP on 127.0.0.1", Transport::TcpLoopback),
     ];
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); transports.len()];
     for _ in 0..reps {

@@ -97,9 +97,10 @@ def test_an_instance_needing_a_licence_runs_on_the_licensed_worker(cluster, osci
         if not seen:
             seen.append((hosts(pids), licences(client, licensed)))
 
-    placed = tether.run(pair(oscillator_fmu, resources={"licence": 1}), client=client,
+    # 5000 steps: the run lasts longer than the 50 ms to the first progress call.
+    placed = tether.run(pair(oscillator_fmu, stop=5.0, resources={"licence": 1}), client=client,
                         progress=look)
-    local = tether.run(pair(oscillator_fmu))
+    local = tether.run(pair(oscillator_fmu, stop=5.0))
     assert placed.complete and placed.columns == local.columns
     assert same_bits(placed.to_numpy().view(np.float64), local.to_numpy().view(np.float64))
     # While the run went on: one host, under the licensed worker, serving
@@ -179,7 +180,7 @@ def test_resources_no_worker_has_are_one_line(cluster, oscillator_fmu):
 def test_resources_travel_through_the_system_file(tmp_path, oscillator_fmu):
     system = pair(oscillator_fmu, resources={"licence": 1})
     system.save(tmp_path / "placed.toml")
-    assert "resources = { licence = 1 }" in (tmp_path / "placed.toml").read_text()
+    assert "[instance.resources]\nlicence = 1\n" in (tmp_path / "placed.toml").read_text()
     loaded = tether.System.from_file(tmp_path / "placed.toml")
     assert loaded.instances[1]["resources"] == {"licence": 1.0}
     # Without a client the instance runs here, bit for bit as without the key.
@@ -190,3 +191,41 @@ def test_resources_travel_through_the_system_file(tmp_path, oscillator_fmu):
     with pytest.raises(tether.SystemFileError) as wrong:
         tether.run(bad)
     assert "expected a number of units of a Dask worker resource" in str(wrong.value)
+
+
+VANISHING = """
+import sys
+sys.path.insert(0, sys.argv[2])
+import distributed, tether
+from test_dask_placement import pair
+client = distributed.Client(sys.argv[1])
+tether.run(pair(sys.argv[3], stop=500.0, resources={"licence": 1}), client=client)
+"""
+
+
+def test_a_vanished_client_ends_its_hosts(cluster, oscillator_fmu):
+    """A client killed during its run: the scheduler releases its tasks, whose
+    hosts end."""
+    import subprocess
+    import sys
+    import time
+
+    client, licensed, pids = cluster
+    tests = os.path.dirname(os.path.abspath(__file__))
+    other = subprocess.Popen([sys.executable, "-c", VANISHING, client.scheduler.address, tests,
+                              str(oscillator_fmu)], stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(600):  # the host serving, within a minute
+            time.sleep(0.1)
+            if any(served for _, served in hosts(pids)[licensed]):
+                break
+        else:
+            raise AssertionError(f"no host served the other client: {hosts(pids)}")
+    finally:
+        other.kill()
+        other.wait()
+    for _ in range(100):  # gone within ten seconds
+        time.sleep(0.1)
+        if all(found == [] for found in hosts(pids).values()) and licences(client, licensed) == 1:
+            break
+    assert_no_host_left(client, licensed, pids)

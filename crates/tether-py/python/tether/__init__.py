@@ -566,9 +566,9 @@ def run(
     partial result in ``err.result``.
     """
     if client is not None:
+        given = {k: v for k, v in locals().items() if k not in ("system", "client")}
         from ._dask import run_placed
 
-        given = {k: v for k, v in locals().items() if k not in ("system", "client")}
         return run_placed(system, client, given, run)
     stop = _one_of("stop", stop, "stop_time", stop_time)
     parameters = _one_of("parameters", parameters, "start_values", start_values)
