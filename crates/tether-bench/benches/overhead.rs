@@ -679,6 +679,7 @@ fn loopback_host(dir: &std::path::Path) -> (String, PathBuf) {
         address: format!("127.0.0.1:{port}"),
         token_file: token.clone(),
         max_fmu_bytes: 1 << 30,
+        max_frame_bytes: 1 << 28,
     };
     std::thread::spawn(move || tether_fmi_host::listen::listen(&options));
     let address = format!("127.0.0.1:{port}");

@@ -1075,12 +1075,13 @@ fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
 /// client=…)` starts on a Dask worker. With `parent`, the process ends when
 /// the process of that id (its parent) does.
 #[pyfunction]
-#[pyo3(signature = (address, token_file, max_fmu_bytes, parent=None))]
+#[pyo3(signature = (address, token_file, max_fmu_bytes, max_frame_bytes, parent=None))]
 fn listen_host(
     py: Python<'_>,
     address: String,
     token_file: PathBuf,
     max_fmu_bytes: u64,
+    max_frame_bytes: u64,
     parent: Option<i32>,
 ) -> PyResult<()> {
     if let Some(parent) = parent {
@@ -1101,6 +1102,7 @@ fn listen_host(
         address,
         token_file,
         max_fmu_bytes,
+        max_frame_bytes,
     };
     py.detach(|| tether_fmi_host::listen::listen(&options))
         .map_err(pyo3::exceptions::PyRuntimeError::new_err)

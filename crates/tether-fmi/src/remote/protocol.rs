@@ -374,6 +374,17 @@ impl Out {
 /// Reads one frame from `from` into `buf` (its capacity is reused); `Ok(false)`
 /// at the end of the stream before a frame began.
 pub fn receive(from: &mut impl Read, buf: &mut Vec<u8>) -> io::Result<bool> {
+    receive_bounded(from, buf, MAX_FRAME)
+}
+
+/// A frame up to this size is read into a buffer of its announced length;
+/// a larger one grows its buffer with the bytes that actually arrive, so
+/// that announcing a length costs the peer as much as it costs the reader.
+const EAGER_FRAME: usize = 1 << 16;
+
+/// [`receive`] of a frame of at most `max` bytes (a host's
+/// `--max-frame-mib`): a longer one is refused before anything is allocated.
+pub fn receive_bounded(from: &mut impl Read, buf: &mut Vec<u8>, max: usize) -> io::Result<bool> {
     let mut len = [0u8; 4];
     let mut got = 0;
     while got < 4 {
@@ -386,15 +397,22 @@ pub fn receive(from: &mut impl Read, buf: &mut Vec<u8>) -> io::Result<bool> {
         }
     }
     let n = u32::from_le_bytes(len) as usize;
-    if n == 0 || n > MAX_FRAME {
+    if n == 0 || n > max.min(MAX_FRAME) {
         return Err(io::Error::new(
             io::ErrorKind::InvalidData,
-            format!("a frame of {n} bytes"),
+            format!(
+                "a frame of {n} bytes where at most {} are expected",
+                max.min(MAX_FRAME)
+            ),
         ));
     }
     buf.clear();
-    buf.resize(n, 0);
-    from.read_exact(buf)?;
+    if n <= EAGER_FRAME {
+        buf.resize(n, 0);
+        from.read_exact(buf)?;
+    } else if from.take(n as u64).read_to_end(buf)? < n {
+        return Err(io::ErrorKind::UnexpectedEof.into());
+    }
     Ok(true)
 }
 
