@@ -797,7 +797,10 @@ fn bench_isolation() {
     revolute.coupling.parallel = Parallel::Off;
     for (name, spec) in [
         ("oscillator pair, Dop853, H = 1e-3", oscillator),
-        ("double pendulum (examples/double_pendulum.toml), 2 s", pendulum),
+        (
+            "double pendulum (examples/double_pendulum.toml), 2 s",
+            pendulum,
+        ),
         (
             "3d_revolute, body3d max_step = 1e-5 (expensive steps), parallel off",
             revolute,

@@ -774,7 +774,11 @@ fn bad_remote_keys_are_one_line_errors() {
 fn resources_are_noted_by_the_cli_and_checked() {
     let dir = tempfile::tempdir().unwrap();
     let sys = dir.path().join("oscillator.toml");
-    system(dir.path(), "oscillator", "resources = { licence = 1, gpu = 0.5 }\n");
+    system(
+        dir.path(),
+        "oscillator",
+        "resources = { licence = 1, gpu = 0.5 }\n",
+    );
     let out = tether()
         .arg("run")
         .arg(&sys)

@@ -397,7 +397,10 @@ fn resources<'de, D: serde::Deserializer<'de>>(d: D) -> Result<BTreeMap<String, 
         fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
             f.write_str("a table of Dask worker resources, e.g. { licence = 1 }")
         }
-        fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            mut map: A,
+        ) -> Result<Self::Value, A::Error> {
             let mut table = BTreeMap::new();
             while let Some((name, Amount(amount))) = map.next_entry::<String, Amount>()? {
                 table.insert(name, amount);
