@@ -68,7 +68,7 @@ fn jacobian_reuse_saves_fmu_calls_at_the_same_accuracy() {
 /// the best fixed H that reaches it (the largest H of the sequence). With
 /// `TETHER_FIGURES=DIR` the plot and its table go to DIR (docs/figures).
 #[test]
-fn work_precision_on_the_slider_crank() {
+fn adaptive_steps_reach_each_error_with_a_third_of_the_fixed_step_calls() {
     use tether_master::{JacobianMode, StepControl};
     use tether_study::{ConvergenceCurve, ConvergencePoint, Outcome};
     let base = |h: f64| with(example("slider_crank.toml"), BAUMGARTE_INDEX2, 0, h, 2.0);

@@ -176,7 +176,7 @@ fn background_csv_recording_does_not_allocate() {
 
 /// The counter sees allocations at all (so zero above means something).
 #[test]
-fn the_counter_counts() {
+fn the_allocation_counter_sees_allocations() {
     let before = allocations();
     let v: Vec<u64> = std::hint::black_box((0..100).collect());
     assert!(allocations() > before, "{}", v.len());

@@ -178,7 +178,7 @@ fn swap(text: String, from: &str, to: &str) -> String {
 
 /// The path: nothing at it.
 #[test]
-fn an_fmu_path_that_does_not_exist() {
+fn a_missing_fmu_path_is_one_error_line_naming_it() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("missing.fmu");
     info_error(&path, &[&shown(&path), "cannot access"]);
@@ -186,7 +186,7 @@ fn an_fmu_path_that_does_not_exist() {
 
 /// The container: not a zip archive.
 #[test]
-fn not_a_zip() {
+fn a_file_that_is_not_a_zip_is_one_error_line_naming_it() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("plain.fmu");
     std::fs::write(&path, "this is not a zip archive").unwrap();
@@ -195,7 +195,7 @@ fn not_a_zip() {
 
 /// The entries: one that would land outside the extraction directory.
 #[test]
-fn zip_slip_with_a_parent_entry() {
+fn a_zip_slip_entry_is_one_error_line_naming_it() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("slip.fmu");
     let name = format!("resources/../../tether-slip-{}", std::process::id());
@@ -211,7 +211,7 @@ fn zip_slip_with_a_parent_entry() {
 
 /// The model description: not well-formed, reported with its line.
 #[test]
-fn malformed_model_description() {
+fn a_malformed_model_description_is_one_error_line_with_its_line() {
     let dir = tempfile::tempdir().unwrap();
     let xml = cs_description().replace("</ModelVariables>", "</ModelVariable>");
     let line = 1 + xml
@@ -231,7 +231,7 @@ fn malformed_model_description() {
 
 /// The standard: an FMU of another FMI version.
 #[test]
-fn fmi_4_0() {
+fn an_fmi_4_0_fmu_is_one_error_line_naming_the_version() {
     let dir = tempfile::tempdir().unwrap();
     let xml = r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="4.0" modelName="m" instantiationToken="{x}">
@@ -243,7 +243,7 @@ fn fmi_4_0() {
 
 /// An FMI 3.0 FMU is read; without its binary (under x86_64-linux) it is refused.
 #[test]
-fn fmi_3_0_without_its_binary() {
+fn an_fmi_3_0_fmu_without_its_binary_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let xml = r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="{x}">
@@ -260,7 +260,7 @@ fn fmi_3_0_without_its_binary() {
 
 /// The binary: present but not loadable (the loader's message, on one line).
 #[test]
-fn a_binary_that_is_not_a_shared_library() {
+fn a_binary_that_is_not_a_shared_library_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("notelf.fmu");
     write_zip(
@@ -276,7 +276,7 @@ fn a_binary_that_is_not_a_shared_library() {
 /// The model description: nested 200 000 levels deep (1.4 MB), refused at the first
 /// element past the XML reader's depth limit.
 #[test]
-fn a_deeply_nested_model_description() {
+fn a_deeply_nested_model_description_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let depth = 200_000;
     let xml = cs_description().replace(
@@ -388,7 +388,7 @@ fn declare_size(path: &Path, name: &str, size: u32) {
 /// A 4.7 KB archive declaring an unused 3 GiB entry: refused before anything is
 /// written.
 #[test]
-fn an_ssp_with_a_3_gib_entry() {
+fn an_ssp_with_a_3_gib_entry_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bomb.ssp");
     let text = ssd("resources/a.fmu", "");
@@ -413,7 +413,7 @@ fn an_ssp_with_a_3_gib_entry() {
 
 /// Two `SystemStructure.ssd` entries: refused, not the last one read.
 #[test]
-fn an_ssp_with_two_system_structures() {
+fn an_ssp_with_two_system_structures_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("twice.ssp");
     let (first, second) = (ssd("resources/a.fmu", ""), ssd("resources/b.fmu", ""));
@@ -445,7 +445,7 @@ fn an_ssp_with_two_system_structures() {
 
 /// A component whose source climbs out of the archive.
 #[test]
-fn an_ssp_component_outside_the_archive() {
+fn an_ssp_component_outside_the_archive_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("outside.ssp");
     let source = "../../../../etc/passwd";
@@ -466,7 +466,7 @@ fn an_ssp_component_outside_the_archive() {
 
 /// An SSD nested 200 000 levels deep (1.4 MB), in an unpacked folder.
 #[test]
-fn a_deeply_nested_ssd() {
+fn a_deeply_nested_ssd_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let system = dir.path().join("system");
     std::fs::create_dir(&system).unwrap();
@@ -497,7 +497,7 @@ fn ssp_of(dir: &Path, name: &str, entries: &[Entry<'_>]) -> PathBuf {
 /// the compression ratio before anything is written (the issue's 1.5 GB SSD in a 3.2 MB
 /// archive, smaller).
 #[test]
-fn an_ssp_with_a_highly_compressible_system_structure() {
+fn an_ssp_with_a_highly_compressible_system_structure_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let mut text = ssd("resources/a.fmu", "");
     text.push_str(&" ".repeat(8 << 20));
@@ -526,7 +526,7 @@ fn an_ssp_with_a_highly_compressible_system_structure() {
 /// harmless): the bytes inflated are counted, the extraction stops at the entry and
 /// the folder is removed.
 #[test]
-fn an_ssp_entry_inflating_past_its_declared_size() {
+fn an_ssp_entry_inflating_past_its_declared_size_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let text = ssd("resources/a.fmu", "");
     let zeros = vec![0; 8 << 20];
@@ -551,7 +551,7 @@ fn an_ssp_entry_inflating_past_its_declared_size() {
 
 /// One entry declaring 600 MiB, under the 1 GiB total: over the per-entry limit.
 #[test]
-fn an_ssp_entry_over_the_per_entry_limit() {
+fn an_ssp_entry_over_the_per_entry_limit_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let text = ssd("resources/a.fmu", "");
     let path = ssp_of(
@@ -574,7 +574,7 @@ fn an_ssp_entry_over_the_per_entry_limit() {
 
 /// 100 001 empty entries: over the entry limit, named after the first one past it.
 #[test]
-fn an_ssp_with_more_entries_than_the_limit() {
+fn an_ssp_with_more_entries_than_the_limit_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("many.ssp");
     let mut zip = zip::ZipWriter::new(std::fs::File::create(&path).unwrap());
@@ -597,7 +597,7 @@ fn an_ssp_with_more_entries_than_the_limit() {
 /// A central directory header whose extra field runs past the directory: the zip
 /// reader refuses the whole archive, the error names the entry.
 #[test]
-fn an_ssp_with_a_broken_central_directory_header() {
+fn an_ssp_with_a_broken_central_directory_header_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let text = ssd("resources/a.fmu", "");
     let path = ssp_of(
@@ -626,7 +626,7 @@ fn an_ssp_with_a_broken_central_directory_header() {
 
 /// A parameter set (`.ssv`) in the archive nested 200 000 levels deep.
 #[test]
-fn a_deeply_nested_ssv_in_an_ssp() {
+fn a_deeply_nested_ssv_in_an_ssp_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let depth = 200_000;
     let text = ssd(
@@ -682,7 +682,7 @@ fn a_leftover_ssp_folder_is_swept() {
 // ---------------------------------------------------------------- system files
 
 #[test]
-fn a_system_file_that_is_not_toml() {
+fn a_system_file_that_is_not_toml_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| swap(t, "stop = 0.1", "stop = = 0.1"));
     assert!(matches!(setup_err(&sys), MasterError::SystemFile { .. }));
@@ -690,7 +690,7 @@ fn a_system_file_that_is_not_toml() {
 }
 
 #[test]
-fn a_system_file_with_an_unknown_key() {
+fn a_system_file_with_an_unknown_key_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| {
         swap(t, "stop = 0.1", "stop = 0.1\nstpe = 1e-3")
@@ -742,7 +742,7 @@ fn array_counts_are_bounded() {
 /// each couples every other: an interface Jacobian of 10¹⁰ entries. One error naming
 /// the file, before the matrices are allocated (docs/system-file.md, "Limits").
 #[test]
-fn an_interface_system_over_the_entry_limit() {
+fn an_interface_system_over_the_entry_limit_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let dense = system(dir.path(), |t| {
         swap(
@@ -767,7 +767,7 @@ fn an_interface_system_over_the_entry_limit() {
 }
 
 #[test]
-fn a_system_file_naming_a_missing_fmu() {
+fn a_system_file_naming_a_missing_fmu_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nowhere.fmu");
     let sys = system_with(dir.path(), Some(&missing), |t| t);
@@ -776,7 +776,7 @@ fn a_system_file_naming_a_missing_fmu() {
 }
 
 #[test]
-fn a_duplicate_instance_name() {
+fn a_duplicate_instance_name_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| {
         swap(t, "name = \"mass2\"", "name = \"mass1\"")
@@ -786,7 +786,7 @@ fn a_duplicate_instance_name() {
 }
 
 #[test]
-fn an_unknown_instance_in_a_constraint() {
+fn an_unknown_instance_in_a_constraint_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| {
         swap(t, "position = \"mass2.x", "position = \"mass3.x")
@@ -799,7 +799,7 @@ fn an_unknown_instance_in_a_constraint() {
 }
 
 #[test]
-fn an_unknown_variable_in_a_constraint() {
+fn an_unknown_variable_in_a_constraint_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| {
         swap(t, "mass2.v - mass1.v", "mass2.v - mass1.vv")
@@ -812,7 +812,7 @@ fn an_unknown_variable_in_a_constraint() {
 }
 
 #[test]
-fn an_unknown_parameter_name() {
+fn an_unknown_parameter_name_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| swap(t, "m = 2.0", "mass = 2.0"));
     assert!(matches!(setup_err(&sys), MasterError::UnknownVariable(_)));
@@ -823,7 +823,7 @@ fn an_unknown_parameter_name() {
 }
 
 #[test]
-fn coupling_into_an_output() {
+fn coupling_into_an_output_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| {
         swap(t, "mass1.F - mass2.F", "mass1.F - mass2.x")
@@ -833,7 +833,7 @@ fn coupling_into_an_output() {
 }
 
 #[test]
-fn a_constraint_on_an_input() {
+fn a_constraint_on_an_input_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| {
         swap(t, "mass2.x - mass1.x", "mass2.F - mass1.x")
@@ -843,7 +843,7 @@ fn a_constraint_on_an_input() {
 }
 
 #[test]
-fn setting_an_output_as_a_parameter() {
+fn setting_an_output_as_a_parameter_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| {
         swap(t, "v0 = 100.0 }", "v0 = 100.0, x = 1.0 }")
@@ -853,7 +853,7 @@ fn setting_an_output_as_a_parameter() {
 }
 
 #[test]
-fn a_nan_parameter() {
+fn a_nan_parameter_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| swap(t, "c = 1000.0", "c = nan"));
     assert!(matches!(setup_err(&sys), MasterError::StartValue { .. }));
@@ -861,7 +861,7 @@ fn a_nan_parameter() {
 }
 
 #[test]
-fn an_infinite_parameter() {
+fn an_infinite_parameter_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| swap(t, "d = 10.0", "d = inf"));
     assert!(matches!(setup_err(&sys), MasterError::StartValue { .. }));
@@ -869,7 +869,7 @@ fn an_infinite_parameter() {
 }
 
 #[test]
-fn a_parameter_below_its_declared_min() {
+fn a_parameter_below_its_declared_min_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| swap(t, "c = 1000.0", "c = -1000.0"));
     assert!(matches!(setup_err(&sys), MasterError::StartValue { .. }));
@@ -880,7 +880,7 @@ fn a_parameter_below_its_declared_min() {
 }
 
 #[test]
-fn a_negative_mass_the_fmu_refuses() {
+fn a_negative_mass_the_fmu_refuses_is_one_error_line_naming_the_instance() {
     // m has no declared min; the oscillator itself refuses m <= 0 when it initializes.
     let dir = tempfile::tempdir().unwrap();
     let sys = system(dir.path(), |t| swap(t, "m = 2.0", "m = -2.0"));
@@ -916,7 +916,7 @@ fn invalid_parameter(edit: impl Fn(String) -> String, name: &str, fragments: &[&
 }
 
 #[test]
-fn a_negative_beta() {
+fn a_negative_beta_is_one_error_line() {
     invalid_parameter(
         |t| swap(t, "beta = 2e-3", "beta = -2e-3"),
         "beta",
@@ -925,7 +925,7 @@ fn a_negative_beta() {
 }
 
 #[test]
-fn a_polynomial_degree_above_two() {
+fn a_polynomial_degree_above_two_is_one_error_line() {
     invalid_parameter(
         |t| swap(t, "order = 0", "order = 3"),
         "order",
@@ -934,22 +934,22 @@ fn a_polynomial_degree_above_two() {
 }
 
 #[test]
-fn a_zero_macro_step() {
+fn a_zero_macro_step_is_one_error_line() {
     invalid_parameter(|t| swap(t, "step = 1e-3", "step = 0.0"), "step", &["> 0"]);
 }
 
 #[test]
-fn a_nan_macro_step() {
+fn a_nan_macro_step_is_one_error_line() {
     invalid_parameter(|t| swap(t, "step = 1e-3", "step = nan"), "step", &["NaN"]);
 }
 
 #[test]
-fn a_stop_time_before_the_start() {
+fn a_stop_time_before_the_start_is_one_error_line() {
     invalid_parameter(|t| swap(t, "stop = 0.1", "stop = -0.1"), "stop", &["-0.1"]);
 }
 
 #[test]
-fn a_finite_difference_increment_of_zero() {
+fn a_finite_difference_increment_of_zero_is_one_error_line() {
     invalid_parameter(
         |t| swap(t, "order = 0", "order = 0\nepsilon = 0.0"),
         "epsilon",
@@ -958,7 +958,7 @@ fn a_finite_difference_increment_of_zero() {
 }
 
 #[test]
-fn an_infinite_initial_multiplier() {
+fn an_infinite_initial_multiplier_is_one_error_line() {
     invalid_parameter(
         |t| {
             swap(
@@ -975,7 +975,7 @@ fn an_infinite_initial_multiplier() {
 // ---------------------------------------------------------------- capabilities
 
 #[test]
-fn rollback_without_can_get_and_set_fmu_state() {
+fn rollback_without_can_get_and_set_fmu_state_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let fmu = edited_oscillator(dir.path(), "nostate", |xml| {
         xml.replace(
@@ -994,7 +994,7 @@ fn rollback_without_can_get_and_set_fmu_state() {
 }
 
 #[test]
-fn adaptive_steps_without_variable_step_sizes() {
+fn adaptive_steps_without_variable_step_sizes_are_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let fmu = edited_oscillator(dir.path(), "fixedstep", |xml| {
         xml.replace(
@@ -1045,7 +1045,7 @@ fn adaptive_steps_without_variable_step_sizes() {
 }
 
 #[test]
-fn input_polynomials_without_can_interpolate_inputs() {
+fn input_polynomials_without_can_interpolate_inputs_are_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let fmu = edited_oscillator(dir.path(), "nointerp", |xml| {
         xml.replace(
@@ -1066,7 +1066,7 @@ fn input_polynomials_without_can_interpolate_inputs() {
 }
 
 #[test]
-fn two_instances_of_a_once_per_process_fmu() {
+fn two_instances_of_a_once_per_process_fmu_are_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let caps = Capabilities {
         only_once_per_process: true,
@@ -1100,7 +1100,7 @@ fn two_instances_of_a_once_per_process_fmu() {
 // ---------------------------------------------------------------- failures mid-run
 
 #[test]
-fn a_singular_interface_jacobian() {
+fn a_singular_interface_jacobian_ends_the_run_with_the_rows_kept() {
     let dir = tempfile::tempdir().unwrap();
     // g = x2 − x2 does not depend on the multiplier.
     let sys = system(dir.path(), |t| {
@@ -1203,7 +1203,7 @@ fn check_results(csv_path: &Path, line: &str, tmp: &Path) -> Csv {
 }
 
 #[test]
-fn do_step_returns_discard_mid_run() {
+fn discard_from_do_step_mid_run_ends_the_run_with_the_rows_kept() {
     let dir = tempfile::tempdir().unwrap();
     let sys = faulty_system(dir.path(), 2, 0);
     let (err, rec) = run_err(&sys);
@@ -1226,7 +1226,7 @@ fn do_step_returns_discard_mid_run() {
 }
 
 #[test]
-fn do_step_returns_error_mid_run() {
+fn error_from_do_step_mid_run_ends_the_run_with_the_rows_kept() {
     let dir = tempfile::tempdir().unwrap();
     let sys = faulty_system(dir.path(), 3, 0);
     let (err, _) = run_err(&sys);
@@ -1248,7 +1248,7 @@ fn do_step_returns_error_mid_run() {
 }
 
 #[test]
-fn do_step_returns_fatal_mid_run() {
+fn fatal_from_do_step_mid_run_ends_the_run_with_the_rows_kept() {
     let dir = tempfile::tempdir().unwrap();
     let sys = faulty_system(dir.path(), 4, 0);
     let (err, _) = run_err(&sys);
@@ -1271,7 +1271,7 @@ fn do_step_returns_fatal_mid_run() {
 }
 
 #[test]
-fn set_fmu_state_fails_mid_run() {
+fn a_failing_set_fmu_state_mid_run_ends_the_run_with_the_rows_kept() {
     let dir = tempfile::tempdir().unwrap();
     let sys = faulty_system(dir.path(), 3, 1);
     let (err, _) = run_err(&sys);
@@ -1289,7 +1289,7 @@ fn set_fmu_state_fails_mid_run() {
 }
 
 #[test]
-fn set_fmu_state_is_fatal_mid_run() {
+fn a_fatal_set_fmu_state_mid_run_ends_the_run_with_the_rows_kept() {
     let dir = tempfile::tempdir().unwrap();
     let sys = faulty_system(dir.path(), 4, 1);
     let (err, _) = run_err(&sys);
@@ -1410,7 +1410,7 @@ fn pendulum(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {
 }
 
 #[test]
-fn a_joint_naming_an_unknown_marker() {
+fn a_joint_naming_an_unknown_marker_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = pendulum(dir.path(), |t| {
         swap(t, "i = \"link1.B\"", "i = \"link1.tip\"")
@@ -1420,7 +1420,7 @@ fn a_joint_naming_an_unknown_marker() {
 }
 
 #[test]
-fn a_joint_of_an_unknown_kind() {
+fn a_joint_of_an_unknown_kind_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = pendulum(dir.path(), |t| {
         swap(t, "kind = \"atpoint\"", "kind = \"hinge\"")
@@ -1430,7 +1430,7 @@ fn a_joint_of_an_unknown_kind() {
 }
 
 #[test]
-fn a_spatial_joint_on_a_planar_marker_without_the_port() {
+fn a_spatial_joint_on_a_planar_marker_without_the_port_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let sys = pendulum(dir.path(), |t| swap(t, "plane = \"xy\"", ""));
     assert!(matches!(setup_err(&sys), MasterError::MissingPort { .. }));
@@ -1444,7 +1444,7 @@ fn a_spatial_joint_on_a_planar_marker_without_the_port() {
 /// once, whether the writer thread fails at the end (10 steps) or in the middle
 /// (20 000 steps, many blocks of rows).
 #[test]
-fn a_full_disk_for_the_results() {
+fn a_full_disk_for_the_results_is_one_error_line_and_an_incomplete_summary() {
     if !Path::new("/dev/full").exists() {
         eprintln!("no /dev/full here: skipped");
         return;

@@ -136,7 +136,7 @@ fn ended_inside_the_fmu(s: &Scratch, out: &Output, called: &str) {
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
 }
 
-/// `exit(0)` inside an FMU used to be a silent success with an empty CSV.
+/// `exit(0)` inside an FMU is an error, not a success with an empty CSV.
 #[test]
 fn exit_0_inside_an_fmu_is_an_error() {
     let s = Scratch::new();
@@ -260,8 +260,7 @@ fn folders_of_killed_runs_are_swept_by_the_next_run() {
 }
 
 /// A log flood (2000 warnings per `fmi2DoStep` from t = 0.5, about three million
-/// in all) used to put hundreds of megabytes on stderr and take a hundred times
-/// longer: now 20 messages a second per instance and category are shown and the
+/// in all): 20 messages a second per instance and category are shown and the
 /// rest counted, without being formatted; `--quiet` silences FMU warnings.
 #[test]
 fn a_log_flood_is_rate_limited() {
@@ -347,10 +346,9 @@ fn refused(out: &Output, what: &str) {
 }
 
 /// Two runs writing one results file: the second is refused (the first holds
-/// the file's advisory lock) and the first one's rows are untouched. It used to
-/// interleave both runs in one file (and NUL bytes).
+/// the file's advisory lock) and the first one's rows are untouched.
 #[test]
-fn two_runs_writing_one_results_file() {
+fn a_second_run_writing_the_same_results_file_is_refused() {
     let s = Scratch::new();
     let slow = system(s.path(), 7, "");
     let first = Killed(
@@ -381,8 +379,7 @@ fn two_runs_writing_one_results_file() {
 }
 
 /// An `--out` that is one of the run's inputs is refused before anything is
-/// written: `tether run self.toml --out self.toml` used to replace the system
-/// file with CSV and exit 0.
+/// written: `tether run self.toml --out self.toml` keeps the system file.
 #[test]
 fn an_output_that_is_an_input_is_refused() {
     let s = Scratch::new();

@@ -283,7 +283,7 @@ mod tests {
     }
 
     #[test]
-    fn reads_the_oscillator_constraint() {
+    fn the_oscillator_constraint_parses_to_its_terms() {
         let e = LinearExpr::parse("mass2.x - mass1.x").unwrap();
         assert_eq!(
             e.terms,
@@ -310,7 +310,7 @@ mod tests {
     }
 
     #[test]
-    fn quoted_variable_names() {
+    fn quoted_variable_names_parse_with_their_brackets() {
         let e = LinearExpr::parse("m.'x (pos)'").unwrap();
         assert_eq!(e.terms, vec![t(1.0, "m", "x (pos)", 0)]);
     }

@@ -163,7 +163,7 @@ mod tests {
     }
 
     #[test]
-    fn defaults_and_limits() {
+    fn step_control_defaults_are_valid_and_limits_are_refused() {
         let l = StepControl::default().limits(0.0, 2.0, 1e-3).unwrap();
         assert_eq!((l.h_min, l.h_max, l.h_initial), (2e-10, 0.2, 1e-3));
         let bad = StepControl {

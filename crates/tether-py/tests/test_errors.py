@@ -11,7 +11,7 @@ import tether
 from conftest import cli, error_line, read_csv, same_bits
 
 
-def test_hierarchy():
+def test_every_error_is_a_tether_error_and_interrupted_a_keyboard_interrupt():
     for cls in (tether.FmuError, tether.SystemFileError, tether.SettingsError,
                 tether.DivergenceError, tether.Interrupted):
         assert issubclass(cls, tether.TetherError)
@@ -19,7 +19,7 @@ def test_hierarchy():
     assert issubclass(tether.SettingsError, ValueError)
 
 
-def test_missing_system_file(tmp_path, tether_bin):
+def test_a_missing_system_file_raises_the_clis_error_line(tmp_path, tether_bin):
     path = tmp_path / "nope.toml"
     proc = cli(tether_bin, "run", str(path), "--quiet")
     with pytest.raises(tether.SystemFileError) as err:
@@ -28,7 +28,7 @@ def test_missing_system_file(tmp_path, tether_bin):
     assert err.value.result is None
 
 
-def test_malformed_system_file(tmp_path, tether_bin):
+def test_a_malformed_system_file_raises_the_clis_error_line(tmp_path, tether_bin):
     path = tmp_path / "bad.toml"
     path.write_text("[experiment]\nstop = 1\n")
     proc = cli(tether_bin, "run", str(path), "--quiet")
@@ -39,7 +39,7 @@ def test_malformed_system_file(tmp_path, tether_bin):
         tether.System.from_file(path)
 
 
-def test_missing_fmu(tmp_path, tether_bin, oscillator_toml):
+def test_a_missing_fmu_raises_the_clis_error_line(tmp_path, tether_bin, oscillator_toml):
     text = oscillator_toml.read_text().replace("../target/fmus/oscillator.fmu", str(tmp_path / "gone.fmu"))
     path = tmp_path / "system.toml"
     path.write_text(text)
@@ -49,14 +49,14 @@ def test_missing_fmu(tmp_path, tether_bin, oscillator_toml):
     assert str(err.value) == error_line(proc)
 
 
-def test_unknown_parameter_target(tether_bin, oscillator_toml):
+def test_an_unknown_parameter_instance_raises_the_clis_error_line(tether_bin, oscillator_toml):
     proc = cli(tether_bin, "run", str(oscillator_toml), "--quiet", "--set", "mass3.m=2")
     with pytest.raises(tether.SettingsError) as err:
         tether.run(oscillator_toml, parameters={"mass3.m": 2.0})
     assert str(err.value) == error_line(proc)
 
 
-def test_unknown_fmu_parameter(tmp_path, tether_bin, oscillator_toml):
+def test_an_unknown_fmu_parameter_names_the_instance_and_suggests(tmp_path, tether_bin, oscillator_toml):
     proc = cli(tether_bin, "run", str(oscillator_toml), "--quiet", "--set", "mass2.mass=4",
                "--out", str(tmp_path / "x.csv"))
     with pytest.raises(tether.FmuError) as err:
@@ -66,14 +66,14 @@ def test_unknown_fmu_parameter(tmp_path, tether_bin, oscillator_toml):
     assert error_line(proc) == "--set mass2.mass: " + where
 
 
-def test_invalid_step(tether_bin, oscillator_toml):
+def test_a_negative_step_raises_the_clis_error_line(tether_bin, oscillator_toml):
     proc = cli(tether_bin, "run", str(oscillator_toml), "--quiet", "--step", "-1")
     with pytest.raises(tether.SettingsError) as err:
         tether.run(oscillator_toml, step=-1.0)
     assert str(err.value) == error_line(proc)
 
 
-def test_bad_overrides():
+def test_an_unknown_method_or_keyword_is_refused():
     with pytest.raises(tether.SettingsError, match="unknown method 'rk4'"):
         tether.run("unused.toml", method="rk4")
     with pytest.raises(TypeError, match="unexpected keyword"):
@@ -128,7 +128,7 @@ def test_ctrl_c_raises_interrupted_with_the_partial_result(tmp_path, monkeypatch
     assert list(tmp_path.iterdir()) == []
 
 
-def test_ctrl_c_in_run_until(tmp_path, monkeypatch, oscillator_toml):
+def test_ctrl_c_in_run_until_keeps_the_rows_and_close_removes_the_extractions(tmp_path, monkeypatch, oscillator_toml):
     monkeypatch.setenv("TMPDIR", str(tmp_path))
     sim = tether.Simulation(oscillator_toml, stop=1e3)
     timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
@@ -149,7 +149,7 @@ def test_ctrl_c_in_run_until(tmp_path, monkeypatch, oscillator_toml):
         sim.outputs
 
 
-def test_simulation_as_context_manager(tmp_path, monkeypatch, oscillator_toml):
+def test_a_simulation_closes_as_a_context_manager_and_removes_its_extractions(tmp_path, monkeypatch, oscillator_toml):
     monkeypatch.setenv("TMPDIR", str(tmp_path))
     with tether.Simulation(oscillator_toml, stop=0.01) as sim:
         sim.run()

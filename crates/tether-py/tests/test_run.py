@@ -59,7 +59,7 @@ def test_double_pendulum_equals_cli(tmp_path, tether_bin, root, oscillator_fmu):
     assert same_bits(result.to_numpy().view(np.float64).reshape(len(result), -1), rows)
 
 
-def test_result_api(oscillator_toml):
+def test_result_gives_columns_as_float_arrays_and_the_run_stats(oscillator_toml):
     result = tether.run(oscillator_toml, stop=0.1)
     assert len(result) == 101
     assert "mass1.x" in result and "time" in result and "nope" not in result
@@ -110,7 +110,7 @@ def test_fmpy_plot_result_accepts_the_result(tmp_path, oscillator_toml):
     assert np.array_equal(np.asarray(figure.data[0].y), result["mass1.x"])
 
 
-def test_to_pandas(oscillator_toml):
+def test_to_pandas_gives_a_frame_with_the_columns_in_order(oscillator_toml):
     pd = need_tool("pandas")
     frame = tether.run(oscillator_toml, stop=0.01).to_pandas()
     assert isinstance(frame, pd.DataFrame)
@@ -250,7 +250,7 @@ def test_isolate_and_call_timeout_are_keywords(oscillator_toml):
         assert same_bits(inline[name], isolated[name]), name
 
 
-def test_version():
+def test_version_is_the_packages():
     assert tether.__version__ == "0.1.0"
 
 

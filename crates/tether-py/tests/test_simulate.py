@@ -36,7 +36,7 @@ def test_simulate_matches_fmpy(fmpy, oscillator_fmu, parameters):
         assert deviation <= 1e-12, (name, deviation)
 
 
-def test_simulate_errors(tmp_path, oscillator_fmu):
+def test_simulate_of_a_missing_fmu_or_a_bad_time_span_raises_typed_errors(tmp_path, oscillator_fmu):
     with pytest.raises(tether.FmuError):
         tether.simulate(tmp_path / "gone.fmu")
     with pytest.raises(tether.SettingsError, match="invalid time span"):

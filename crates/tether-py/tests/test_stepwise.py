@@ -29,7 +29,7 @@ def test_steps_equal_a_whole_run(oscillator_toml):
         sim.step()
 
 
-def test_run_until_and_outputs(oscillator_toml):
+def test_run_until_stops_on_the_grid_and_the_rest_equals_a_whole_run(oscillator_toml):
     whole = tether.run(oscillator_toml)
     sim = tether.Simulation(oscillator_toml)
     assert sim.run_until(0.25) == pytest.approx(0.25)
@@ -46,7 +46,7 @@ def test_run_until_and_outputs(oscillator_toml):
     assert sim.stats["macro_steps"] == whole.stats["macro_steps"] == 1000
 
 
-def test_set_parameter_between_steps(oscillator_toml, oscillator_fmu):
+def test_a_force_set_between_steps_follows_the_closed_form(oscillator_toml, oscillator_fmu):
     # A third oscillator that no constraint drives: its force F is free.
     system = tether.System.from_file(oscillator_toml)
     system.add_instance("mass3", oscillator_fmu, {"m": 1.5, "c": 800.0, "d": 4.0, "v0": 1.0, "exact": True})
@@ -71,7 +71,7 @@ def test_set_parameter_between_steps(oscillator_toml, oscillator_fmu):
     assert np.max(np.abs(result["mass3.x"][~before] - exact)) < 1e-12
 
 
-def test_set_parameter_refusals(oscillator_toml):
+def test_set_parameter_refuses_fixed_driven_output_and_unknown_names(oscillator_toml):
     sim = tether.Simulation(oscillator_toml)
     with pytest.raises(tether.SettingsError, match="fixed.*start value"):
         sim.set_parameter("mass1.m", 2.0)

@@ -124,13 +124,13 @@ def test_dask_local_cluster_equals_local(oscillator_toml, tmp_path):
     assert seen[-1] == (20, 20)
 
 
-def test_system_objects_and_dict_axes(oscillator_toml):
+def test_a_system_object_and_dict_axes_give_the_maps_of_the_file(oscillator_toml):
     system = tether.System.from_file(oscillator_toml)
     kw = dict(MAP, x={"targets": ["mass1.c", "mass2.c"], "from": 1e2, "to": 1e6, "points": 6, "scale": "log"})
     same_maps(tether.sweep_stability(system, **kw), tether.sweep_stability(oscillator_toml, **MAP))
 
 
-def test_series_study_returns_results(oscillator_toml, tmp_path):
+def test_a_series_study_returns_each_variants_run_and_marks_the_diverged_one(oscillator_toml, tmp_path):
     study = tmp_path / "series.toml"
     study.write_text(
         f"""
@@ -170,7 +170,7 @@ def test_study_errors_name_the_culprit(oscillator_toml, tether_bin):
         tether.sweep_stability(oscillator_toml, x="step=1e-3,2e-3", y="step=1e-3", bogus=1)
 
 
-def test_run_progress_callback(oscillator_toml):
+def test_an_exception_in_the_progress_callback_interrupts_with_the_partial_result(oscillator_toml):
     seen = []
 
     def progress(step, total):

@@ -152,7 +152,7 @@ mod tests {
     }
 
     #[test]
-    fn patterns_and_derived_columns() {
+    fn series_patterns_select_columns_and_derived_columns_compute() {
         let mut t = table();
         assert!(matches("*.E", "a.E") && !matches("*.E", "link.lambda"));
         assert!(matches("a*", "a.E") && matches("*lam*", "link.lambda"));

@@ -822,7 +822,7 @@ mod tests {
     "#;
 
     #[test]
-    fn reads_a_system_file() {
+    fn a_system_file_parses_with_its_defaults() {
         let spec = SystemSpec::from_toml(OSC).unwrap();
         spec.validate().unwrap();
         assert_eq!(spec.instances.len(), 2);
