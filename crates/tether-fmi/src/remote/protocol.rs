@@ -652,6 +652,35 @@ mod tests {
         assert!(!receive(&mut &wire[..0], &mut buf).unwrap());
     }
 
+    /// A frame longer than the bound is refused before its body is read;
+    /// one within it but longer than 64 KiB grows its buffer with the bytes
+    /// that arrive, not with the length announced.
+    #[test]
+    fn announced_lengths_allocate_only_what_arrives() {
+        let mut buf = Vec::new();
+        let mut wire = (512u32 << 20).to_le_bytes().to_vec();
+        wire.extend_from_slice(&[1; 100]);
+        let e = receive_bounded(&mut wire.as_slice(), &mut buf, 1 << 20).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "a frame of 536870912 bytes where at most 1048576 are expected"
+        );
+        assert_eq!(buf.capacity(), 0);
+        // 1 GiB − 1 announced, 100 bytes sent, the stream ends.
+        let mut wire = ((1u32 << 30) - 1).to_le_bytes().to_vec();
+        wire.extend_from_slice(&[1; 100]);
+        let e = receive(&mut wire.as_slice(), &mut buf).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::UnexpectedEof);
+        assert!(buf.capacity() < 1 << 16, "{}", buf.capacity());
+        // A long frame that arrives whole is read whole.
+        let mut out = Out::default();
+        out.start(OK).bytes(&vec![3; 200_000]);
+        let mut wire = Vec::new();
+        out.send(&mut wire).unwrap();
+        assert!(receive_bounded(&mut wire.as_slice(), &mut buf, 1 << 20).unwrap());
+        assert_eq!(&buf[..], &wire[4..]);
+    }
+
     /// A time-out and a request to end the simulation cross as themselves,
     /// with an FMI 3.0 function name kept as the static name.
     #[test]
