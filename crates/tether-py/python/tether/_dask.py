@@ -101,7 +101,11 @@ def _placed(inst: Dict[str, Any], isolate: bool) -> bool:
 
 def _check_resources(client: Any, placed: List[Dict[str, Any]], error: Any) -> None:
     """Every instance's resources exist on some worker (else it would wait for ever)."""
-    workers = client.scheduler_info().get("workers", {})
+    try:  # every worker (distributed ≥ 2025.1 lists 5 unless told)
+        info = client.scheduler_info(n_workers=-1)
+    except TypeError:
+        info = client.scheduler_info()
+    workers = info.get("workers", {})
     for inst in placed:
         wanted = inst.get("resources") or {}
         if not wanted:
