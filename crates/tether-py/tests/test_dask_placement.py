@@ -104,11 +104,13 @@ def test_an_instance_needing_a_licence_runs_on_the_licensed_worker(cluster, osci
     assert placed.complete and placed.columns == local.columns
     assert same_bits(placed.to_numpy().view(np.float64), local.to_numpy().view(np.float64))
     # While the run went on: one host, under the licensed worker, serving
-    # the master (a host process of its connection), the licence held.
+    # the master (a host process per connection), the licence held.
     assert seen, "the run ended before the first progress call"
     during, held = seen[0]
     assert held == 0
-    assert [len(served) for _, served in during[licensed]] == [1], during
+    # (The master may open more than one connection: copies for parallel
+    # perturbed runs are host processes of their own.)
+    assert [len(served) >= 1 for _, served in during[licensed]] == [True], during
     assert all(found == [] for address, found in during.items() if address != licensed), during
     assert list(placed.placement) == ["mass2"]
     assert placed.placement["mass2"]["worker"] == licensed
