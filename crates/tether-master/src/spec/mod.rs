@@ -140,16 +140,32 @@ pub struct ConnectionSpec {
 }
 
 /// `[signals]`: the order in which signal-connected instances see each
-/// other's values within a macro step.
+/// other's values within a macro step, and whether the step is iterated
+/// until the exchanged values agree (docs/algorithm.md, "Signal connections").
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SignalSettings {
-    /// `"jacobi"` (the default) or `"gauss_seidel"`.
-    pub scheme: SignalScheme,
-    /// Relative tolerance on the exchanged values of direct-feedthrough
-    /// loops (at T_0, and per step when iterated); default 1e-10.
+    /// `"jacobi"` (the default) or `"gauss_seidel"`; refused with
+    /// `solver = "newton"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scheme: Option<SignalScheme>,
+    /// Tolerance on the exchanged values (at T_0, and per step when
+    /// iterated): |Δv| ≤ tolerance·max(1, |v|); default 1e-10.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tolerance: Option<f64>,
+    /// Iterate every macro step: at most this many repetitions of the step
+    /// (fixed point) or Newton updates (`solver = "newton"`) after its first
+    /// run. None (the default): the step is run once.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
+    /// How an iterated step updates the exchanged values: `"fixed_point"`
+    /// (the default) or `"newton"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub solver: Option<SignalSolver>,
+    /// A step that does not converge within `iterations` fails the run
+    /// (otherwise it is counted and warned about once).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub strict: bool,
 }
 
 impl SignalSettings {
@@ -161,6 +177,25 @@ impl SignalSettings {
     pub fn tolerance(&self) -> f64 {
         self.tolerance.unwrap_or(1e-10)
     }
+
+    /// `scheme`, or its default Jacobi.
+    pub fn scheme(&self) -> SignalScheme {
+        self.scheme.unwrap_or_default()
+    }
+}
+
+/// How an iterated macro step (`[signals] iterations`) updates the values
+/// the signal connections exchange.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SignalSolver {
+    /// Repeat the step with the values the last run produced (Jacobi or
+    /// Gauss–Seidel, as `scheme` says).
+    #[default]
+    FixedPoint,
+    /// Newton on v = G(v) with a finite-difference Jacobian from perturbed
+    /// runs of the step.
+    Newton,
 }
 
 /// Jacobi: every receiver takes the senders' values at T_N. Gauss–Seidel:
@@ -356,6 +391,59 @@ pub struct InstanceSpec {
     /// The FMU already on `host` (a path there): the archive is not sent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fmu_on_host: Option<PathBuf>,
+    /// What a Dask worker must have to host the instance, by name, e.g.
+    /// `{ licence = 1 }` (Python's `tether.run(system, client=…)`,
+    /// docs/remote.md); the `tether` CLI runs the instance here and says so.
+    #[serde(
+        default,
+        skip_serializing_if = "BTreeMap::is_empty",
+        deserialize_with = "resources"
+    )]
+    pub resources: BTreeMap<String, f64>,
+}
+
+/// `resources`: a table of numbers, the error naming what is expected.
+fn resources<'de, D: serde::Deserializer<'de>>(d: D) -> Result<BTreeMap<String, f64>, D::Error> {
+    struct Amount(f64);
+    impl<'de> Deserialize<'de> for Amount {
+        fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+            struct Visitor;
+            impl serde::de::Visitor<'_> for Visitor {
+                type Value = Amount;
+                fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                    f.write_str("a number of units of a Dask worker resource, e.g. { licence = 1 }")
+                }
+                fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Amount, E> {
+                    Ok(Amount(v as f64))
+                }
+                fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Amount, E> {
+                    Ok(Amount(v as f64))
+                }
+                fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Amount, E> {
+                    Ok(Amount(v))
+                }
+            }
+            d.deserialize_any(Visitor)
+        }
+    }
+    struct Table;
+    impl<'de> serde::de::Visitor<'de> for Table {
+        type Value = BTreeMap<String, f64>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a table of Dask worker resources, e.g. { licence = 1 }")
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            mut map: A,
+        ) -> Result<Self::Value, A::Error> {
+            let mut table = BTreeMap::new();
+            while let Some((name, Amount(amount))) = map.next_entry::<String, Amount>()? {
+                table.insert(name, amount);
+            }
+            Ok(table)
+        }
+    }
+    d.deserialize_map(Table)
 }
 
 /// Where an instance's FMU runs (`isolation` of an instance).
