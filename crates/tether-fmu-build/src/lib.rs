@@ -154,13 +154,12 @@ pub fn model_description_of(cdylib: &Path, version: FmiVersion) -> Result<String
     })?;
     type Describe = unsafe extern "C" fn() -> *const c_char;
     // SAFETY: the kit exports this symbol with exactly this signature.
-    let describe = unsafe { library.get::<Describe>(symbol.as_bytes()) }.map_err(|source| {
-        Error::Symbol {
+    let describe =
+        unsafe { library.get::<Describe>(symbol.as_bytes()) }.map_err(|source| Error::Symbol {
             path: cdylib.to_path_buf(),
             symbol,
             source,
-        }
-    })?;
+        })?;
     // SAFETY: the function takes no arguments and returns null or a static C string.
     let text = unsafe { describe() };
     if text.is_null() {
@@ -220,13 +219,7 @@ fn package_as(cdylib: &Path, out_dir: &Path, version: FmiVersion) -> Result<Path
     written.map(|()| target)
 }
 
-fn write_zip(
-    path: &Path,
-    xml: &str,
-    id: &str,
-    binary: &[u8],
-    platform: &str,
-) -> Result<(), Error> {
+fn write_zip(path: &Path, xml: &str, id: &str, binary: &[u8], platform: &str) -> Result<(), Error> {
     let file = File::create(path).map_err(io_error("cannot create", path))?;
     let zip_error = |source| Error::Zip {
         path: path.to_path_buf(),

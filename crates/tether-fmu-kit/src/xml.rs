@@ -370,10 +370,12 @@ fn render3(d: &Declaration, token: &str) -> String {
 
     let _ = writeln!(x, "  <ModelVariables>");
     let real_parameters = d.all_real_parameters();
-    let description = |text: &str| opt_attr("description", (!text.is_empty()).then(|| text.to_string()));
+    let description =
+        |text: &str| opt_attr("description", (!text.is_empty()).then(|| text.to_string()));
     let fixed = r#" causality="parameter" variability="fixed" initial="exact""#;
-    let calculated =
-        |causality: &str| format!(r#" causality="{causality}" variability="continuous" initial="calculated""#);
+    let calculated = |causality: &str| {
+        format!(r#" causality="{causality}" variability="continuous" initial="calculated""#)
+    };
     for (vr, &slot) in slots.iter().enumerate() {
         let name = escape(&d.name(slot));
         let line = match slot {
@@ -462,8 +464,16 @@ fn render3(d: &Declaration, token: &str) -> String {
             .depends_on
             .iter()
             .filter_map(|dep| {
-                let state = d.states.iter().position(|s| s.name == *dep).map(Slot::State);
-                let input = d.inputs.iter().position(|u| u.name == *dep).map(Slot::Input);
+                let state = d
+                    .states
+                    .iter()
+                    .position(|s| s.name == *dep)
+                    .map(Slot::State);
+                let input = d
+                    .inputs
+                    .iter()
+                    .position(|u| u.name == *dep)
+                    .map(Slot::Input);
                 state.or(input).map(vr_of)
             })
             .collect();

@@ -149,7 +149,12 @@ pub unsafe fn enter_initialization_mode<M: Model>(
 
 /// Refuses a get/set whose `nValues` differs from `nValueReferences` (every variable
 /// is a scalar) before any array is touched.
-unsafe fn scalars<M: Model>(c: Fmi3Instance, call: Call, n: usize, n_values: usize) -> Option<Fmi3Status> {
+unsafe fn scalars<M: Model>(
+    c: Fmi3Instance,
+    call: Call,
+    n: usize,
+    n_values: usize,
+) -> Option<Fmi3Status> {
     let refuse = |_: &mut Instance<M>| {
         Err(Failure::usage(format!(
             "nValues is {n_values}, expected {n} (every variable is a scalar)"
@@ -170,9 +175,7 @@ pub unsafe fn get_float64<M: Model>(
     if let Some(status) = unsafe { scalars::<M>(c, Call::GetReal, n, n_values) } {
         return status;
     }
-    let get = |i: &mut Instance<M>, vrs: &[u32], out: &mut [f64]| {
-        i.get_real(vrs, out)
-    };
+    let get = |i: &mut Instance<M>, vrs: &[u32], out: &mut [f64]| i.get_real(vrs, out);
     // SAFETY: this module's contract.
     unsafe { get_values::<M, f64>(c, Call::GetReal, vr, n, values, get) }
 }
@@ -188,9 +191,7 @@ pub unsafe fn set_float64<M: Model>(
     if let Some(status) = unsafe { scalars::<M>(c, Call::SetReal, n, n_values) } {
         return status;
     }
-    let set = |i: &mut Instance<M>, vrs: &[u32], values: &[f64]| {
-        i.set_real(vrs, values)
-    };
+    let set = |i: &mut Instance<M>, vrs: &[u32], values: &[f64]| i.set_real(vrs, values);
     // SAFETY: this module's contract.
     unsafe { set_values::<M, f64>(c, Call::SetReal, vr, n, values, set) }
 }
@@ -206,9 +207,7 @@ pub unsafe fn get_int32<M: Model>(
     if let Some(status) = unsafe { scalars::<M>(c, Call::GetInteger, n, n_values) } {
         return status;
     }
-    let get = |i: &mut Instance<M>, vrs: &[u32], out: &mut [i32]| {
-        i.get_integer(vrs, out)
-    };
+    let get = |i: &mut Instance<M>, vrs: &[u32], out: &mut [i32]| i.get_integer(vrs, out);
     // SAFETY: this module's contract.
     unsafe { get_values::<M, i32>(c, Call::GetInteger, vr, n, values, get) }
 }
@@ -224,9 +223,7 @@ pub unsafe fn set_int32<M: Model>(
     if let Some(status) = unsafe { scalars::<M>(c, Call::SetInteger, n, n_values) } {
         return status;
     }
-    let set = |i: &mut Instance<M>, vrs: &[u32], values: &[i32]| {
-        i.set_integer(vrs, values)
-    };
+    let set = |i: &mut Instance<M>, vrs: &[u32], values: &[i32]| i.set_integer(vrs, values);
     // SAFETY: this module's contract.
     unsafe { set_values::<M, i32>(c, Call::SetInteger, vr, n, values, set) }
 }
@@ -359,5 +356,176 @@ pub unsafe fn unsupported<M: Model>(c: Fmi3Instance, function: &'static str) -> 
                 "not supported by this FMU (the kit supports Float64, Int32 and Boolean variables, no event mode, clocks or derivatives)",
             ))
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The FMI 3.0 layer called as an importer calls it, on the kit's test model
+    //! (ẋ = u − k·x; value references k 0, x0 1, tolerance 2, u 3, y 4, z 5, x 6,
+    //! der(x) 7, time 8).
+
+    use std::ffi::CString;
+    use std::ptr;
+    use std::sync::Mutex;
+
+    use super::*;
+    use crate::ffi::{free_instance, get_fmu_state, set_fmu_state};
+    use crate::tests::Decay;
+
+    type D = Decay;
+    const OK: Fmi3Status = 0;
+    const DISCARD_OR_WORSE: Fmi3Status = 2;
+
+    static MESSAGES: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+    unsafe extern "C" fn log(_: *mut c_void, _: Fmi3Status, _: Fmi3String, message: Fmi3String) {
+        // SAFETY: the kit passes a NUL-terminated message.
+        let text = unsafe { CStr::from_ptr(message) }
+            .to_string_lossy()
+            .into_owned();
+        MESSAGES.lock().unwrap().push(text);
+    }
+
+    fn instantiate(token: &str) -> Fmi3Instance {
+        let name = CString::new("decay3").unwrap();
+        let token = CString::new(token).unwrap();
+        // SAFETY: valid NUL-terminated strings.
+        unsafe {
+            instantiate_co_simulation::<D>(
+                name.as_ptr(),
+                token.as_ptr(),
+                0,
+                ptr::null_mut(),
+                Some(log),
+            )
+        }
+    }
+
+    fn get(c: Fmi3Instance, vr: u32) -> f64 {
+        let mut v = [f64::NAN];
+        // SAFETY: one value reference, one value.
+        assert_eq!(
+            unsafe { get_float64::<D>(c, &vr, 1, v.as_mut_ptr(), 1) },
+            OK
+        );
+        v[0]
+    }
+
+    #[test]
+    fn the_fmi3_layer_steps_the_model_as_the_fmi2_layer_does() {
+        assert!(instantiate("{not-the-token}").is_null());
+        let c = instantiate(xml::model_guid::<D>());
+        assert!(!c.is_null());
+        let (mut event, mut terminate, mut early, mut last) = (1u8, 1u8, 1u8, f64::NAN);
+        // SAFETY: c is a live instance of D; every array holds what the call says.
+        unsafe {
+            let k = [2.0];
+            assert_eq!(set_float64::<D>(c, &0, 1, k.as_ptr(), 1), OK);
+            assert_eq!(enter_initialization_mode::<D>(c, 0, 0.0, 0.5, 0, 0.0), OK);
+            assert_eq!(crate::ffi::exit_initialization_mode::<D>(c), OK);
+            assert_eq!(get(c, 8), 0.5, "time starts at the start time");
+            let u = [1.0];
+            assert_eq!(set_float64::<D>(c, &3, 1, u.as_ptr(), 1), OK);
+            let status = do_step::<D>(
+                c,
+                0.5,
+                0.25,
+                &mut event,
+                &mut terminate,
+                &mut early,
+                &mut last,
+            );
+            assert_eq!(status, OK);
+            assert_eq!((event, terminate, early, last), (0, 0, 0, 0.75));
+        }
+        // x(t) = 1/2 + (x0 − 1/2)·e^(−k (t − t0)) with x0 = 1, k = 2, u = 1.
+        let x = get(c, 6);
+        let exact = 0.5 + 0.5 * (-2.0 * 0.25f64).exp();
+        assert!((x - exact).abs() < 1e-9, "x = {x}, exact {exact}");
+        assert_eq!(get(c, 4), x + 1.0, "y = x + u");
+        assert_eq!(get(c, 8), 0.75);
+        // SAFETY: as above; the state is freed with the instance's state functions.
+        unsafe {
+            let mut state: *mut c_void = ptr::null_mut();
+            assert_eq!(get_fmu_state::<D>(c, &mut state), OK);
+            do_step::<D>(
+                c,
+                0.75,
+                0.25,
+                &mut event,
+                &mut terminate,
+                &mut early,
+                &mut last,
+            );
+            let after = get(c, 6);
+            assert_eq!(set_fmu_state::<D>(c, state), OK);
+            assert_eq!(get(c, 6), x);
+            do_step::<D>(
+                c,
+                0.75,
+                0.25,
+                &mut event,
+                &mut terminate,
+                &mut early,
+                &mut last,
+            );
+            assert_eq!(
+                get(c, 6).to_bits(),
+                after.to_bits(),
+                "a restored step repeats bit for bit"
+            );
+            crate::ffi::free_fmu_state::<D>(c, &mut state);
+            free_instance::<D>(c);
+        }
+    }
+
+    #[test]
+    fn bad_fmi3_calls_return_error_with_a_message_naming_the_fmi3_function() {
+        let c = instantiate(xml::model_guid::<D>());
+        let v = [0.0; 2];
+        // SAFETY: c is a live instance of D; every array holds what the call says
+        // (nValues = 2 for one value reference is refused before the arrays are read).
+        unsafe {
+            assert!(set_float64::<D>(c, &0, 1, v.as_ptr(), 2) >= DISCARD_OR_WORSE);
+            assert!(
+                set_float64::<D>(c, &8, 1, v.as_ptr(), 1) >= DISCARD_OR_WORSE,
+                "time is read-only"
+            );
+            assert!(unsupported::<D>(c, "fmi3GetFloat32") >= DISCARD_OR_WORSE);
+            assert!(enter_step_mode::<D>(c) >= DISCARD_OR_WORSE);
+            free_instance::<D>(c);
+        }
+        let messages = MESSAGES.lock().unwrap().join("\n");
+        for expected in [
+            "fmi3SetFloat64: nValues is 2, expected 1",
+            "fmi3SetFloat64: time (value reference 8) cannot be set",
+            "fmi3GetFloat32: not supported",
+            "fmi3EnterStepMode: not supported",
+        ] {
+            assert!(
+                messages.contains(expected),
+                "{expected:?} not in\n{messages}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_fmi3_model_description_keeps_the_value_references_and_adds_time() {
+        let text = xml::model_description_fmi3(&D::DECLARATION).unwrap();
+        for expected in [
+            r#"fmiVersion="3.0""#,
+            &format!(r#"instantiationToken="{}""#, xml::guid(&D::DECLARATION)),
+            r#"<Float64 name="u" valueReference="3" causality="input" variability="continuous" start="0.0"/>"#,
+            r#"<Float64 name="der(x)" valueReference="7" description="Derivative of x" causality="local" variability="continuous" initial="calculated" derivative="6"/>"#,
+            r#"<Float64 name="time" valueReference="8" description="Simulation time" causality="independent" variability="continuous"/>"#,
+            r#"<Output valueReference="4" dependencies="3 6"/>"#,
+            r#"<Output valueReference="5" dependencies="6"/>"#,
+            r#"<InitialUnknown valueReference="4"/>"#,
+            r#"canGetAndSetFMUState="true" canSerializeFMUState="true""#,
+            r#"canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="1" providesIntermediateUpdate="false""#,
+        ] {
+            assert!(text.contains(expected), "{expected}\nnot in\n{text}");
+        }
     }
 }
