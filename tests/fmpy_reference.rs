@@ -360,7 +360,7 @@ fn fmi3_builds_alone_and_mixed_with_fmi2_agree_with_the_fmpy_reference_exactly()
         ("tests/validation/double_pendulum_fmi3.toml", Some(0.05)),
     ] {
         let flags = ["--method", "baumgarte", "--beta", "2e-3", "--gamma", "1e-6"];
-        let (a, b) = both(&python, system, index1.clone(), 0, stop, &flags);
+        let (a, b) = both(&python, system, index1, 0, stop, &flags);
         let (rel, column) = worst(&a, &b, "\u{0}");
         eprintln!(
             "{system}: {} rows, max relative deviation {rel:e} ({column})",

@@ -673,7 +673,8 @@ fn bench_fmi3() {
     let reps = reps();
     println!("\n== FMI 3.0 against FMI 2.0 instances (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps, k = 0) ==");
     println!("FMU     FMI 2.0/step   FMI 3.0/step   FMI 3.0 / FMI 2.0   goal");
-    let fmu3 = tether_fmu_build::workspace_fmu3("oscillator").expect("package the FMI 3.0 oscillator");
+    let fmu3 =
+        tether_fmu_build::workspace_fmu3("oscillator").expect("package the FMI 3.0 oscillator");
     for exact in [true, false] {
         let case = Case::example(exact, 0);
         let spec2 = case.spec();
@@ -689,7 +690,11 @@ fn bench_fmi3() {
         };
         let (_, lambda, calls2) = run(&spec2);
         let (_, lambda3, calls3) = run(&spec3);
-        assert_eq!(lambda.to_bits(), lambda3.to_bits(), "the same λ_N through FMI 3.0");
+        assert_eq!(
+            lambda.to_bits(),
+            lambda3.to_bits(),
+            "the same λ_N through FMI 3.0"
+        );
         assert_eq!(calls2, calls3, "the same FMI calls through FMI 3.0");
         let (mut t2, mut t3, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
         for rep in 0..reps {
