@@ -149,19 +149,32 @@ pub unsafe fn enter_initialization_mode<M: Model>(
 
 /// Refuses a get/set whose `nValues` differs from `nValueReferences` (every variable
 /// is a scalar) before any array is touched.
+#[inline]
 unsafe fn scalars<M: Model>(
     c: Fmi3Instance,
     call: Call,
     n: usize,
     n_values: usize,
 ) -> Option<Fmi3Status> {
+    // SAFETY: this module's contract.
+    (n != n_values).then(|| unsafe { refuse_values::<M>(c, call, n, n_values) })
+}
+
+#[cold]
+#[inline(never)]
+unsafe fn refuse_values<M: Model>(
+    c: Fmi3Instance,
+    call: Call,
+    n: usize,
+    n_values: usize,
+) -> Fmi3Status {
     let refuse = |_: &mut Instance<M>| {
         Err(Failure::usage(format!(
             "nValues is {n_values}, expected {n} (every variable is a scalar)"
         )))
     };
     // SAFETY: this module's contract.
-    (n != n_values).then(|| unsafe { simple::<M>(c, call, refuse) })
+    unsafe { simple::<M>(c, call, refuse) }
 }
 
 pub unsafe fn get_float64<M: Model>(
