@@ -115,6 +115,9 @@ def run(args):
 
     clock = time.perf_counter()
     master = Master(system)
+    if not args.quiet:
+        for note in master.signals.loop_notes():
+            print(f"note: {note}", file=sys.stderr)
     failure = None
     try:
         try:

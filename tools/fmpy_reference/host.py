@@ -118,6 +118,8 @@ class Host:
         self.values = {}  # (value reference, order) -> latest value read
         self.state = None
         self.initialized = False
+        # Gauss-Seidel signals: stepped by the signal sweep before the method's step.
+        self.stepped_ahead = False
         self.counters = Counters()
         for name, value in spec.parameters.items():
             self._start_value(name, value)
@@ -168,10 +170,18 @@ class Host:
         return bool(self.inputs)
 
     def initialize(self, start, stop, tolerance):
+        self.enter_initialization(start, stop, tolerance)
+        self.exit_initialization()
+
+    def enter_initialization(self, start, stop, tolerance):
+        """Setup experiment and enter initialization mode, where inputs can be
+        set and outputs read before the first step (a loop's values at T_0)."""
         self.fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
         self.fmu.enterInitializationMode()
+
+    def exit_initialization(self):
         self.fmu.exitInitializationMode()
-        self.initialized = True
+        self.initialized = True  # fmi2Terminate is allowed from here on
 
     # -- during the run ---------------------------------------------------------
 

@@ -15,6 +15,7 @@ import rows as rowkinds
 from errors import RunError
 from host import REAL, Host, describe
 from linalg import solve
+from signals import Signals
 
 
 class Master:
@@ -31,9 +32,32 @@ class Master:
             for spec in system.instances:
                 self.hosts.append(Host(spec))
             self._wire()
+            self.signals = Signals(system, self.hosts)
+            if self.control is not None and not self.unknowns:
+                raise RunError(f"invalid step_control = {system.step_control['rtol']}: expected a system with "
+                               f"constraints, joints or coupling variables: the error estimate is on the "
+                               f"coupled quantities")
+            if self.control is not None:
+                # A rejected step rolls back every instance, signal-only ones too.
+                for host in self.hosts:
+                    for capability in ("canGetAndSetFMUstate", "canHandleVariableCommunicationStepSize"):
+                        if not getattr(host.cs, capability):
+                            role = "" if host.is_coupled() else \
+                                "; a rejected step rolls back signal-only instances too"
+                            raise RunError(f"instance '{host.name}' ({host.md.modelName}) does not declare "
+                                           f"{capability}, which adaptive macro steps ([step_control]{role}) "
+                                           f"needs")
             stop = self.t0 + self.steps * self.h if self.control is None else system.stop
             for host in self.hosts:
-                host.initialize(self.t0, stop, system.tolerance)
+                host.enter_initialization(self.t0, stop, system.tolerance)
+            # A loop's values at T_0 are solved in initialization mode.
+            if self.signals.loops:
+                self.signals.initialize()
+            for host in self.hosts:
+                host.exit_initialization()
+            # Adaptive steps: a rejected try rolls back the instances the
+            # Gauss-Seidel sweep stepped too, so it saves them first.
+            self.signals.save = self.control is not None
         except Exception:
             self.close()
             raise
@@ -263,10 +287,14 @@ class Master:
         """Initial multipliers at T_0, then the first recorded point."""
         consistent = [m for m, u in enumerate(self.unknowns) if u.initial is None]
         mu = self.method.mu if self.method.kind == "explicit" else None
+        # Signals at T_0 before and after the consistent multipliers, which may
+        # depend on signal inputs and change outputs that senders read.
+        self.signals.initialize()
         if consistent:
             for _ in range(2):  # Newton; the first step is exact for linear feedthrough
                 self._feedthrough_newton(consistent, mu)
         self._apply_constant()
+        self.signals.initialize()
         self._accept()
         if self.control is not None:
             self._find_states()
@@ -309,19 +337,24 @@ class Master:
 
     def _explicit_step(self):
         t = self.time()
+        self.signals.send(self.n, t, self.h, None)
         for host in self.hosts:  # inputs hold u_N over the step
-            host.do_step(t, self.h)
+            if not host.stepped_ahead:
+                host.do_step(t, self.h)
         self.n += 1
         self.past = [[p[0], p[0], p[1]] for p in self.past]
         self._feedthrough_newton(list(range(len(self.unknowns))), self.method.mu)
         self._apply_constant()
         self._accept()
+        self.signals.receive(self.time())
 
     # -- the predictor/corrector step -------------------------------------------------------
 
     def _predictor_corrector_step(self):
         if self.control is None:
+            self.signals.send(self.n, self.time(), self.h, None)
             self._try_step(self.time(), self.h, None)
+            self.signals.receive(self.time())
             return
         c = self.control
         while True:
@@ -331,9 +364,11 @@ class Master:
             halved = not last and remaining < 2.0 * c.h
             h = remaining if last else 0.5 * remaining if halved else c.h
             t_next = c.stop if last else c.t + h
+            self.signals.send(self.n, c.t, h, tuple(c.past))
             error = self._try_step(c.t, h, tuple(c.past), t_next)
             nxt, accepted = c.next(h, error)
             if accepted:
+                self.signals.receive(t_next)
                 c.t = t_next
                 c.past = [h, c.past[0]]
                 c.h = max(c.h, nxt) if last or halved else nxt
@@ -357,15 +392,27 @@ class Master:
         adaptive = self.control is not None
         if t_next is None:
             t_next = self.time_at(n + 1)
+        if nu == 0:
+            # Nothing to solve for (signal connections only): every instance
+            # steps once (those the Gauss-Seidel sweep stepped have), and that
+            # is the accepted point.
+            for host in self.hosts:
+                if not host.stepped_ahead:
+                    host.do_step(t, h)
+            self.n += 1
+            self._accept()
+            return None
 
-        # Predictor: extrapolated polynomials (eq. 56-58).
+        # Predictor: extrapolated polynomials (eq. 56-58). Instances the
+        # Gauss-Seidel signal sweep stepped already are not stepped again.
         jets = [poly.predictor(self.past[m], degree_pred, h, steps) for m in range(nu)]
         u_pred = [jets[m].at(h) for m in range(nu)]
         for host in self.hosts:
-            if host.is_coupled() or adaptive:
-                host.save_state()
-            host.apply(jets, k)
-            host.do_step(t, h)
+            if not host.stepped_ahead:
+                if host.is_coupled() or adaptive:
+                    host.save_state()
+                host.apply(jets, k)
+                host.do_step(t, h)
             host.read()
         base = self._snapshot()
         out = self._output()

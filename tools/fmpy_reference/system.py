@@ -75,6 +75,16 @@ class JointSpec:
 
 
 @dataclass
+class ConnectionSpec:
+    """A `[[connection]]`: `from` output to `to` input, as gain*y + offset."""
+
+    frm: str
+    to: str
+    gain: float | None = None
+    offset: float | None = None
+
+
+@dataclass
 class VariableSpec:
     name: str
     drives: str
@@ -110,6 +120,10 @@ class System:
     constraints: list = field(default_factory=list)
     joints: list = field(default_factory=list)
     variables: list = field(default_factory=list)
+    connections: list = field(default_factory=list)
+    # `[signals]`: "jacobi" or "gauss_seidel"; the loops' relative tolerance.
+    scheme: str = "jacobi"
+    signal_tolerance: float = 1e-10
 
     def macro_steps(self):
         """(stop - start)/step rounded half away from zero, at least 1."""
@@ -346,6 +360,18 @@ def _from_document(doc):
                                              t.take("drives", "string", required=True),
                                              t.take("value", "string", required=True), initial))
         t.done()
+    for i, raw in enumerate(top.take("connection", "array", [])):
+        t = _Table(f"[[connection]] {i + 1}", raw)
+        system.connections.append(ConnectionSpec(t.take("from", "string", required=True),
+                                                 t.take("to", "string", required=True),
+                                                 t.take("gain", "number", None), t.take("offset", "number", None)))
+        t.done()
+    signals = _Table("[signals]", top.take("signals", "table", {}))
+    system.scheme = signals.take("scheme", "string", "jacobi")
+    if system.scheme not in ("jacobi", "gauss_seidel"):
+        raise RunError(f"[signals]: unknown scheme `{system.scheme}`, expected jacobi or gauss_seidel")
+    system.signal_tolerance = signals.take("tolerance", "number", 1e-10)
+    signals.done()
     # [export] declares the interface of `tether fmu export`: nothing to run.
     top.take("export", "table", None)
     top.done()
@@ -419,6 +445,12 @@ def check(system):
         if name in seen:
             raise RunError(f"name '{name}' is used twice")
         seen.add(name)
+    if not finite(system.signal_tolerance) or system.signal_tolerance <= 0:
+        raise invalid("[signals] tolerance", system.signal_tolerance, "a finite relative tolerance > 0")
+    for c in system.connections:
+        for what, v in (("gain", c.gain), ("offset", c.offset)):
+            if v is not None and not finite(v):
+                raise invalid(f"{what} of the connection to {c.to}", v, "a finite number")
     for c in system.constraints:
         if c.initial is not None and not finite(c.initial):
             raise invalid(f"{c.name}.initial", c.initial, "a finite number")

@@ -115,6 +115,25 @@ for kind in revolute universal cylindrical translational planar inline orientati
   variant "3d_$kind" "3d-$kind" completes 1e-9 0 -- --stop 0.1
 done
 
+# Signal connections (docs/algorithm.md, "Signal connections"), bit for bit
+# (rtol = atol = 0). A control loop through direct feedthrough (PI controller
+# and plant, loop gain 0.5): solved at T_0 in initialization mode, closed at
+# the macro points under Gauss-Seidel (examples/control_loop.toml) and Jacobi;
+# with k = 1 the plant takes the interpolated (Gauss-Seidel) or extrapolated
+# (Jacobi, unstable in the loop: both hosts stop at the same step) inputs.
+variant control_loop loop-gs completes 0 0 --
+variant control_loop_jacobi loop-jacobi completes 0 0 --
+variant control_loop loop-gs-k1 completes 0 0 -- --order 1
+variant control_loop_jacobi loop-jacobi-k1 diverges 0 0 -- --order 1
+# Loop gain 2: the sweeps at T_0 diverge and Newton solves the loop; closed at
+# the macro points the loop is unstable and both hosts stop at the same step.
+variant control_loop_gain2 loop-gain2 diverges 0 0 --
+# Signals with a constraint (a controller without rollback on the paper's
+# rigid pair, Jacobi, k = 1), and with adaptive steps whose rejected tries roll
+# back the instance the Gauss-Seidel sweep stepped.
+variant controlled_oscillator signals-ctrl completes 0 0 --
+variant driven_oscillator signals-adaptive completes 0 0 --
+
 # FMI 3.0: the workspace FMUs built as FMI 3.0 (docs/fmu-kit.md), alone and mixed
 # with FMI 2.0 in one system; deviation exactly 0 (rtol = atol = 0).
 variant oscillator_fmi3 fmi3-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0

@@ -208,6 +208,7 @@ fn stats_dict<'py>(
     py: Python<'py>,
     stats: &RunStats,
     stop_reason: &str,
+    notes: &[String],
 ) -> PyResult<Bound<'py, PyDict>> {
     let json = py.import("json")?;
     let d = json
@@ -215,6 +216,9 @@ fn stats_dict<'py>(
         .cast_into::<PyDict>()?;
     d.set_item("stop_reason", stop_reason)?;
     d.set_item("summary", stats.to_string())?;
+    // The setup's notes (the CLI's `note:` lines), such as the
+    // direct-feedthrough loops closed only at macro points.
+    d.set_item("notes", notes.to_vec())?;
     Ok(d)
 }
 
@@ -505,6 +509,7 @@ fn run(
     let outcome = py.detach(move || -> Result<_, MasterError> {
         spec.check_grid()?;
         let mut sim = Simulation::new(&spec).map_err(|e| e.located(&spec, |_, _| None))?;
+        let notes = sim.notes().to_vec();
         let mut rows = Rows::default();
         let width = sim.columns().len() + 1;
         let points = usize::try_from(sim.total_steps()).unwrap_or(usize::MAX);
@@ -516,17 +521,21 @@ fn run(
         );
         let mut signals = Signals::new(progress.map(|f| (f, sim.total_steps())));
         let result = sim.run(&mut [&mut rows, &mut signals], &mut |_, _| {});
-        Ok((rows, result.map(|_| ()), sim.stats()))
+        Ok((rows, result.map(|_| ()), sim.stats(), notes))
     });
     match outcome {
         // The run could not start: no results.
         Err(e) => Err(master_failure(&e, None)),
-        Ok((rows, Ok(()), stats)) => {
-            let stats = stats_dict(py, &stats, "completed")?.into_any().unbind();
+        Ok((rows, Ok(()), stats, notes)) => {
+            let stats = stats_dict(py, &stats, "completed", &notes)?
+                .into_any()
+                .unbind();
             rows.into_py(py, stats)
         }
-        Ok((rows, Err(e), stats)) => {
-            let stats = stats_dict(py, &stats, &message(&e))?.into_any().unbind();
+        Ok((rows, Err(e), stats, notes)) => {
+            let stats = stats_dict(py, &stats, &message(&e), &notes)?
+                .into_any()
+                .unbind();
             let partial = rows.into_py(py, stats)?;
             match (&e, unstable) {
                 (
@@ -562,6 +571,8 @@ struct PySimulation {
     closed_stats: Option<(RunStats, u64)>,
     /// The advice for a formulation known to be unstable, repeated on divergence.
     unstable: Option<String>,
+    /// The setup's notes.
+    notes: Vec<String>,
 }
 
 impl PySimulation {
@@ -591,6 +602,7 @@ impl PySimulation {
             bytes: Vec::new(),
         };
         rows.push(sim.time(), sim.values());
+        let notes = sim.notes().to_vec();
         Ok(PySimulation {
             sim: Some(sim),
             n: 0,
@@ -600,6 +612,7 @@ impl PySimulation {
             failed: None,
             closed_stats: None,
             unstable: spec.method.stability_warning(spec.coupling.order),
+            notes,
         })
     }
 
@@ -665,7 +678,7 @@ impl PySimulation {
             (None, true) => "completed".to_string(),
             (None, false) => "running".to_string(),
         };
-        stats_dict(py, &stats, &reason)
+        stats_dict(py, &stats, &reason, &self.notes)
     }
 
     /// `(columns, data, stats)` of every point so far.

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import warnings
 from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -73,6 +74,7 @@ __all__ = [
     "SettingsError",
     "DivergenceError",
     "Interrupted",
+    "Note",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -81,6 +83,19 @@ ParameterValue = Union[bool, int, float, str]
 
 # ---------------------------------------------------------------------------
 # Errors
+
+
+class Note(UserWarning):
+    """What the ``tether`` command prints as ``note:`` before a run, such as a
+    direct-feedthrough loop of signal connections closed only at macro
+    points: issued with :func:`warnings.warn` by :func:`run` and
+    :class:`Simulation`, and kept in ``stats["notes"]``. Silence it with
+    ``warnings.simplefilter("ignore", tether.Note)``."""
+
+
+def _notes(stats: Dict[str, Any]) -> None:
+    for note in stats.get("notes", []):
+        warnings.warn(note, Note, stacklevel=3)
 
 
 class TetherError(Exception):
@@ -563,7 +578,11 @@ def run(
     try:
         raw = _tether.run(**_source(system), progress=progress, **kw)
     except _tether.Failure as f:
+        partial = f.args[2] if len(f.args) > 2 else None
+        if partial:
+            _notes(partial[2])
         raise _error(f) from None
+    _notes(raw[2])
     return Result(*raw)
 
 
@@ -644,6 +663,7 @@ class Simulation:
             self._sim = _tether.Simulation(**_source(system), **kw)
         except _tether.Failure as f:
             raise _error(f) from None
+        _notes(self._sim.stats())
         self._columns: List[str] = self._sim.columns
 
     @property
