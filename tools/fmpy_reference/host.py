@@ -36,6 +36,9 @@ class FMU3Reference(FMU3Slave):
     def setReal(self, vr, values):
         self.setFloat64(vr, values)
 
+    def getInteger(self, vr):
+        return self.getInt32(vr)
+
     def setInteger(self, vr, values):
         self.setInt32(vr, values)
 

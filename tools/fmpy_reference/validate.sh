@@ -140,6 +140,7 @@ variant oscillator_fmi3 fmi3-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 
 variant oscillator_fmi3 fmi3-m2-index2-k0 completes 0 0 -- "${i2m2[@]}" --order 0
 variant mixed_fmi3 fmi3-mixed-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0
 variant double_pendulum_fmi3 fmi3-dp-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0 --stop 0.2
+variant control_loop_fmi3 fmi3-loop-gs completes 0 0 --
 
 printf '%s\n' "${summary[@]}"
 exit $failed
