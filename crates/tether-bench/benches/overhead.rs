@@ -726,24 +726,67 @@ fn bench_fmi3() {
     }
 }
 
-/// Transports, one FMI call, and the macro step of the oscillator pair and the
-/// double pendulum with every instance in a host process against in-process;
-/// alternated repetitions, medians and their ratios from the same run.
+/// The load average of the last minute (what shares the cores with the bench).
+fn load() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|l| l.split_whitespace().next().map(str::to_string))
+        .unwrap_or_else(|| "unknown".into())
+}
+
+/// A `tether host` on 127.0.0.1 in a thread of this process (its host
+/// processes are this executable, as for pipes): `tcp://ADDR:PORT` and the
+/// token file (in `dir`).
+fn loopback_host(dir: &std::path::Path) -> (String, PathBuf) {
+    use std::os::unix::fs::PermissionsExt;
+    let token = dir.join("token");
+    std::fs::write(&token, "a token for the bench's loopback host").expect("token");
+    std::fs::set_permissions(&token, std::fs::Permissions::from_mode(0o600)).expect("chmod");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
+    let options = tether_fmi_host::listen::ListenOptions {
+        address: format!("127.0.0.1:{port}"),
+        token_file: token.clone(),
+        max_fmu_bytes: 1 << 30,
+        max_frame_bytes: 1 << 28,
+    };
+    std::thread::spawn(move || tether_fmi_host::listen::listen(&options));
+    let address = format!("127.0.0.1:{port}");
+    // Listening once the port cannot be bound (a probe connection would be
+    // a master the host complains about).
+    while std::net::TcpListener::bind(&address).is_ok() {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    (format!("tcp://{address}"), token)
+}
+
+/// Transports, one FMI call, and the macro step of the oscillator pair, the
+/// double pendulum and 3d_revolute (expensive body3d steps) with every
+/// instance in process, in a host process over pipes, and on a `tether host`
+/// over TCP on loopback; alternated repetitions, medians and their ratios
+/// from the same run, with the load average before and after.
 fn bench_isolation() {
     use tether_bench::{transport_round_trip, Transport};
+    use tether_fmi::remote::tcp::RemoteHost;
     use tether_fmi::remote::{set_host, HostCommand, RemoteInstance};
     println!("\n== isolation: FMU instances in host processes ==");
+    println!("load average (1 min) at the start: {}", load());
     // This executable is the host (as `tether` is for the CLI).
     set_host(HostCommand {
         program: std::env::current_exe().expect("the bench executable"),
         args: vec![FMI_HOST.into()],
     });
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let (url, token_file) = loopback_host(dir.path());
     let reps = reps();
     let transports = [
         ("pipes", Transport::Pipes),
         ("socket pair", Transport::SocketPair),
         ("shared memory + futex", Transport::SharedMemoryFutex),
         ("shared memory, spinning", Transport::SharedMemorySpin),
+        ("TCP on 127.0.0.1", Transport::TcpLoopback),
     ];
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); transports.len()];
     for _ in 0..reps {
@@ -755,72 +798,103 @@ fn bench_isolation() {
     for ((name, _), t) in transports.iter().zip(&times) {
         println!("  {name:<24} {}", us2(t));
     }
-    // One FMI call: fmi2GetReal of x and v of the oscillator.
+    // One FMI call: fmi2GetReal of x and v of the oscillator; an empty request.
     let fmu = Fmu::open(tether_fmu_build::workspace_fmu("oscillator").expect("oscillator"))
         .expect("open the oscillator");
     let mut local = fmu.instantiate("m", Default::default()).expect("instance");
-    let mut remote = RemoteInstance::new(&fmu, "m", Default::default(), None).expect("host");
+    let host = RemoteHost {
+        address: RemoteHost::parse_address(&url).expect("address"),
+        token_file: token_file.clone(),
+        fmu_on_host: None,
+    };
+    let mut remotes = [
+        RemoteInstance::new(&fmu, "m", Default::default(), None).expect("host"),
+        RemoteInstance::connect(&fmu, "m", Default::default(), None, &host).expect("tcp host"),
+    ];
     local.setup_experiment(None, 0.0, None).expect("setup");
     local.enter_initialization_mode().expect("initialization");
     local.exit_initialization_mode().expect("initialization");
-    remote.setup_experiment(None, 0.0, None).expect("setup");
-    remote.enter_initialization_mode().expect("initialization");
-    remote.exit_initialization_mode().expect("initialization");
+    for remote in &mut remotes {
+        remote.setup_experiment(None, 0.0, None).expect("setup");
+        remote.enter_initialization_mode().expect("initialization");
+        remote.exit_initialization_mode().expect("initialization");
+    }
     let vrs = [0, 1];
     let mut out = [0.0; 2];
     let n = 20_000;
-    let (mut in_process, mut isolated, mut ping) = (Vec::new(), Vec::new(), Vec::new());
+    let mut in_process = Vec::new();
+    let (mut get, mut ping): ([Vec<f64>; 2], [Vec<f64>; 2]) = Default::default();
     for _ in 0..reps {
         let clock = Instant::now();
         for _ in 0..n {
             local.get_real(&vrs, &mut out).expect("fmi2GetReal");
         }
         in_process.push(clock.elapsed().as_secs_f64() / n as f64);
-        let clock = Instant::now();
-        for _ in 0..n {
-            remote.get_real(&vrs, &mut out).expect("fmi2GetReal");
+        for (i, remote) in remotes.iter_mut().enumerate() {
+            let clock = Instant::now();
+            for _ in 0..n {
+                remote.get_real(&vrs, &mut out).expect("fmi2GetReal");
+            }
+            get[i].push(clock.elapsed().as_secs_f64() / n as f64);
+            let clock = Instant::now();
+            for _ in 0..n {
+                remote.ping().expect("ping");
+            }
+            ping[i].push(clock.elapsed().as_secs_f64() / n as f64);
         }
-        isolated.push(clock.elapsed().as_secs_f64() / n as f64);
-        let clock = Instant::now();
-        for _ in 0..n {
-            remote.ping().expect("ping");
-        }
-        ping.push(clock.elapsed().as_secs_f64() / n as f64);
     }
-    println!("one FMI call (fmi2GetReal of 2 values):");
+    println!("one FMI call (fmi2GetReal of 2 values) and an empty request (Tether's round trip):");
+    println!("  in-process {}", us2(&in_process));
+    for (i, name) in ["pipes", "TCP loopback"].into_iter().enumerate() {
+        println!(
+            "  {name:<13} {}   empty request {}",
+            us2(&get[i]),
+            us2(&ping[i])
+        );
+    }
     println!(
-        "  in-process {}   isolated {}   (an empty request: {})",
-        us2(&in_process),
-        us2(&isolated),
-        us2(&ping)
+        "  TCP / pipes: empty request {:.2}x",
+        median(ping[1].clone()) / median(ping[0].clone())
     );
-    drop((local, remote));
+    drop((local, remotes));
     let root = workspace_root();
-    let pendulum = SystemSpec::from_file(&root.join("examples/double_pendulum.toml"))
+    let mut pendulum = SystemSpec::from_file(&root.join("examples/double_pendulum.toml"))
         .expect("examples/double_pendulum.toml");
+    pendulum.experiment.stop = 2.0;
     tether_fmu_build::workspace_fmu("link").expect("package the link FMU");
     let mut oscillator = Case::example(false, 0).spec();
     oscillator.experiment.stop = 1.0;
+    let mut revolute = parallel_cases().remove(0).spec;
+    revolute.coupling.parallel = Parallel::Off;
     for (name, spec) in [
         ("oscillator pair, Dop853, H = 1e-3", oscillator),
-        ("double pendulum (examples/double_pendulum.toml)", pendulum),
+        (
+            "double pendulum (examples/double_pendulum.toml), 2 s",
+            pendulum,
+        ),
+        (
+            "3d_revolute, body3d max_step = 1e-5 (expensive steps), parallel off",
+            revolute,
+        ),
     ] {
         let steps = spec.macro_steps() as f64;
-        let mut times: [Vec<f64>; 2] = Default::default();
-        let (mut calls, mut trips) = (0, 0);
+        let mut times: [Vec<f64>; 3] = Default::default();
+        let (mut calls, mut trips) = (0, [0.0; 2]);
         for _ in 0..reps {
-            for (i, isolation) in [Isolation::None, Isolation::Process]
-                .into_iter()
-                .enumerate()
-            {
+            for (i, times) in times.iter_mut().enumerate() {
                 let mut spec = spec.clone();
                 for instance in &mut spec.instances {
-                    instance.isolation = isolation;
+                    if i == 1 {
+                        instance.isolation = Isolation::Process;
+                    } else if i == 2 {
+                        instance.host = Some(url.clone());
+                        instance.token_file = Some(token_file.clone());
+                    }
                 }
                 let mut sim = Simulation::new(&spec).expect("simulation");
                 let clock = Instant::now();
                 let stats = sim.run(&mut [], &mut |_, _| {}).expect("run");
-                times[i].push(clock.elapsed().as_secs_f64() / steps);
+                times.push(clock.elapsed().as_secs_f64() / steps);
                 calls = stats
                     .instances
                     .iter()
@@ -835,23 +909,33 @@ fn bench_isolation() {
                     })
                     .sum::<u64>()
                     / stats.macro_steps;
-                let round_trips = stats.instances.iter().map(|c| c.round_trips).sum::<u64>();
-                if round_trips > 0 {
-                    // Setup included: ~0 per step of a long run.
-                    trips = round_trips / stats.macro_steps;
+                if i > 0 {
+                    // Setup included: a few round trips over the whole run.
+                    let round_trips = stats.instances.iter().map(|c| c.round_trips).sum::<u64>();
+                    trips[i - 1] = round_trips as f64
+                        / (stats.macro_steps * stats.instances.len() as u64) as f64;
                 }
             }
         }
-        let [a, b] = times.clone().map(median);
-        println!("{name} ({calls} FMI calls, {trips} round trips per macro step)");
+        let [a, b, c] = times.clone().map(median);
         println!(
-            "  per macro step: in-process {}   isolated {}   ratio {:.1}x, {:.2} µs more per round trip",
+            "{name} ({calls} FMI calls a step; round trips per instance and step: pipes {:.2}, TCP {:.2}, setup included)",
+            trips[0], trips[1]
+        );
+        println!(
+            "  per macro step: in-process {}   pipes {}   TCP {}",
             us2(&times[0]),
             us2(&times[1]),
+            us2(&times[2])
+        );
+        println!(
+            "  isolated / in-process {:.2}x   TCP / in-process {:.2}x   TCP / pipes {:.2}x",
             b / a,
-            (b - a) * 1e6 / trips.max(1) as f64
+            c / a,
+            c / b
         );
     }
+    println!("load average (1 min) at the end: {}", load());
 }
 
 /// One system of the parallel bench.

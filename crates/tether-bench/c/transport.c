@@ -7,10 +7,14 @@
  *   kind 2: shared memory, futex wait/wake on a sequence word (no spinning)
  *   kind 3: shared memory, both sides spinning (keeps two cores busy: a
  *           reference, not a candidate)
+ *   kind 4: a TCP connection on 127.0.0.1 with TCP_NODELAY (what remote
+ *           hosts use)
  * The child does only read/write/futex system calls and _exit (safe after
  * fork in a threaded process). */
 #define _GNU_SOURCE
 #include <linux/futex.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -62,10 +66,29 @@ static double by_fds(int kind, long n, size_t size) {
     int up[2], down[2];
     if (kind == 0) {
         if (pipe(up) || pipe(down)) return -1;
-    } else {
+    } else if (kind == 1) {
         int pair[2];
         if (socketpair(AF_UNIX, SOCK_STREAM, 0, pair)) return -1;
         up[0] = pair[1]; up[1] = pair[0]; down[0] = pair[0]; down[1] = pair[1];
+    } else {
+        struct sockaddr_in at;
+        socklen_t len = sizeof at;
+        memset(&at, 0, sizeof at);
+        at.sin_family = AF_INET;
+        at.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+        int listener = socket(AF_INET, SOCK_STREAM, 0);
+        if (listener < 0 || bind(listener, (struct sockaddr *)&at, sizeof at) || listen(listener, 1) ||
+            getsockname(listener, (struct sockaddr *)&at, &len))
+            return -1;
+        int client = socket(AF_INET, SOCK_STREAM, 0);
+        if (client < 0 || connect(client, (struct sockaddr *)&at, sizeof at)) return -1;
+        int server = accept(listener, NULL, NULL);
+        close(listener);
+        int one = 1;
+        if (server < 0 || setsockopt(client, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one) ||
+            setsockopt(server, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one))
+            return -1;
+        up[0] = server; up[1] = client; down[0] = client; down[1] = server;
     }
     char buf[4096];
     memset(buf, 1, sizeof buf);
@@ -88,7 +111,7 @@ static double by_fds(int kind, long n, size_t size) {
     int status = 0;
     waitpid(child, &status, 0);
     if (kind == 0) { close(up[0]); close(up[1]); close(down[0]); close(down[1]); }
-    else { close(up[0]); close(up[1]); }
+    else { close(up[0]); close(up[1]); }  /* a socket pair or a connection */
     return WIFEXITED(status) && WEXITSTATUS(status) == 0 ? (t1 - t0) / (double)n * 1e6 : -1;
 }
 
@@ -129,6 +152,6 @@ static double by_memory(long n, size_t size, int spin) {
 
 double tether_transport_roundtrip(int kind, long n, long size) {
     if (size < 1 || size > 4096) return -1;
-    if (kind <= 1) return by_fds(kind, n, (size_t)size);
+    if (kind <= 1 || kind == 4) return by_fds(kind, n, (size_t)size);
     return by_memory(n, (size_t)size, kind == 3);
 }

@@ -158,6 +158,8 @@ pub enum Transport {
     SharedMemoryFutex,
     /// Shared memory, both sides spinning (two busy cores: a reference only).
     SharedMemorySpin,
+    /// A TCP connection on 127.0.0.1 with TCP_NODELAY (what remote hosts use).
+    TcpLoopback,
 }
 
 /// Microseconds per round trip of `size` bytes each way between this process

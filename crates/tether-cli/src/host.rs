@@ -15,6 +15,10 @@ pub struct Args {
     /// The largest FMU archive a master may send, in MiB.
     #[arg(long, value_name = "MIB", default_value_t = 1024)]
     max_fmu_mib: u64,
+    /// The largest request a master may send once its FMU is ready, in MiB
+    /// (a serialized FMU state is the largest there is).
+    #[arg(long, value_name = "MIB", default_value_t = 256)]
+    max_frame_mib: u64,
 }
 
 pub fn main(args: Args) -> anyhow::Result<()> {
@@ -22,6 +26,7 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         address: args.listen,
         token_file: args.token_file,
         max_fmu_bytes: args.max_fmu_mib.saturating_mul(1 << 20),
+        max_frame_bytes: args.max_frame_mib.saturating_mul(1 << 20),
     })
     .map_err(anyhow::Error::msg)
 }

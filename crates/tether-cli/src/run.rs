@@ -103,6 +103,18 @@ pub fn main(args: Args) -> Result<()> {
     }
     spec.validate()?;
     spec.check_grid()?;
+    let placed: Vec<&str> = spec
+        .instances
+        .iter()
+        .filter(|i| !i.resources.is_empty())
+        .map(|i| i.name.as_str())
+        .collect();
+    if !placed.is_empty() {
+        crate::say!(
+            "note: resources of {} place instances on Dask workers from Python (tether.run(system, client=…)); tether run runs them on this machine",
+            placed.join(", ")
+        );
+    }
     let unstable = spec.method.stability_warning(spec.coupling.order);
     if let Some(warning) = &unstable {
         crate::say!("warning: {warning}");

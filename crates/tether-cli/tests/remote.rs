@@ -44,10 +44,15 @@ struct Host {
 
 impl Host {
     fn start(token_file: &Path) -> Host {
+        Host::start_with(token_file, &[])
+    }
+
+    fn start_with(token_file: &Path, extra: &[&str]) -> Host {
         let tmp = tempfile::tempdir().unwrap();
         let mut child = tether()
             .args(["host", "--listen", "127.0.0.1:0", "--token-file"])
             .arg(token_file)
+            .args(extra)
             .env("TMPDIR", tmp.path())
             .stderr(Stdio::piped())
             .process_group(0)
@@ -760,4 +765,121 @@ fn bad_remote_keys_are_one_line_errors() {
         let line = last_line(&out);
         assert!(line.starts_with("error: ") && line.ends_with(&error), "{line}");
     }
+}
+
+/// `resources` (placement on Dask workers from Python): `tether run` runs the
+/// instances here, bit for bit as without the key, and says so in one note;
+/// a value that is not a table of positive numbers is one line naming it.
+#[test]
+fn resources_are_noted_by_the_cli_and_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let sys = dir.path().join("oscillator.toml");
+    system(
+        dir.path(),
+        "oscillator",
+        "resources = { licence = 1, gpu = 0.5 }\n",
+    );
+    let out = tether()
+        .arg("run")
+        .arg(&sys)
+        .args(["--out", "placed.csv", "--stop", "0.1"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let notes: Vec<_> = stderr(&out)
+        .lines()
+        .filter(|l| l.starts_with("note: resources"))
+        .map(str::to_string)
+        .collect();
+    assert_eq!(
+        notes,
+        ["note: resources of mass1, mass2 place instances on Dask workers from Python (tether.run(system, client=…)); tether run runs them on this machine"]
+    );
+    system(dir.path(), "oscillator", "");
+    let out = run(dir.path(), &sys, "plain.csv", &["--stop", "0.1"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        std::fs::read(dir.path().join("placed.csv")).unwrap()
+            == std::fs::read(dir.path().join("plain.csv")).unwrap()
+    );
+    for (value, error) in [
+        (
+            "{ licence = \"yes\" }",
+            "invalid type: string \"yes\", expected a number of units of a Dask worker resource, e.g. { licence = 1 }",
+        ),
+        (
+            "\"licence\"",
+            "invalid type: string \"licence\", expected a table of Dask worker resources, e.g. { licence = 1 }",
+        ),
+        (
+            "{ licence = 0 }",
+            "instance 'mass1': resources: licence = 0: expected a finite number of units > 0",
+        ),
+        (
+            "{ licence = -2.5 }",
+            "instance 'mass1': resources: licence = -2.5: expected a finite number of units > 0",
+        ),
+    ] {
+        system(dir.path(), "oscillator", &format!("resources = {value}\n"));
+        let out = run(dir.path(), &sys, "out.csv", &[]);
+        assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+        assert_eq!(stderr(&out).lines().count(), 1, "{}", stderr(&out));
+        let line = last_line(&out);
+        assert!(line.starts_with("error: system file ") && line.ends_with(error), "{line}");
+    }
+}
+
+/// Once its FMU is ready a master's requests are bounded by --max-frame-mib:
+/// an authenticated master that announces a larger frame is refused before
+/// the host allocates anything for it, and the host serves on.
+#[test]
+fn a_request_above_the_frame_limit_is_refused() {
+    use tether_fmi::remote::protocol::{In, Out, OK, VERSION};
+    use tether_fmi::remote::tcp;
+    let dir = tempfile::tempdir().unwrap();
+    let token_file = token(dir.path(), "token", TOKEN, 0o600);
+    let host = Host::start_with(&token_file, &["--max-frame-mib", "1"]);
+    let fmu = tether_fmu_build::workspace_fmu("oscillator").unwrap();
+    let mut stream = TcpStream::connect(("127.0.0.1", host.port)).unwrap();
+    let master = [7u8; 32];
+    Out::default()
+        .start(OK)
+        .str(tcp::MAGIC)
+        .u32(VERSION)
+        .bytes(&master)
+        .send(&mut stream)
+        .unwrap();
+    let mut frame = Vec::new();
+    tcp::receive_at_most(&mut stream, &mut frame, 4096).unwrap();
+    assert_eq!(frame[0], OK);
+    let mut hello = In::new(&frame[1..]);
+    hello.u32().unwrap();
+    let nonce = hello.bytes().unwrap().to_vec();
+    let proof = tcp::proof(TOKEN.trim().as_bytes(), "master", &master, &nonce);
+    Out::default()
+        .start(OK)
+        .bytes(&proof)
+        .send(&mut stream)
+        .unwrap();
+    tcp::receive_at_most(&mut stream, &mut frame, 4096).unwrap();
+    assert_eq!(frame[0], OK, "the proof was refused");
+    Out::default()
+        .start(tcp::FMU_PATH)
+        .str(fmu.to_str().unwrap())
+        .send(&mut stream)
+        .unwrap();
+    tcp::receive_at_most(&mut stream, &mut frame, 4096).unwrap();
+    assert_eq!(frame[0], OK, "the FMU was refused");
+    // Served by a host process now: a request of 512 MiB announced.
+    stream.write_all(&(512u32 << 20).to_le_bytes()).unwrap();
+    let _ = stream.write_all(&[0; 64]);
+    let mut rest = Vec::new();
+    let _ = stream.read_to_end(&mut rest);
+    assert!(rest.is_empty(), "{rest:?}");
+    wait_for_line(&host, |l| {
+        l.ends_with("a frame of 536870912 bytes where at most 1048576 are expected")
+    });
+    host.wait_clean();
+    same_on(&host, dir.path());
 }

@@ -133,6 +133,19 @@ struct Host {
     timeout: Option<Duration>,
 }
 
+/// The environment variable by which `tether host` bounds the requests of a
+/// master (`--max-frame-mib`), in bytes.
+pub const MAX_REQUEST_ENV: &str = "TETHER_HOST_MAX_FRAME";
+
+/// The largest request this host reads: [`MAX_REQUEST_ENV`], else the
+/// protocol's own bound (a master on pipes is this host's parent).
+fn max_request() -> usize {
+    std::env::var(MAX_REQUEST_ENV)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(usize::MAX)
+}
+
 /// Answers requests until the master closes the connection: the calls of a
 /// request one after the other, until one fails.
 fn serve(requests: File, writer: File) -> std::io::Result<()> {
@@ -143,7 +156,8 @@ fn serve(requests: File, writer: File) -> std::io::Result<()> {
     let mut out = Out::default();
     let mut host = Host::default();
     let mut watching = false;
-    while protocol::receive(&mut reader, &mut request)? {
+    let max = max_request();
+    while protocol::receive_bounded(&mut reader, &mut request, max)? {
         let mut input = In::new(&request);
         out.start(protocol::OK);
         let mut index = 0u32;

@@ -32,6 +32,9 @@ pub struct ListenOptions {
     pub token_file: PathBuf,
     /// The largest FMU archive a master may send, in bytes.
     pub max_fmu_bytes: u64,
+    /// The largest request frame a master may send once its FMU is ready
+    /// (a serialized FMU state is the largest the protocol has), in bytes.
+    pub max_frame_bytes: u64,
 }
 
 /// Listens and serves until killed; `Err` with one line if it cannot start.
@@ -61,10 +64,14 @@ pub fn listen(options: &ListenOptions) -> Result<(), String> {
             );
             continue;
         }
-        let (token, max) = (token.clone(), options.max_fmu_bytes);
+        let (token, max, frame) = (
+            token.clone(),
+            options.max_fmu_bytes,
+            options.max_frame_bytes,
+        );
         let opening = Arc::clone(&opening);
         std::thread::spawn(move || {
-            if let Err(line) = serve_connection(stream, &token, max, &opening) {
+            if let Err(line) = serve_connection(stream, &token, max, frame, &opening) {
                 eprintln!("tether host: {peer}: {line}");
             }
         });
@@ -77,6 +84,7 @@ fn serve_connection(
     stream: TcpStream,
     token: &[u8],
     max_fmu: u64,
+    max_frame: u64,
     opening: &AtomicUsize,
 ) -> Result<(), String> {
     // Counted among the openings until its host process starts.
@@ -104,6 +112,7 @@ fn serve_connection(
     let socket = |s: &TcpStream| s.try_clone().map(|s| Stdio::from(OwnedFd::from(s)));
     let mut host = Command::new(&command.program);
     host.args(&command.args)
+        .env(crate::MAX_REQUEST_ENV, max_frame.to_string())
         .stdin(socket(&stream).map_err(io_error)?)
         .stdout(socket(&stream).map_err(io_error)?)
         .process_group(0);

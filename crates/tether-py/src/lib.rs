@@ -1082,6 +1082,45 @@ fn serve_fmi_host(py: Python<'_>) -> PyResult<()> {
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("tether-fmi-host: {e}")))
 }
 
+/// Serve FMU instances to masters on `address` as `tether host --listen`
+/// does (docs/remote.md), until the process is killed: the body of
+/// `python -m tether._fmi_host --listen` that `tether.run(system,
+/// client=…)` starts on a Dask worker. With `parent`, the process ends when
+/// the process of that id (its parent) does.
+#[pyfunction]
+#[pyo3(signature = (address, token_file, max_fmu_bytes, max_frame_bytes, parent=None))]
+fn listen_host(
+    py: Python<'_>,
+    address: String,
+    token_file: PathBuf,
+    max_fmu_bytes: u64,
+    max_frame_bytes: u64,
+    parent: Option<i32>,
+) -> PyResult<()> {
+    if let Some(parent) = parent {
+        // SAFETY: prctl and getppid take and return plain integers; after
+        // prctl the kernel kills this process when its parent ends, and a
+        // parent that ended before it shows as another parent id.
+        let orphaned = unsafe {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+            libc::getppid() != parent
+        };
+        if orphaned {
+            return Err(pyo3::exceptions::PyRuntimeError::new_err(
+                "tether host: the process that started it has ended",
+            ));
+        }
+    }
+    let options = tether_fmi_host::listen::ListenOptions {
+        address,
+        token_file,
+        max_fmu_bytes,
+        max_frame_bytes,
+    };
+    py.detach(|| tether_fmi_host::listen::listen(&options))
+        .map_err(pyo3::exceptions::PyRuntimeError::new_err)
+}
+
 /// This process is the host of an isolated instance (`serve_fmi_host`): its
 /// FMU's exit is left to the master, which reports it with the exit code.
 static SERVING_HOST: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
@@ -1133,6 +1172,7 @@ fn _tether(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dump_toml, m)?)?;
     m.add_function(wrap_pyfunction!(use_fmi_host, m)?)?;
     m.add_function(wrap_pyfunction!(serve_fmi_host, m)?)?;
+    m.add_function(wrap_pyfunction!(listen_host, m)?)?;
     m.add_function(wrap_pyfunction!(adopt_exit_hook, m)?)?;
     m.add_class::<PySimulation>()?;
     m.add_class::<study::PyPlan>()?;

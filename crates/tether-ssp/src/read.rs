@@ -442,6 +442,7 @@ impl Reader {
             host: None,
             token_file: None,
             fmu_on_host: None,
+            resources: Default::default(),
         });
         Ok(())
     }

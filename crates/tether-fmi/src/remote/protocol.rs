@@ -374,6 +374,17 @@ impl Out {
 /// Reads one frame from `from` into `buf` (its capacity is reused); `Ok(false)`
 /// at the end of the stream before a frame began.
 pub fn receive(from: &mut impl Read, buf: &mut Vec<u8>) -> io::Result<bool> {
+    receive_bounded(from, buf, MAX_FRAME)
+}
+
+/// A frame up to this size is read into a buffer of its announced length;
+/// a larger one grows its buffer with the bytes that actually arrive, so
+/// that announcing a length costs the peer as much as it costs the reader.
+const EAGER_FRAME: usize = 1 << 16;
+
+/// [`receive`] of a frame of at most `max` bytes (a host's
+/// `--max-frame-mib`): a longer one is refused before anything is allocated.
+pub fn receive_bounded(from: &mut impl Read, buf: &mut Vec<u8>, max: usize) -> io::Result<bool> {
     let mut len = [0u8; 4];
     let mut got = 0;
     while got < 4 {
@@ -386,15 +397,22 @@ pub fn receive(from: &mut impl Read, buf: &mut Vec<u8>) -> io::Result<bool> {
         }
     }
     let n = u32::from_le_bytes(len) as usize;
-    if n == 0 || n > MAX_FRAME {
+    if n == 0 || n > max.min(MAX_FRAME) {
         return Err(io::Error::new(
             io::ErrorKind::InvalidData,
-            format!("a frame of {n} bytes"),
+            format!(
+                "a frame of {n} bytes where at most {} are expected",
+                max.min(MAX_FRAME)
+            ),
         ));
     }
     buf.clear();
-    buf.resize(n, 0);
-    from.read_exact(buf)?;
+    if n <= EAGER_FRAME {
+        buf.resize(n, 0);
+        from.read_exact(buf)?;
+    } else if from.take(n as u64).read_to_end(buf)? < n {
+        return Err(io::ErrorKind::UnexpectedEof.into());
+    }
     Ok(true)
 }
 
@@ -632,6 +650,35 @@ mod tests {
         // A truncated frame is an error, not a panic.
         assert!(receive(&mut &wire[..wire.len() - 1], &mut buf).is_err());
         assert!(!receive(&mut &wire[..0], &mut buf).unwrap());
+    }
+
+    /// A frame longer than the bound is refused before its body is read;
+    /// one within it but longer than 64 KiB grows its buffer with the bytes
+    /// that arrive, not with the length announced.
+    #[test]
+    fn announced_lengths_allocate_only_what_arrives() {
+        let mut buf = Vec::new();
+        let mut wire = (512u32 << 20).to_le_bytes().to_vec();
+        wire.extend_from_slice(&[1; 100]);
+        let e = receive_bounded(&mut wire.as_slice(), &mut buf, 1 << 20).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "a frame of 536870912 bytes where at most 1048576 are expected"
+        );
+        assert_eq!(buf.capacity(), 0);
+        // 1 GiB − 1 announced, 100 bytes sent, the stream ends.
+        let mut wire = ((1u32 << 30) - 1).to_le_bytes().to_vec();
+        wire.extend_from_slice(&[1; 100]);
+        let e = receive(&mut wire.as_slice(), &mut buf).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::UnexpectedEof);
+        assert!(buf.capacity() < 1 << 16, "{}", buf.capacity());
+        // A long frame that arrives whole is read whole.
+        let mut out = Out::default();
+        out.start(OK).bytes(&vec![3; 200_000]);
+        let mut wire = Vec::new();
+        out.send(&mut wire).unwrap();
+        assert!(receive_bounded(&mut wire.as_slice(), &mut buf, 1 << 20).unwrap());
+        assert_eq!(&buf[..], &wire[4..]);
     }
 
     /// A time-out and a request to end the simulation cross as themselves,

@@ -356,6 +356,59 @@ pub struct InstanceSpec {
     /// The FMU already on `host` (a path there): the archive is not sent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fmu_on_host: Option<PathBuf>,
+    /// What a Dask worker must have to host the instance, by name, e.g.
+    /// `{ licence = 1 }` (Python's `tether.run(system, client=…)`,
+    /// docs/remote.md); the `tether` CLI runs the instance here and says so.
+    #[serde(
+        default,
+        skip_serializing_if = "BTreeMap::is_empty",
+        deserialize_with = "resources"
+    )]
+    pub resources: BTreeMap<String, f64>,
+}
+
+/// `resources`: a table of numbers, the error naming what is expected.
+fn resources<'de, D: serde::Deserializer<'de>>(d: D) -> Result<BTreeMap<String, f64>, D::Error> {
+    struct Amount(f64);
+    impl<'de> Deserialize<'de> for Amount {
+        fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+            struct Visitor;
+            impl serde::de::Visitor<'_> for Visitor {
+                type Value = Amount;
+                fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                    f.write_str("a number of units of a Dask worker resource, e.g. { licence = 1 }")
+                }
+                fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Amount, E> {
+                    Ok(Amount(v as f64))
+                }
+                fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Amount, E> {
+                    Ok(Amount(v as f64))
+                }
+                fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Amount, E> {
+                    Ok(Amount(v))
+                }
+            }
+            d.deserialize_any(Visitor)
+        }
+    }
+    struct Table;
+    impl<'de> serde::de::Visitor<'de> for Table {
+        type Value = BTreeMap<String, f64>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a table of Dask worker resources, e.g. { licence = 1 }")
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            mut map: A,
+        ) -> Result<Self::Value, A::Error> {
+            let mut table = BTreeMap::new();
+            while let Some((name, Amount(amount))) = map.next_entry::<String, Amount>()? {
+                table.insert(name, amount);
+            }
+            Ok(table)
+        }
+    }
+    d.deserialize_map(Table)
 }
 
 /// Where an instance's FMU runs (`isolation` of an instance).

@@ -178,6 +178,17 @@ impl SystemSpec {
                     ));
                 }
             }
+            for (resource, &amount) in &i.resources {
+                if resource.trim().is_empty() {
+                    return Err(remote("resources", "a resource needs a name".into()));
+                }
+                if !amount.is_finite() || amount <= 0.0 {
+                    return Err(remote(
+                        "resources",
+                        format!("{resource} = {amount}: expected a finite number of units > 0"),
+                    ));
+                }
+            }
             if let Some(t) = i.call_timeout.filter(|t| !t.is_finite() || *t <= 0.0) {
                 return Err(param(
                     &format!("{}.call_timeout", i.name),

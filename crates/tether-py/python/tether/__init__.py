@@ -176,6 +176,9 @@ class Result:
         # A view of the bytes the master produced: no copy.
         self._table = np.frombuffer(data, dtype=self._dtype)
         self._index = {name: i for i, name in enumerate(self.columns)}
+        #: Where :func:`run` with ``client=`` placed each isolated instance:
+        #: ``{name: {"worker": address, "host": "tcp://ADDR:PORT"}}``.
+        self.placement: Dict[str, Dict[str, str]] = {}
 
     @property
     def complete(self) -> bool:
@@ -368,12 +371,15 @@ class System:
         host: Optional[str] = None,
         token_file: Optional[PathLike] = None,
         fmu_on_host: Optional[str] = None,
+        resources: Optional[Mapping[str, float]] = None,
     ) -> "System":
         """An FMU instance named ``name`` (the column prefix) with start values;
         ``isolation="process"`` runs it in a host process of its own and
         ``call_timeout`` (seconds) bounds each FMI call (docs/reliability.md).
         ``host="tcp://ADDR:PORT"`` with ``token_file`` runs it on a ``tether
-        host`` (docs/remote.md); ``fmu_on_host`` names an FMU already there."""
+        host`` (docs/remote.md); ``fmu_on_host`` names an FMU already there.
+        ``resources`` (``{"licence": 1}``) are what a Dask worker must have
+        to host the instance when :func:`run` is given ``client=``."""
         inst: Dict[str, Any] = {"name": name, "fmu": os.path.abspath(os.fspath(fmu))}
         if parameters:
             inst["parameters"] = dict(parameters)
@@ -387,6 +393,8 @@ class System:
             inst["token_file"] = os.path.abspath(os.fspath(token_file))
         if fmu_on_host is not None:
             inst["fmu_on_host"] = fmu_on_host
+        if resources is not None:
+            inst["resources"] = dict(resources)
         self._data["instance"].append(inst)
         return self
 
@@ -527,6 +535,7 @@ def run(
     stop_time: Optional[float] = None,
     start_values: Optional[Mapping[str, ParameterValue]] = None,
     output: Union[str, Sequence[str], None] = None,
+    client: Any = None,
 ) -> Result:
     """Run a coupled system to its stop time, like ``tether run``.
 
@@ -554,6 +563,14 @@ def run(
     ``stop``, ``start_values`` for ``parameters``, ``output`` for
     ``output_variables``; giving both names of one setting is a ``TypeError``.
 
+    ``client``, a ``dask.distributed.Client``, places the host of every
+    isolated instance (``isolation = "process"``, ``isolate=True``, or an
+    instance with ``resources``) on a worker of its cluster, one that has the
+    instance's ``resources``; the master runs here and connects to each
+    host on its worker's address with a token made for the run
+    (docs/remote.md). ``result.placement`` then names each placed
+    instance's ``worker`` and ``host``; the hosts end with the run.
+
     ``progress(step, total)`` is called every 50 ms while the run goes on
     (an exception from it stops the run as Ctrl-C does).
 
@@ -563,6 +580,11 @@ def run(
     result. A run that diverges raises :class:`DivergenceError` with the
     partial result in ``err.result``.
     """
+    if client is not None:
+        given = {k: v for k, v in locals().items() if k not in ("system", "client")}
+        from ._dask import run_placed
+
+        return run_placed(system, client, given, run)
     stop = _one_of("stop", stop, "stop_time", stop_time)
     parameters = _one_of("parameters", parameters, "start_values", start_values)
     output_variables = _one_of("output_variables", output_variables, "output", output)
