@@ -16,12 +16,17 @@
 //!
 //! * `fmi3`: the macro step with the FMI 3.0 builds of the oscillator against the
 //!   FMI 2.0 builds of the same library (the master's FMI 3.0 instance path);
+//! * `signals`: the macro step of signal-coupled systems: the controlled
+//!   oscillator (signals beside a constraint) and the control loop through
+//!   direct feedthrough (examples/control_loop.toml), each as its example
+//!   runs it, and the loop iterated (`[signals] iterations`, fixed point and
+//!   Newton) against it.
 //!
 //! * `isolation`: FMU instances in host processes (`isolation = "process"`):
 //!   the transports a host could use (round trips between two processes), the
 //!   cost of one FMI call, and the macro step against in-process instances.
 //!
-//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|fmi3|isolation ...]`;
+//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|fmi3|signals|isolation ...]`;
 //! `TETHER_BENCH_REPS` repetitions (default 10, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
@@ -617,6 +622,110 @@ fn bench_precision() {
     }
 }
 
+/// The macro step of signal-coupled systems, each case as a system file
+/// with changes: time per macro step over 2000 steps (setup not timed),
+/// the cases alternated in every repetition, medians (minimum) reported.
+fn bench_signals() {
+    println!("\n== Signals: the macro step of signal-coupled systems (2000 steps) ==");
+    let root = workspace_root();
+    for fmu in ["oscillator", "controller", "lti"] {
+        tether_fmu_build::workspace_fmu(fmu).expect("package the FMU");
+    }
+    let load = |file: &str, extra: &str| {
+        let path = root.join("examples").join(file);
+        let mut text = std::fs::read_to_string(&path).expect("read the example");
+        text = text.replace(
+            "../target/fmus/",
+            &format!("{}/target/fmus/", root.display()),
+        );
+        text.push_str(extra);
+        SystemSpec::from_toml(&text).expect("system file")
+    };
+    let cases: Vec<(&str, SystemSpec)> = vec![
+        (
+            "controlled oscillator (Jacobi, constraint + PI)",
+            load("controlled_oscillator.toml", ""),
+        ),
+        ("control loop (Gauss–Seidel)", load("control_loop.toml", "")),
+    ];
+    // The loop with a PI controller that can roll back (docs/system-file.md,
+    // "[signals]"): not iterated, and iterated to 1e-12.
+    let lti = root.join("target/fmus/lti.fmu");
+    let rollback_loop = |signals: &str| {
+        let text = format!(
+            r#"
+            [experiment]
+            stop = 1.0
+            step = 1e-3
+
+            [signals]
+            tolerance = 1e-12
+            {signals}
+
+            [[instance]]
+            name = "source"
+            fmu = "{lti}"
+            parameters = {{ a = -2.0, b1 = 0.0, c = 1.0, x0 = 1.0 }}
+
+            [[instance]]
+            name = "controller"
+            fmu = "{lti}"
+            parameters = {{ a = 0.0, b1 = 1.0, b2 = -1.0, c = 2.0, d1 = 1.0, d2 = -1.0, u1 = 1.0 }}
+
+            [[instance]]
+            name = "plant"
+            fmu = "{lti}"
+            parameters = {{ a = -1.0, b1 = 1.0, b2 = 1.0, c = 1.0, d1 = 0.5, d2 = 0.5, x0 = 0.0 }}
+
+            [[connection]]
+            from = "source.y"
+            to = "plant.u2"
+
+            [[connection]]
+            from = "controller.y"
+            to = "plant.u1"
+
+            [[connection]]
+            from = "plant.y"
+            to = "controller.u2"
+            "#,
+            lti = lti.display()
+        );
+        SystemSpec::from_toml(&text).expect("system file")
+    };
+    let cases: Vec<(&str, SystemSpec)> = cases
+        .into_iter()
+        .chain([
+            (
+                "loop, lti PI (Gauss–Seidel, not iterated)",
+                rollback_loop("scheme = \"gauss_seidel\""),
+            ),
+            (
+                "loop, lti PI (Gauss–Seidel, iterated)",
+                rollback_loop("scheme = \"gauss_seidel\"\niterations = 100"),
+            ),
+            (
+                "loop, lti PI (Newton)",
+                rollback_loop("solver = \"newton\"\niterations = 10"),
+            ),
+        ])
+        .collect();
+    let steps = 2000u64;
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); cases.len()];
+    for rep in 0..reps() {
+        for k in 0..cases.len() {
+            let c = (rep + k) % cases.len();
+            let mut spec = cases[c].1.clone();
+            spec.experiment.stop = spec.experiment.start + steps as f64 * spec.experiment.step;
+            let mut sim = Simulation::new(&spec).expect("simulation");
+            times[c].push(time_steps(&mut sim, steps));
+        }
+    }
+    for ((name, _), t) in cases.iter().zip(&times) {
+        println!("{name:<45} {}/step", us2(t));
+    }
+}
+
 /// The hidden argument that makes this executable the FMU host of `isolation`.
 const FMI_HOST: &str = "__fmi-host";
 
@@ -654,6 +763,9 @@ fn main() -> std::process::ExitCode {
     }
     if run("fmi3") {
         bench_fmi3();
+    }
+    if run("signals") {
+        bench_signals();
     }
     if run("isolation") {
         bench_isolation();

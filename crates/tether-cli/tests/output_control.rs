@@ -515,3 +515,85 @@ fn a_results_file_above_a_gigabyte_is_announced_before_the_run() {
     );
     assert!(!success(&out).contains("GB"));
 }
+
+/// The control loop of docs/system-file.md ("[signals]"), iterated with too
+/// few repetitions: without `strict` the run completes and the summary
+/// counts the steps that did not converge, with one warning; with
+/// `strict = true` the first such step fails the run with one line, the
+/// rows so far kept and marked incomplete.
+#[test]
+fn an_iterated_step_that_does_not_converge_is_counted_or_fails_with_strict() {
+    let dir = tempfile::tempdir().unwrap();
+    let lti = tether_fmu_build::workspace_fmu("lti").unwrap();
+    let write = |strict: bool| {
+        let text = format!(
+            r#"
+            [experiment]
+            stop = 0.05
+            step = 1e-2
+
+            [signals]
+            iterations = 2
+            strict = {strict}
+
+            [[instance]]
+            name = "controller"
+            fmu = "{lti}"
+            parameters = {{ a = 0.0, b1 = 1.0, b2 = -1.0, c = 2.0, d1 = 1.0, d2 = -1.0, u1 = 1.0 }}
+
+            [[instance]]
+            name = "plant"
+            fmu = "{lti}"
+            parameters = {{ a = -1.0, b1 = 1.0, c = 1.0, d1 = 0.5 }}
+
+            [[connection]]
+            from = "controller.y"
+            to = "plant.u1"
+
+            [[connection]]
+            from = "plant.y"
+            to = "controller.u2"
+            "#,
+            lti = lti.display()
+        );
+        let path = dir.path().join(format!("loop-{strict}.toml"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let lenient = write(false);
+    let out = tether(
+        &["run", lenient.to_str().unwrap(), "--out", "a.csv"],
+        dir.path(),
+    );
+    let text = success(&out);
+    assert!(
+        text.contains(
+            "signal iterations per step: 2.00 on average, 2 at most (10 repeated runs of the \
+             step); not converged: 5 steps"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains("warning: 5 macro steps did not converge within [signals] iterations"),
+        "{text}"
+    );
+    let strict = write(true);
+    let out = tether(
+        &["run", strict.to_str().unwrap(), "--out", "b.csv"],
+        dir.path(),
+    );
+    let line = error_line(&out);
+    assert!(
+        line.contains(
+            "[signals] strict: the macro step from t = 0 did not converge in 2 iterations"
+        ),
+        "{line}"
+    );
+    let csv = std::fs::read_to_string(dir.path().join("b.csv")).unwrap();
+    assert!(
+        csv.lines().last().unwrap().starts_with("# incomplete: "),
+        "{csv}"
+    );
+    let rows = csv.lines().filter(|l| !l.starts_with('#')).count() - 1;
+    assert_eq!(rows, 1, "the row at T_0 is kept: {csv}");
+}

@@ -306,6 +306,21 @@ pub enum MasterError {
     /// A worker thread panicked during perturbed runs.
     #[error("a worker thread panicked during parallel perturbed runs")]
     Worker,
+    /// `[signals] strict = true`: an iterated macro step whose exchanged
+    /// values did not converge within `[signals] iterations`.
+    #[error("[signals] strict: the macro step from t = {time} did not converge in {iterations} iterations: |Δv| of connection {connection} is {residual:.1e} times the tolerance {tolerance:e} (raise iterations, loosen tolerance, or try solver = \"newton\")")]
+    SignalsNotConverged {
+        /// T_N, the step's start.
+        time: f64,
+        /// `[signals] iterations`.
+        iterations: usize,
+        /// The connection with the largest change, `from → to`.
+        connection: String,
+        /// Its |Δv| / (tolerance·max(1, |v|)).
+        residual: f64,
+        /// `[signals] tolerance`.
+        tolerance: f64,
+    },
 }
 
 impl MasterError {
@@ -343,6 +358,7 @@ impl MasterError {
             MasterError::Recording(_) => "recording",
             MasterError::Thread(_) => "thread",
             MasterError::Connection { .. } => "connection",
+            MasterError::SignalsNotConverged { .. } => "signals_not_converged",
             MasterError::Worker => "worker",
         }
     }

@@ -50,12 +50,12 @@ pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
     Experiment, ExportLink, ExportSource, ExportSpec, InitialMultiplier, InstanceSpec,
     JacobianMode, JointInitial, JointSpec, OutputSpec, ResidualLimit, SignalScheme, SignalSettings,
-    StartValue, SystemSpec,
+    SignalSolver, StartValue, SystemSpec,
 };
 pub use start::apply_start_value;
 pub use stats::{
-    AdaptiveStats, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, Termination,
-    SUMMARY_SCHEMA,
+    AdaptiveStats, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, SignalStats,
+    Termination, SUMMARY_SCHEMA,
 };
 pub use step_control::StepControl;
 

@@ -104,6 +104,9 @@ pub struct RunStats {
     pub jacobians_remade: u64,
     /// Adaptive macro steps (`[step_control]`): what the controller did.
     pub adaptive: Option<AdaptiveStats>,
+    /// Iterated signal coupling (`[signals] iterations`): what the
+    /// iterations did.
+    pub signals: Option<SignalStats>,
     /// Per-instance FMI call counts.
     pub instances: Vec<InstanceCounters>,
     /// Where the time went.
@@ -202,6 +205,7 @@ impl From<&crate::MasterError> for Failure {
                 failure.instance = Some(instance.clone());
                 failure.variable = Some(variable.clone());
             }
+            E::SignalsNotConverged { time, .. } => failure.time = Some(*time),
             _ => {}
         }
         failure
@@ -222,6 +226,26 @@ pub struct AdaptiveStats {
     /// The error norm of the last accepted step (≤ 1: its estimated local
     /// error over the tolerances).
     pub last_error: f64,
+}
+
+/// What the iterations of an iterated signal coupling did (`[signals]
+/// iterations`), over the accepted macro steps.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct SignalStats {
+    /// `"fixed_point"` or `"newton"`.
+    pub solver: crate::spec::SignalSolver,
+    /// Updates of the exchanged values, over all steps: repetitions of the
+    /// step (fixed point) or Newton updates.
+    pub iterations: u64,
+    /// The most updates in one macro step.
+    pub max_iterations: u64,
+    /// Runs of the macro step beyond each step's first, over all steps
+    /// (Newton: the perturbed runs of its Jacobian included).
+    pub repeated_runs: u64,
+    /// Macro steps whose values had not converged after `iterations`.
+    pub not_converged: u64,
+    /// The start time T_N of the first such step.
+    pub first_not_converged: Option<f64>,
 }
 
 /// An instance's request to end the simulation, and where the run ended.
@@ -259,6 +283,25 @@ impl fmt::Display for RunStats {
                 "  interface Jacobian: recomputed in {} steps ({} after the reused one mispredicted the correction), reused in {}",
                 self.jacobians, self.jacobians_remade, self.jacobians_reused
             )?;
+        }
+        if let Some(i) = &self.signals {
+            writeln!(
+                f,
+                "  signal iterations per step: {:.2} on average, {} at most ({} repeated runs of \
+                 the step); not converged: {} steps",
+                i.iterations as f64 / self.macro_steps.max(1) as f64,
+                i.max_iterations,
+                i.repeated_runs,
+                i.not_converged
+            )?;
+            if let Some(t) = i.first_not_converged {
+                writeln!(
+                    f,
+                    "  warning: {} macro steps did not converge within [signals] iterations \
+                     (the first at t = {t}): their last run stands",
+                    i.not_converged
+                )?;
+            }
         }
         if self.max_corrections > 1 {
             writeln!(
@@ -573,6 +616,8 @@ struct Summary<'a> {
     jacobians_reused: u64,
     jacobians_remade: u64,
     adaptive: Option<&'a AdaptiveStats>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    signals: Option<&'a SignalStats>,
     wall_time: f64,
     max_abs_g: Ordered<'a, Option<f64>>,
     residual_warning: f64,
@@ -607,6 +652,7 @@ impl Serialize for RunStats {
             jacobians_reused: self.jacobians_reused,
             jacobians_remade: self.jacobians_remade,
             adaptive: self.adaptive.as_ref(),
+            signals: self.signals.as_ref(),
             wall_time: secs(self.wall),
             // NaN (a residual that was not finite) as null.
             max_abs_g: Ordered(

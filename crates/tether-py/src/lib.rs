@@ -54,7 +54,8 @@ fn kind_of(e: &MasterError) -> &'static str {
         MasterError::Diverged { .. }
         | MasterError::ResidualLimit { .. }
         | MasterError::DivergedOutput { .. }
-        | MasterError::SingularJacobian { .. } => "divergence",
+        | MasterError::SingularJacobian { .. }
+        | MasterError::SignalsNotConverged { .. } => "divergence",
         MasterError::Interrupted { .. } => "interrupted",
         MasterError::InvalidParameter { .. } | MasterError::InvalidTimeSpan { .. } => "settings",
         MasterError::SystemFile { .. }

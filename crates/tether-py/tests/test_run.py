@@ -285,3 +285,45 @@ def test_to_toml_keeps_the_order_of_the_file(tmp_path, oscillator_toml):
     a = tether.run(oscillator_toml, stop=0.05)
     b = tether.run(tether.System.from_file(reordered), stop=0.05)
     assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))
+
+
+def test_iterated_signals_from_the_builder(root, tmp_path):
+    """The control loop through direct feedthrough with a PI controller that
+    can roll back (fmus/lti), iterated by Newton (signals(iterations=...,
+    solver="newton")): the same rows as the same system file, bit for bit,
+    and the summary's iteration counts; iterations=1 with strict=True fails
+    the run with one line."""
+    lti = root / "target" / "fmus" / "lti.fmu"
+    pi = {"a": 0.0, "b1": 1.0, "b2": -1.0, "c": 2.0, "d1": 1.0, "d2": -1.0, "x0": 0.0, "u1": 1.0}
+    plant = {"a": -1.0, "b1": 1.0, "b2": 1.0, "c": 1.0, "d1": 0.5, "d2": 0.5, "x0": 0.0}
+
+    def loop(**signals):
+        return (
+            tether.System("iterated loop")
+            .experiment(stop=0.1, step=1e-2)
+            .signals(tolerance=1e-12, **signals)
+            .add_instance("source", lti, {"a": -2.0, "b1": 0.0, "c": 1.0, "x0": 1.0})
+            .add_instance("controller", lti, pi)
+            .add_instance("plant", lti, plant)
+            .add_connection("source.y", "plant.u2")
+            .add_connection("controller.y", "plant.u1")
+            .add_connection("plant.y", "controller.u2")
+        )
+
+    system = loop(iterations=10, solver="newton")
+    path = tmp_path / "loop.toml"
+    path.write_text(system.to_toml())
+    assert 'solver = "newton"' in path.read_text()
+    a = tether.run(system)
+    b = tether.run(path)
+    assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))
+    counts = a.stats["signals"]
+    assert counts["solver"] == "newton"
+    assert counts["not_converged"] == 0
+    assert 1 <= counts["max_iterations"] <= 2
+    plain = tether.run(loop(scheme="jacobi"))
+    assert "signals" not in plain.stats
+    assert np.max(np.abs(plain["plant.y"] - a["plant.y"])) > 1e-4
+    with pytest.raises(tether.DivergenceError) as failed:
+        tether.run(loop(iterations=1, strict=True))
+    assert str(failed.value).startswith("[signals] strict: the macro step from t = 0 did not converge")

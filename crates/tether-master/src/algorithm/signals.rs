@@ -13,12 +13,13 @@
 
 use tether_fmi::{BaseType, Causality, ScalarVariable};
 
-use crate::build::system::StepAt;
+use crate::build::system::{MacroStep, StepAt, System};
 use crate::linalg::solve::Solver;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::names::{describe, find_instance};
-use crate::spec::{ConnectionSpec, SignalScheme, SystemSpec};
+use crate::spec::{ConnectionSpec, SignalScheme, SignalSolver, SystemSpec};
+use crate::stats::{Lap, RunStats, SignalStats};
 use crate::MasterError;
 use tether_fmi::Inputs;
 
@@ -69,6 +70,17 @@ pub(crate) struct Signals {
     /// Adaptive steps: the Gauss–Seidel sweep saves each instance before
     /// stepping it, so that a rejected step rolls it back with the others.
     save: bool,
+    /// `[signals] iterations`: the most updates per macro step, if iterated.
+    iterations: Option<usize>,
+    /// `[signals] solver`.
+    solver: SignalSolver,
+    /// `[signals] strict`.
+    strict: bool,
+    /// In an iterated step's repeated runs: every receiver takes the
+    /// iterate `next` as its sender's value at T_{N+1}.
+    iterating: bool,
+    /// The Newton updates' linear solver, reused.
+    newton: Solver,
 }
 
 impl Signals {
@@ -119,7 +131,7 @@ impl Signals {
         if let Some(e) = unit_errors.into_iter().next() {
             return Err(e);
         }
-        let scheme = spec.signals.scheme;
+        let scheme = spec.signals.scheme();
         let mut sequence = Vec::new();
         if scheme == SignalScheme::GaussSeidel {
             for (s, slave) in slaves.iter_mut().enumerate() {
@@ -141,7 +153,45 @@ impl Signals {
             tolerance: spec.signals.tolerance(),
             fresh: vec![false; slaves.len()],
             save: false,
+            iterations: spec.signals.iterations,
+            solver: spec.signals.solver.unwrap_or_default(),
+            strict: spec.signals.strict,
+            iterating: false,
+            newton: Solver::default(),
         })
+    }
+
+    /// Whether every macro step is iterated (`[signals] iterations`).
+    pub fn iterated(&self) -> bool {
+        self.iterations.is_some()
+    }
+
+    /// The run summary's iteration counts, zero, when iterated.
+    pub fn initial_stats(&self) -> Option<SignalStats> {
+        self.iterated().then(|| SignalStats {
+            solver: self.solver,
+            ..SignalStats::default()
+        })
+    }
+
+    /// An iterated step repeats the macro step of every instance from its
+    /// state at T_N: each must declare `canGetAndSetFMUstate`. The first
+    /// that does not is refused by name, before the first step.
+    pub fn check_rollback(&self, slaves: &[Slave]) -> Result<(), MasterError> {
+        if !self.iterated() {
+            return Ok(());
+        }
+        match slaves.iter().find(|s| !s.can_get_and_set_state) {
+            None => Ok(()),
+            Some(slave) => Err(MasterError::MissingCapability {
+                instance: slave.name.clone(),
+                model: slave.model_name.clone(),
+                capability: "canGetAndSetFMUstate",
+                needed_by: "[signals] iterations (every instance repeats the macro step from \
+                            its state at T_N)"
+                    .into(),
+            }),
+        }
     }
 
     /// Whether link `l` passes its sender's value at T_N (closes a loop at
@@ -171,6 +221,22 @@ impl Signals {
                             instances.push(&slaves[s].name);
                         }
                     }
+                }
+                if let Some(n) = self.iterations {
+                    let how = match (self.solver, self.scheme) {
+                        (SignalSolver::Newton, _) => format!("Newton, at most {n} updates"),
+                        (_, SignalScheme::Jacobi) => {
+                            format!("Jacobi fixed point, at most {n} repetitions of the step")
+                        }
+                        (_, SignalScheme::GaussSeidel) => {
+                            format!("Gauss–Seidel fixed point, at most {n} repetitions of the step")
+                        }
+                    };
+                    return format!(
+                        "direct-feedthrough loop through {} is iterated at every macro step \
+                         ({how}; -v names the connections)",
+                        instances.join(", ")
+                    );
                 }
                 let lagged = members.iter().filter(|&&l| self.lagged(l)).count();
                 let how = match self.scheme {
@@ -202,7 +268,11 @@ impl Signals {
                 let names: Vec<String> = members
                     .iter()
                     .map(|&l| {
-                        let at = if self.lagged(l) { "T_N" } else { "T_{N+1}" };
+                        let at = if self.lagged(l) && !self.iterated() {
+                            "T_N"
+                        } else {
+                            "T_{N+1}"
+                        };
                         format!("{} (value at {at})", self.links[l].name)
                     })
                     .collect();
@@ -264,77 +334,44 @@ impl Signals {
     }
 
     /// Consistent values of the loops at T_0, v = G(v) with G: set every
-    /// receiver to its link's value, read every sender. Fixed-point sweeps
-    /// first (they converge when the loop gain is below 1), then Newton on
-    /// the Real links with a finite-difference Jacobian of G (one run of G
-    /// per link; exact after one step for linear feedthrough). Converged:
-    /// |v − G(v)| ≤ tolerance·max(1, |v|) for every link. Otherwise an
-    /// error naming the first loop.
+    /// receiver to its link's value, read every sender ([`solve_loop`]:
+    /// up to 50 fixed-point sweeps, which converge when the loop gain is
+    /// below 1, then up to 20 Newton updates; exact after one for linear
+    /// feedthrough). Otherwise an error naming the first loop.
     pub fn solve_loops(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
-        const SWEEPS: usize = 50;
-        const NEWTON: usize = 20;
-        let n = self.links.len();
         let mut v: Vec<f64> = self.history.iter().map(|h| h[0]).collect();
-        let mut g = vec![0.0; n];
-        let mut residual = self.apply(slaves, &v, &mut g)?;
-        for _ in 0..SWEEPS {
-            if residual <= 1.0 {
-                return self.settle(slaves, &g);
-            }
-            v.copy_from_slice(&g);
-            residual = self.apply(slaves, &v, &mut g)?;
-        }
-        let real: Vec<usize> = (0..n)
-            .filter(|&l| self.links[l].kind == Kind::Real)
-            .collect();
-        let mut bumped = vec![0.0; n];
-        let mut gb = vec![0.0; n];
+        let mut g = vec![0.0; v.len()];
+        let real = self.real_links();
         let mut solver = Solver::default();
-        for _ in 0..NEWTON {
-            if residual <= 1.0 {
-                return self.settle(slaves, &g);
-            }
-            // Non-Real links take G's value; the Real ones a Newton step on
-            // r(v) = v − G(v), ∂r/∂v = I − ∂G/∂v.
-            for l in 0..n {
-                if self.links[l].kind != Kind::Real {
-                    v[l] = g[l];
-                }
-            }
-            let k = real.len();
-            let mut w = vec![0.0; k * k];
-            for (j, &lj) in real.iter().enumerate() {
-                let delta = 1e-7 * v[lj].abs().max(1.0);
-                bumped.copy_from_slice(&v);
-                bumped[lj] += delta;
-                self.apply(slaves, &bumped, &mut gb)?;
-                for (i, &li) in real.iter().enumerate() {
-                    let identity = if i == j { 1.0 } else { 0.0 };
-                    w[i + j * k] = identity - (gb[li] - g[li]) / delta;
-                }
-            }
-            let (a, b) = solver.system(k);
-            a.copy_from_slice(&w);
-            for (i, &li) in real.iter().enumerate() {
-                b[i] = v[li] - g[li];
-            }
-            let step = solver
-                .solve(0.0, "signal loop", 1e14)
-                .map_err(|_| self.unsolved(residual, "its Jacobian is singular"))?;
-            for (&li, s) in real.iter().zip(step) {
-                v[li] -= s;
-            }
-            residual = self.apply(slaves, &v, &mut g)?;
-        }
-        if residual <= 1.0 {
+        let solved = solve_loop(
+            (&mut v, &mut g),
+            &real,
+            (50, 20),
+            self.tolerance,
+            &mut solver,
+            |v, g| self.apply(slaves, v, g),
+        )?;
+        if solved.converged {
             return self.settle(slaves, &g);
         }
-        Err(self.unsolved(residual, "fixed-point sweeps and Newton did not converge"))
+        let why = if solved.singular {
+            "its Jacobian is singular"
+        } else {
+            "fixed-point sweeps and Newton did not converge"
+        };
+        Err(self.unsolved(solved.residual, why))
     }
 
-    /// G(v) into `g`: every receiver set to its link's value `v`, every
-    /// sender read. Returns max |v − G(v)| / (tolerance·max(1, |v|)).
-    fn apply(&self, slaves: &mut [Slave], v: &[f64], g: &mut [f64]) -> Result<f64, MasterError> {
+    /// The links that carry Real values (those Newton updates).
+    fn real_links(&self) -> Vec<usize> {
+        (0..self.links.len())
+            .filter(|&l| self.links[l].kind == Kind::Real)
+            .collect()
+    }
+
+    /// G(v) into `g` at T_0: every receiver set to its link's value `v`,
+    /// every sender read.
+    fn apply(&self, slaves: &mut [Slave], v: &[f64], g: &mut [f64]) -> Result<(), MasterError> {
         for (l, &value) in v.iter().enumerate() {
             let held = Taylor {
                 value,
@@ -342,13 +379,113 @@ impl Signals {
             };
             self.set(slaves, l, held)?;
         }
-        let mut worst: f64 = 0.0;
         for (l, out) in g.iter_mut().enumerate() {
             *out = self.read(slaves, l, Run::Initial)?;
-            let scale = self.tolerance * v[l].abs().max(1.0);
-            worst = worst.max((v[l] - *out).abs() / scale);
         }
-        Ok(worst)
+        Ok(())
+    }
+
+    /// An iterated macro step T_N → T_{N+1} (`[signals] iterations`):
+    /// every instance is saved at T_N and the step is run once as without
+    /// iterations (the scheme's values at T_N or T_{N+1}, the method's
+    /// step); its senders' values at T_{N+1} are the first iterate v. Then
+    /// v = G(v) is solved by [`solve_loop`], G one repetition of the whole
+    /// macro step from T_N (every instance restored, the unknowns' history
+    /// and the method's state back to T_N) in which every receiver takes
+    /// v as its sender's value at T_{N+1} (held, or the polynomial through
+    /// it and y_N, y_{N-1}, … when it interpolates), Gauss–Seidel's later
+    /// receivers the values of this repetition. Fixed point: at most
+    /// `iterations` repetitions; Newton: at most `iterations` updates. The
+    /// last repetition stands, converged or not; its senders' values start
+    /// the next step.
+    pub fn step_iterated(
+        &mut self,
+        (method, system): (&mut Box<dyn MacroStep>, &mut System),
+        at: StepAt,
+        stats: &mut RunStats,
+        lap: &mut Lap,
+    ) -> Result<Option<f64>, MasterError> {
+        let max = self.iterations.unwrap_or(1);
+        for slave in &mut system.slaves {
+            slave.save_state()?;
+        }
+        let unknowns = system.history.clone();
+        let state = method.save();
+        self.send(&mut system.slaves, at)?;
+        method.step(system, at, stats, lap)?;
+        self.read_next(&mut system.slaves)?;
+        let mut v = self.next.clone();
+        let mut g = vec![0.0; v.len()];
+        let real = self.real_links();
+        let limits = match self.solver {
+            SignalSolver::FixedPoint => (max - 1, 0),
+            SignalSolver::Newton => (0, max),
+        };
+        let mut newton = std::mem::take(&mut self.newton);
+        self.iterating = true;
+        let tolerance = self.tolerance;
+        let solved = solve_loop(
+            (&mut v, &mut g),
+            &real,
+            limits,
+            tolerance,
+            &mut newton,
+            |v, g| {
+                for slave in &mut system.slaves {
+                    slave.restore_state()?;
+                }
+                system.history.clone_from(&unknowns);
+                method.restore(&state);
+                self.next.copy_from_slice(v);
+                self.send(&mut system.slaves, at)?;
+                method.step(system, at, stats, lap)?;
+                self.read_next(&mut system.slaves)?;
+                g.copy_from_slice(&self.next);
+                Ok(())
+            },
+        );
+        self.iterating = false;
+        self.newton = newton;
+        let solved = solved?;
+        self.shift();
+        let counts = stats.signals.get_or_insert_with(SignalStats::default);
+        let iterations = match self.solver {
+            SignalSolver::FixedPoint => solved.runs,
+            SignalSolver::Newton => solved.updates,
+        } as u64;
+        counts.iterations += iterations;
+        counts.max_iterations = counts.max_iterations.max(iterations);
+        counts.repeated_runs += solved.runs as u64;
+        if !solved.converged {
+            let worst = (0..v.len())
+                .max_by(|&a, &b| {
+                    let r = |l: usize| (v[l] - g[l]).abs() / v[l].abs().max(1.0);
+                    r(a).total_cmp(&r(b))
+                })
+                .unwrap_or(0);
+            if self.strict {
+                return Err(MasterError::SignalsNotConverged {
+                    time: at.t,
+                    iterations: max,
+                    connection: self.links[worst].name.clone(),
+                    residual: solved.residual,
+                    tolerance,
+                });
+            }
+            if counts.first_not_converged.is_none() {
+                counts.first_not_converged = Some(at.t);
+                log::warn!(
+                    "[signals] the macro step from t = {} did not converge in {max} iterations \
+                     (|Δv| of connection {} is {:.1e} times the tolerance); its last run stands \
+                     (the run summary counts such steps; strict = true fails the run)",
+                    at.t,
+                    self.links[worst].name,
+                    solved.residual
+                );
+            }
+            counts.not_converged += 1;
+        }
+        Ok(None)
     }
 
     /// Take the converged values `g` (read from the senders at the last
@@ -417,26 +554,39 @@ impl Signals {
     /// After the method's step: read the senders at T_{N+1} (those not read
     /// by the Gauss–Seidel sweep) and shift the histories.
     pub fn receive(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
+        self.read_next(slaves)?;
+        self.shift();
+        Ok(())
+    }
+
+    /// Read the senders at T_{N+1} not read by the Gauss–Seidel sweep.
+    fn read_next(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
         for l in 0..self.links.len() {
             if !self.fresh[self.links[l].from] {
                 self.next[l] = self.read(slaves, l, Run::Signal)?;
             }
-            let h = &mut self.history[l];
-            *h = [self.next[l], h[0], h[1]];
         }
         Ok(())
     }
 
+    /// Start every history at the values at T_{N+1}.
+    fn shift(&mut self) {
+        for (h, &next) in self.history.iter_mut().zip(&self.next) {
+            *h = [next, h[0], h[1]];
+        }
+    }
+
     /// The sender's polynomial over the step, as link `l`'s receiver takes
     /// it: through y_{N+1} when the sender has stepped already
-    /// (Gauss–Seidel), else extrapolated from y_N, y_{N-1}, …; degree 0
-    /// (held) for a receiver that cannot interpolate.
+    /// (Gauss–Seidel), or in an iterated step's repetitions, else
+    /// extrapolated from y_N, y_{N-1}, …; degree 0 (held) for a receiver
+    /// that cannot interpolate.
     fn polynomial(&self, l: usize, at: StepAt) -> Taylor {
         let link = &self.links[l];
         let n = usize::try_from(at.n).unwrap_or(usize::MAX);
         let k = if link.interpolate { self.order } else { 0 };
         let history = &self.history[l];
-        if self.fresh[link.from] {
+        if self.fresh[link.from] || self.iterating {
             interpolate(self.next[l], history, k.min(n + 1), at.h, at.past)
         } else {
             extrapolate(history, k.min(n), at.h, at.past)
@@ -505,6 +655,111 @@ impl Signals {
         slave.counters.set_reals += 1;
         Ok(())
     }
+}
+
+/// What [`solve_loop`] did.
+struct Solved {
+    converged: bool,
+    /// Newton stopped on a singular Jacobian.
+    singular: bool,
+    /// Updates of v: fixed-point sweeps and Newton updates.
+    updates: usize,
+    /// Runs of G.
+    runs: usize,
+    /// max over the links of |v − G(v)| / (tolerance·max(1, |v|)) at the
+    /// last run: ≤ 1 is converged.
+    residual: f64,
+}
+
+/// Solve v = G(v), a loop's values (one per link) against G, one run that
+/// sets every receiver from v and reads every sender (`apply(v, g)` puts
+/// G(v) into g). First G(v); then up to `sweeps` fixed-point updates
+/// v ← G(v), each followed by a run; then up to `newton` Newton updates on
+/// the Real links `real` of r(v) = v − G(v), ∂r/∂v = I − ∂G/∂v from one run
+/// per Real link with v_j increased by 1e-7·max(1, |v_j|) (the other links
+/// take G's value), each followed by a run at the new v. Converged, and
+/// stopped, as soon as a run gives |v_l − G(v)_l| ≤ tolerance·max(1, |v_l|)
+/// for every link l. On return `g` holds G(v) of the last run, which was
+/// at `v` (after a singular Jacobian G(v) is run once more).
+fn solve_loop(
+    (v, g): (&mut [f64], &mut [f64]),
+    real: &[usize],
+    (sweeps, newton): (usize, usize),
+    tolerance: f64,
+    solver: &mut Solver,
+    mut apply: impl FnMut(&[f64], &mut [f64]) -> Result<(), MasterError>,
+) -> Result<Solved, MasterError> {
+    let residual = |v: &[f64], g: &[f64]| {
+        v.iter().zip(g.iter()).fold(0.0_f64, |worst, (&v, &g)| {
+            worst.max((v - g).abs() / (tolerance * v.abs().max(1.0)))
+        })
+    };
+    let n = v.len();
+    apply(v, g)?;
+    let mut solved = Solved {
+        converged: false,
+        singular: false,
+        updates: 0,
+        runs: 1,
+        residual: residual(v, g),
+    };
+    for _ in 0..sweeps {
+        if solved.residual <= 1.0 {
+            break;
+        }
+        v.copy_from_slice(g);
+        apply(v, g)?;
+        solved.updates += 1;
+        solved.runs += 1;
+        solved.residual = residual(v, g);
+    }
+    let mut bumped = vec![0.0; n];
+    let mut gb = vec![0.0; n];
+    for _ in 0..newton {
+        if solved.residual <= 1.0 {
+            break;
+        }
+        // Non-Real links take G's value; the Real ones a Newton step on
+        // r(v) = v − G(v), ∂r/∂v = I − ∂G/∂v.
+        let is_real = |l: &usize| real.contains(l);
+        for l in (0..n).filter(|l| !is_real(l)) {
+            v[l] = g[l];
+        }
+        let k = real.len();
+        let mut w = vec![0.0; k * k];
+        for (j, &lj) in real.iter().enumerate() {
+            let delta = 1e-7 * v[lj].abs().max(1.0);
+            bumped.copy_from_slice(v);
+            bumped[lj] += delta;
+            apply(&bumped, &mut gb)?;
+            solved.runs += 1;
+            for (i, &li) in real.iter().enumerate() {
+                let identity = if i == j { 1.0 } else { 0.0 };
+                w[i + j * k] = identity - (gb[li] - g[li]) / delta;
+            }
+        }
+        let (a, b) = solver.system(k);
+        a.copy_from_slice(&w);
+        for (i, &li) in real.iter().enumerate() {
+            b[i] = v[li] - g[li];
+        }
+        let Ok(step) = solver.solve(0.0, "signal loop", 1e14) else {
+            solved.singular = true;
+            apply(v, g)?;
+            solved.runs += 1;
+            solved.residual = residual(v, g);
+            return Ok(solved);
+        };
+        for (&li, s) in real.iter().zip(step) {
+            v[li] -= s;
+        }
+        apply(v, g)?;
+        solved.updates += 1;
+        solved.runs += 1;
+        solved.residual = residual(v, g);
+    }
+    solved.converged = solved.residual <= 1.0;
+    Ok(solved)
 }
 
 /// `inst.variable` split at the first dot.

@@ -165,7 +165,11 @@ impl Simulation {
                 Some((control, limits))
             }
         };
-        let mut stats = RunStats::default();
+        signals.check_rollback(&system.slaves)?;
+        let mut stats = RunStats {
+            signals: signals.initial_stats(),
+            ..RunStats::default()
+        };
         // Signals at T_0 before and after the consistent multipliers, which
         // may depend on signal inputs and change outputs that senders read.
         signals.initialize(&mut system.slaves)?;
@@ -549,6 +553,9 @@ fn step_at(
     stats: &mut RunStats,
     lap: &mut Lap,
 ) -> Result<Option<f64>, MasterError> {
+    if signals.iterated() {
+        return signals.step_iterated((method, system), at, stats, lap);
+    }
     signals.send(&mut system.slaves, at)?;
     let error = method.step(system, at, stats, lap)?;
     if error.is_none_or(|e| e <= 1.0) {

@@ -140,16 +140,32 @@ pub struct ConnectionSpec {
 }
 
 /// `[signals]`: the order in which signal-connected instances see each
-/// other's values within a macro step.
+/// other's values within a macro step, and whether the step is iterated
+/// until the exchanged values agree (docs/algorithm.md, "Signal connections").
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SignalSettings {
-    /// `"jacobi"` (the default) or `"gauss_seidel"`.
-    pub scheme: SignalScheme,
-    /// Relative tolerance on the exchanged values of direct-feedthrough
-    /// loops (at T_0, and per step when iterated); default 1e-10.
+    /// `"jacobi"` (the default) or `"gauss_seidel"`; refused with
+    /// `solver = "newton"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scheme: Option<SignalScheme>,
+    /// Tolerance on the exchanged values (at T_0, and per step when
+    /// iterated): |Δv| ≤ tolerance·max(1, |v|); default 1e-10.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tolerance: Option<f64>,
+    /// Iterate every macro step: at most this many repetitions of the step
+    /// (fixed point) or Newton updates (`solver = "newton"`) after its first
+    /// run. None (the default): the step is run once.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
+    /// How an iterated step updates the exchanged values: `"fixed_point"`
+    /// (the default) or `"newton"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub solver: Option<SignalSolver>,
+    /// A step that does not converge within `iterations` fails the run
+    /// (otherwise it is counted and warned about once).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub strict: bool,
 }
 
 impl SignalSettings {
@@ -161,6 +177,25 @@ impl SignalSettings {
     pub fn tolerance(&self) -> f64 {
         self.tolerance.unwrap_or(1e-10)
     }
+
+    /// `scheme`, or its default Jacobi.
+    pub fn scheme(&self) -> SignalScheme {
+        self.scheme.unwrap_or_default()
+    }
+}
+
+/// How an iterated macro step (`[signals] iterations`) updates the values
+/// the signal connections exchange.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SignalSolver {
+    /// Repeat the step with the values the last run produced (Jacobi or
+    /// Gauss–Seidel, as `scheme` says).
+    #[default]
+    FixedPoint,
+    /// Newton on v = G(v) with a finite-difference Jacobian from perturbed
+    /// runs of the step.
+    Newton,
 }
 
 /// Jacobi: every receiver takes the senders' values at T_N. Gauss–Seidel:

@@ -58,6 +58,39 @@ impl SystemSpec {
             .unwrap_or_else(|| PathBuf::from("<system>"))
     }
 
+    /// `[signals]`: the iteration keys fit together (one line naming the key).
+    fn validate_signals(&self) -> Result<(), MasterError> {
+        let s = &self.signals;
+        let fail = |reason: &str| MasterError::SystemFile {
+            path: self.source_name(),
+            reason: format!("[signals] {reason}"),
+        };
+        if s.solver == Some(crate::spec::SignalSolver::Newton) && s.scheme.is_some() {
+            return Err(fail(
+                "scheme does not apply with solver = \"newton\": Newton updates every \
+                 connection's value at once; remove the scheme key",
+            ));
+        }
+        match s.iterations {
+            Some(0) => Err(fail(
+                "iterations = 0: give the most repetitions of a macro step (at least 1), \
+                 or leave the key out to run each step once",
+            )),
+            Some(_) if self.connections.is_empty() => Err(fail(
+                "iterations: the system has no [[connection]] whose values could be iterated",
+            )),
+            Some(_) if self.step_control.is_some() => Err(fail(
+                "iterations: not available with [step_control] (adaptive steps); use a fixed \
+                 macro step",
+            )),
+            None if s.solver.is_some() || s.strict => Err(fail(&format!(
+                "{} needs iterations = N (the most repetitions or Newton updates per macro step)",
+                if s.strict { "strict" } else { "solver" }
+            ))),
+            _ => Ok(()),
+        }
+    }
+
     /// Check what can be checked without the FMUs: times, settings, names.
     pub fn validate(&self) -> Result<(), MasterError> {
         // The sizes first: everything after allocates with them.
@@ -111,6 +144,7 @@ impl SystemSpec {
                 ));
             }
         }
+        self.validate_signals()?;
         self.method.validate()?;
         self.output.every(e.step)?;
         let c = &self.coupling;

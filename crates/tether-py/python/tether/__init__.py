@@ -125,8 +125,9 @@ class SettingsError(TetherError, ValueError):
 
 
 class DivergenceError(TetherError):
-    """The coupling diverged (a value became non-finite or exploded) or the
-    interface Jacobian became singular."""
+    """The coupling diverged (a value became non-finite or exploded), the
+    interface Jacobian became singular, or an iterated step did not converge
+    with ``[signals] strict``."""
 
 
 class Interrupted(TetherError, KeyboardInterrupt):
@@ -413,9 +414,28 @@ class System:
         )
         return self
 
-    def signals(self, scheme: str) -> "System":
-        """The order of signal connections: ``"jacobi"`` or ``"gauss_seidel"``."""
-        self._data["signals"] = {"scheme": scheme}
+    def signals(
+        self,
+        scheme: Optional[str] = None,
+        *,
+        tolerance: Optional[float] = None,
+        iterations: Optional[int] = None,
+        solver: Optional[str] = None,
+        strict: Optional[bool] = None,
+    ) -> "System":
+        """The ``[signals]`` table: the order of signal connections
+        (``scheme``: ``"jacobi"`` or ``"gauss_seidel"``), the ``tolerance`` on
+        exchanged values, and iterated steps: at most ``iterations``
+        repetitions (``solver="fixed_point"``, the default) or Newton updates
+        (``solver="newton"``, without ``scheme``) per macro step; ``strict``
+        fails the run on a step that does not converge."""
+        self._data["signals"] = _overrides(
+            scheme=scheme,
+            tolerance=None if tolerance is None else float(tolerance),
+            iterations=None if iterations is None else int(iterations),
+            solver=solver,
+            strict=None if strict is None else bool(strict),
+        )
         return self
 
     def output(
