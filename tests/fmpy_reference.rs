@@ -338,3 +338,35 @@ fn the_reference_reads_the_method_index_as_tether_does() {
         }
     }
 }
+
+/// FMI 3.0 FMUs (the workspace FMUs built as FMI 3.0, alone and mixed with FMI 2.0
+/// in one system): the reference drives them through fmpy's FMU3Slave, and both
+/// hosts agree to the last bit (validate.sh's `fmi3-*` variants).
+#[test]
+fn fmi3_builds_alone_and_mixed_with_fmi2_agree_with_the_fmpy_reference_exactly() {
+    let Some(python) = tether_tests::tools::fmpy() else {
+        return;
+    };
+    for fmu in ["oscillator", "link"] {
+        tether_fmu_build::workspace_fmu3(fmu).expect("package the FMI 3.0 builds");
+    }
+    let index1 = Method::Baumgarte {
+        beta: 2e-3,
+        gamma: 1e-6,
+    };
+    for (system, stop) in [
+        ("tests/validation/oscillator_fmi3.toml", None),
+        ("tests/validation/mixed_fmi3.toml", None),
+        ("tests/validation/double_pendulum_fmi3.toml", Some(0.05)),
+    ] {
+        let flags = ["--method", "baumgarte", "--beta", "2e-3", "--gamma", "1e-6"];
+        let (a, b) = both(&python, system, index1, 0, stop, &flags);
+        let (rel, column) = worst(&a, &b, "\u{0}");
+        eprintln!(
+            "{system}: {} rows, max relative deviation {rel:e} ({column})",
+            a.times.len()
+        );
+        assert!(a.times.len() > 10, "{system}");
+        assert!(rel == 0.0, "{system}: {column} deviates by {rel:e}");
+    }
+}

@@ -39,6 +39,10 @@ fn closed_form_position(t: f64) -> f64 {
 
 fn simulate_oscillator(extra: &[&str]) -> Vec<(f64, f64)> {
     let fmu = tether_fmu_build::workspace_fmu("oscillator").expect("packaging the oscillator");
+    simulate(&fmu, extra)
+}
+
+fn simulate(fmu: &std::path::Path, extra: &[&str]) -> Vec<(f64, f64)> {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("out.csv");
     let mut args: Vec<&OsStr> = vec![fmu.as_os_str(), csv.as_os_str()];
@@ -77,5 +81,21 @@ fn fmpy_simulates_the_oscillator_on_its_closed_form() {
                 closed_form_position(t)
             );
         }
+    }
+}
+
+/// fmpy drives the FMI 3.0 build of the oscillator (its fmi3 functions, the same
+/// model) to the values of the FMI 2.0 build, bit for bit, in both modes.
+#[test]
+fn fmpy_simulates_the_fmi3_oscillator_as_the_fmi2_one_bit_for_bit() {
+    if tether_tests::tools::fmpy().is_none() {
+        return;
+    }
+    let fmu3 = tether_fmu_build::workspace_fmu3("oscillator").expect("packaging the oscillator");
+    for mode in [&[][..], &["--set", "exact=true"][..]] {
+        let fmi2 = simulate_oscillator(mode);
+        let fmi3 = simulate(&fmu3, mode);
+        assert_eq!(fmi2.len(), 101, "{mode:?}");
+        assert_eq!(fmi2, fmi3, "{mode:?}");
     }
 }

@@ -43,7 +43,7 @@ def main(argv):
         if not sep or name not in types:
             parser.error(f"--set {assignment!r}: expected NAME=VALUE with a variable of the FMU")
         value = parse_value(value)
-        start_values[name] = float(value) if types[name] == "Real" else value
+        start_values[name] = float(value) if types[name] in ("Real", "Float64") else value
 
     result = simulate_fmu(
         args.fmu,

@@ -1,5 +1,6 @@
-"""FMU instances driven through fmpy's FMU2Slave: start values, coupled inputs
-(value and input derivatives), outputs and output derivatives, FMU states."""
+"""FMU instances driven through fmpy's FMU2Slave (FMI 2.0) or FMU3Slave (FMI 3.0):
+start values, coupled inputs (value and input derivatives), outputs and output
+derivatives, FMU states."""
 
 import atexit
 import os
@@ -8,14 +9,62 @@ from ctypes import byref
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
 
 from errors import RunError
+
+# The type names of a Real variable: FMI 2.0 and FMI 3.0.
+REAL = ("Real", "Float64")
+_INTEGER = ("Integer", "Enumeration", "Int32")
+
+
+class FMU3Reference(FMU3Slave):
+    """An FMI 3.0 co-simulation FMU under the FMU2Slave calls the reference makes
+    (the one place that knows the FMI version). FMI 3.0 has no input derivatives:
+    the master refuses k > 0 for it (no canInterpolateInputs)."""
+
+    def setupExperiment(self, tolerance=None, startTime=0.0, stopTime=None):
+        self.experiment = (tolerance, startTime, stopTime)
+
+    def enterInitializationMode(self):
+        tolerance, start, stop = self.experiment
+        super().enterInitializationMode(tolerance=tolerance, startTime=start, stopTime=stop)
+
+    def getReal(self, vr):
+        return self.getFloat64(vr)
+
+    def setReal(self, vr, values):
+        self.setFloat64(vr, values)
+
+    def getInteger(self, vr):
+        return self.getInt32(vr)
+
+    def setInteger(self, vr, values):
+        self.setInt32(vr, values)
+
+    def getRealOutputDerivatives(self, vr, order):
+        return self.getOutputDerivatives(vr, order)
+
+    def getFMUstate(self):
+        return self.getFMUState()
+
+    def fmi2GetFMUstate(self, component, state):
+        return self._call("fmi3GetFMUState", component, state)
+
+    def setFMUstate(self, state):
+        self.setFMUState(state)
+
+    def freeFMUstate(self, state):
+        self.freeFMUState(state)
+
+    def doStep(self, currentCommunicationPoint, communicationStepSize):
+        super().doStep(currentCommunicationPoint, communicationStepSize)
 
 _NOT_SETTABLE = {"output", "local", "independent", "calculatedParameter"}
 
 
 def _article(type_name):
-    return "an" if type_name in ("Integer", "Enumeration") else "a"
+    return "an" if type_name in ("Integer", "Enumeration", "Int32") else "a"
 
 
 def describe(var):
@@ -60,10 +109,11 @@ class Host:
                 # leaves it there; remove it when the run ends.
                 atexit.register(shutil.rmtree, Host._unpacked[key], ignore_errors=True)
             unzipped = Host._unpacked[key]
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
-                             modelIdentifier=self.cs.modelIdentifier, instanceName=self.name)
+        slave = FMU3Reference if md.fmiVersion.startswith("3.") else FMU2Slave
+        self.fmu = slave(guid=md.guid, unzipDirectory=unzipped,
+                         modelIdentifier=self.cs.modelIdentifier, instanceName=self.name)
         self.fmu.instantiate()
-        self.recorded = [v for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        self.recorded = [v for v in md.modelVariables if v.causality == "output" and v.type in REAL]
         self.recorded_vrs = [v.valueReference for v in self.recorded]
         self.recorded_values = [0.0] * len(self.recorded)
         self.inputs = []  # [value reference, [(unknown, coefficient), ...]]
@@ -93,9 +143,9 @@ class Host:
             raise fail(f"it is {describe(var)} and cannot be set")
         vr = [var.valueReference]
         is_bool = isinstance(value, bool)
-        if var.type == "Real" and isinstance(value, (int, float)) and not is_bool:
+        if var.type in REAL and isinstance(value, (int, float)) and not is_bool:
             self.fmu.setReal(vr, [float(value)])
-        elif var.type in ("Integer", "Enumeration") and isinstance(value, int) and not is_bool:
+        elif var.type in _INTEGER and isinstance(value, int) and not is_bool:
             if not -(2**31) <= value < 2**31:
                 raise fail("out of the 32-bit integer range")
             self.fmu.setInteger(vr, [value])

@@ -13,7 +13,7 @@ import polynomials as poly
 import joints as jointkinds
 import rows as rowkinds
 from errors import RunError
-from host import Host, describe
+from host import REAL, Host, describe
 from linalg import solve
 from signals import Signals
 
@@ -129,7 +129,7 @@ class Master:
             for level in row.levels:
                 for inst, var, order in row.reads(level):
                     s, v = self._lookup(unknown.owner, inst, var)
-                    if v.causality != "output" or v.type != "Real":
+                    if v.causality != "output" or v.type not in REAL:
                         raise RunError(f"{inst}.{var} is {describe(v)}, but the {level} level of "
                                        f"{unknown.owner} needs a Real output")
                     host = self.hosts[s]
@@ -151,7 +151,7 @@ class Master:
         for m, unknown in enumerate(self.unknowns):
             for inst, var, c, order in unknown.drives:
                 s, v = self._lookup(unknown.owner, inst, var)
-                if v.causality != "input" or v.type != "Real" or order != 0:
+                if v.causality != "input" or v.type not in REAL or order != 0:
                     raise RunError(f"{inst}.{var} is {describe(v)}, but 'drives' of {unknown.owner} "
                                    f"needs a Real input")
                 self.hosts[s].add_input(v.valueReference, m, c)

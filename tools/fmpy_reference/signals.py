@@ -41,7 +41,8 @@ class Link:
 
 
 def _kind(var):
-    return {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean": "Boolean"}.get(var.type)
+    return {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Integer",
+            "Enumeration": "Integer", "Boolean": "Boolean"}.get(var.type)
 
 
 def _e(x, digits=None):

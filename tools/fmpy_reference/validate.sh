@@ -134,5 +134,13 @@ variant control_loop_gain2 loop-gain2 diverges 0 0 --
 variant controlled_oscillator signals-ctrl completes 0 0 --
 variant driven_oscillator signals-adaptive completes 0 0 --
 
+# FMI 3.0: the workspace FMUs built as FMI 3.0 (docs/fmu-kit.md), alone and mixed
+# with FMI 2.0 in one system; deviation exactly 0 (rtol = atol = 0).
+variant oscillator_fmi3 fmi3-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0
+variant oscillator_fmi3 fmi3-m2-index2-k0 completes 0 0 -- "${i2m2[@]}" --order 0
+variant mixed_fmi3 fmi3-mixed-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0
+variant double_pendulum_fmi3 fmi3-dp-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0 --stop 0.2
+variant control_loop_fmi3 fmi3-loop-gs completes 0 0 --
+
 printf '%s\n' "${summary[@]}"
 exit $failed

@@ -14,6 +14,8 @@
 //!   against the sequential path, on a 3D joint with an expensive FMU step and
 //!   on the cheap oscillator pair.
 //!
+//! * `fmi3`: the macro step with the FMI 3.0 builds of the oscillator against the
+//!   FMI 2.0 builds of the same library (the master's FMI 3.0 instance path);
 //! * `signals`: the macro step of signal-coupled systems: the controlled
 //!   oscillator (signals beside a constraint) and the control loop through
 //!   direct feedthrough (examples/control_loop.toml), each as its example
@@ -29,7 +31,7 @@
 //!   a native driver (libloading on the runtime library) against the same
 //!   system's macro steps in the library without recording.
 //!
-//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|signals|isolation|export ...]`;
+//! `cargo bench -p tether-bench [-- floor|fmpy|reference|recording|precision|parallel|fmi3|signals|isolation|export ...]`;
 //! `TETHER_BENCH_REPS` repetitions (default 10, medians reported),
 //! `TETHER_PYTHON` the Python with fmpy, `TETHER_FMPY_LOOP` the fmpy loop
 //! script (default tools/bench/fmpy_loop.py).
@@ -764,6 +766,9 @@ fn main() -> std::process::ExitCode {
     if run("parallel") {
         bench_parallel();
     }
+    if run("fmi3") {
+        bench_fmi3();
+    }
     if run("signals") {
         bench_signals();
     }
@@ -835,6 +840,71 @@ fn bench_export() {
         "exported FMU / library: {:.3} (goal ≤ 1.2; last outputs identical bit for bit)",
         fmu / library
     );
+}
+
+/// The goal of docs/performance.md: a macro step with FMI 3.0 instances at most
+/// this many times one with FMI 2.0 instances of the same FMUs.
+const GOAL_FMI3: f64 = 1.10;
+
+/// The oscillator pair (k = 0) with the FMI 3.0 builds of the oscillator
+/// (`oscillator-fmi3.fmu`) against the FMI 2.0 builds of the same library:
+/// what the master's FMI 3.0 instance path costs. Alternated repetitions
+/// (2, 3, 3, 2, then 3, 2, 2, 3), λ_N and the FMI calls equal, medians.
+fn bench_fmi3() {
+    let reps = reps();
+    println!("\n== FMI 3.0 against FMI 2.0 instances (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps, k = 0) ==");
+    println!("FMU     FMI 2.0/step   FMI 3.0/step   FMI 3.0 / FMI 2.0   goal");
+    let fmu3 =
+        tether_fmu_build::workspace_fmu3("oscillator").expect("package the FMI 3.0 oscillator");
+    for exact in [true, false] {
+        let case = Case::example(exact, 0);
+        let spec2 = case.spec();
+        let mut spec3 = spec2.clone();
+        for instance in &mut spec3.instances {
+            instance.fmu = fmu3.clone();
+        }
+        let run = |spec: &SystemSpec| {
+            let mut sim = Simulation::new(spec).expect("simulation");
+            let before = sim.stats().instances;
+            let t = time_steps(&mut sim, case.steps);
+            (t, sim.unknowns()[0], calls(&sim.stats().instances, &before))
+        };
+        let (_, lambda, calls2) = run(&spec2);
+        let (_, lambda3, calls3) = run(&spec3);
+        assert_eq!(
+            lambda.to_bits(),
+            lambda3.to_bits(),
+            "the same λ_N through FMI 3.0"
+        );
+        assert_eq!(calls2, calls3, "the same FMI calls through FMI 3.0");
+        let (mut t2, mut t3, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+        for rep in 0..reps {
+            let (mut sum2, mut sum3) = (0.0, 0.0);
+            for slot in 0..4 {
+                if (slot == 1 || slot == 2) == (rep % 2 == 0) {
+                    let (t, l, _) = run(&spec3);
+                    assert_eq!(l.to_bits(), lambda.to_bits());
+                    t3.push(t);
+                    sum3 += t;
+                } else {
+                    let (t, l, _) = run(&spec2);
+                    assert_eq!(l.to_bits(), lambda.to_bits());
+                    t2.push(t);
+                    sum2 += t;
+                }
+            }
+            ratios.push(sum3 / sum2);
+        }
+        let ratio = median(ratios);
+        println!(
+            "{}  {}     {}     {:5.2}×             ≤ {GOAL_FMI3:.2}× {}",
+            mode(exact),
+            us(median(t2)),
+            us(median(t3)),
+            ratio,
+            if ratio <= GOAL_FMI3 { "met" } else { "missed" }
+        );
+    }
 }
 
 /// The load average of the last minute (what shares the cores with the bench).

@@ -5,6 +5,11 @@
 //!   (`target/fmu-build`, so it works from inside `cargo test`), then [`package`] into
 //!   `target/fmus/`. Cached per process, serialized across processes by a file lock.
 //! - [`workspace_fmus`]: the same for every crate under `fmus/`.
+//!
+//! Every kit-built library is both an FMI 2.0 and an FMI 3.0 FMU (one model, two C
+//! layers). [`package`] and [`workspace_fmu`] make the FMI 2.0 archive
+//! `<name>.fmu`; [`package_fmi3`] and [`workspace_fmu3`] the FMI 3.0 archive
+//! `<name>-fmi3.fmu` of the same library; [`workspace_fmus`] makes both.
 
 use std::collections::HashMap;
 use std::ffi::{c_char, CStr};
@@ -19,6 +24,57 @@ use zip::{CompressionMethod, DateTime, ZipWriter};
 
 /// Name of the symbol every kit-built FMU exports.
 pub const MODEL_DESCRIPTION_SYMBOL: &str = "tether_fmu_kit_model_description";
+
+/// Name of the symbol that gives the FMI 3.0 model description of a kit-built FMU.
+pub const MODEL_DESCRIPTION_SYMBOL_FMI3: &str = "tether_fmu_kit_model_description_fmi3";
+
+/// The FMI 3.0 platform tuple of this host (`binaries/<tuple>/`).
+pub const PLATFORM_FMI3: &str = if cfg!(all(target_os = "linux", target_arch = "x86_64")) {
+    "x86_64-linux"
+} else if cfg!(all(target_os = "linux", target_arch = "aarch64")) {
+    "aarch64-linux"
+} else if cfg!(all(target_os = "macos", target_arch = "aarch64")) {
+    "aarch64-darwin"
+} else if cfg!(target_os = "macos") {
+    "x86_64-darwin"
+} else if cfg!(all(windows, target_pointer_width = "64")) {
+    "x86_64-windows"
+} else {
+    "unknown"
+};
+
+/// The FMI version of an archive made from a kit-built library.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum FmiVersion {
+    /// `<modelIdentifier>.fmu`, `binaries/linux64/`.
+    Fmi2,
+    /// `<modelIdentifier>-fmi3.fmu`, `binaries/x86_64-linux/`.
+    Fmi3,
+}
+
+impl FmiVersion {
+    fn symbol(self) -> &'static str {
+        match self {
+            FmiVersion::Fmi2 => MODEL_DESCRIPTION_SYMBOL,
+            FmiVersion::Fmi3 => MODEL_DESCRIPTION_SYMBOL_FMI3,
+        }
+    }
+
+    fn platform(self) -> &'static str {
+        match self {
+            FmiVersion::Fmi2 => PLATFORM.0,
+            FmiVersion::Fmi3 => PLATFORM_FMI3,
+        }
+    }
+
+    /// The archive's file name for model identifier `id`.
+    pub fn file_name(self, id: &str) -> String {
+        match self {
+            FmiVersion::Fmi2 => format!("{id}.fmu"),
+            FmiVersion::Fmi3 => format!("{id}-fmi3.fmu"),
+        }
+    }
+}
 
 /// The FMI platform folder and library suffix of this host.
 pub const PLATFORM: (&str, &str) = if cfg!(all(target_os = "linux", target_pointer_width = "64")) {
@@ -38,13 +94,14 @@ pub enum Error {
         path: PathBuf,
         source: libloading::Error,
     },
-    #[error("{path} does not export {MODEL_DESCRIPTION_SYMBOL} (not built with tether-fmu-kit?): {source}")]
+    #[error("{path} does not export {symbol} (not built with tether-fmu-kit?): {source}")]
     Symbol {
         path: PathBuf,
+        symbol: &'static str,
         source: libloading::Error,
     },
-    #[error("{path}: {MODEL_DESCRIPTION_SYMBOL} returned no description (invalid model declaration, see stderr)")]
-    NoDescription { path: PathBuf },
+    #[error("{path}: {symbol} returned no description (invalid model declaration, see stderr)")]
+    NoDescription { path: PathBuf, symbol: &'static str },
     #[error("{path}: modelDescription.xml has no valid modelIdentifier")]
     NoIdentifier { path: PathBuf },
     #[error("{action} {path}: {source}")]
@@ -81,8 +138,14 @@ fn io_error<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(io::Error) 
     }
 }
 
-/// Reads the model description out of a built FMU library.
+/// Reads the FMI 2.0 model description out of a built FMU library.
 pub fn model_description(cdylib: &Path) -> Result<String, Error> {
+    model_description_of(cdylib, FmiVersion::Fmi2)
+}
+
+/// Reads the model description of FMI version `version` out of a built FMU library.
+pub fn model_description_of(cdylib: &Path, version: FmiVersion) -> Result<String, Error> {
+    let symbol = version.symbol();
     // SAFETY: loading a library runs its initializers; this is a library built with
     // tether-fmu-kit, whose initializers are Rust's (none with side effects).
     let library = unsafe { libloading::Library::new(cdylib) }.map_err(|source| Error::Load {
@@ -91,9 +154,10 @@ pub fn model_description(cdylib: &Path) -> Result<String, Error> {
     })?;
     type Describe = unsafe extern "C" fn() -> *const c_char;
     // SAFETY: the kit exports this symbol with exactly this signature.
-    let describe = unsafe { library.get::<Describe>(MODEL_DESCRIPTION_SYMBOL.as_bytes()) }
-        .map_err(|source| Error::Symbol {
+    let describe =
+        unsafe { library.get::<Describe>(symbol.as_bytes()) }.map_err(|source| Error::Symbol {
             path: cdylib.to_path_buf(),
+            symbol,
             source,
         })?;
     // SAFETY: the function takes no arguments and returns null or a static C string.
@@ -101,6 +165,7 @@ pub fn model_description(cdylib: &Path) -> Result<String, Error> {
     if text.is_null() {
         return Err(Error::NoDescription {
             path: cdylib.to_path_buf(),
+            symbol,
         });
     }
     // SAFETY: non-null, NUL-terminated and static for as long as `library` is loaded;
@@ -123,19 +188,30 @@ pub fn model_identifier(xml: &str) -> Option<&str> {
 /// `modelDescription.xml` and `binaries/<platform>/<modelIdentifier>.<suffix>`),
 /// written to a temporary file and renamed into place.
 pub fn package(cdylib: &Path, out_dir: &Path) -> Result<PathBuf, Error> {
-    let xml = model_description(cdylib)?;
+    package_as(cdylib, out_dir, FmiVersion::Fmi2)
+}
+
+/// Packages a built FMU library as the FMI 3.0 archive `<out_dir>/<modelIdentifier>-fmi3.fmu`
+/// (`binaries/x86_64-linux/<modelIdentifier>.so` on Linux).
+pub fn package_fmi3(cdylib: &Path, out_dir: &Path) -> Result<PathBuf, Error> {
+    package_as(cdylib, out_dir, FmiVersion::Fmi3)
+}
+
+fn package_as(cdylib: &Path, out_dir: &Path, version: FmiVersion) -> Result<PathBuf, Error> {
+    let xml = model_description_of(cdylib, version)?;
     let id = model_identifier(&xml).ok_or_else(|| Error::NoIdentifier {
         path: cdylib.to_path_buf(),
     })?;
     let binary = fs::read(cdylib).map_err(io_error("cannot read", cdylib))?;
     fs::create_dir_all(out_dir).map_err(io_error("cannot create", out_dir))?;
-    let target = out_dir.join(format!("{id}.fmu"));
+    let file_name = version.file_name(id);
+    let target = out_dir.join(&file_name);
     let temp = out_dir.join(format!(
-        ".{id}.fmu.{}.{:?}.tmp",
+        ".{file_name}.{}.{:?}.tmp",
         std::process::id(),
         std::thread::current().id()
     ));
-    let written = write_zip(&temp, &xml, id, &binary)
+    let written = write_zip(&temp, &xml, id, &binary, version.platform())
         .and_then(|()| fs::rename(&temp, &target).map_err(io_error("cannot rename into", &target)));
     if written.is_err() {
         let _ = fs::remove_file(&temp);
@@ -143,7 +219,7 @@ pub fn package(cdylib: &Path, out_dir: &Path) -> Result<PathBuf, Error> {
     written.map(|()| target)
 }
 
-fn write_zip(path: &Path, xml: &str, id: &str, binary: &[u8]) -> Result<(), Error> {
+fn write_zip(path: &Path, xml: &str, id: &str, binary: &[u8], platform: &str) -> Result<(), Error> {
     let file = File::create(path).map_err(io_error("cannot create", path))?;
     let zip_error = |source| Error::Zip {
         path: path.to_path_buf(),
@@ -154,7 +230,7 @@ fn write_zip(path: &Path, xml: &str, id: &str, binary: &[u8]) -> Result<(), Erro
     let options = SimpleFileOptions::default()
         .compression_method(CompressionMethod::Deflated)
         .last_modified_time(DateTime::default());
-    let (platform, suffix) = PLATFORM;
+    let (_, suffix) = PLATFORM;
     zip.start_file("modelDescription.xml", options.unix_permissions(0o644))
         .map_err(zip_error)?;
     zip.write_all(xml.as_bytes())
@@ -188,16 +264,27 @@ pub fn workspace_root() -> Result<PathBuf, Error> {
         .ok_or(Error::NoWorkspace { start })
 }
 
-/// Builds the workspace crate `name` in release mode and packages it into
-/// `<root>/target/fmus/`. Cached per process; a file lock serializes concurrent
-/// processes (parallel test binaries).
+/// Builds the workspace crate `name` in release mode and packages it as FMI 2.0
+/// into `<root>/target/fmus/<name>.fmu`. Cached per process; a file lock serializes
+/// concurrent processes (parallel test binaries).
 pub fn workspace_fmu(name: &str) -> Result<PathBuf, Error> {
-    static BUILT: OnceLock<Mutex<HashMap<String, PathBuf>>> = OnceLock::new();
+    workspace_fmu_as(name, FmiVersion::Fmi2)
+}
+
+/// The same library packaged as FMI 3.0: `<root>/target/fmus/<name>-fmi3.fmu`.
+pub fn workspace_fmu3(name: &str) -> Result<PathBuf, Error> {
+    workspace_fmu_as(name, FmiVersion::Fmi3)
+}
+
+/// [`workspace_fmu`] or [`workspace_fmu3`].
+pub fn workspace_fmu_as(name: &str, version: FmiVersion) -> Result<PathBuf, Error> {
+    static BUILT: OnceLock<Mutex<HashMap<(String, FmiVersion), PathBuf>>> = OnceLock::new();
     let mut built = BUILT
         .get_or_init(Default::default)
         .lock()
         .unwrap_or_else(|e| e.into_inner());
-    if let Some(path) = built.get(name) {
+    let key = (name.to_string(), version);
+    if let Some(path) = built.get(&key) {
         return Ok(path.clone());
     }
     let root = workspace_root()?;
@@ -206,14 +293,14 @@ pub fn workspace_fmu(name: &str) -> Result<PathBuf, Error> {
     let lock_path = target.join("fmu-build.lock");
     let lock = File::create(&lock_path).map_err(io_error("cannot create", &lock_path))?;
     lock.lock().map_err(io_error("cannot lock", &lock_path))?;
-    let path = build_and_package(&root, name);
+    let path = build_and_package(&root, name, version);
     drop(lock);
     let path = path?;
-    built.insert(name.to_string(), path.clone());
+    built.insert(key, path.clone());
     Ok(path)
 }
 
-fn build_and_package(root: &Path, name: &str) -> Result<PathBuf, Error> {
+fn build_and_package(root: &Path, name: &str, version: FmiVersion) -> Result<PathBuf, Error> {
     let build_dir = root.join("target").join("fmu-build");
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut command = Command::new(&cargo);
@@ -263,7 +350,7 @@ fn build_and_package(root: &Path, name: &str) -> Result<PathBuf, Error> {
             path: library,
         });
     }
-    package(&library, &root.join("target").join("fmus"))
+    package_as(&library, &root.join("target").join("fmus"), version)
 }
 
 /// The package names of every crate under `<root>/fmus/`, sorted.
@@ -293,12 +380,15 @@ pub fn workspace_fmu_names() -> Result<Vec<String>, Error> {
     Ok(names)
 }
 
-/// Builds and packages every crate under `fmus/`; returns the `.fmu` paths.
+/// Builds and packages every crate under `fmus/`, as FMI 2.0 and as FMI 3.0;
+/// returns the `.fmu` paths (`<name>.fmu`, `<name>-fmi3.fmu`, …).
 pub fn workspace_fmus() -> Result<Vec<PathBuf>, Error> {
-    workspace_fmu_names()?
-        .iter()
-        .map(|name| workspace_fmu(name))
-        .collect()
+    let mut fmus = Vec::new();
+    for name in workspace_fmu_names()? {
+        fmus.push(workspace_fmu(&name)?);
+        fmus.push(workspace_fmu3(&name)?);
+    }
+    Ok(fmus)
 }
 
 #[cfg(test)]

@@ -76,6 +76,7 @@ impl<M: Model> Instance<M> {
                 Slot::Output(i) => self.scratch.y[i],
                 Slot::State(i) => d.states[i],
                 Slot::Derivative(i) => self.scratch.dx[i],
+                Slot::Time => d.time,
                 Slot::IntegerParameter(_) | Slot::BooleanParameter(_) => 0.0,
             };
         }

@@ -253,6 +253,9 @@ pub enum Slot {
     Output(usize),
     State(usize),
     Derivative(usize),
+    /// The independent variable `time` (FMI 3.0 only: the value reference after
+    /// every other variable, read-only).
+    Time,
 }
 
 /// The FMI type of a variable, as the get/set functions see it.
@@ -320,6 +323,7 @@ impl Declaration {
             Slot::Output(i) => self.outputs[i].name.to_string(),
             Slot::State(i) => self.states[i].name.to_string(),
             Slot::Derivative(i) => format!("der({})", self.states[i].name),
+            Slot::Time => "time".to_string(),
         }
     }
 

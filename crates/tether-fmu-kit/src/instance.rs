@@ -82,6 +82,9 @@ pub struct Instance<M: Model> {
     /// `fmi2GetBooleanStatus(fmi2Terminated)`. Not part of the FMU state: the
     /// request is final.
     pub terminated: bool,
+    /// Made by `fmi3InstantiateCoSimulation`: log messages name the fmi3 functions,
+    /// and `time` is a variable (value reference after the declared ones).
+    pub fmi3: bool,
 }
 
 /// Per-instance work buffers (see [`Instance::scratch`]), borrowed next to the
@@ -107,7 +110,17 @@ impl<M: Model> Instance<M> {
             model: None,
             scratch: Scratch::default(),
             terminated: false,
+            fmi3: false,
         }
+    }
+
+    /// The same instance as seen through the FMI 3.0 layer: log messages name the
+    /// fmi3 functions and the independent variable `time` gets the value reference
+    /// after the declared variables.
+    pub fn fmi3(mut self) -> Self {
+        self.fmi3 = true;
+        self.slots.push(Slot::Time);
+        self
     }
 
     pub fn shape() -> Shape {
@@ -152,9 +165,18 @@ impl<M: Model> Instance<M> {
         }
         self.log(
             failure.status,
-            &format!("{}: {}", call.name(), failure.message),
+            &format!("{}: {}", self.call_name(call), failure.message),
         );
         failure.status
+    }
+
+    /// The name of `call` in the FMI version of this instance.
+    pub fn call_name(&self, call: Call) -> &'static str {
+        if self.fmi3 {
+            call.fmi3_name()
+        } else {
+            call.name()
+        }
     }
 
     /// Sends a message to the environment's logger. Errors and fatal errors are always

@@ -1,4 +1,4 @@
-//! Write FMI 2.0 co-simulation FMUs in Rust.
+//! Write FMI 2.0 and FMI 3.0 co-simulation FMUs in Rust.
 //!
 //! A model implements [`Model`] (a `const` [`Declaration`] and its equations) and
 //! calls [`export_fmu!`] once; the kit provides every `fmi2*` function of the
@@ -29,9 +29,12 @@ pub use input::InputJet;
 pub use marker::MarkerKinematics;
 pub use model::Model;
 
-/// Exports `$model` (a type implementing [`Model`]) as an FMI 2.0 co-simulation FMU:
-/// generates every `#[no_mangle] extern "C"` fmi2 function of the co-simulation
-/// interface plus `tether_fmu_kit_model_description`. Use once per cdylib crate.
+/// Exports `$model` (a type implementing [`Model`]) as an FMI 2.0 and an FMI 3.0
+/// co-simulation FMU from one library: generates every `#[no_mangle] extern "C"`
+/// fmi2 function of the co-simulation interface, every fmi3 function of the common
+/// and co-simulation interfaces, and `tether_fmu_kit_model_description` and
+/// `tether_fmu_kit_model_description_fmi3` (the packager puts one of the two in the
+/// archive). Use once per cdylib crate.
 #[macro_export]
 macro_rules! export_fmu {
     ($model:ty) => {
@@ -314,6 +317,303 @@ macro_rules! export_fmu {
                 unsafe { k::get_string_status::<M>(c, kind, v) }
             }
         }
+
+        #[allow(non_snake_case, clippy::missing_safety_doc, clippy::too_many_arguments)]
+        mod __tether_fmu_exports_fmi3 {
+            use super::*;
+            use std::ffi::{c_char, c_void};
+            use $crate::ffi as k;
+            use $crate::ffi::fmi3 as k3;
+            use $crate::ffi::fmi3::{Fmi3Boolean as B, Fmi3Status as St, Fmi3String as Str};
+            type C = *mut c_void;
+            type S = *mut c_void;
+            type Vr = *const k3::Fmi3ValueReference;
+            type M = $model;
+
+            /// The generated FMI 3.0 modelDescription.xml (NUL-terminated, static), or
+            /// null if the declaration is invalid.
+            #[unsafe(no_mangle)]
+            pub extern "C" fn tether_fmu_kit_model_description_fmi3() -> *const c_char {
+                static XML: std::sync::OnceLock<Option<std::ffi::CString>> =
+                    std::sync::OnceLock::new();
+                k::model_description_fmi3::<M>(&XML)
+            }
+
+            #[unsafe(no_mangle)]
+            pub extern "C" fn fmi3GetVersion() -> *const c_char {
+                k3::get_version()
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SetDebugLogging(
+                c: C,
+                on: B,
+                n: usize,
+                categories: *const Str,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::set_debug_logging::<M>(c, i32::from(on), n, categories) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
+                name: Str,
+                token: Str,
+                _resources: Str,
+                _visible: B,
+                logging_on: B,
+                _event_mode_used: B,
+                _early_return_allowed: B,
+                _required_intermediate: Vr,
+                _n_required_intermediate: usize,
+                environment: *mut c_void,
+                log_message: k3::Fmi3LogMessageCallback,
+                _intermediate_update: k3::Fmi3IntermediateUpdateCallback,
+            ) -> C {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe {
+                    k3::instantiate_co_simulation::<M>(name, token, logging_on, environment, log_message)
+                }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3FreeInstance(c: C) {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::free_instance::<M>(c) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3EnterInitializationMode(
+                c: C,
+                tol_defined: B,
+                tol: f64,
+                start: f64,
+                stop_defined: B,
+                stop: f64,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe {
+                    k3::enter_initialization_mode::<M>(c, tol_defined, tol, start, stop_defined, stop)
+                }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3ExitInitializationMode(c: C) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::exit_initialization_mode::<M>(c) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3Terminate(c: C) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::terminate::<M>(c) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3Reset(c: C) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::reset::<M>(c) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetFloat64(c: C, vr: Vr, n: usize, v: *mut f64, nv: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::get_float64::<M>(c, vr, n, v, nv) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SetFloat64(c: C, vr: Vr, n: usize, v: *const f64, nv: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::set_float64::<M>(c, vr, n, v, nv) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetInt32(c: C, vr: Vr, n: usize, v: *mut i32, nv: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::get_int32::<M>(c, vr, n, v, nv) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SetInt32(c: C, vr: Vr, n: usize, v: *const i32, nv: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::set_int32::<M>(c, vr, n, v, nv) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetBoolean(c: C, vr: Vr, n: usize, v: *mut B, nv: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::get_boolean::<M>(c, vr, n, v, nv) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SetBoolean(c: C, vr: Vr, n: usize, v: *const B, nv: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::set_boolean::<M>(c, vr, n, v, nv) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetFMUState(c: C, s: *mut S) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::get_fmu_state::<M>(c, s) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SetFMUState(c: C, s: S) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::set_fmu_state::<M>(c, s) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3FreeFMUState(c: C, s: *mut S) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::free_fmu_state::<M>(c, s) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SerializedFMUStateSize(c: C, s: S, size: *mut usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::serialized_fmu_state_size::<M>(c, s, size) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SerializeFMUState(c: C, s: S, bytes: *mut u8, size: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::serialize_fmu_state::<M>(c, s, bytes.cast(), size) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3DeserializeFMUState(
+                c: C,
+                bytes: *const u8,
+                size: usize,
+                s: *mut S,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::deserialize_fmu_state::<M>(c, bytes.cast(), size, s) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetOutputDerivatives(
+                c: C,
+                vr: Vr,
+                n: usize,
+                orders: *const i32,
+                v: *mut f64,
+                nv: usize,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::get_output_derivatives::<M>(c, vr, n, orders, v, nv) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3DoStep(
+                c: C,
+                t: f64,
+                h: f64,
+                _no_set_fmu_state_prior: B,
+                event_handling_needed: *mut B,
+                terminate_simulation: *mut B,
+                early_return: *mut B,
+                last_successful_time: *mut f64,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe {
+                    k3::do_step::<M>(
+                        c,
+                        t,
+                        h,
+                        event_handling_needed,
+                        terminate_simulation,
+                        early_return,
+                        last_successful_time,
+                    )
+                }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3EnterStepMode(c: C) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k3::enter_step_mode::<M>(c) }
+            }
+
+            $crate::__fmi3_unsupported! {
+                fmi3EnterEventMode();
+                fmi3EnterConfigurationMode();
+                fmi3ExitConfigurationMode();
+                fmi3EvaluateDiscreteStates();
+                fmi3UpdateDiscreteStates(*mut B, *mut B, *mut B, *mut B, *mut B, *mut f64);
+                fmi3GetFloat32(Vr, usize, *mut f32, usize);
+                fmi3GetInt8(Vr, usize, *mut i8, usize);
+                fmi3GetUInt8(Vr, usize, *mut u8, usize);
+                fmi3GetInt16(Vr, usize, *mut i16, usize);
+                fmi3GetUInt16(Vr, usize, *mut u16, usize);
+                fmi3GetUInt32(Vr, usize, *mut u32, usize);
+                fmi3GetInt64(Vr, usize, *mut i64, usize);
+                fmi3GetUInt64(Vr, usize, *mut u64, usize);
+                fmi3GetString(Vr, usize, *mut Str, usize);
+                fmi3GetBinary(Vr, usize, *mut usize, *mut *const u8, usize);
+                fmi3GetClock(Vr, usize, *mut B);
+                fmi3SetFloat32(Vr, usize, *const f32, usize);
+                fmi3SetInt8(Vr, usize, *const i8, usize);
+                fmi3SetUInt8(Vr, usize, *const u8, usize);
+                fmi3SetInt16(Vr, usize, *const i16, usize);
+                fmi3SetUInt16(Vr, usize, *const u16, usize);
+                fmi3SetUInt32(Vr, usize, *const u32, usize);
+                fmi3SetInt64(Vr, usize, *const i64, usize);
+                fmi3SetUInt64(Vr, usize, *const u64, usize);
+                fmi3SetString(Vr, usize, *const Str, usize);
+                fmi3SetBinary(Vr, usize, *const usize, *const *const u8, usize);
+                fmi3SetClock(Vr, usize, *const B);
+                fmi3GetNumberOfVariableDependencies(u32, *mut usize);
+                fmi3GetVariableDependencies(u32, *mut usize, *mut u32, *mut usize, *mut i32, usize);
+                fmi3GetDirectionalDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
+                fmi3GetAdjointDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
+                fmi3GetIntervalDecimal(Vr, usize, *mut f64, *mut i32);
+                fmi3GetIntervalFraction(Vr, usize, *mut u64, *mut u64, *mut i32);
+                fmi3GetShiftDecimal(Vr, usize, *mut f64);
+                fmi3GetShiftFraction(Vr, usize, *mut u64, *mut u64);
+                fmi3SetIntervalDecimal(Vr, usize, *const f64);
+                fmi3SetIntervalFraction(Vr, usize, *const u64, *const u64);
+                fmi3SetShiftDecimal(Vr, usize, *const f64);
+                fmi3SetShiftFraction(Vr, usize, *const u64, *const u64);
+                fmi3ActivateModelPartition(u32, f64);
+                fmi3EnterContinuousTimeMode();
+                fmi3CompletedIntegratorStep(B, *mut B, *mut B);
+                fmi3SetTime(f64);
+                fmi3SetContinuousStates(*const f64, usize);
+                fmi3GetContinuousStateDerivatives(*mut f64, usize);
+                fmi3GetEventIndicators(*mut f64, usize);
+                fmi3GetContinuousStates(*mut f64, usize);
+                fmi3GetNominalsOfContinuousStates(*mut f64, usize);
+                fmi3GetNumberOfEventIndicators(*mut usize);
+                fmi3GetNumberOfContinuousStates(*mut usize);
+            }
+
+            // Model exchange and scheduled execution are not offered (the model
+            // description has only <CoSimulation>): no instance.
+            #[unsafe(no_mangle)]
+            pub extern "C" fn fmi3InstantiateModelExchange(
+                _name: Str,
+                _token: Str,
+                _resources: Str,
+                _visible: B,
+                _logging_on: B,
+                _environment: *mut c_void,
+                _log_message: k3::Fmi3LogMessageCallback,
+            ) -> C {
+                std::ptr::null_mut()
+            }
+            #[unsafe(no_mangle)]
+            pub extern "C" fn fmi3InstantiateScheduledExecution(
+                _name: Str,
+                _token: Str,
+                _resources: Str,
+                _visible: B,
+                _logging_on: B,
+                _environment: *mut c_void,
+                _log_message: k3::Fmi3LogMessageCallback,
+                _clock_update: *mut c_void,
+                _lock_preemption: *mut c_void,
+                _unlock_preemption: *mut c_void,
+            ) -> C {
+                std::ptr::null_mut()
+            }
+        }
+    };
+}
+
+/// The FMI 3.0 functions the kit refuses (see [`ffi::fmi3::unsupported`]), with
+/// their C signatures; used by [`export_fmu!`] inside its FMI 3.0 module (where
+/// `M`, `C` and `St` are defined).
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi3_unsupported {
+    ($($name:ident($($arg:ty),*);)*) => {
+        $(
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn $name(c: C, $(_: $arg),*) -> St {
+                // SAFETY: the FMI 3.0 contract; only `c` is used, checked for null.
+                unsafe { k3::unsupported::<M>(c, stringify!($name)) }
+            }
+        )*
     };
 }
 

@@ -72,6 +72,8 @@ pub enum Call {
     GetIntegerStatus,
     GetBooleanStatus,
     GetStringStatus,
+    /// An FMI 3.0 function the kit does not support (named): refused with an error.
+    Unsupported(&'static str),
 }
 
 use MachineState::*;
@@ -135,6 +137,46 @@ impl Call {
             Call::GetIntegerStatus => "fmi2GetIntegerStatus",
             Call::GetBooleanStatus => "fmi2GetBooleanStatus",
             Call::GetStringStatus => "fmi2GetStringStatus",
+            Call::Unsupported(name) => name,
+        }
+    }
+
+    /// The FMI 3.0 function a call of the FMI 3.0 layer ([`crate::ffi::fmi3`]) came
+    /// through, for log messages (`fmi2SetupExperiment` has none: its arguments come
+    /// with `fmi3EnterInitializationMode`).
+    pub fn fmi3_name(self) -> &'static str {
+        match self {
+            Call::SetDebugLogging => "fmi3SetDebugLogging",
+            Call::FreeInstance => "fmi3FreeInstance",
+            Call::SetupExperiment | Call::EnterInitializationMode => "fmi3EnterInitializationMode",
+            Call::ExitInitializationMode => "fmi3ExitInitializationMode",
+            Call::Terminate => "fmi3Terminate",
+            Call::Reset => "fmi3Reset",
+            Call::GetReal => "fmi3GetFloat64",
+            Call::GetInteger => "fmi3GetInt32",
+            Call::GetBoolean => "fmi3GetBoolean",
+            Call::GetString => "fmi3GetString",
+            Call::SetReal => "fmi3SetFloat64",
+            Call::SetInteger => "fmi3SetInt32",
+            Call::SetBoolean => "fmi3SetBoolean",
+            Call::SetString => "fmi3SetString",
+            Call::GetFMUstate => "fmi3GetFMUState",
+            Call::SetFMUstate => "fmi3SetFMUState",
+            Call::FreeFMUstate => "fmi3FreeFMUState",
+            Call::SerializedFMUstateSize => "fmi3SerializedFMUStateSize",
+            Call::SerializeFMUstate => "fmi3SerializeFMUState",
+            Call::DeSerializeFMUstate => "fmi3DeserializeFMUState",
+            Call::GetDirectionalDerivative => "fmi3GetDirectionalDerivative",
+            Call::GetRealOutputDerivatives => "fmi3GetOutputDerivatives",
+            Call::DoStep => "fmi3DoStep",
+            Call::SetRealInputDerivatives
+            | Call::CancelStep
+            | Call::GetStatus
+            | Call::GetRealStatus
+            | Call::GetIntegerStatus
+            | Call::GetBooleanStatus
+            | Call::GetStringStatus => self.name(),
+            Call::Unsupported(name) => name,
         }
     }
 
@@ -167,6 +209,7 @@ impl Call {
             | Call::GetIntegerStatus
             | Call::GetBooleanStatus
             | Call::GetStringStatus => STATUS,
+            Call::Unsupported(_) => NOT_FATAL,
         }
     }
 

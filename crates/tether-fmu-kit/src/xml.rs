@@ -255,6 +255,7 @@ fn render(d: &Declaration, guid: &str) -> String {
                 let description = format!("Derivative of {}", s.name);
                 (head(&description, &calculated("local")), element)
             }
+            Slot::Time => continue,
         };
         let _ = writeln!(x, "{head}\n      {element}\n    </ScalarVariable>");
     }
@@ -316,6 +317,183 @@ fn render(d: &Declaration, guid: &str) -> String {
             let _ = writeln!(x, r#"      <Unknown index="{index}"/>"#);
         }
         let _ = writeln!(x, "    </InitialUnknowns>");
+    }
+    let _ = writeln!(x, "  </ModelStructure>");
+    let _ = writeln!(x, "</fmiModelDescription>");
+    x
+}
+
+/// The FMI 3.0 `modelDescription.xml` of the same model (co-simulation), or why the
+/// declaration is invalid. The variables keep their FMI 2.0 value references
+/// (`Float64`, `Int32`, `Boolean`), `time` (causality `independent`) comes after
+/// them; `<ModelStructure>` lists the outputs with their dependencies (value
+/// references of states and inputs) and the outputs as initial unknowns. The
+/// instantiation token is the FMI 2.0 GUID: the model is the same.
+pub fn model_description_fmi3(declaration: &Declaration) -> Result<String, String> {
+    declaration.check()?;
+    Ok(render3(declaration, &guid(declaration)))
+}
+
+fn render3(d: &Declaration, token: &str) -> String {
+    let mut x = String::new();
+    let slots = d.slots();
+    let vr_of = |slot: Slot| slots.iter().position(|&s| s == slot).unwrap_or(0);
+
+    let _ = writeln!(x, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
+    let _ = writeln!(
+        x,
+        r#"<fmiModelDescription fmiVersion="3.0" modelName="{}" instantiationToken="{token}"{} generationTool="tether-fmu-kit {}" variableNamingConvention="structured">"#,
+        escape(d.model_name),
+        opt_attr(
+            "description",
+            (!d.description.is_empty()).then(|| d.description.to_string())
+        ),
+        env!("CARGO_PKG_VERSION"),
+    );
+    let _ = writeln!(
+        x,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="{}" providesIntermediateUpdate="false" canReturnEarlyAfterIntermediateUpdate="false" hasEventMode="false" providesEvaluateDiscreteStates="false"/>"#,
+        escape(d.model_identifier),
+        d.capabilities.can_get_and_set_fmu_state,
+        d.capabilities.can_get_and_set_fmu_state,
+        d.max_output_derivative_order,
+    );
+    units_and_log_categories(&mut x, &used_units(d));
+    let e = d.default_experiment;
+    let _ = writeln!(
+        x,
+        r#"  <DefaultExperiment startTime="{}" stopTime="{}" tolerance="{}" stepSize="{}"/>"#,
+        real(e.start_time),
+        real(e.stop_time),
+        real(DEFAULT_TOLERANCE),
+        real(e.step_size)
+    );
+
+    let _ = writeln!(x, "  <ModelVariables>");
+    let real_parameters = d.all_real_parameters();
+    let description =
+        |text: &str| opt_attr("description", (!text.is_empty()).then(|| text.to_string()));
+    let fixed = r#" causality="parameter" variability="fixed" initial="exact""#;
+    let calculated = |causality: &str| {
+        format!(r#" causality="{causality}" variability="continuous" initial="calculated""#)
+    };
+    for (vr, &slot) in slots.iter().enumerate() {
+        let name = escape(&d.name(slot));
+        let line = match slot {
+            Slot::RealParameter(i) => {
+                let p = &real_parameters[i];
+                format!(
+                    r#"<Float64 name="{name}" valueReference="{vr}"{}{fixed} start="{}"{}{}{}/>"#,
+                    description(p.description),
+                    real(p.start),
+                    opt_attr("unit", p.unit.map(String::from)),
+                    opt_attr("min", p.min.map(real)),
+                    opt_attr("max", p.max.map(real)),
+                )
+            }
+            Slot::IntegerParameter(i) => {
+                let p = &d.integer_parameters[i];
+                format!(
+                    r#"<Int32 name="{name}" valueReference="{vr}"{}{fixed} start="{}"{}{}/>"#,
+                    description(p.description),
+                    p.start,
+                    opt_attr("min", p.min.map(|m| m.to_string())),
+                    opt_attr("max", p.max.map(|m| m.to_string())),
+                )
+            }
+            Slot::BooleanParameter(i) => {
+                let p = &d.boolean_parameters[i];
+                format!(
+                    r#"<Boolean name="{name}" valueReference="{vr}"{}{fixed} start="{}"/>"#,
+                    description(p.description),
+                    p.start
+                )
+            }
+            Slot::Input(i) => {
+                let u = &d.inputs[i];
+                format!(
+                    r#"<Float64 name="{name}" valueReference="{vr}"{} causality="input" variability="continuous" start="{}"{}{}{}/>"#,
+                    description(u.description),
+                    real(u.start),
+                    opt_attr("unit", u.unit.map(String::from)),
+                    opt_attr("min", u.min.map(real)),
+                    opt_attr("max", u.max.map(real)),
+                )
+            }
+            Slot::Output(i) => {
+                let y = &d.outputs[i];
+                format!(
+                    r#"<Float64 name="{name}" valueReference="{vr}"{}{}{}/>"#,
+                    description(y.description),
+                    calculated("output"),
+                    opt_attr("unit", y.unit.map(String::from)),
+                )
+            }
+            Slot::State(i) => {
+                let s = &d.states[i];
+                format!(
+                    r#"<Float64 name="{name}" valueReference="{vr}"{}{}{}/>"#,
+                    description(s.description),
+                    calculated("local"),
+                    opt_attr("unit", s.unit.map(String::from)),
+                )
+            }
+            Slot::Derivative(i) => {
+                let s = &d.states[i];
+                format!(
+                    r#"<Float64 name="{name}" valueReference="{vr}"{}{}{} derivative="{}"/>"#,
+                    description(&format!("Derivative of {}", s.name)),
+                    calculated("local"),
+                    opt_attr("unit", s.derivative_unit.map(String::from)),
+                    vr_of(Slot::State(i))
+                )
+            }
+            Slot::Time => continue,
+        };
+        let _ = writeln!(x, "    {line}");
+    }
+    let _ = writeln!(
+        x,
+        r#"    <Float64 name="time" valueReference="{}" description="Simulation time" causality="independent" variability="continuous"/>"#,
+        slots.len()
+    );
+    let _ = writeln!(x, "  </ModelVariables>");
+
+    let _ = writeln!(x, "  <ModelStructure>");
+    for (i, y) in d.outputs.iter().enumerate() {
+        let mut deps: Vec<usize> = y
+            .depends_on
+            .iter()
+            .filter_map(|dep| {
+                let state = d
+                    .states
+                    .iter()
+                    .position(|s| s.name == *dep)
+                    .map(Slot::State);
+                let input = d
+                    .inputs
+                    .iter()
+                    .position(|u| u.name == *dep)
+                    .map(Slot::Input);
+                state.or(input).map(vr_of)
+            })
+            .collect();
+        deps.sort_unstable();
+        deps.dedup();
+        let deps: Vec<String> = deps.iter().map(usize::to_string).collect();
+        let _ = writeln!(
+            x,
+            r#"    <Output valueReference="{}" dependencies="{}"/>"#,
+            vr_of(Slot::Output(i)),
+            deps.join(" ")
+        );
+    }
+    for i in 0..d.outputs.len() {
+        let _ = writeln!(
+            x,
+            r#"    <InitialUnknown valueReference="{}"/>"#,
+            vr_of(Slot::Output(i))
+        );
     }
     let _ = writeln!(x, "  </ModelStructure>");
     let _ = writeln!(x, "</fmiModelDescription>");

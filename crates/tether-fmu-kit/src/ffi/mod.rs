@@ -239,6 +239,26 @@ pub fn model_description<M: Model>(cache: &'static OnceLock<Option<CString>>) ->
     }
 }
 
+/// The generated FMI 3.0 modelDescription.xml, kept for the life of the library.
+pub fn model_description_fmi3<M: Model>(
+    cache: &'static OnceLock<Option<CString>>,
+) -> *const c_char {
+    let make = || match xml::model_description_fmi3(&M::DECLARATION) {
+        Ok(text) => CString::new(text).ok(),
+        Err(e) => {
+            eprintln!(
+                "tether-fmu-kit: invalid declaration of {}: {e}",
+                M::DECLARATION.model_identifier
+            );
+            None
+        }
+    };
+    match catch_unwind(AssertUnwindSafe(|| cache.get_or_init(make))) {
+        Ok(Some(text)) => text.as_ptr(),
+        _ => ptr::null(),
+    }
+}
+
 pub fn get_types_platform() -> *const c_char {
     c"default".as_ptr()
 }
@@ -416,6 +436,7 @@ unsafe fn set_values<M: Model, T>(
     }
 }
 
+pub mod fmi3;
 mod state;
 mod values;
 
