@@ -881,8 +881,8 @@ def info(fmu: PathLike) -> Dict[str, Any]:
 
 
 #: The exported FMU's binary (libtether_fmu_export.so), package data of the
-#: wheel: ``.ci/run`` builds it and copies it into python/tether while the
-#: wheel is built (docs/fmu-export.md).
+#: wheel: tools/install-python.sh builds it and copies it into python/tether
+#: while the wheel is built (docs/fmu-export.md).
 _EXPORT_RUNTIME = "libtether_fmu_export.so"
 
 
@@ -895,9 +895,7 @@ def export_fmu(system: Union[PathLike, "System"], path: PathLike) -> str:
     if not os.path.isfile(runtime):
         raise SettingsError(
             f"the FMU runtime {runtime} is not installed with the tether package "
-            "(build it with `cargo build --profile wheel -p tether-fmu-export` and copy "
-            "target/wheel/libtether_fmu_export.so to crates/tether-py/python/tether/ "
-            "before building the wheel, as .ci/run does)"
+            "(install the package with tools/install-python.sh, which builds it into the wheel)"
         )
     try:
         _tether.export_fmu(os.fspath(path), runtime, **_source(system))
