@@ -146,6 +146,11 @@ def run(args):
             if master.control is not None:
                 c = master.control
                 print(f"  adaptive steps: {c.accepted} accepted, {c.rejected} rejected", file=sys.stderr)
+            if master.signals.iterations is not None:
+                c = master.signals.counts
+                print(f"  signals ({master.signals.solver}): {c['iterations']} iterations, at most "
+                      f"{c['max_iterations']} per step, {c['repeated_runs']} repeated runs, "
+                      f"{c['not_converged']} steps not converged", file=sys.stderr)
             for h in master.hosts:
                 c = h.counters
                 print(f"  {h.name}: {c.do_steps} fmi2DoStep, {c.state_gets} fmi2GetFMUstate, "

@@ -5,6 +5,7 @@ eq. 71-76) and the explicit baseline, on the grid T_n = T_0 + n*H.
 Written from docs/algorithm.md, independently of crates/tether-master.
 """
 
+import copy
 import math
 
 import numpy as np
@@ -47,6 +48,7 @@ class Master:
                             raise RunError(f"instance '{host.name}' ({host.md.modelName}) does not declare "
                                            f"{capability}, which adaptive macro steps ([step_control]{role}) "
                                            f"needs")
+            self.signals.check_rollback()
             stop = self.t0 + self.steps * self.h if self.control is None else system.stop
             for host in self.hosts:
                 host.enter_initialization(self.t0, stop, system.tolerance)
@@ -336,8 +338,13 @@ class Master:
             self.past[m][0] -= float(step[i])
 
     def _explicit_step(self):
+        self.signals.send(self.n, self.time(), self.h, None)
+        self._explicit_method()
+        self.signals.receive(self.time())
+
+    def _explicit_method(self):
+        """The explicit method's step, the signals sent."""
         t = self.time()
-        self.signals.send(self.n, t, self.h, None)
         for host in self.hosts:  # inputs hold u_N over the step
             if not host.stepped_ahead:
                 host.do_step(t, self.h)
@@ -346,7 +353,6 @@ class Master:
         self._feedthrough_newton(list(range(len(self.unknowns))), self.method.mu)
         self._apply_constant()
         self._accept()
-        self.signals.receive(self.time())
 
     # -- the predictor/corrector step -------------------------------------------------------
 
@@ -598,8 +604,39 @@ class Master:
         out = self._output()
         self.row += [self._value(r, "position", u, output=out) for r in self.rows if r.residual is not None]
 
+    def _iterated_step(self):
+        """A macro step with iterated signals ([signals] iterations): every
+        instance and the method's state saved at T_N, the step (signals sent,
+        the method's step) repeated from there as Signals.step_iterated asks."""
+        t, n = self.time(), self.n
+        for host in self.hosts:
+            host.save_state()
+        saved = copy.deepcopy((self.past, self.jac, self.reuse))
+        explicit = self.method.kind == "explicit"
+
+        def run():
+            self.signals.send(n, t, self.h, None)
+            if explicit:
+                self._explicit_method()
+            else:
+                self._try_step(t, self.h, None)
+
+        def restore():
+            for host in self.hosts:
+                host.restore_state()
+            self.past, self.jac, self.reuse = copy.deepcopy(saved)
+            self.n = n
+
+        try:
+            self.signals.step_iterated(t, run, restore)
+        except Exception:
+            self.n = n  # the step failed: the run ends at T_N
+            raise
+
     def step(self):
-        if self.method.kind == "explicit":
+        if self.signals.iterations is not None:
+            self._iterated_step()
+        elif self.method.kind == "explicit":
             self._explicit_step()
         else:
             self._predictor_corrector_step()

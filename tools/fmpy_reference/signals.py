@@ -5,9 +5,14 @@ value handed to an input at macro points, without a solve (docs/algorithm.md,
 during the run, solved at T_0 in initialization mode (fixed-point sweeps, then
 Newton on the Real connections with a finite-difference Jacobian).
 
+Iterated steps (`[signals] iterations`, `solver`, `strict`): every instance
+saved at T_N, the step run once, then v = G(v) on the senders' values at
+T_{N+1}, G one repetition of the whole macro step from T_N (fixed point or
+Newton, the solve the loops at T_0 use).
+
 Where the result depends on the order of floating-point operations (the loop
-solve at T_0), the operations are those of Tether's `algorithm/signals.rs` in
-the same order, so that both hosts give the FMUs the same inputs bit for bit.
+solves), the operations are those of Tether's `algorithm/signals.rs` in the
+same order, so that both hosts give the FMUs the same inputs bit for bit.
 """
 
 import math
@@ -94,6 +99,25 @@ class Signals:
         self.next = [0.0] * n  # y_{N+1}, once read
         self.fresh = [False] * len(hosts)  # stepped already in this macro step
         self.save = False  # adaptive steps: the sweep saves each instance first
+        self.iterations = system.signal_iterations  # None: each step runs once
+        self.solver = system.signal_solver
+        self.strict = system.signal_strict
+        # In an iterated step's repetitions every receiver takes the iterate
+        # `next` as its sender's value at T_{N+1}.
+        self.iterating = False
+        # The run summary's counts of iterated steps.
+        self.counts = {"iterations": 0, "max_iterations": 0, "repeated_runs": 0, "not_converged": 0}
+
+    def check_rollback(self):
+        """An iterated step repeats the macro step of every instance from its
+        state at T_N: the first instance without canGetAndSetFMUstate is refused."""
+        if self.iterations is None:
+            return
+        for host in self.hosts:
+            if not host.cs.canGetAndSetFMUstate:
+                raise RunError(f"instance '{host.name}' ({host.md.modelName}) does not declare "
+                               f"canGetAndSetFMUstate, which [signals] iterations (every instance repeats "
+                               f"the macro step from its state at T_N) needs")
 
     # -- set-up ---------------------------------------------------------------
 
@@ -206,6 +230,13 @@ class Signals:
                 for s in (self.links[l].frm, self.links[l].to):
                     if self.hosts[s].name not in instances:
                         instances.append(self.hosts[s].name)
+            if self.iterations is not None:
+                how = f"Newton, at most {self.iterations} updates" if self.solver == "newton" else \
+                    f"{self.scheme} fixed point, at most {self.iterations} repetitions of the step"
+                names = ", ".join(self.links[l].name for l in members)
+                notes.append(f"direct-feedthrough loop through {', '.join(instances)} is iterated at every "
+                             f"macro step ({how}): {names} (value at T_{{N+1}})")
+                continue
             passes = ", ".join(f"{self.links[l].name} (value at {'T_N' if self.lagged(l) else 'T_{N+1}'})"
                                for l in members)
             notes.append(f"direct-feedthrough loop through {', '.join(instances)} is closed only at macro "
@@ -235,60 +266,28 @@ class Signals:
         self.history[l] = [value, value, value]
         self._set(l, poly.Jet(value))
 
+    def _real_links(self):
+        return [l for l in range(len(self.links)) if self.links[l].kind == "Real"]
+
     def _solve_loops(self):
         """v = G(v) with G: set every receiver to its link's value, read every
-        sender. Fixed-point sweeps, then Newton on the Real links with
-        W = I - dG/dv from one evaluation of G per link, until
-        |v - G(v)| <= tolerance*max(1, |v|) for every link."""
-        n = len(self.links)
+        sender (solve_loop: up to 50 fixed-point sweeps, then up to 20 Newton
+        updates); the converged values start the histories."""
         v = [h[0] for h in self.history]
-        g = [0.0] * n
-        residual = self._apply(v, g)
-        for _ in range(SWEEPS):
-            if residual <= 1.0:
-                return self._settle(g)
-            v = list(g)
-            residual = self._apply(v, g)
-        real = [l for l in range(n) if self.links[l].kind == "Real"]
-        gb = [0.0] * n
-        for _ in range(NEWTON):
-            if residual <= 1.0:
-                return self._settle(g)
-            for l in range(n):
-                if self.links[l].kind != "Real":
-                    v[l] = g[l]
-            k = len(real)
-            w = [[0.0] * k for _ in range(k)]
-            for j, lj in enumerate(real):
-                delta = 1e-7 * max(abs(v[lj]), 1.0)
-                bumped = list(v)
-                bumped[lj] += delta
-                self._apply(bumped, gb)
-                for i, li in enumerate(real):
-                    identity = 1.0 if i == j else 0.0
-                    w[i][j] = identity - (gb[li] - g[li]) / delta
-            b = [v[li] - g[li] for li in real]
-            try:
-                step = solve(w, b, 0.0, "signal loop", 1e14)
-            except RunError:
-                raise self._unsolved(residual, "its Jacobian is singular") from None
-            for li, s in zip(real, step):
-                v[li] -= s
-            residual = self._apply(v, g)
-        if residual <= 1.0:
+        g = [0.0] * len(v)
+        solved = solve_loop(v, g, self._real_links(), (SWEEPS, NEWTON), self.tolerance, self._apply)
+        if solved.converged:
             return self._settle(g)
-        raise self._unsolved(residual, "fixed-point sweeps and Newton did not converge")
+        why = "its Jacobian is singular" if solved.singular else \
+            "fixed-point sweeps and Newton did not converge"
+        raise self._unsolved(solved.residual, why)
 
     def _apply(self, v, g):
-        """G(v) into g; returns max |v - G(v)| / (tolerance*max(1, |v|))."""
+        """G(v) into g at T_0: every receiver set to v, every sender read."""
         for l, value in enumerate(v):
             self._set(l, poly.Jet(value))
-        worst = 0.0
         for l in range(len(g)):
             g[l] = self._read(l, "at T_0")
-            scale = self.tolerance * max(abs(v[l]), 1.0)
-            worst = max(worst, abs(v[l] - g[l]) / scale)
-        return worst
 
     def _settle(self, g):
         for l, value in enumerate(g):
@@ -328,11 +327,64 @@ class Signals:
     def receive(self, t):
         """After an accepted step: read the senders at T_{N+1} (those the
         Gauss-Seidel sweep did not) and shift the histories."""
+        self._read_next(t)
+        self._shift()
+
+    def _read_next(self, t):
         for l, link in enumerate(self.links):
             if not self.fresh[link.frm]:
                 self.next[l] = self._read(l, f"after the step to t = {t}")
-            h = self.history[l]
+
+    def _shift(self):
+        for l, h in enumerate(self.history):
             self.history[l] = [self.next[l], h[0], h[1]]
+
+    def step_iterated(self, t, run, restore):
+        """An iterated macro step from T_N = t: the caller saved every instance
+        and the method's state at T_N; `run()` sends and makes the method's
+        step, `restore()` goes back to T_N. The first run's senders' values at
+        T_{N+1} are the first iterate v; G(v) restores, sets `next` = v (every
+        receiver takes it as its sender's value at T_{N+1}; Gauss-Seidel's
+        later receivers this repetition's values), runs and reads the senders.
+        Fixed point: at most `iterations` repetitions; Newton: at most
+        `iterations` updates. The last repetition stands."""
+        n_max = self.iterations
+        run()
+        self._read_next(t)
+        v = list(self.next)
+        g = [0.0] * len(v)
+        limits = (n_max - 1, 0) if self.solver == "fixed_point" else (0, n_max)
+
+        def apply(v, g):
+            restore()
+            self.next = list(v)
+            run()
+            self._read_next(t)
+            g[:] = self.next
+
+        self.iterating = True
+        try:
+            solved = solve_loop(v, g, self._real_links(), limits, self.tolerance, apply)
+        finally:
+            self.iterating = False
+        self._shift()
+        c = self.counts
+        iterations = solved.runs if self.solver == "fixed_point" else solved.updates
+        c["iterations"] += iterations
+        c["max_iterations"] = max(c["max_iterations"], iterations)
+        c["repeated_runs"] += solved.runs
+        if not solved.converged:
+            worst, largest = 0, None
+            for l in range(len(v)):
+                r = abs(v[l] - g[l]) / max(abs(v[l]), 1.0)
+                if largest is None or r >= largest:
+                    worst, largest = l, r
+            if self.strict:
+                raise RunError(f"[signals] strict: the macro step from t = {t} did not converge in {n_max} "
+                               f"iterations: |Δv| of connection {self.links[worst].name} is "
+                               f"{_e(solved.residual, 1)} times the tolerance {_e(self.tolerance)} (raise "
+                               f"iterations, loosen tolerance, or try solver = \"newton\")")
+            c["not_converged"] += 1
 
     def _polynomial(self, l, n, h, steps):
         """The sender's polynomial over the step as link l's receiver takes it:
@@ -341,7 +393,7 @@ class Signals:
         link = self.links[l]
         k = self.order if link.interpolate else 0
         history = self.history[l]
-        if self.fresh[link.frm]:
+        if self.fresh[link.frm] or self.iterating:
             return poly.through(self.next[l], history, min(k, n + 1), h, steps)
         return poly.predictor(history, min(k, n), h, steps)
 
@@ -375,6 +427,84 @@ class Signals:
             fmu.setInteger(vr, [int(jet.value)])
         else:
             fmu.setBoolean(vr, [jet.value != 0.0])
+
+
+@dataclass
+class Solved:
+    """What solve_loop did."""
+
+    converged: bool = False
+    singular: bool = False  # Newton stopped on a singular Jacobian
+    updates: int = 0  # fixed-point sweeps and Newton updates
+    runs: int = 0  # runs of G
+    residual: float = 0.0  # max |v - G(v)| / (tolerance*max(1, |v|)) at the last run
+
+
+def solve_loop(v, g, real, limits, tolerance, apply):
+    """Solve v = G(v), one value per link, `apply(v, g)` putting G(v) into g:
+    first G(v); then up to `sweeps` fixed-point updates v <- G(v), each
+    followed by a run; then up to `newton` Newton updates of the Real links
+    `real` on r(v) = v - G(v), dr/dv = I - dG/dv from one run per Real link
+    with v_j increased by 1e-7*max(1, |v_j|) (the other links take G's
+    value), each followed by a run at the new v. Stopped as soon as a run
+    gives |v_l - G(v)_l| <= tolerance*max(1, |v_l|) for every l. v and g are
+    updated in place; g holds G(v) of the last run (after a singular
+    Jacobian G(v) is run once more). Tether's `solve_loop`, operation for
+    operation."""
+    sweeps, newton = limits
+
+    def residual(v, g):
+        worst = 0.0
+        for a, b in zip(v, g):
+            worst = max(worst, abs(a - b) / (tolerance * max(abs(a), 1.0)))
+        return worst
+
+    n = len(v)
+    apply(v, g)
+    solved = Solved(runs=1, residual=residual(v, g))
+    for _ in range(sweeps):
+        if solved.residual <= 1.0:
+            break
+        v[:] = g
+        apply(v, g)
+        solved.updates += 1
+        solved.runs += 1
+        solved.residual = residual(v, g)
+    gb = [0.0] * n
+    for _ in range(newton):
+        if solved.residual <= 1.0:
+            break
+        for l in range(n):
+            if l not in real:
+                v[l] = g[l]
+        k = len(real)
+        w = [[0.0] * k for _ in range(k)]
+        for j, lj in enumerate(real):
+            delta = 1e-7 * max(abs(v[lj]), 1.0)
+            bumped = list(v)
+            bumped[lj] += delta
+            apply(bumped, gb)
+            solved.runs += 1
+            for i, li in enumerate(real):
+                identity = 1.0 if i == j else 0.0
+                w[i][j] = identity - (gb[li] - g[li]) / delta
+        b = [v[li] - g[li] for li in real]
+        try:
+            step = solve(w, b, 0.0, "signal loop", 1e14)
+        except RunError:
+            solved.singular = True
+            apply(v, g)
+            solved.runs += 1
+            solved.residual = residual(v, g)
+            return solved
+        for li, s in zip(real, step):
+            v[li] -= s
+        apply(v, g)
+        solved.updates += 1
+        solved.runs += 1
+        solved.residual = residual(v, g)
+    solved.converged = solved.residual <= 1.0
+    return solved
 
 
 def _same_bits(a, b):

@@ -124,6 +124,10 @@ class System:
     # `[signals]`: "jacobi" or "gauss_seidel"; the loops' relative tolerance.
     scheme: str = "jacobi"
     signal_tolerance: float = 1e-10
+    # `[signals] iterations`, `solver` ("fixed_point" or "newton"), `strict`.
+    signal_iterations: int = None
+    signal_solver: str = "fixed_point"
+    signal_strict: bool = False
 
     def macro_steps(self):
         """(stop - start)/step rounded half away from zero, at least 1."""
@@ -366,11 +370,38 @@ def _from_document(doc):
                                                  t.take("to", "string", required=True),
                                                  t.take("gain", "number", None), t.take("offset", "number", None)))
         t.done()
-    signals = _Table("[signals]", top.take("signals", "table", {}))
+    raw_signals = top.take("signals", "table", {})
+    signals = _Table("[signals]", raw_signals)
     system.scheme = signals.take("scheme", "string", "jacobi")
     if system.scheme not in ("jacobi", "gauss_seidel"):
         raise RunError(f"[signals]: unknown scheme `{system.scheme}`, expected jacobi or gauss_seidel")
     system.signal_tolerance = signals.take("tolerance", "number", 1e-10)
+    # Iterated steps: at most `iterations` repetitions (fixed point) or
+    # Newton updates per macro step; None runs each step once.
+    system.signal_iterations = signals.take("iterations", "integer", None)
+    solver = signals.take("solver", "string", None)
+    if solver not in (None, "fixed_point", "newton"):
+        raise RunError(f"[signals]: unknown solver `{solver}`, expected fixed_point or newton")
+    if solver == "newton" and "scheme" in raw_signals:
+        raise RunError("[signals] scheme does not apply with solver = \"newton\": Newton updates every "
+                       "connection's value at once; remove the scheme key")
+    system.signal_solver = solver or "fixed_point"
+    strict = signals.take("strict", "boolean", False)
+    if not isinstance(strict, bool):
+        raise RunError(f"[signals]: `strict` must be true or false, found {strict!r}")
+    system.signal_strict = strict
+    n = system.signal_iterations
+    if n == 0:
+        raise RunError("[signals] iterations = 0: give the most repetitions of a macro step (at least 1), "
+                       "or leave the key out to run each step once")
+    if n is not None and not system.connections:
+        raise RunError("[signals] iterations: the system has no [[connection]] whose values could be iterated")
+    if n is not None and system.step_control is not None:
+        raise RunError("[signals] iterations: not available with [step_control] (adaptive steps); use a "
+                       "fixed macro step")
+    if n is None and (solver is not None or strict):
+        raise RunError(f"[signals] {'strict' if strict else 'solver'} needs iterations = N (the most "
+                       f"repetitions or Newton updates per macro step)")
     signals.done()
     # [export] declares the interface of `tether fmu export`: nothing to run.
     top.take("export", "table", None)
