@@ -133,6 +133,23 @@ variant control_loop_gain2 loop-gain2 diverges 0 0 --
 # back the instance the Gauss-Seidel sweep stepped.
 variant controlled_oscillator signals-ctrl completes 0 0 --
 variant driven_oscillator signals-adaptive completes 0 0 --
+# Iterated signal steps ([signals] iterations): the control loop with a PI
+# controller that can roll back, each macro step repeated from the saved states
+# until the exchanged values agree (Jacobi and Gauss-Seidel fixed point, Newton;
+# k = 0 and k = 1), at most 2 repetitions (no step converges, the last stands;
+# with strict = true both hosts fail the first step), and a rigid pair whose
+# controller's signals are iterated around the predictor/corrector step.
+variant loop_iterated_jacobi loop-iter-jacobi completes 0 0 --
+variant loop_iterated_gauss_seidel loop-iter-gs completes 0 0 --
+variant loop_newton loop-newton completes 0 0 --
+variant loop_iterated_jacobi loop-iter-jacobi-k1 completes 0 0 -- --order 1
+variant loop_iterated_gauss_seidel loop-iter-gs-k1 completes 0 0 -- --order 1
+variant loop_newton loop-newton-k1 completes 0 0 -- --order 1
+variant loop_iterated_2 loop-iter-2 completes 0 0 --
+variant loop_iterated_strict loop-iter-strict diverges 0 0 --
+variant controlled_oscillator_newton signals-ctrl-newton completes 0 0 --
+variant controlled_oscillator_gauss_seidel signals-ctrl-iter-gs completes 0 0 --
+variant controlled_oscillator_newton signals-ctrl-newton-explicit completes 0 0 -- --method explicit --mu 1e-2 --order 0
 
 # FMI 3.0: the workspace FMUs built as FMI 3.0 (docs/fmu-kit.md), alone and mixed
 # with FMI 2.0 in one system; deviation exactly 0 (rtol = atol = 0).
