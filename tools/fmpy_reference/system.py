@@ -396,9 +396,6 @@ def _from_document(doc):
                        "or leave the key out to run each step once")
     if n is not None and not system.connections:
         raise RunError("[signals] iterations: the system has no [[connection]] whose values could be iterated")
-    if n is not None and system.step_control is not None:
-        raise RunError("[signals] iterations: not available with [step_control] (adaptive steps); use a "
-                       "fixed macro step")
     if n is None and (solver is not None or strict):
         raise RunError(f"[signals] {'strict' if strict else 'solver'} needs iterations = N (the most "
                        f"repetitions or Newton updates per macro step)")
@@ -419,6 +416,9 @@ def check(system):
         return RunError(f"invalid {name} = {value}: expected {expected}")
 
     finite = math.isfinite
+    if system.signal_iterations is not None and system.step_control is not None:
+        raise RunError("[signals] iterations: not available with [step_control] (adaptive steps); use a "
+                       "fixed macro step")
     if not finite(system.start):
         raise invalid("start", system.start, "a finite start time")
     if not finite(system.step) or system.step <= 0:
