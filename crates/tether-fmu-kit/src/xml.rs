@@ -265,31 +265,11 @@ fn render(d: &Declaration, guid: &str) -> String {
     if !d.outputs.is_empty() {
         let _ = writeln!(x, "    <Outputs>");
         for (i, y) in d.outputs.iter().enumerate() {
-            let mut deps: Vec<usize> = y
-                .depends_on
-                .iter()
-                .filter_map(|dep| {
-                    let state = d
-                        .states
-                        .iter()
-                        .position(|s| s.name == *dep)
-                        .map(Slot::State);
-                    let input = d
-                        .inputs
-                        .iter()
-                        .position(|u| u.name == *dep)
-                        .map(Slot::Input);
-                    state.or(input).map(index_of)
-                })
-                .collect();
-            deps.sort_unstable();
-            deps.dedup();
-            let deps: Vec<String> = deps.iter().map(usize::to_string).collect();
             let _ = writeln!(
                 x,
                 r#"      <Unknown index="{}" dependencies="{}"/>"#,
                 index_of(Slot::Output(i)),
-                deps.join(" ")
+                dependencies(d, &y.depends_on, index_of)
             );
         }
         let _ = writeln!(x, "    </Outputs>");
@@ -461,31 +441,11 @@ fn render3(d: &Declaration, token: &str) -> String {
 
     let _ = writeln!(x, "  <ModelStructure>");
     for (i, y) in d.outputs.iter().enumerate() {
-        let mut deps: Vec<usize> = y
-            .depends_on
-            .iter()
-            .filter_map(|dep| {
-                let state = d
-                    .states
-                    .iter()
-                    .position(|s| s.name == *dep)
-                    .map(Slot::State);
-                let input = d
-                    .inputs
-                    .iter()
-                    .position(|u| u.name == *dep)
-                    .map(Slot::Input);
-                state.or(input).map(vr_of)
-            })
-            .collect();
-        deps.sort_unstable();
-        deps.dedup();
-        let deps: Vec<String> = deps.iter().map(usize::to_string).collect();
         let _ = writeln!(
             x,
             r#"    <Output valueReference="{}" dependencies="{}"/>"#,
             vr_of(Slot::Output(i)),
-            deps.join(" ")
+            dependencies(d, &y.depends_on, vr_of)
         );
     }
     for i in 0..d.outputs.len() {
@@ -498,6 +458,31 @@ fn render3(d: &Declaration, token: &str) -> String {
     let _ = writeln!(x, "  </ModelStructure>");
     let _ = writeln!(x, "</fmiModelDescription>");
     x
+}
+
+/// The states and inputs named in `depends_on`, as `number` numbers them
+/// (FMI 2.0 indices or FMI 3.0 value references), sorted, space-separated.
+fn dependencies(d: &Declaration, depends_on: &[&str], number: impl Fn(Slot) -> usize) -> String {
+    let mut deps: Vec<usize> = depends_on
+        .iter()
+        .filter_map(|dep| {
+            let state = d
+                .states
+                .iter()
+                .position(|s| s.name == *dep)
+                .map(Slot::State);
+            let input = d
+                .inputs
+                .iter()
+                .position(|u| u.name == *dep)
+                .map(Slot::Input);
+            state.or(input).map(&number)
+        })
+        .collect();
+    deps.sort_unstable();
+    deps.dedup();
+    let deps: Vec<String> = deps.iter().map(usize::to_string).collect();
+    deps.join(" ")
 }
 
 fn used_units(d: &Declaration) -> Vec<&'static str> {
