@@ -269,7 +269,7 @@ fn render(d: &Declaration, guid: &str) -> String {
                 x,
                 r#"      <Unknown index="{}" dependencies="{}"/>"#,
                 index_of(Slot::Output(i)),
-                dependencies(d, &y.depends_on, index_of)
+                dependencies(d, y.depends_on, index_of)
             );
         }
         let _ = writeln!(x, "    </Outputs>");
@@ -445,7 +445,7 @@ fn render3(d: &Declaration, token: &str) -> String {
             x,
             r#"    <Output valueReference="{}" dependencies="{}"/>"#,
             vr_of(Slot::Output(i)),
-            dependencies(d, &y.depends_on, vr_of)
+            dependencies(d, y.depends_on, vr_of)
         );
     }
     for i in 0..d.outputs.len() {
