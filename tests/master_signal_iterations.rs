@@ -18,16 +18,10 @@
 
 use tether_master::{MemoryRecorder, SignalSolver, Simulation, SystemSpec};
 
-const A_S: f64 = -2.0;
+use tether_tests::control_loop::*;
+
+/// The controller's proportional gain (loop gain D1·KP = 0.5).
 const KP: f64 = 1.0;
-const KI: f64 = 2.0;
-const R: f64 = 1.0;
-const A: f64 = -1.0;
-const B1: f64 = 1.0;
-const B2: f64 = 1.0;
-const C: f64 = 1.0;
-const D1: f64 = 0.5;
-const D2: f64 = 0.5;
 
 /// The implicit discretization's Y at T_1 … T_steps (after Y_0, the
 /// consistent start).
@@ -180,30 +174,13 @@ fn the_implicit_result_is_first_order_in_h() {
         let (rows, _) = run(&system(h, steps, 0, "solver = \"newton\"\niterations = 10"));
         rows.iter()
             .enumerate()
-            .map(|(n, y)| (y - monolithic(n as f64 * h)).abs())
+            .map(|(n, y)| (y - monolithic(KP, n as f64 * h)).abs())
             .fold(0.0, f64::max)
     };
     let coarse = error(2e-2, 50);
     let fine = error(1e-2, 100);
     eprintln!("Newton-iterated: max |Y − Y_mono| {coarse:.3e} (H = 2e-2), {fine:.3e} (H = 1e-2), ratio {:.3}", coarse / fine);
     assert!((coarse / fine - 2.0).abs() < 0.15, "{coarse:e} / {fine:e}");
-}
-
-/// The monolithic loop's Y(t) (matrix exponential), as in
-/// tests/master_signal_loops.rs.
-fn monolithic(t: f64) -> f64 {
-    use nalgebra::{Matrix4, RowVector4, Vector4};
-    let alpha = 1.0 / (1.0 + D1 * KP);
-    let y = RowVector4::new(alpha * D2, alpha * D1 * KI, alpha * C, alpha * D1 * KP * R);
-    let u = RowVector4::new(0.0, KI, 0.0, KP * R) - KP * y;
-    #[rustfmt::skip]
-    let a = Matrix4::new(
-        A_S,                0.0,        0.0,            0.0,
-        -y[0],              -y[1],      -y[2],          R - y[3],
-        B2 + B1 * u[0],     B1 * u[1],  A + B1 * u[2],  B1 * u[3],
-        0.0,                0.0,        0.0,            0.0,
-    );
-    (y * (a * t).exp() * Vector4::new(1.0, 0.0, 0.0, 1.0))[0]
 }
 
 /// With inputs interpolated (k = 1, the lti FMU takes input derivatives),

@@ -10,35 +10,8 @@
 //! U = kp (r − Y) + ki z,  Y = c x + d1 U + d2 w
 //!   ⇒ Y = (c x + d1 kp r + d1 ki z + d2 w) / (1 + d1 kp).
 
-use nalgebra::{Matrix4, RowVector4, Vector4};
 use tether_master::{MemoryRecorder, Simulation, SystemSpec};
-
-const A_S: f64 = -2.0;
-const KI: f64 = 2.0;
-const R: f64 = 1.0;
-const A: f64 = -1.0;
-const B1: f64 = 1.0;
-const B2: f64 = 1.0;
-const C: f64 = 1.0;
-const D1: f64 = 0.5;
-const D2: f64 = 0.5;
-
-/// The plant output Y of the monolithic loop at `t` for proportional gain
-/// `kp` (loop gain d1·kp), from w = 1, z = x = 0.
-fn reference(kp: f64, t: f64) -> f64 {
-    let alpha = 1.0 / (1.0 + D1 * kp);
-    // s = (w, z, x, 1): Y = y·s, U = u·s, ṡ = A s.
-    let y = RowVector4::new(alpha * D2, alpha * D1 * KI, alpha * C, alpha * D1 * kp * R);
-    let u = RowVector4::new(0.0, KI, 0.0, kp * R) - kp * y;
-    #[rustfmt::skip]
-    let a = Matrix4::new(
-        A_S,                0.0,        0.0,            0.0,
-        -y[0],              -y[1],      -y[2],          R - y[3],
-        B2 + B1 * u[0],     B1 * u[1],  A + B1 * u[2],  B1 * u[3],
-        0.0,                0.0,        0.0,            0.0,
-    );
-    (y * (a * t).exp() * Vector4::new(1.0, 0.0, 0.0, 1.0))[0]
-}
+use tether_tests::control_loop::*;
 
 fn system(h: f64, stop: f64, kp: f64, scheme: &str) -> SystemSpec {
     let lti = tether_fmu_build::workspace_fmu("lti").expect("package lti");
@@ -102,7 +75,7 @@ fn plant_y(spec: &SystemSpec) -> Vec<(f64, f64)> {
 fn max_error(spec: &SystemSpec, kp: f64) -> f64 {
     plant_y(spec)
         .iter()
-        .map(|&(t, y)| (y - reference(kp, t)).abs())
+        .map(|&(t, y)| (y - monolithic(kp, t)).abs())
         .fold(0.0, f64::max)
 }
 
@@ -131,7 +104,7 @@ fn the_loop_starts_from_consistent_values() {
         let rows = plant_y(&system(1e-3, 1e-3, kp, "jacobi"));
         let (t, y) = rows[0];
         assert_eq!(t, 0.0);
-        let exact = reference(kp, 0.0);
+        let exact = monolithic(kp, 0.0);
         eprintln!("kp {kp}: Y(0) = {y:.17} against {exact:.17}");
         assert!(
             (y - exact).abs() <= 1e-12 * exact.abs(),

@@ -1,5 +1,6 @@
 //! Shared helpers for the integration tests in tests/.
 
+pub mod control_loop;
 pub mod faulty;
 pub mod fmi;
 pub mod fmpy;
