@@ -1,12 +1,12 @@
-//! `tether fmu export`: the coupled system as one FMI 2.0 co-simulation FMU
-//! (docs/fmu-export.md). The FMU's binary is the `tether-fmu-export`
-//! cdylib, found next to the `tether` binary; the system file and the member
-//! FMUs go to `resources/`.
+//! `tether fmu export`: the coupled system as one FMI 2.0 or FMI 3.0
+//! co-simulation FMU (docs/fmu-export.md). The FMU's binary is the
+//! `tether-fmu-export` cdylib, found next to the `tether` binary; the system
+//! file and the member FMUs go to `resources/`.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use tether_master::SystemSpec;
+use tether_fmu_export::package::FmiVersion;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -16,20 +16,25 @@ pub struct Args {
 
 #[derive(clap::Subcommand)]
 enum Command {
-    /// Export a system file as one FMI 2.0 co-simulation FMU (linux64), its
-    /// interface declared by the file's [export] table.
+    /// Export a system as one FMI 2.0 or 3.0 co-simulation FMU (64-bit
+    /// Linux), its interface declared by the file's [export] table (an SSP
+    /// system without one: its top-level connectors).
     Export {
-        /// The system file (TOML) with an [export] table.
+        /// The system file (TOML) with an [export] table, or SSP (.ssp, .ssd
+        /// or a folder).
         system: PathBuf,
         /// The .fmu file to write.
         #[arg(long, short)]
         out: PathBuf,
+        /// The FMI version of the FMU: 2 (FMI 2.0) or 3 (FMI 3.0).
+        #[arg(long, default_value_t = 2)]
+        fmi: u32,
     },
 }
 
 pub fn main(args: Args) -> Result<()> {
     match args.command {
-        Command::Export { system, out } => export(&system, &out),
+        Command::Export { system, out, fmi } => export(&system, &out, fmi),
     }
 }
 
@@ -50,11 +55,17 @@ fn runtime_library() -> Result<PathBuf> {
         })
 }
 
-fn export(system: &Path, out: &Path) -> Result<()> {
-    let spec = SystemSpec::from_file(system)?;
+fn export(system: &Path, out: &Path, fmi: u32) -> Result<()> {
+    let fmi = FmiVersion::from_number(fmi).map_err(anyhow::Error::msg)?;
+    crate::output::not_an_input(out, std::iter::once(system))?;
+    // `_ssp` keeps an extracted archive's FMUs until they are packed.
+    let (spec, _ssp) = crate::ssp::load(system, None, None)?;
     let runtime = runtime_library()?;
-    let source = system.display().to_string();
-    let packaged = tether_fmu_export::package::package(spec, &source, &runtime, out)
+    let source = match &_ssp {
+        Some(_) => crate::ssp::ssd_name(system),
+        None => system.display().to_string(),
+    };
+    let packaged = tether_fmu_export::package::package(spec, &source, &runtime, out, fmi)
         .map_err(anyhow::Error::msg)?;
     crate::say!(
         "wrote {} ({} parameters, {} inputs, {} outputs; {} member FMU files)",

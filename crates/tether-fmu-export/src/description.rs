@@ -36,17 +36,9 @@ pub fn model_description(
     let _ = writeln!(x, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
     let _ = writeln!(
         x,
-        r#"<fmiModelDescription fmiVersion="2.0" modelName="{}" guid="{}" description="{}" generationTool="tether {}" variableNamingConvention="flat" numberOfEventIndicators="0">"#,
-        escape(name),
+        r#"<fmiModelDescription fmiVersion="2.0" {} guid="{}" variableNamingConvention="flat" numberOfEventIndicators="0">"#,
+        header(spec),
         guid(system_text),
-        escape(&format!(
-            "Tether system{} exported as one FMU: its members and system file are in resources/",
-            spec.name
-                .as_deref()
-                .map(|n| format!(" '{n}'"))
-                .unwrap_or_default()
-        )),
-        env!("CARGO_PKG_VERSION"),
     );
     let _ = writeln!(
         x,
@@ -73,16 +65,7 @@ pub fn model_description(
             ExportKind::Input => ("input", "continuous", ""),
             ExportKind::Output => ("output", "continuous", r#" initial="calculated""#),
         };
-        let description = v
-            .description
-            .as_deref()
-            .map(|d| {
-                format!(
-                    r#" description="{}""#,
-                    escape(&format!("{d} ({})", v.target))
-                )
-            })
-            .unwrap_or_else(|| format!(r#" description="{}""#, escape(&v.target)));
+        let description = description_attribute(v);
         let _ = writeln!(
             x,
             r#"    <ScalarVariable name="{}" valueReference="{vr}"{description} causality="{causality}" variability="{variability}"{initial}>"#,
@@ -102,29 +85,31 @@ pub fn model_description(
     }
     let _ = writeln!(x, "  </ModelVariables>");
     let _ = writeln!(x, "  <ModelStructure>");
-    let outputs: Vec<usize> = (0..variables.len())
-        .filter(|&i| variables[i].kind == ExportKind::Output)
-        .collect();
-    // An output is read at the current point of the system; an input set
-    // now acts from the next step on: no output depends directly on an
-    // input. At initialization an output depends on the parameters.
-    let parameters: Vec<String> = (0..variables.len())
-        .filter(|&i| variables[i].kind == ExportKind::Parameter)
-        .map(|i| (i + 1).to_string())
-        .collect();
-    if !outputs.is_empty() {
+    let structure = structure(variables);
+    if !structure.is_empty() {
+        let index = |list: &[usize]| {
+            list.iter()
+                .map(|i| (i + 1).to_string())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
         let _ = writeln!(x, "    <Outputs>");
-        for &i in &outputs {
-            let _ = writeln!(x, r#"      <Unknown index="{}" dependencies=""/>"#, i + 1);
-        }
-        let _ = writeln!(x, "    </Outputs>");
-        let _ = writeln!(x, "    <InitialUnknowns>");
-        for &i in &outputs {
+        for o in &structure {
             let _ = writeln!(
                 x,
                 r#"      <Unknown index="{}" dependencies="{}"/>"#,
-                i + 1,
-                parameters.join(" ")
+                o.output + 1,
+                index(&o.stepping)
+            );
+        }
+        let _ = writeln!(x, "    </Outputs>");
+        let _ = writeln!(x, "    <InitialUnknowns>");
+        for o in &structure {
+            let _ = writeln!(
+                x,
+                r#"      <Unknown index="{}" dependencies="{}"/>"#,
+                o.output + 1,
+                index(&o.initial)
             );
         }
         let _ = writeln!(x, "    </InitialUnknowns>");
@@ -132,4 +117,169 @@ pub fn model_description(
     let _ = writeln!(x, "  </ModelStructure>");
     let _ = writeln!(x, "</fmiModelDescription>");
     x
+}
+
+/// ` description="…"`: the member variable's description and what the
+/// variable sets or reads.
+fn description_attribute(v: &ExportVariable) -> String {
+    let text = match &v.description {
+        Some(d) => format!("{d} ({})", v.target),
+        None => v.target.clone(),
+    };
+    format!(r#" description="{}""#, escape(&text))
+}
+
+/// The `<fmiModelDescription …>` attributes both versions share besides
+/// the version and the GUID: the model name, the description and the tool.
+fn header(spec: &SystemSpec) -> String {
+    let export = spec.export.as_ref();
+    let name = export.map_or("system", |e| e.model_name.as_str());
+    format!(
+        r#"modelName="{}" description="{}" generationTool="tether {}""#,
+        escape(name),
+        escape(&format!(
+            "Tether system{} exported as one FMU: its members and system file are in resources/",
+            spec.name
+                .as_deref()
+                .map(|n| format!(" '{n}'"))
+                .unwrap_or_default()
+        )),
+        env!("CARGO_PKG_VERSION"),
+    )
+}
+
+/// The FMI 3.0 `modelDescription.xml` of `spec` exported with `variables`
+/// (value reference = index; `time`, the independent variable, after
+/// them): Float64 variables, the same structure, units, default experiment
+/// and capabilities as the FMI 2.0 one, the GUID as `instantiationToken`.
+pub fn model_description_fmi3(
+    spec: &SystemSpec,
+    system_text: &str,
+    variables: &[ExportVariable],
+    capabilities: &Capabilities,
+) -> String {
+    let name = spec
+        .export
+        .as_ref()
+        .map_or("system", |e| e.model_name.as_str());
+    let e = &spec.experiment;
+    let yes = |b: bool| if b { "true" } else { "false" };
+    let mut x = String::new();
+    let _ = writeln!(x, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
+    let _ = writeln!(
+        x,
+        r#"<fmiModelDescription fmiVersion="3.0" {} instantiationToken="{}" variableNamingConvention="flat">"#,
+        header(spec),
+        guid(system_text),
+    );
+    let _ = writeln!(
+        x,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="0" providesIntermediateUpdate="false" canReturnEarlyAfterIntermediateUpdate="false" hasEventMode="false" providesEvaluateDiscreteStates="false"/>"#,
+        escape(name),
+        yes(capabilities.state),
+        yes(capabilities.state),
+    );
+    let mut units: Vec<&str> = variables.iter().filter_map(|v| v.unit.as_deref()).collect();
+    units.sort_unstable();
+    units.dedup();
+    units_and_log_categories(&mut x, &units);
+    let _ = writeln!(
+        x,
+        r#"  <DefaultExperiment startTime="{:?}" stopTime="{:?}" stepSize="{:?}"/>"#,
+        e.start,
+        spec.end_time(),
+        e.step
+    );
+    let _ = writeln!(x, "  <ModelVariables>");
+    for (vr, v) in variables.iter().enumerate() {
+        let kind = match v.kind {
+            ExportKind::Parameter => {
+                r#" causality="parameter" variability="fixed" initial="exact""#
+            }
+            ExportKind::Input => r#" causality="input" variability="continuous""#,
+            ExportKind::Output => {
+                r#" causality="output" variability="continuous" initial="calculated""#
+            }
+        };
+        let unit = v
+            .unit
+            .as_deref()
+            .map(|u| format!(r#" unit="{}""#, escape(u)))
+            .unwrap_or_default();
+        let start = v
+            .start
+            .filter(|_| v.kind != ExportKind::Output)
+            .map(|s| format!(r#" start="{s:?}""#))
+            .unwrap_or_default();
+        let _ = writeln!(
+            x,
+            r#"    <Float64 name="{}" valueReference="{vr}"{}{kind}{unit}{start}/>"#,
+            escape(&v.name),
+            description_attribute(v),
+        );
+    }
+    let _ = writeln!(
+        x,
+        r#"    <Float64 name="time" valueReference="{}" description="Simulation time" causality="independent" variability="continuous"/>"#,
+        variables.len()
+    );
+    let _ = writeln!(x, "  </ModelVariables>");
+    let _ = writeln!(x, "  <ModelStructure>");
+    let list = |list: &[usize]| {
+        list.iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let structure = structure(variables);
+    for o in &structure {
+        let _ = writeln!(
+            x,
+            r#"    <Output valueReference="{}" dependencies="{}"/>"#,
+            o.output,
+            list(&o.stepping)
+        );
+    }
+    for o in &structure {
+        let _ = writeln!(
+            x,
+            r#"    <InitialUnknown valueReference="{}" dependencies="{}"/>"#,
+            o.output,
+            list(&o.initial)
+        );
+    }
+    let _ = writeln!(x, "  </ModelStructure>");
+    let _ = writeln!(x, "</fmiModelDescription>");
+    x
+}
+
+/// One exported output's dependencies, as value references (indices into
+/// the exported variables).
+pub struct OutputDependencies {
+    pub output: usize,
+    /// While stepping (`<Outputs>`).
+    pub stepping: Vec<usize>,
+    /// At initialization (`<InitialUnknowns>`).
+    pub initial: Vec<usize>,
+}
+
+/// The `ModelStructure` of both FMI versions. An output is read at the
+/// current point of the system; an input set now acts from the next step
+/// on: no output depends directly on an input. At initialization an output
+/// depends on the parameters.
+pub fn structure(variables: &[ExportVariable]) -> Vec<OutputDependencies> {
+    let of_kind = |kind: ExportKind| {
+        (0..variables.len())
+            .filter(|&i| variables[i].kind == kind)
+            .collect::<Vec<_>>()
+    };
+    let parameters = of_kind(ExportKind::Parameter);
+    of_kind(ExportKind::Output)
+        .into_iter()
+        .map(|output| OutputDependencies {
+            output,
+            stepping: Vec::new(),
+            initial: parameters.clone(),
+        })
+        .collect()
 }

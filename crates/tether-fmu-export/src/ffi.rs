@@ -3,7 +3,9 @@
 //! (`tether_fmu_kit::ffi`, `machine`). Each function checks its pointers,
 //! runs the call inside `catch_unwind` (a panic becomes fmi2Fatal, logged)
 //! and logs a failure through the importer's logger of that instance. An
-//! instance owns all its data: instances share nothing.
+//! instance owns all its data: instances share nothing. The FMI 3.0 layer
+//! ([`crate::ffi3`]) runs its calls through the same [`with`] on the same
+//! [`Component`], with its own [`Logger`].
 
 #![allow(non_snake_case, clippy::missing_safety_doc)]
 
@@ -12,6 +14,7 @@ use std::ffi::{c_char, c_int, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::ptr;
 
+use tether_fmu_kit::ffi::fmi3::Fmi3Status;
 use tether_fmu_kit::ffi::{
     null, slice, slice_mut, EnvironmentLogger, Fmi2Boolean as B, Fmi2CallbackFunctions,
     Fmi2Component as C, Fmi2FmuState as S, Fmi2Status as St, Fmi2String as Str,
@@ -22,14 +25,53 @@ use tether_fmu_kit::machine::{Call, MachineState};
 
 use crate::runtime::{uri_path, Exported, Saved};
 
-const OK: St = Status::Ok as St;
-const ERROR: St = Status::Error as St;
+pub(crate) const OK: St = Status::Ok as St;
+pub(crate) const ERROR: St = Status::Error as St;
+
+/// The importer's logger of one instance: FMI 2.0's `fmi2CallbackLogger`
+/// (with the instance name) or FMI 3.0's `fmi3LogMessageCallback`.
+#[derive(Clone, Copy)]
+pub(crate) enum Logger {
+    Fmi2(EnvironmentLogger),
+    Fmi3 {
+        callback: unsafe extern "C" fn(*mut c_void, Fmi3Status, *const c_char, *const c_char),
+        environment: *mut c_void,
+    },
+}
+
+impl Logger {
+    fn log(&self, status: Status, category: &str, message: &str) {
+        match *self {
+            Logger::Fmi2(logger) => logger.log(status, category, message),
+            Logger::Fmi3 {
+                callback,
+                environment,
+            } => {
+                let category = c_string(category);
+                let message = c_string(message);
+                // SAFETY: the callback and environment fmi3InstantiateCoSimulation
+                // received, valid until fmi3FreeInstance (the FMI contract); both
+                // strings are NUL-terminated and live across the call.
+                unsafe {
+                    callback(
+                        environment,
+                        status as Fmi3Status,
+                        category.as_ptr(),
+                        message.as_ptr(),
+                    )
+                }
+            }
+        }
+    }
+}
 
 /// What a component pointer points at.
-struct Component {
+pub(crate) struct Component {
     exported: Exported,
-    logger: Option<EnvironmentLogger>,
+    logger: Option<Logger>,
     logging_on: bool,
+    /// Made by fmi3InstantiateCoSimulation: messages name the fmi3 functions.
+    fmi3: bool,
     /// The instance name `logger.instance_name` points into.
     _name: CString,
 }
@@ -57,10 +99,12 @@ impl Component {
         } else if failure.enters_error_state {
             self.exported.machine = MachineState::Error;
         }
-        self.log(
-            failure.status,
-            &format!("{}: {}", call.name(), failure.message),
-        );
+        let function = if self.fmi3 {
+            call.fmi3_name()
+        } else {
+            call.name()
+        };
+        self.log(failure.status, &format!("{function}: {}", failure.message));
         failure.status as St
     }
 }
@@ -69,15 +113,15 @@ thread_local! {
     /// The logger of the instance whose call runs on this thread, and
     /// whether its debug logging is on: where the members' messages and the
     /// master's warnings (the `log` facade) go.
-    static IN_CALL: Cell<Option<(EnvironmentLogger, bool)>> = const { Cell::new(None) };
+    static IN_CALL: Cell<Option<(Logger, bool)>> = const { Cell::new(None) };
 }
 
 /// Puts an instance's logger in scope for one call; the previous one comes
 /// back on drop (also after a panic).
-struct Scope(Option<(EnvironmentLogger, bool)>);
+struct Scope(Option<(Logger, bool)>);
 
 impl Scope {
-    fn enter(logger: Option<EnvironmentLogger>, logging_on: bool) -> Scope {
+    fn enter(logger: Option<Logger>, logging_on: bool) -> Scope {
         Scope(IN_CALL.replace(logger.map(|l| (l, logging_on))))
     }
 }
@@ -127,7 +171,7 @@ fn forward_log() {
     });
 }
 
-fn c_string(text: &str) -> CString {
+pub(crate) fn c_string(text: &str) -> CString {
     CString::new(text.replace('\0', " ")).unwrap_or_default()
 }
 
@@ -141,8 +185,9 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 /// failure is logged and applied, a panic becomes fmi2Fatal.
 ///
 /// # Safety
-/// `c` must be null or a live pointer from [`fmi2Instantiate`].
-unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Outcome) -> St {
+/// `c` must be null or a live pointer from [`fmi2Instantiate`] or
+/// `fmi3InstantiateCoSimulation`.
+pub(crate) unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Outcome) -> St {
     if c.is_null() {
         return ERROR;
     }
@@ -173,7 +218,7 @@ unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Outcome) -> St
 
 /// # Safety
 /// `p` null or NUL-terminated.
-unsafe fn text(p: Str) -> Option<String> {
+pub(crate) unsafe fn text(p: Str) -> Option<String> {
     // SAFETY: non-null, and the caller guarantees a NUL-terminated string.
     (!p.is_null()).then(|| unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned())
 }
@@ -186,6 +231,46 @@ pub extern "C" fn fmi2GetTypesPlatform() -> *const c_char {
 #[unsafe(no_mangle)]
 pub extern "C" fn fmi2GetVersion() -> *const c_char {
     tether_fmu_kit::ffi::get_version()
+}
+
+/// A new instance of the system in `resources` (checked against `guid`),
+/// boxed as a component pointer; null with the reason logged (as a message
+/// of the instantiate function of the FMI version) otherwise.
+pub(crate) fn instantiate(
+    name: CString,
+    logger: Option<Logger>,
+    logging_on: bool,
+    fmi3: bool,
+    resources: Result<std::path::PathBuf, String>,
+    guid: Option<String>,
+) -> C {
+    forward_log();
+    let _scope = Scope::enter(logger, logging_on);
+    let exported = resources.and_then(|r| Exported::new(&r, guid.as_deref().unwrap_or("")));
+    match exported {
+        Ok(exported) => {
+            let component = Component {
+                exported,
+                logger,
+                logging_on,
+                fmi3,
+                _name: name,
+            };
+            Box::into_raw(Box::new(component)).cast::<c_void>()
+        }
+        Err(reason) => {
+            if let Some(logger) = logger {
+                let function = if fmi3 {
+                    "fmi3InstantiateCoSimulation"
+                } else {
+                    "fmi2Instantiate"
+                };
+                let message = format!("{function}: {reason}");
+                logger.log(Status::Error, "logStatusError", &message);
+            }
+            ptr::null_mut()
+        }
+    }
 }
 
 /// Null with a logged reason when the resources are missing or broken.
@@ -210,41 +295,23 @@ pub unsafe extern "C" fn fmi2Instantiate(
         // SAFETY: non-null, and the FMI contract gives a valid callback struct.
         let callbacks = unsafe { &*functions };
         let name = c_string(&name);
-        let logger = callbacks.logger.map(|logger| EnvironmentLogger {
-            logger,
-            component_environment: callbacks.component_environment,
-            instance_name: name.as_ptr(),
+        let logger = callbacks.logger.map(|logger| {
+            Logger::Fmi2(EnvironmentLogger {
+                logger,
+                component_environment: callbacks.component_environment,
+                instance_name: name.as_ptr(),
+            })
         });
         // SAFETY: the FMI contract: NUL-terminated strings or null.
         let (guid, resources) = unsafe { (text(guid), text(resources)) };
-        forward_log();
-        let _scope = Scope::enter(logger, logging_on != 0);
-        let exported = if fmu_type != 1 {
+        let resources = if fmu_type != 1 {
             Err("this FMU supports co-simulation only (fmuType must be fmi2CoSimulation)".into())
         } else {
-            let resources = resources
+            resources
                 .ok_or_else(|| "no fmuResourceLocation given".to_string())
-                .and_then(|r| uri_path(&r));
-            resources.and_then(|r| Exported::new(&r, guid.as_deref().unwrap_or("")))
+                .and_then(|r| uri_path(&r))
         };
-        match exported {
-            Ok(exported) => {
-                let component = Component {
-                    exported,
-                    logger,
-                    logging_on: logging_on != 0,
-                    _name: name,
-                };
-                Box::into_raw(Box::new(component)).cast::<c_void>()
-            }
-            Err(reason) => {
-                if let Some(logger) = logger {
-                    let message = format!("fmi2Instantiate: {reason}");
-                    logger.log(Status::Error, "logStatusError", &message);
-                }
-                ptr::null_mut()
-            }
-        }
+        instantiate(name, logger, logging_on != 0, false, resources, guid)
     }));
     made.unwrap_or(ptr::null_mut())
 }

@@ -9,6 +9,7 @@
 
 pub mod description;
 pub mod ffi;
+pub mod ffi3;
 pub mod package;
 pub mod runtime;
 

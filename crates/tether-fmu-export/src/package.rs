@@ -1,6 +1,7 @@
 //! Writing the `.fmu` (`tether fmu export`, `tether.export_fmu`): the model
-//! description, the runtime library as `binaries/linux64/MODEL.so`, the
-//! system file and each member FMU in `resources/`.
+//! description, the runtime library as `binaries/linux64/MODEL.so` (FMI 2.0)
+//! or `binaries/x86_64-linux/MODEL.so` (FMI 3.0), the system file and each
+//! member FMU in `resources/`.
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -8,8 +9,38 @@ use std::path::{Path, PathBuf};
 
 use tether_master::{Simulation, SystemSpec};
 
-use crate::description::{model_description, Capabilities};
+use crate::description::{model_description, model_description_fmi3, Capabilities};
 use crate::SYSTEM_FILE;
+
+/// The FMI version of an exported FMU. One runtime library serves both: it
+/// has the fmi2 and the fmi3 functions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FmiVersion {
+    #[default]
+    Fmi2,
+    Fmi3,
+}
+
+impl FmiVersion {
+    /// `2` or `3`; anything else is one line saying so.
+    pub fn from_number(n: u32) -> Result<FmiVersion, String> {
+        match n {
+            2 => Ok(FmiVersion::Fmi2),
+            3 => Ok(FmiVersion::Fmi3),
+            _ => Err(format!(
+                "FMI version {n}: an exported FMU is FMI 2 (2.0) or FMI 3 (3.0)"
+            )),
+        }
+    }
+
+    /// The folder of the binary for 64-bit Linux.
+    fn platform(self) -> &'static str {
+        match self {
+            FmiVersion::Fmi2 => "linux64",
+            FmiVersion::Fmi3 => "x86_64-linux",
+        }
+    }
+}
 
 /// What an export wrote.
 pub struct Packaged {
@@ -21,13 +52,14 @@ pub struct Packaged {
 }
 
 /// Export `spec` (read from `source`, named in messages) with its `[export]`
-/// table as one FMU at `out`, whose binary is `runtime`; one line saying
-/// what is wrong otherwise.
+/// table as one FMU of version `fmi` at `out`, whose binary is `runtime`;
+/// one line saying what is wrong otherwise.
 pub fn package(
     mut spec: SystemSpec,
     source: &str,
     runtime: &Path,
     out: &Path,
+    fmi: FmiVersion,
 ) -> Result<Packaged, String> {
     let Some(export) = spec.export.clone() else {
         return Err(format!(
@@ -69,7 +101,11 @@ pub fn package(
     }
     spec.source = None;
     let text = toml::to_string(&spec).map_err(|e| format!("cannot write the system file: {e}"))?;
-    let xml = model_description(&spec, &text, &variables, &Capabilities { state });
+    let capabilities = Capabilities { state };
+    let xml = match fmi {
+        FmiVersion::Fmi2 => model_description(&spec, &text, &variables, &capabilities),
+        FmiVersion::Fmi3 => model_description_fmi3(&spec, &text, &variables, &capabilities),
+    };
     let write = || -> Result<(), String> {
         let file = std::fs::File::create(out).map_err(|e| e.to_string())?;
         let mut zip = zip::ZipWriter::new(file);
@@ -83,7 +119,7 @@ pub fn package(
         add("modelDescription.xml".into(), xml.as_bytes(), 0o644)?;
         let binary = std::fs::read(runtime)
             .map_err(|e| format!("cannot read the FMU runtime {}: {e}", runtime.display()))?;
-        let name = format!("binaries/linux64/{}.so", export.model_name);
+        let name = format!("binaries/{}/{}.so", fmi.platform(), export.model_name);
         add(name, &binary, 0o755)?;
         add(format!("resources/{SYSTEM_FILE}"), text.as_bytes(), 0o644)?;
         for (path, name) in &members {

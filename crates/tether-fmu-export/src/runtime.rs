@@ -272,6 +272,16 @@ impl Exported {
         self.sim.as_ref().map(Simulation::time)
     }
 
+    /// The start time (the system's, or as the importer set it).
+    pub fn start_time(&self) -> f64 {
+        self.start
+    }
+
+    /// The number of exported variables (value references 0 to n − 1).
+    pub fn variable_count(&self) -> usize {
+        self.variables.len()
+    }
+
     fn require_state(&self) -> Outcome {
         if self.can_save {
             Ok(())

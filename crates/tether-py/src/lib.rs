@@ -777,25 +777,28 @@ impl PySimulation {
 // One FMU
 
 /// A model description as a dict, with fmpy's attribute names.
-/// Export a system with an `[export]` table as one FMI 2.0 co-simulation
-/// FMU at `out`, its binary the runtime library `runtime` (shipped in the
-/// package); returns the numbers of parameters, inputs, outputs and member
-/// FMU files.
+/// Export a system with an `[export]` table as one FMI 2.0 or 3.0 (`fmi`)
+/// co-simulation FMU at `out`, its binary the runtime library `runtime`
+/// (shipped in the package); returns the numbers of parameters, inputs,
+/// outputs and member FMU files.
 #[pyfunction]
-#[pyo3(signature = (out, runtime, path=None, text=None))]
+#[pyo3(signature = (out, runtime, path=None, text=None, fmi=2))]
 fn export_fmu(
     py: Python<'_>,
     out: PathBuf,
     runtime: PathBuf,
     path: Option<PathBuf>,
     text: Option<&str>,
+    fmi: u32,
 ) -> PyResult<(usize, usize, usize, usize)> {
     let source = path
         .as_ref()
         .map_or("(text)".to_string(), |p| p.display().to_string());
+    let fmi = tether_fmu_export::package::FmiVersion::from_number(fmi)
+        .map_err(|e| failure("settings", e, None))?;
     let spec = load_spec(path, text, None)?;
     let packaged = py
-        .detach(move || tether_fmu_export::package::package(spec, &source, &runtime, &out))
+        .detach(move || tether_fmu_export::package::package(spec, &source, &runtime, &out, fmi))
         .map_err(|e| failure("settings", e, None))?;
     Ok((
         packaged.parameters,

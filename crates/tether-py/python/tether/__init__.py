@@ -886,11 +886,12 @@ def info(fmu: PathLike) -> Dict[str, Any]:
 _EXPORT_RUNTIME = "libtether_fmu_export.so"
 
 
-def export_fmu(system: Union[PathLike, "System"], path: PathLike) -> str:
+def export_fmu(system: Union[PathLike, "System"], path: PathLike, fmi: int = 2) -> str:
     """Export ``system`` (a system file path or a :class:`System`) with its
-    ``[export]`` table as one FMI 2.0 co-simulation FMU at ``path``, as
-    ``tether fmu export`` does (docs/fmu-export.md); returns the path. The
-    FMU's binary is the runtime library shipped in this package."""
+    ``[export]`` table as one FMI 2.0 (``fmi=2``) or FMI 3.0 (``fmi=3``)
+    co-simulation FMU at ``path``, as ``tether fmu export`` does
+    (docs/fmu-export.md); returns the path. The FMU's binary is the runtime
+    library shipped in this package."""
     runtime = os.path.join(os.path.dirname(os.path.abspath(__file__)), _EXPORT_RUNTIME)
     if not os.path.isfile(runtime):
         raise SettingsError(
@@ -898,7 +899,7 @@ def export_fmu(system: Union[PathLike, "System"], path: PathLike) -> str:
             "(install the package with tools/install-python.sh, which builds it into the wheel)"
         )
     try:
-        _tether.export_fmu(os.fspath(path), runtime, **_source(system))
+        _tether.export_fmu(os.fspath(path), runtime, fmi=fmi, **_source(system))
     except _tether.Failure as f:
         raise _error(f) from None
     return os.fspath(path)
