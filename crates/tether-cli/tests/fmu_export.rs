@@ -166,6 +166,76 @@ fn the_fmi3_export_runs_in_fmpy_as_tether_run_and_nests_as_the_fmi2_export() {
     );
 }
 
+/// Zips `dir` as the archive `out` (an `.ssp`).
+fn zip_dir(dir: &Path, out: &Path) {
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(out).unwrap());
+    let options = zip::write::SimpleFileOptions::default();
+    for entry in ["SystemStructure.ssd", "resources/oscillator.fmu"] {
+        zip.start_file(entry, options).unwrap();
+        let bytes = std::fs::read(dir.join(entry)).unwrap();
+        std::io::Write::write_all(&mut zip, &bytes).unwrap();
+    }
+    zip.finish().unwrap();
+}
+
+/// An `.ssp` without `[export]` (tests/fixtures/ssp/rigid_pair_export: the
+/// rigid pair, the root system's connectors F, m1, x, v, a) exported: the
+/// FMU's variables are those connectors, fmpy validates it and its
+/// `simulate_fmu` gives `tether run`'s numbers of the same `.ssp` bit for
+/// bit (tests/fmpy/exported_fmu.py).
+#[test]
+fn an_ssp_exports_with_its_root_connectors_as_the_interface() {
+    let osc = oscillator();
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("ssp");
+    std::fs::create_dir_all(folder.join("resources")).unwrap();
+    let fixture = root().join("tests/fixtures/ssp/rigid_pair_export/SystemStructure.ssd");
+    std::fs::copy(fixture, folder.join("SystemStructure.ssd")).unwrap();
+    std::fs::copy(&osc, folder.join("resources/oscillator.fmu")).unwrap();
+    let ssp = dir.path().join("rigid_pair.ssp");
+    zip_dir(&folder, &ssp);
+    let fmu = dir.path().join("rigid_pair_ssp.fmu");
+    let ours = dir.path().join("run.csv");
+    let theirs = dir.path().join("fmpy.csv");
+    let (ssp_arg, fmu_arg) = (ssp.to_str().unwrap(), fmu.to_str().unwrap());
+    let export = tether(&["fmu", "export", ssp_arg, "--out", fmu_arg], dir.path());
+    success(&export);
+    let said = String::from_utf8_lossy(&export.stderr).to_string()
+        + &String::from_utf8_lossy(&export.stdout);
+    assert!(said.contains("1 parameters, 1 inputs, 3 outputs"), "{said}");
+    success(&tether(
+        &["run", ssp_arg, "--out", ours.to_str().unwrap()],
+        dir.path(),
+    ));
+    let args = [fmu.as_os_str(), theirs.as_os_str()];
+    let out = tether_tests::fmpy::run_script("exported_fmu.py", &args).expect("run fmpy");
+    let report = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{report}");
+    assert!(
+        out.status.success(),
+        "{report}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(report.contains("validate: no problems"), "{report}");
+    let (h1, r1) = read_csv(&ours);
+    let (h2, r2) = read_csv(&theirs);
+    assert_eq!(h2, ["time", "x", "v", "a"]);
+    assert_eq!(r1.len(), 501);
+    assert_eq!(r1.len(), r2.len(), "same rows");
+    for (name, column) in [
+        ("time", "time"),
+        ("x", "mass1.x"),
+        ("v", "mass1.v"),
+        ("a", "mass1.a"),
+    ] {
+        let i = h1.iter().position(|c| c == column).unwrap();
+        let j = h2.iter().position(|c| c == name).unwrap();
+        for (a, b) in r1.iter().zip(&r2) {
+            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
+        }
+    }
+}
+
 /// The rigid pair with `export` as its [export] table.
 fn system_with(dir: &Path, export: &str) -> PathBuf {
     let fmu = oscillator();

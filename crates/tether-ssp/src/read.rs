@@ -5,7 +5,10 @@ use std::path::{Component, Path, PathBuf};
 
 use tether_fmi::archive::{extract_archive, ArchiveKind, ExtractLimits, FmuDir};
 use tether_fmi::xml::{self, Element as Node, Names};
-use tether_master::{ConnectionSpec, Experiment, InstanceSpec, StartValue, SystemSpec};
+use tether_master::{
+    ConnectionSpec, Experiment, ExportLink, ExportSource, ExportSpec, InstanceSpec, StartValue,
+    SystemSpec,
+};
 
 use crate::{Annotation, SspError, ANNOTATION_TYPE, NAMESPACES};
 
@@ -154,6 +157,8 @@ struct Reader {
     systems: Vec<Vec<String>>,
     /// Declared unit of each connector (component or system).
     units: BTreeMap<End, String>,
+    /// The kind of each connector (`input`, `output`, `parameter`, …).
+    kinds: BTreeMap<End, String>,
     unit_definitions: BTreeMap<String, BaseUnit>,
     edges: Vec<Edge>,
     /// System-level bindings: system path, parameter path, value, line.
@@ -228,7 +233,7 @@ impl Reader {
         }
         let system = system.ok_or_else(|| self.at(root, "no <ssd:System>"))?;
         self.system(system, &[], true)?;
-        let connections = self.connections()?;
+        let (connections, export) = self.connections()?;
         self.apply_bindings()?;
         let annotation = self.annotation.take().unwrap_or_default();
         let (mut start, mut stop_time) = (0.0, None);
@@ -273,7 +278,10 @@ impl Reader {
             signals: annotation.signals.unwrap_or_default(),
             step_control: annotation.step_control,
             output: Default::default(),
-            export: None,
+            export: export.map(|mut export| {
+                export.model_name = flat_name(&[system.attr("name").unwrap_or("ssp").to_string()]);
+                export
+            }),
             source: None,
         };
         spec.validate()?;
@@ -530,6 +538,7 @@ impl Reader {
             }
             let name = self.required(c, "name")?.to_string();
             let kind = self.required(c, "kind")?;
+            self.kinds.insert(end(name.clone()), kind.to_string());
             if !matches!(
                 kind,
                 "input" | "output" | "parameter" | "calculatedParameter" | "inout"
@@ -748,36 +757,68 @@ impl Reader {
     }
 
     /// Connections between components, followed through system connectors,
-    /// with their transformations and unit conversions composed.
-    fn connections(&self) -> Result<Vec<ConnectionSpec>, SspError> {
+    /// with their transformations and unit conversions composed; and the
+    /// exported interface the root system's own connectors declare: an input
+    /// or parameter connector that nothing inside drives sets the component
+    /// connectors it is connected to, an output connector reads the component
+    /// output connected to it (`[export]`, docs/fmu-export.md). `None` when
+    /// the root system has no such connectors.
+    fn connections(&self) -> Result<(Vec<ConnectionSpec>, Option<ExportSpec>), SspError> {
         let mut edges = self.edges.clone();
         for e in &mut edges {
             (e.gain, e.offset) = self.conversion(e)?;
         }
+        let root_kind = |end: &End| match end {
+            End::System(p, _) if p.is_empty() => self.kinds.get(end).map(String::as_str),
+            _ => None,
+        };
         let mut out = Vec::new();
+        let mut export = ExportSpec {
+            model_name: String::new(),
+            inputs: Vec::new(),
+            outputs: Vec::new(),
+            parameters: Vec::new(),
+        };
         for edge in &edges {
-            if let End::System(p, _) = &edge.from {
-                if p.is_empty() && !edges.iter().any(|e| e.to == edge.from) {
-                    return Err(SspError::xml(
-                        &self.file,
-                        edge.line,
-                        format!(
-                            "<ssd:Connection> from {}: nothing drives it, and Tether runs closed systems",
-                            edge.from.describe()
-                        ),
-                    ));
+            // Where the chain starts: a component output, or a root input or
+            // parameter connector nothing inside drives (exported).
+            let exported = match &edge.from {
+                End::System(p, _) if p.is_empty() => {
+                    if edges.iter().any(|e| e.to == edge.from) {
+                        continue;
+                    }
+                    match root_kind(&edge.from) {
+                        Some(kind @ ("input" | "parameter")) => Some(kind),
+                        _ => {
+                            return Err(SspError::xml(
+                                &self.file,
+                                edge.line,
+                                format!(
+                                    "<ssd:Connection> from {}: nothing drives it, and Tether runs closed systems \
+                                     (a root connector of kind input or parameter is the exported FMU's)",
+                                    edge.from.describe()
+                                ),
+                            ));
+                        }
+                    }
                 }
-                continue;
-            }
+                End::System(..) => continue,
+                End::Component(..) => None,
+            };
             let mut stack = vec![(edge.clone(), 0usize)];
             while let Some((e, depth)) = stack.pop() {
-                if let End::Component(..) = e.to {
-                    out.push(ConnectionSpec {
-                        from: e.from.describe(),
-                        to: e.to.describe(),
-                        gain: (e.gain != 1.0).then_some(e.gain),
-                        offset: (e.offset != 0.0).then_some(e.offset),
-                    });
+                let root_output = root_kind(&e.to) == Some("output");
+                if matches!(e.to, End::Component(..)) || root_output {
+                    if exported.is_some() || root_output {
+                        self.exported(&e, exported, &mut export)?;
+                    } else {
+                        out.push(ConnectionSpec {
+                            from: e.from.describe(),
+                            to: e.to.describe(),
+                            gain: (e.gain != 1.0).then_some(e.gain),
+                            offset: (e.offset != 0.0).then_some(e.offset),
+                        });
+                    }
                     continue;
                 }
                 if depth > edges.len() {
@@ -796,7 +837,67 @@ impl Reader {
                 }
             }
         }
-        Ok(out)
+        let any = !(export.inputs.is_empty()
+            && export.outputs.is_empty()
+            && export.parameters.is_empty());
+        Ok((out, any.then_some(export)))
+    }
+
+    /// One connection of the exported interface (see [`connections`]):
+    /// from a root input or parameter connector (`kind`) to a component, or
+    /// from a component to a root output connector. Values pass unchanged.
+    fn exported(
+        &self,
+        e: &Edge,
+        kind: Option<&str>,
+        export: &mut ExportSpec,
+    ) -> Result<(), SspError> {
+        let name = |end: &End| match end {
+            End::System(_, n) | End::Component(_, n) => n.clone(),
+        };
+        if e.gain != 1.0 || e.offset != 0.0 {
+            return Err(SspError::xml(
+                &self.file,
+                e.line,
+                format!(
+                    "<ssd:Connection> {} → {}: a connector of the exported interface passes values unchanged \
+                     (no LinearTransformation or unit conversion)",
+                    e.from.describe(),
+                    e.to.describe()
+                ),
+            ));
+        }
+        match (kind, &e.to) {
+            (Some(kind), End::Component(..)) => {
+                let link = ExportLink {
+                    name: name(&e.from),
+                    to: e.to.describe(),
+                };
+                match kind {
+                    "parameter" => export.parameters.push(link),
+                    _ => export.inputs.push(link),
+                }
+            }
+            (None, End::System(..)) if matches!(e.from, End::Component(..)) => {
+                export.outputs.push(ExportSource {
+                    name: name(&e.to),
+                    from: e.from.describe(),
+                })
+            }
+            _ => {
+                return Err(SspError::xml(
+                    &self.file,
+                    e.line,
+                    format!(
+                        "<ssd:Connection> {} → {}: the root system's connectors are the exported FMU's \
+                         inputs, parameters and outputs: connect each to a component",
+                        e.from.describe(),
+                        e.to.describe()
+                    ),
+                ))
+            }
+        }
+        Ok(())
     }
 
     /// The (gain, offset) of one connection: its LinearTransformation, else
