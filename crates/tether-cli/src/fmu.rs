@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use tether_fmu_export::package::FmiVersion;
+use tether_fmu_export::package::{FmiVersion, Programs};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -40,19 +40,33 @@ pub fn main(args: Args) -> Result<()> {
 
 /// The runtime library, built by the workspace next to the `tether` binary.
 fn runtime_library() -> Result<PathBuf> {
-    let exe = std::env::current_exe().context("cannot find the tether binary's folder")?;
-    let dir = exe.parent().unwrap_or(Path::new("."));
     let name = "libtether_fmu_export.so";
-    [dir.join(name), dir.join("deps").join(name)]
-        .into_iter()
-        .find(|p| p.is_file())
-        .with_context(|| {
-            format!(
-                "the FMU runtime {name} is not next to the tether binary in {} \
+    let dir = tether_folder()?;
+    beside_tether(name)?.with_context(|| {
+        format!(
+            "the FMU runtime {name} is not next to the tether binary in {} \
                  (build it with `cargo build --release -p tether-fmu-export`)",
-                dir.display()
-            )
-        })
+            dir.display()
+        )
+    })
+}
+
+/// The folder of the `tether` binary.
+fn tether_folder() -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("cannot find the tether binary's folder")?;
+    Ok(exe.parent().unwrap_or(Path::new(".")).to_path_buf())
+}
+
+/// The file `name` next to the `tether` binary or in `deps/` there (where
+/// cargo builds a library a test binary depends on), the newer of the two,
+/// if it is there.
+fn beside_tether(name: &str) -> Result<Option<PathBuf>> {
+    let dir = tether_folder()?;
+    let modified = |p: &PathBuf| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    Ok([dir.join(name), dir.join("deps").join(name)]
+        .into_iter()
+        .filter(|p| p.is_file())
+        .max_by_key(modified))
 }
 
 fn export(system: &Path, out: &Path, fmi: u32) -> Result<()> {
@@ -65,7 +79,13 @@ fn export(system: &Path, out: &Path, fmi: u32) -> Result<()> {
         Some(_) => crate::ssp::ssd_name(system),
         None => system.display().to_string(),
     };
-    let packaged = tether_fmu_export::package::package(spec, &source, &runtime, out, fmi)
+    // The host program of isolated members, built with the workspace.
+    let host = beside_tether(tether_fmi::remote::HOST_NAME)?;
+    let programs = Programs {
+        runtime: &runtime,
+        host: host.as_deref(),
+    };
+    let packaged = tether_fmu_export::package::package(spec, &source, &programs, out, fmi)
         .map_err(anyhow::Error::msg)?;
     crate::say!(
         "wrote {} ({} parameters, {} inputs, {} outputs; {} member FMU files)",

@@ -236,6 +236,86 @@ fn an_ssp_exports_with_its_root_connectors_as_the_interface() {
     }
 }
 
+/// A system whose member runs isolated (`isolation = "process"`) exported:
+/// the host program travels in the FMU (`resources/tether-fmi-host`); fmpy
+/// (which unpacks without exec bits) runs a copy of the `.fmu` alone in a
+/// temporary folder with a PATH and environment that hold nothing of the
+/// build tree, and gives `tether run`'s numbers bit for bit
+/// (tests/fmpy/exported_fmu.py, all its checks).
+#[test]
+fn an_exported_system_with_an_isolated_member_runs_from_the_fmu_alone() {
+    let osc = oscillator();
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("examples/rigid_pair_export.toml")).unwrap();
+    let text = text
+        .replace("\"../target/fmus/oscillator.fmu\"", &format!("{osc:?}"))
+        .replace(
+            "name = \"mass2\"\n",
+            "name = \"mass2\"\nisolation = \"process\"\n",
+        );
+    assert!(text.contains("isolation = \"process\""));
+    let system = dir.path().join("isolated.toml");
+    std::fs::write(&system, text).unwrap();
+    let fmu = dir.path().join("isolated.fmu");
+    let ours = dir.path().join("run.csv");
+    let system_arg = system.to_str().unwrap();
+    success(&tether(
+        &["fmu", "export", system_arg, "--out", fmu.to_str().unwrap()],
+        dir.path(),
+    ));
+    success(&tether(
+        &["run", system_arg, "--out", ours.to_str().unwrap()],
+        dir.path(),
+    ));
+    let mut archive = zip::ZipArchive::new(std::fs::File::open(&fmu).unwrap()).unwrap();
+    let names: Vec<String> = (0..archive.len())
+        .map(|i| archive.by_index(i).unwrap().name().unwrap().to_string())
+        .collect();
+    assert!(
+        names.iter().any(|n| n == "resources/tether-fmi-host"),
+        "{names:?}"
+    );
+    // The .fmu alone, elsewhere; no TETHER_FMI_HOST, no build tree on PATH.
+    let alone = tempfile::tempdir().unwrap();
+    let copy = alone.path().join("isolated.fmu");
+    std::fs::copy(&fmu, &copy).unwrap();
+    let theirs = alone.path().join("fmpy.csv");
+    let python = tether_tests::fmpy::python().expect("fmpy");
+    let out = std::process::Command::new(python)
+        .env_clear()
+        .env("PATH", "/usr/bin:/bin")
+        .env("HOME", alone.path())
+        .current_dir(alone.path())
+        .arg(tether_tests::fmpy::script("exported_fmu.py"))
+        .args([&copy, &theirs])
+        .output()
+        .unwrap();
+    let report = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{report}");
+    assert!(
+        out.status.success(),
+        "{report}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (h1, r1) = read_csv(&ours);
+    let (h2, r2) = read_csv(&theirs);
+    assert_eq!(r1.len(), 1001);
+    assert_eq!(r1.len(), r2.len(), "same rows");
+    for (name, column) in [
+        ("time", "time"),
+        ("x", "mass1.x"),
+        ("v", "mass1.v"),
+        ("a", "mass1.a"),
+        ("lambda", "link.lambda"),
+    ] {
+        let i = h1.iter().position(|c| c == column).unwrap();
+        let j = h2.iter().position(|c| c == name).unwrap();
+        for (a, b) in r1.iter().zip(&r2) {
+            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
+        }
+    }
+}
+
 /// The rigid pair with `export` as its [export] table.
 fn system_with(dir: &Path, export: &str) -> PathBuf {
     let fmu = oscillator();

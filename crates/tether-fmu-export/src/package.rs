@@ -7,6 +7,8 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use tether_fmi::remote::HOST_NAME;
+use tether_master::spec::Isolation;
 use tether_master::{Simulation, SystemSpec};
 
 use crate::description::{model_description, model_description_fmi3, Capabilities};
@@ -51,16 +53,25 @@ pub struct Packaged {
     pub members: usize,
 }
 
+/// The programs an exported FMU carries: the runtime library (its binary)
+/// and, for a system with isolated members, the host program
+/// (`tether-fmi-host`, which goes to `resources/`).
+pub struct Programs<'a> {
+    pub runtime: &'a Path,
+    pub host: Option<&'a Path>,
+}
+
 /// Export `spec` (read from `source`, named in messages) with its `[export]`
-/// table as one FMU of version `fmi` at `out`, whose binary is `runtime`;
-/// one line saying what is wrong otherwise.
+/// table as one FMU of version `fmi` at `out` carrying `programs`; one line
+/// saying what is wrong otherwise.
 pub fn package(
     mut spec: SystemSpec,
     source: &str,
-    runtime: &Path,
+    programs: &Programs,
     out: &Path,
     fmi: FmiVersion,
 ) -> Result<Packaged, String> {
+    let runtime = programs.runtime;
     let Some(export) = spec.export.clone() else {
         return Err(format!(
             "system file {source}: no [export] table: it declares the exported FMU's model_name and variables (docs/fmu-export.md)"
@@ -76,6 +87,26 @@ pub fn package(
     let variables = sim.export_interface(&spec).map_err(|e| e.to_string())?;
     let state = sim.can_save_state();
     drop(sim);
+    // Isolated members run in the host program, which travels in resources/.
+    let isolated = spec
+        .instances
+        .iter()
+        .find(|i| i.isolation == Isolation::Process && i.host.is_none());
+    let host = match (isolated, programs.host) {
+        (None, _) => None,
+        (Some(_), Some(host)) => Some(
+            std::fs::read(host)
+                .map_err(|e| format!("cannot read the host program {}: {e}", host.display()))?,
+        ),
+        (Some(instance), None) => {
+            return Err(format!(
+                "instance '{}' runs isolated (isolation = \"process\"): the exported FMU carries the host \
+                 program {HOST_NAME}, which is not next to the tether binary (build it with \
+                 `cargo build --release -p tether-fmi-host`)",
+                instance.name
+            ))
+        }
+    };
     // Member FMUs travel in resources/ under their file names (one copy of
     // each file; a name taken by another file gets a number).
     let mut members: BTreeMap<PathBuf, String> = BTreeMap::new();
@@ -122,6 +153,9 @@ pub fn package(
         let name = format!("binaries/{}/{}.so", fmi.platform(), export.model_name);
         add(name, &binary, 0o755)?;
         add(format!("resources/{SYSTEM_FILE}"), text.as_bytes(), 0o644)?;
+        if let Some(host) = &host {
+            add(format!("resources/{HOST_NAME}"), host, 0o755)?;
+        }
         for (path, name) in &members {
             let bytes =
                 std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;

@@ -5,9 +5,11 @@
 use std::path::{Path, PathBuf};
 
 use tether_fmi::remote::protocol::{In, Out};
+use tether_fmi::remote::{set_host, HostCommand, HOST_NAME};
 use tether_fmu_kit::instance::{Failure, Outcome};
 use tether_fmu_kit::machine::MachineState;
 use tether_fmu_kit::xml::fnv1a64;
+use tether_master::spec::Isolation;
 use tether_master::{
     ExportKind, ExportVariable, Parallel, Simulation, StartValue, SystemSpec, SystemState,
 };
@@ -44,6 +46,54 @@ pub struct Exported {
     pub machine: MachineState,
     /// Whether the state functions may be used (every member can).
     can_save: bool,
+    /// A copy of the host program made executable, when the unpacked
+    /// FMU's own could not be.
+    _host: Option<tempfile::TempDir>,
+}
+
+/// For a system with isolated members: the host program the FMU carries
+/// (`resources/tether-fmi-host`), made executable (archive tools do not
+/// keep the exec bit; a read-only folder gets an executable copy, kept in
+/// the returned folder) and set as this library's host, so that isolated
+/// members never run a host from elsewhere (`TETHER_FMI_HOST` still comes
+/// first, docs/reliability.md).
+fn isolated_host(spec: &SystemSpec, resources: &Path) -> Result<Option<tempfile::TempDir>, String> {
+    use std::os::unix::fs::PermissionsExt;
+    let isolated = spec
+        .instances
+        .iter()
+        .any(|i| i.isolation == Isolation::Process && i.host.is_none());
+    if !isolated {
+        return Ok(None);
+    }
+    let host = resources.join(HOST_NAME);
+    let mode = std::fs::metadata(&host)
+        .map_err(|e| {
+            format!(
+                "isolated members run in {}, which is missing: {e}",
+                host.display()
+            )
+        })?
+        .permissions()
+        .mode();
+    let executable = std::fs::Permissions::from_mode(mode | 0o555);
+    let (program, copy) =
+        if mode & 0o111 == 0o111 || std::fs::set_permissions(&host, executable.clone()).is_ok() {
+            (host, None)
+        } else {
+            let dir =
+                tempfile::tempdir().map_err(|e| format!("cannot copy {}: {e}", host.display()))?;
+            let copy = dir.path().join(HOST_NAME);
+            std::fs::copy(&host, &copy)
+                .and_then(|_| std::fs::set_permissions(&copy, executable))
+                .map_err(|e| format!("cannot make {} executable: {e}", host.display()))?;
+            (copy, Some(dir))
+        };
+    set_host(HostCommand {
+        program,
+        args: Vec::new(),
+    });
+    Ok(copy)
 }
 
 /// `file:///a/b%20c/` → `/a/b c/`.
@@ -98,6 +148,7 @@ impl Exported {
         if spec.coupling.parallel == Parallel::Auto {
             spec.coupling.parallel = Parallel::Off;
         }
+        let host = isolated_host(&spec, resources)?;
         let sim = Simulation::new(&spec).map_err(|e| e.to_string())?;
         let variables = sim.export_interface(&spec).map_err(|e| e.to_string())?;
         let can_save = sim.can_save_state();
@@ -114,6 +165,7 @@ impl Exported {
             sim: None,
             machine: MachineState::Instantiated,
             can_save,
+            _host: host,
         })
     }
 

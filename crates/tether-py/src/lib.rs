@@ -798,7 +798,13 @@ fn export_fmu(
         .map_err(|e| failure("settings", e, None))?;
     let spec = load_spec(path, text, None)?;
     let packaged = py
-        .detach(move || tether_fmu_export::package::package(spec, &source, &runtime, &out, fmi))
+        .detach(move || {
+            let programs = tether_fmu_export::package::Programs {
+                runtime: &runtime,
+                host: None,
+            };
+            tether_fmu_export::package::package(spec, &source, &programs, &out, fmi)
+        })
         .map_err(|e| failure("settings", e, None))?;
     Ok((
         packaged.parameters,
