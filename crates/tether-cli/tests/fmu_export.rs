@@ -178,8 +178,9 @@ fn zip_dir(dir: &Path, out: &Path) {
     zip.finish().unwrap();
 }
 
-/// An `.ssp` without `[export]` (tests/fixtures/ssp/rigid_pair_export: the
-/// rigid pair, the root system's connectors F, m1, x, v, a) exported: the
+/// An `.ssp` without `[export]` (examples/rigid_pair_ssp packed as an
+/// archive with its member FMU in resources/: the rigid pair, the root
+/// system's connectors F, m1, x, v, a) exported: the
 /// FMU's variables are those connectors, fmpy validates it and its
 /// `simulate_fmu` gives `tether run`'s numbers of the same `.ssp` bit for
 /// bit (tests/fmpy/exported_fmu.py).
@@ -189,8 +190,13 @@ fn an_ssp_exports_with_its_root_connectors_as_the_interface() {
     let dir = tempfile::tempdir().unwrap();
     let folder = dir.path().join("ssp");
     std::fs::create_dir_all(folder.join("resources")).unwrap();
-    let fixture = root().join("tests/fixtures/ssp/rigid_pair_export/SystemStructure.ssd");
-    std::fs::copy(fixture, folder.join("SystemStructure.ssd")).unwrap();
+    let ssd = std::fs::read_to_string(root().join("examples/rigid_pair_ssp/SystemStructure.ssd"))
+        .unwrap()
+        .replace(
+            "../../target/fmus/oscillator.fmu",
+            "resources/oscillator.fmu",
+        );
+    std::fs::write(folder.join("SystemStructure.ssd"), ssd).unwrap();
     std::fs::copy(&osc, folder.join("resources/oscillator.fmu")).unwrap();
     let ssp = dir.path().join("rigid_pair.ssp");
     zip_dir(&folder, &ssp);
@@ -217,6 +223,30 @@ fn an_ssp_exports_with_its_root_connectors_as_the_interface() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(report.contains("validate: no problems"), "{report}");
+    // `tether ssp import` writes the same interface as an [export] table.
+    let imported = dir.path().join("imported/system.toml");
+    let import = [
+        "ssp",
+        "import",
+        ssp_arg,
+        "--out",
+        imported.to_str().unwrap(),
+    ];
+    success(&tether(&import, dir.path()));
+    let spec = tether_master::SystemSpec::from_file(&imported).unwrap();
+    let export = spec.export.expect("[export] from the root connectors");
+    assert_eq!(export.model_name, "rigid_pair_ssp");
+    let names: Vec<(&str, &str, &str)> = export.variables().collect();
+    assert_eq!(
+        names,
+        [
+            ("parameter", "m1", "mass1.m"),
+            ("input", "F", "mass1.F_ext"),
+            ("output", "x", "mass1.x"),
+            ("output", "v", "mass1.v"),
+            ("output", "a", "mass1.a"),
+        ]
+    );
     let (h1, r1) = read_csv(&ours);
     let (h2, r2) = read_csv(&theirs);
     assert_eq!(h2, ["time", "x", "v", "a"]);

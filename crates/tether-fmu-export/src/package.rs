@@ -101,8 +101,8 @@ pub fn package(
         (Some(instance), None) => {
             return Err(format!(
                 "instance '{}' runs isolated (isolation = \"process\"): the exported FMU carries the host \
-                 program {HOST_NAME}, which is not next to the tether binary (build it with \
-                 `cargo build --release -p tether-fmi-host`)",
+                 program {HOST_NAME}, which was not found (`tether fmu export` takes it from the tether \
+                 binary's folder: `cargo build --release -p tether-fmi-host`)",
                 instance.name
             ))
         }
