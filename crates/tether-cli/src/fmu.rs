@@ -79,11 +79,18 @@ fn export(system: &Path, out: &Path, fmi: u32) -> Result<()> {
         Some(_) => crate::ssp::ssd_name(system),
         None => system.display().to_string(),
     };
-    // The host program of isolated members, built with the workspace.
-    let host = beside_tether(tether_fmi::remote::HOST_NAME)?;
+    // The host program of isolated members: the dedicated one built with the
+    // workspace, unless it is older than this binary (then perhaps of
+    // another protocol version): this binary itself, which serves as a host
+    // under that name.
+    let exe = std::env::current_exe().context("cannot find the tether binary")?;
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    let host = beside_tether(tether_fmi::remote::HOST_NAME)?
+        .filter(|h| modified(h) >= modified(&exe))
+        .unwrap_or(exe);
     let programs = Programs {
         runtime: &runtime,
-        host: host.as_deref(),
+        host: Some(&host),
     };
     let packaged = tether_fmu_export::package::package(spec, &source, &programs, out, fmi)
         .map_err(anyhow::Error::msg)?;

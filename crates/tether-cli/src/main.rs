@@ -131,7 +131,14 @@ fn main() -> ExitCode {
     // signal that kills the process mid-row.
     // SAFETY: sets the disposition of SIGXFSZ to "ignore", before any thread.
     unsafe { libc::signal(libc::SIGXFSZ, libc::SIG_IGN) };
-    if std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
+    // `tether __fmi-host`, or `tether` under the host program's name (as an
+    // exported FMU may carry it, docs/fmu-export.md): a host process.
+    let called = std::env::args_os().next().map(std::path::PathBuf::from);
+    let as_host = called
+        .as_deref()
+        .and_then(std::path::Path::file_name)
+        .is_some_and(|n| n == tether_fmi::remote::HOST_NAME);
+    if as_host || std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
         return tether_fmi_host::serve_stdin();
     }
     // Isolated instances run in `tether __fmi-host`: one file to install.
