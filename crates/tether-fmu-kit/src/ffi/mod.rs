@@ -115,6 +115,9 @@ impl Drop for LoggerScope {
 struct Component<M: Model> {
     instance: Instance<M>,
     logger: Option<EnvironmentLogger>,
+    /// FMI 3.0: the importer's intermediate update callback and its instance
+    /// environment, when given.
+    intermediate_update: Option<(fmi3::IntermediateUpdate, *mut c_void)>,
     /// The instance name `logger.instance_name` points into.
     _name: CString,
 }
@@ -330,6 +333,7 @@ pub unsafe fn instantiate<M: Model>(
         let component = Component {
             instance,
             logger,
+            intermediate_update: None,
             _name: name,
         };
         Box::into_raw(Box::new(component)).cast::<c_void>()

@@ -9,6 +9,7 @@
 #![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
 
 pub(crate) mod component;
+pub(crate) mod intermediate;
 mod functions;
 
 use std::ffi::{c_char, c_int, c_void};
@@ -82,7 +83,7 @@ pub type fmi3LogMessageCallback = Option<
     ),
 >;
 
-/// `fmi3IntermediateUpdateCallback` (not used yet: Tether passes NULL).
+/// `fmi3IntermediateUpdateCallback` (Tether's: [`intermediate::intermediate_update`]).
 pub type fmi3IntermediateUpdateCallback = Option<
     unsafe extern "C" fn(
         instanceEnvironment: fmi3InstanceEnvironment,
