@@ -18,7 +18,7 @@ use std::ptr;
 
 use super::{
     c_string, get_values, null, set_values, simple, slice, slice_mut, with_instance, Component,
-    Fmi2Component as Fmi3Instance, ERROR,
+    EnvironmentLogger, Fmi2Component as Fmi3Instance, ERROR,
 };
 use crate::instance::{Failure, Instance, LogFn, Status};
 use crate::machine::Call;
@@ -52,6 +52,27 @@ pub type IntermediateUpdate = unsafe extern "C" fn(
 
 const TRUE: Fmi3Boolean = 1;
 const FALSE: Fmi3Boolean = 0;
+
+/// The component environment of a model's own messages in an FMI 3.0 build
+/// ([`crate::environment_logger`]): `c/fmi3_logger.c` formats a message given the
+/// fmi2 way and passes it to the importer's `fmi3LogMessageCallback`.
+#[repr(C)]
+pub struct Fmi3LogEnv {
+    log: unsafe extern "C" fn(*mut c_void, Fmi3Status, Fmi3String, Fmi3String),
+    instance_environment: *mut c_void,
+}
+
+extern "C" {
+    /// `c/fmi3_logger.c`: the fmi2CallbackLogger signature over an [`Fmi3LogEnv`].
+    fn tether_kit_fmi3_logger(
+        component_environment: *mut c_void,
+        instance_name: Fmi3String,
+        status: Fmi3Status,
+        category: Fmi3String,
+        format: Fmi3String,
+        ...
+    );
+}
 
 pub fn get_version() -> *const c_char {
     c"3.0".as_ptr()
@@ -118,13 +139,29 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             );
             return ptr::null_mut();
         }
+        // A model's own messages (`environment_logger`) go through the fmi2
+        // logger's signature: the C shim formats them for fmi3LogMessageCallback.
+        let name = c_string(&name);
+        let mut fmi3_log = log_message.map(|log| {
+            Box::new(Fmi3LogEnv {
+                log,
+                instance_environment: environment,
+            })
+        });
+        let logger = fmi3_log.as_mut().map(|env| {
+            let env: *mut Fmi3LogEnv = &mut **env;
+            EnvironmentLogger {
+                logger: tether_kit_fmi3_logger,
+                component_environment: env.cast(),
+                instance_name: name.as_ptr(),
+            }
+        });
         let component = Component {
             instance,
-            // A model's own messages (`environment_logger`) use the fmi2 logger's
-            // signature: an FMI 3.0 instance gives them none.
-            logger: None,
+            logger,
             intermediate_update: intermediate_update.map(|f| (f, environment)),
-            _name: c_string(&name),
+            _fmi3_log: fmi3_log,
+            _name: name,
         };
         Box::into_raw(Box::new(component)).cast::<c_void>()
     });
@@ -675,6 +712,83 @@ mod tests {
         assert!((get(c, 3) - u_end).abs() < 1e-14, "u = {}", get(c, 3));
         // SAFETY: c is live; freed once.
         unsafe { free_instance::<D>(c) };
+    }
+
+    /// Decay, logging two messages of its own in every step: one through
+    /// [`EnvironmentLogger::log`], one with a printf format as a C FMU logs.
+    struct Talker(Decay);
+
+    impl Model for Talker {
+        const DECLARATION: crate::Declaration = Decay::DECLARATION;
+        const LOGS: bool = true;
+        fn new(p: &crate::Parameters) -> Result<Self, String> {
+            Decay::new(p).map(Talker)
+        }
+        fn initial_states(&self, x: &mut [f64]) {
+            self.0.initial_states(x)
+        }
+        fn derivatives(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+            self.0.derivatives(t, x, u, dx)
+        }
+        fn outputs(&self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
+            self.0.outputs(t, x, u, y)
+        }
+        fn exact_step(&self, t: f64, _h: f64, _x: &mut [f64], _u: &[crate::InputJet]) -> bool {
+            if let Some(logger) = crate::environment_logger() {
+                logger.log(Status::Warning, "logStatusWarning", "the talker's own message");
+                // SAFETY: the hook's logger, environment and name, during the call;
+                // "%d at t = %g" matches the int and the double passed.
+                unsafe {
+                    (logger.logger)(
+                        logger.component_environment,
+                        logger.instance_name,
+                        1,
+                        c"logStatusWarning".as_ptr(),
+                        c"formatted %d at t = %g".as_ptr(),
+                        42 as std::ffi::c_int,
+                        t,
+                    )
+                };
+            }
+            false
+        }
+    }
+
+    /// A model's own messages reach the importer's fmi3LogMessageCallback, formatted.
+    #[test]
+    fn the_models_own_messages_reach_the_fmi3_log_callback() {
+        let name = CString::new("talker").unwrap();
+        let token = CString::new(xml::model_guid::<Talker>()).unwrap();
+        let (mut event, mut terminate, mut early, mut last) = (0u8, 0u8, 0u8, 0.0);
+        // SAFETY: valid NUL-terminated strings; c is a live instance while used.
+        unsafe {
+            let c = instantiate_co_simulation::<Talker>(
+                name.as_ptr(),
+                token.as_ptr(),
+                0,
+                ptr::null_mut(),
+                Some(log),
+                None,
+            );
+            assert!(!c.is_null());
+            assert_eq!(enter_initialization_mode::<Talker>(c, 0, 0.0, 0.0, 0, 0.0), OK);
+            assert_eq!(crate::ffi::exit_initialization_mode::<Talker>(c), OK);
+            let status = do_step::<Talker>(
+                c,
+                0.0,
+                0.5,
+                &mut event,
+                &mut terminate,
+                &mut early,
+                &mut last,
+            );
+            assert_eq!(status, OK);
+            free_instance::<Talker>(c);
+        }
+        let messages = MESSAGES.lock().unwrap().join("\n");
+        for expected in ["the talker's own message", "formatted 42 at t = 0"] {
+            assert!(messages.contains(expected), "{expected:?} not in\n{messages}");
+        }
     }
 
     #[test]
