@@ -88,7 +88,11 @@ fn relative_difference(name: &str, a: &[u8], b: &[u8]) -> f64 {
         let mut lines = text.lines();
         let header = lines.next().unwrap_or_default().to_string();
         let rows = lines
-            .map(|l| l.split(',').map(|x| x.trim().parse::<f64>().unwrap()).collect())
+            .map(|l| {
+                l.split(',')
+                    .map(|x| x.trim().parse::<f64>().unwrap())
+                    .collect()
+            })
             .collect();
         (header, rows)
     };
@@ -212,7 +216,13 @@ fn isolated_fmi3_instances_at_k_1_give_the_in_process_csv_in_two_round_trips_a_s
     let dir = tempfile::tempdir().unwrap();
     let system = fmi3_oscillator(dir.path());
     let csv = |name: &str| dir.path().join(name);
-    let plain = run_at(&system, &csv("plain.csv"), dir.path(), "1", &["--parallel", "off"]);
+    let plain = run_at(
+        &system,
+        &csv("plain.csv"),
+        dir.path(),
+        "1",
+        &["--parallel", "off"],
+    );
     let isolated = run_at(
         &system,
         &csv("isolated.csv"),
@@ -249,10 +259,7 @@ fn isolated_fmi3_instances_at_k_1_give_the_in_process_csv_in_two_round_trips_a_s
     let ((s0, a), (s1, b)) = (trips("0.2"), trips("0.4"));
     let steps = (s1 - s0) as f64;
     assert!(steps >= 100.0, "{steps} steps");
-    let per_step = [
-        (b[0] - a[0]) as f64 / steps,
-        (b[1] - a[1]) as f64 / steps,
-    ];
+    let per_step = [(b[0] - a[0]) as f64 / steps, (b[1] - a[1]) as f64 / steps];
     println!("round trips per macro step at k = 1: {per_step:?}");
     assert_eq!(per_step, [2.0, 2.0]);
 }
@@ -357,7 +364,10 @@ initial = 0.0
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success(), "k = 1 ran: {stderr}");
     // Index 3 at k = 1 is also warned about as unstable: one error line.
-    let errors: Vec<&str> = stderr.lines().filter(|l| !l.starts_with("warning:")).collect();
+    let errors: Vec<&str> = stderr
+        .lines()
+        .filter(|l| !l.starts_with("warning:"))
+        .collect();
     assert_eq!(errors.len(), 1, "one line: {stderr}");
     let line = errors[0];
     assert!(

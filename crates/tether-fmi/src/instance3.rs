@@ -28,8 +28,7 @@ use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
 use crate::interface::{FmuInstance, Inputs, Slot, SLOTS};
 use crate::model_description::{
-    hex_decode, hex_encode, Causality, ModelDescription, ScalarVariable, ValueReference,
-    ValueType,
+    hex_decode, hex_encode, Causality, ModelDescription, ScalarVariable, ValueReference, ValueType,
 };
 use crate::raw::fmi3::component::{InstantiateArgs3, RawInstance3, RawState3};
 use crate::shared::{FmuShared, OnceGuard};

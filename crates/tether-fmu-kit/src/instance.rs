@@ -351,7 +351,10 @@ impl<M: Model> Instance<M> {
     pub(crate) fn take_intermediate_inputs(&mut self, samples: &[(f64, Vec<Option<f64>>); 2]) {
         let [(sa, at_a), (sb, at_b)] = samples;
         for (i, jet) in self.data.inputs.iter_mut().enumerate() {
-            let (a, b) = (at_a.get(i).copied().flatten(), at_b.get(i).copied().flatten());
+            let (a, b) = (
+                at_a.get(i).copied().flatten(),
+                at_b.get(i).copied().flatten(),
+            );
             if a.is_none() && b.is_none() {
                 continue;
             }

@@ -271,8 +271,7 @@ impl Slave {
         let cs = &md.co_simulation;
         // FMI 3.0: a polynomial input goes through intermediate update (for the
         // inputs declared `intermediateUpdate="true"`, `Slave::interpolates`).
-        let can_interpolate_inputs =
-            cs.can_interpolate_inputs || cs.provides_intermediate_update;
+        let can_interpolate_inputs = cs.can_interpolate_inputs || cs.provides_intermediate_update;
         let max_output_derivative_order = cs.max_output_derivative_order;
         let can_get_and_set_state = cs.can_get_and_set_fmu_state;
         let model_name = md.model_name.clone();

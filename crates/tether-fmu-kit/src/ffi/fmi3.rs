@@ -672,7 +672,10 @@ mod tests {
         // SAFETY: c is a live instance of D; every array holds what the call says.
         unsafe {
             let parameters = [1.0, 1.0, 1e-10];
-            assert_eq!(set_float64::<D>(c, [0, 1, 2].as_ptr(), 3, parameters.as_ptr(), 3), OK);
+            assert_eq!(
+                set_float64::<D>(c, [0, 1, 2].as_ptr(), 3, parameters.as_ptr(), 3),
+                OK
+            );
             assert_eq!(enter_initialization_mode::<D>(c, 0, 0.0, 0.5, 0, 0.0), OK);
             assert_eq!(crate::ffi::exit_initialization_mode::<D>(c), OK);
             assert_eq!(set_float64::<D>(c, &3, 1, [0.5].as_ptr(), 1), OK);
@@ -694,7 +697,13 @@ mod tests {
             "asked at t + h/2 and t + h, sets only"
         );
         let x = get(c, 6);
-        let model = D::new(&crate::Parameters::new(&D::DECLARATION, &[1.0, 1.0], &[], &[])).unwrap();
+        let model = D::new(&crate::Parameters::new(
+            &D::DECLARATION,
+            &[1.0, 1.0],
+            &[],
+            &[],
+        ))
+        .unwrap();
         let jets = [crate::InputJet {
             value: 0.5,
             d1: 2.0,
@@ -735,7 +744,11 @@ mod tests {
         }
         fn exact_step(&self, t: f64, _h: f64, _x: &mut [f64], _u: &[crate::InputJet]) -> bool {
             if let Some(logger) = crate::environment_logger() {
-                logger.log(Status::Warning, "logStatusWarning", "the talker's own message");
+                logger.log(
+                    Status::Warning,
+                    "logStatusWarning",
+                    "the talker's own message",
+                );
                 // SAFETY: the hook's logger, environment and name, during the call;
                 // "%d at t = %g" matches the int and the double passed.
                 unsafe {
@@ -771,7 +784,10 @@ mod tests {
                 None,
             );
             assert!(!c.is_null());
-            assert_eq!(enter_initialization_mode::<Talker>(c, 0, 0.0, 0.0, 0, 0.0), OK);
+            assert_eq!(
+                enter_initialization_mode::<Talker>(c, 0, 0.0, 0.0, 0, 0.0),
+                OK
+            );
             assert_eq!(crate::ffi::exit_initialization_mode::<Talker>(c), OK);
             let status = do_step::<Talker>(
                 c,
@@ -787,7 +803,10 @@ mod tests {
         }
         let messages = MESSAGES.lock().unwrap().join("\n");
         for expected in ["the talker's own message", "formatted 42 at t = 0"] {
-            assert!(messages.contains(expected), "{expected:?} not in\n{messages}");
+            assert!(
+                messages.contains(expected),
+                "{expected:?} not in\n{messages}"
+            );
         }
     }
 

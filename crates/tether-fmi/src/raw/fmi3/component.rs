@@ -8,11 +8,11 @@
 use std::ffi::{c_char, CStr, CString};
 use std::sync::Arc;
 
+use super::intermediate::{intermediate_update, Env3};
 use super::*;
 use crate::archive::FmuDir;
 use crate::error::{Error, Result};
 use crate::library::Library;
-use super::intermediate::{intermediate_update, Env3};
 use crate::logger::fmi3_log_message;
 use crate::raw::{check, CallSite};
 

@@ -9,8 +9,8 @@
 #![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
 
 pub(crate) mod component;
-pub(crate) mod intermediate;
 mod functions;
+pub(crate) mod intermediate;
 
 use std::ffi::{c_char, c_int, c_void};
 
