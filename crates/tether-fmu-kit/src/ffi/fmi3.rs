@@ -614,11 +614,16 @@ mod tests {
         }
     }
 
-    /// The instance environment of [`intermediate_update`]: the instance, the
-    /// times it was called at and the statuses of its sets.
+    /// One callback: its time, `intermediateVariableSetRequested`,
+    /// `intermediateVariableGetAllowed`, `intermediateStepFinished`, and the status
+    /// of the set made in it.
+    type Call = (f64, u8, u8, u8, Fmi3Status);
+
+    /// The instance environment of [`intermediate_update`]: the instance and the
+    /// callbacks made.
     struct Environment {
         c: std::cell::Cell<Fmi3Instance>,
-        calls: std::cell::RefCell<Vec<(f64, u8, u8, u8, Fmi3Status)>>,
+        calls: std::cell::RefCell<Vec<Call>>,
     }
 
     /// u(t) = 0.5 + 2 (t − 0.5) − (t − 0.5)²/2, set at every intermediate time.
@@ -635,7 +640,7 @@ mod tests {
         // SAFETY: the environment is the test's `Environment`, alive for the call.
         let env = unsafe { &*env.cast_const().cast::<Environment>() };
         let s = time - 0.5;
-        let u = [0.5 + s * (2.0 + 0.5 * s * -1.0)];
+        let u = [0.5 + s * (2.0 - 0.5 * s)];
         // SAFETY: the instance that is calling back; one value reference, one value.
         let status = unsafe { set_float64::<D>(env.c.get(), &3, 1, u.as_ptr(), 1) };
         env.calls
