@@ -18,6 +18,9 @@ pub struct Capabilities {
     /// `canGetAndSetFMUstate` and `canSerializeFMUstate`: every member can
     /// save, restore and serialize its state.
     pub state: bool,
+    /// Per variable, the inputs (indices into the variables) an output
+    /// depends on directly (`Simulation::export_dependencies`).
+    pub dependencies: Vec<Vec<usize>>,
 }
 
 /// The `modelDescription.xml` of `spec` exported with `variables` (value
@@ -50,7 +53,7 @@ pub fn model_description(
     );
     let _ = writeln!(
         x,
-        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="false" maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true" maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
         escape(name),
         yes(capabilities.state),
         yes(capabilities.state),
@@ -105,26 +108,43 @@ pub fn model_description(
     let outputs: Vec<usize> = (0..variables.len())
         .filter(|&i| variables[i].kind == ExportKind::Output)
         .collect();
-    // An output is read at the current point of the system; an input set
-    // now acts from the next step on: no output depends directly on an
-    // input. At initialization an output depends on the parameters.
-    let parameters: Vec<String> = (0..variables.len())
-        .filter(|&i| variables[i].kind == ExportKind::Parameter)
-        .map(|i| (i + 1).to_string())
-        .collect();
+    // An output depends directly on the inputs that reach it through the
+    // members' feedthrough, the signal connections and the coupling
+    // (`Simulation::export_dependencies`); at initialization also on the
+    // parameters. Indices are 1-based and ascending.
+    let list = |mut indices: Vec<usize>| {
+        indices.sort_unstable();
+        indices.dedup();
+        let indices: Vec<String> = indices.iter().map(|i| (i + 1).to_string()).collect();
+        indices.join(" ")
+    };
+    let parameters = (0..variables.len()).filter(|&i| variables[i].kind == ExportKind::Parameter);
+    let parameters: Vec<usize> = parameters.collect();
+    let inputs_of = |i: usize| {
+        capabilities
+            .dependencies
+            .get(i)
+            .cloned()
+            .unwrap_or_default()
+    };
     if !outputs.is_empty() {
         let _ = writeln!(x, "    <Outputs>");
         for &i in &outputs {
-            let _ = writeln!(x, r#"      <Unknown index="{}" dependencies=""/>"#, i + 1);
+            let dependencies = list(inputs_of(i));
+            let _ = writeln!(
+                x,
+                r#"      <Unknown index="{}" dependencies="{dependencies}"/>"#,
+                i + 1
+            );
         }
         let _ = writeln!(x, "    </Outputs>");
         let _ = writeln!(x, "    <InitialUnknowns>");
         for &i in &outputs {
+            let dependencies = list([parameters.clone(), inputs_of(i)].concat());
             let _ = writeln!(
                 x,
-                r#"      <Unknown index="{}" dependencies="{}"/>"#,
-                i + 1,
-                parameters.join(" ")
+                r#"      <Unknown index="{}" dependencies="{dependencies}"/>"#,
+                i + 1
             );
         }
         let _ = writeln!(x, "    </InitialUnknowns>");

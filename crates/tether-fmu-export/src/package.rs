@@ -34,15 +34,11 @@ pub fn package(
             "system file {source}: no [export] table: it declares the exported FMU's model_name and variables (docs/fmu-export.md)"
         ));
     };
-    if spec.step_control.is_some() {
-        return Err(format!(
-            "system file {source}: [step_control]: systems with adaptive steps are not exported (fixed macro steps only)"
-        ));
-    }
     // Resolve the interface against the FMUs, as the FMU's binary will.
     let sim = Simulation::new(&spec).map_err(|e| e.to_string())?;
     let variables = sim.export_interface(&spec).map_err(|e| e.to_string())?;
     let state = sim.can_save_state();
+    let dependencies = sim.export_dependencies(&variables);
     drop(sim);
     // Member FMUs travel in resources/ under their file names (one copy of
     // each file; a name taken by another file gets a number).
@@ -69,7 +65,15 @@ pub fn package(
     }
     spec.source = None;
     let text = toml::to_string(&spec).map_err(|e| format!("cannot write the system file: {e}"))?;
-    let xml = model_description(&spec, &text, &variables, &Capabilities { state });
+    let xml = model_description(
+        &spec,
+        &text,
+        &variables,
+        &Capabilities {
+            state,
+            dependencies,
+        },
+    );
     let write = || -> Result<(), String> {
         let file = std::fs::File::create(out).map_err(|e| e.to_string())?;
         let mut zip = zip::ZipWriter::new(file);
