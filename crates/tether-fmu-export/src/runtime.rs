@@ -312,17 +312,20 @@ impl Exported {
                         v.name
                     )))
                 }
-                // Before the first step an input is a start value of the
-                // run: built again with it, the run is `tether run`'s with
-                // that value (consistent multipliers included).
-                (ExportKind::Input, true) if self.time() == Some(self.start) => self.sim = None,
-                (ExportKind::Input, true) => {
-                    let sim = self.simulation()?;
-                    sim.set_parameter(&v.target, &StartValue::Real(value))
-                        .map_err(|e| Failure::usage(e.to_string()))?;
+                // An input sets the member's input at once: a dependent
+                // output read now is solved again with it. Before the first
+                // step it is also a start value of the run: the first
+                // fmi2DoStep builds the system again with it, so the run is
+                // `tether run`'s with that value (consistent multipliers
+                // included).
+                (ExportKind::Input, _) => {
+                    if let Some(sim) = self.sim.as_mut() {
+                        sim.set_parameter(&v.target, &StartValue::Real(value))
+                            .map_err(|e| Failure::usage(e.to_string()))?;
+                    }
                 }
                 // Before the run: taken when the simulation is built.
-                (_, false) => self.sim = None,
+                (ExportKind::Parameter, false) => self.sim = None,
             }
             self.values[vr as usize] = value;
         }
@@ -339,6 +342,9 @@ impl Exported {
         let step = self.spec.experiment.step;
         let adaptive = self.spec.step_control.is_some();
         let jets = self.jets();
+        if self.time() == Some(self.start) && self.inputs.at_point != self.values {
+            self.sim = None;
+        }
         let sim = self.simulation()?;
         let now = sim.time();
         if (t - now).abs() > 1e-9 * step.max(h.abs()) {
@@ -394,15 +400,14 @@ impl Exported {
                 sim.step().map_err(model)?;
             }
         }
-        // The point now reached was computed with each interpolated input at
-        // its polynomial's value there; from now on the inputs are the values
-        // set (held, until the importer sets others), derivatives cleared.
+        // Each interpolated input is now its polynomial's value at the point
+        // reached, which the outputs there were computed with; it is held
+        // from here on (until the importer sets it), its derivatives cleared.
         let end = sim.time();
         for (target, jet) in &jets {
-            sim.set_input(target, jet.value, &[])
+            sim.set_input(target, jet.eval(end - now), &[])
                 .map_err(|e| Failure::usage(e.to_string()))?;
         }
-        self.inputs.at_point.clone_from(&self.values);
         for (i, d) in self.inputs.derivatives.iter_mut().enumerate() {
             if *d != [0.0; 2] {
                 let jet = InputJet {
@@ -410,10 +415,11 @@ impl Exported {
                     d1: d[0],
                     d2: d[1],
                 };
-                self.inputs.at_point[i] = jet.eval(end - now);
+                self.values[i] = jet.eval(end - now);
                 *d = [0.0; 2];
             }
         }
+        self.inputs.at_point.clone_from(&self.values);
         self.resolved = None;
         Ok(())
     }

@@ -99,7 +99,8 @@ impl Simulation {
     /// The values of the current point (as [`values`](Self::values)) with
     /// the multipliers solved again for the inputs as they are set now: the
     /// consistent multipliers (g̈ = 0, or the explicit method's condition)
-    /// at the current time, the signal connections settled around them, the
+    /// at the current time (at the start time, those the system file asks to
+    /// be consistent), the signal connections settled around them, the
     /// outputs read back. No step is taken and the point the next step starts
     /// from is kept: the master's own state is restored afterwards and the
     /// instances only had their coupled inputs set, which every step sets
@@ -112,7 +113,14 @@ impl Simulation {
         let solved = (|| {
             let system = &mut self.system;
             self.signals.initialize(&mut system.slaves)?;
-            Feedthrough::new(system).solve_all(system, self.level, time, &mut stats)?;
+            let mut feedthrough = Feedthrough::new(system);
+            if self.grid.n() == 0 {
+                // At the start, as the run began: the multipliers the system
+                // file gives stay, "consistent" ones are solved.
+                feedthrough.initial(system, self.level, time, &mut stats)?;
+            } else {
+                feedthrough.solve_all(system, self.level, time, &mut stats)?;
+            }
             self.signals.initialize(&mut system.slaves)?;
             system.read_accepted(Run::Feedthrough)?;
             self.row.fill(system);
