@@ -36,7 +36,8 @@ usage: exported_fmu.py FMU OUT.csv
    1.9e-5 m off its closed form; amplitude 4.5 m), where held inputs are off
    by more than 1e-3 m; and it equals the same ramp driven every H to 1e-11 m
    (each inner step sees the input at its own time; the two differ only in
-   rounding of A + B·t).
+   rounding of A + B·t). A derivative of order 3, or of an output, is
+   refused with fmi2Error.
 Prints one line per check; exit 1 on the first that fails.
 """
 
@@ -355,6 +356,16 @@ if not error_held > 1e-3:
     fail(f"interpolation: held inputs are only {error_held:.3g} m off: the check cannot tell")
 if not same <= 1e-11:
     fail(f"interpolation: steps of 10 H differ from steps of H by {same:.3g} m")
+s = instance("order3", 1.0)
+for what, refs, order in [("order 3", [F], 3), ("an output", [X], 1)]:
+    try:
+        s.setRealInputDerivatives(refs, [order], [1.0])
+        fail(f"interpolation: a derivative of {what} was accepted")
+    except FMICallException as e:
+        if e.status != 3:
+            fail(f"interpolation: a derivative of {what}: status {e.status}, expected 3")
+s.terminate()
+s.freeInstance()
 print(f"interpolation: ramp within {error:.3g} m of the closed form (held: {error_held:.3g} m), "
       f"steps of 10 H and of H agree to {same:.3g} m")
 shutil.rmtree(unzipped, ignore_errors=True)

@@ -29,6 +29,7 @@ pub struct Saved {
 /// format's version (docs/fmu-export.md).
 const MAGIC: &[u8; 16] = b"tether-fmu-state";
 const VERSION: u32 = 2;
+const CHECKSUM_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// The highest order of `fmi2SetRealInputDerivatives`: inputs are
 /// interpolated by polynomials of degree ≤ 2 (the FMU kit's [`InputJet`]).
@@ -45,7 +46,6 @@ pub struct Inputs {
     /// computed (for an interpolated input: its polynomial at that time).
     at_point: Vec<f64>,
 }
-const CHECKSUM_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
 
 pub struct Exported {
     spec: SystemSpec,
