@@ -283,10 +283,11 @@ fn every_example_round_trips_through_ssp() {
             );
             a.fmu = b.fmu.clone();
         }
-        // `[export]` (docs/fmu-export.md) is Tether's own; an SSD has no
-        // place for it.
+        // `[export]` (docs/fmu-export.md) and `[output]` (what a run
+        // records) are Tether's own; an SSD has no place for them.
         let mut without_export = spec.clone();
         without_export.export = None;
+        without_export.output = Default::default();
         assert_eq!(
             toml::to_string(&back).unwrap(),
             toml::to_string(&without_export).unwrap(),
