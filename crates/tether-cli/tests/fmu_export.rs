@@ -51,6 +51,9 @@ fn the_exported_rigid_pair_runs_in_fmpy_bit_for_bit_as_tether_run() {
         "serialized state cut short: fmi2Error",
         "serialized state one byte changed: fmi2Error",
         "serialized state empty: fmi2Error",
+        "dependencies: a and lambda on F, x and v on none",
+        "feedthrough: a and lambda follow F at once",
+        "interpolation: ramp within",
     ] {
         assert!(report.contains(check), "{check}: {report}");
     }
@@ -414,6 +417,90 @@ fn damped(m: f64, c: f64, d: f64, v0: f64, t: f64) -> f64 {
     (-delta * t).exp() * v0 / omega * (omega * t).sin()
 }
 
+/// `[step_control]` exported (examples/rigid_pair_adaptive_export.toml,
+/// output grid 0.0123 s): fmpy's `simulate_fmu` with that communication step,
+/// which is no multiple of the experiment's step 1e-3, gives `tether run`'s
+/// time, x, v, a and lambda at every point of the grid bit for bit (the
+/// inner steps land on the same points; the last one on the stop time).
+/// With a communication step of 0.0071 s, unrelated to both, the inner
+/// steps land on t + h too; x follows the closed form of the joined masses
+/// (m = 3, c = 2000, d = 20) within the step control's tolerance there as
+/// `tether run` does on its own grid.
+#[test]
+fn an_exported_system_with_adaptive_steps_takes_any_communication_step() {
+    oscillator();
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = dir.path().join("rigid_pair_adaptive.fmu");
+    let system = "examples/rigid_pair_adaptive_export.toml";
+    let fmu_arg = fmu.to_str().unwrap();
+    success(&tether(
+        &["fmu", "export", system, "--out", fmu_arg],
+        &root(),
+    ));
+    let ours = dir.path().join("run.csv");
+    success(&tether(
+        &["run", system, "--out", ours.to_str().unwrap()],
+        &root(),
+    ));
+    let simulate = |step: &str, out: &Path| {
+        let args = [
+            fmu.as_os_str(),
+            out.as_os_str(),
+            "--stop".as_ref(),
+            "1".as_ref(),
+            "--step".as_ref(),
+            step.as_ref(),
+        ];
+        let run = tether_tests::fmpy::run_script("simulate.py", &args).expect("run fmpy");
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    };
+    let theirs = dir.path().join("fmpy.csv");
+    simulate("0.0123", &theirs);
+    let (h1, r1) = read_csv(&ours);
+    let (h2, r2) = read_csv(&theirs);
+    // 0, 0.0123, …, 0.9963 and the stop time.
+    assert_eq!(r1.len(), 83);
+    assert_eq!(r1.len(), r2.len(), "same rows");
+    for (name, column) in [
+        ("time", "time"),
+        ("x", "mass1.x"),
+        ("v", "mass1.v"),
+        ("a", "mass1.a"),
+        ("lambda", "link.lambda"),
+    ] {
+        let i = h1.iter().position(|c| c == column).unwrap();
+        let j = h2.iter().position(|c| c == name).unwrap();
+        for (a, b) in r1.iter().zip(&r2) {
+            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
+        }
+    }
+    let x = h1.iter().position(|c| c == "mass1.x").unwrap();
+    let closed = |t: f64| damped(3.0, 2000.0, 20.0, 100.0, t);
+    let run_error = r1
+        .iter()
+        .map(|r| (r[x] - closed(r[0])).abs())
+        .fold(0.0, f64::max);
+    let other = dir.path().join("other.csv");
+    simulate("0.0071", &other);
+    let (h3, r3) = read_csv(&other);
+    let j = h3.iter().position(|c| c == "x").unwrap();
+    // 0, 0.0071, …, 0.9940 and the stop time.
+    assert_eq!(r3.len(), 142);
+    let error = r3
+        .iter()
+        .map(|r| (r[j] - closed(r[0])).abs())
+        .fold(0.0, f64::max);
+    eprintln!("max |x - closed form|: tether run {run_error:e}, fmpy h = 0.0071 {error:e}");
+    // Amplitude 4.5 m, rtol = 1e-6: both within 5e-6 m (the fixed-step pair
+    // with H = 1e-3 is off by 1.9e-5 m).
+    assert!(run_error < 5e-6, "{run_error:e}");
+    assert!(error < 5e-6, "{error:e}");
+}
+
 /// Nesting: the exported pair as an instance of another Tether system,
 /// joined by a rigid link to a third mass (examples/nested_three_masses.toml):
 /// the three joined masses follow the closed form of one mass with the
@@ -460,6 +547,68 @@ fn the_exported_pair_nested_with_a_third_mass_follows_the_closed_form() {
         eprintln!("{column}: max |x - closed form| = {worst:e}");
         assert!(worst < 1e-4, "{column}: {worst:e}");
     }
+}
+
+/// A direct-feedthrough loop through the exported FMU
+/// (examples/exported_pair_feedback.toml): the pair of
+/// examples/rigid_pair_accel_export.toml, whose acceleration a its
+/// ModelStructure declares as depending on the force input F, with a fed back
+/// as F = −3·a through the workspace's LTI block as a pure gain. Tether finds
+/// the loop from the declared dependency, solves it at every macro point
+/// (`[signals] solver = "newton"`) and passes F as a polynomial, which the
+/// exported FMU interpolates; the pair then moves as one mass of
+/// m = 1 + 2 + 3 with c = 2000, d = 20: within 2e-5 m of that closed form
+/// (amplitude 4.8 m), the loop closed at every recorded point to 1e-8.
+#[test]
+fn an_outer_system_solves_a_loop_through_the_exported_feedthrough() {
+    oscillator();
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = dir.path().join("rigid_pair_accel.fmu");
+    let export = [
+        "fmu",
+        "export",
+        "examples/rigid_pair_accel_export.toml",
+        "--out",
+        fmu.to_str().unwrap(),
+    ];
+    success(&tether(&export, &root()));
+    let text =
+        std::fs::read_to_string(root().join("examples/exported_pair_feedback.toml")).unwrap();
+    let lti = tether_fmu_build::workspace_fmu("lti").expect("package the LTI FMU");
+    let text = text
+        .replace("\"../target/rigid_pair_accel.fmu\"", &format!("{fmu:?}"))
+        .replace("\"../target/fmus/lti.fmu\"", &format!("{lti:?}"));
+    let system = dir.path().join("loop.toml");
+    std::fs::write(&system, text).unwrap();
+    let csv = dir.path().join("loop.csv");
+    let run = [
+        "run",
+        system.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ];
+    let out = tether(&run, dir.path());
+    success(&out);
+    let notes = String::from_utf8_lossy(&out.stderr);
+    assert!(notes.contains("loop"), "no loop found: {notes}");
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 1001);
+    let x = header.iter().position(|c| c == "pair.x").unwrap();
+    let (a, y) = (
+        header.iter().position(|c| c == "pair.a").unwrap(),
+        header.iter().position(|c| c == "gain.y").unwrap(),
+    );
+    let worst = rows
+        .iter()
+        .map(|r| (r[x] - damped(6.0, 2000.0, 20.0, 100.0, r[0])).abs())
+        .fold(0.0, f64::max);
+    let loop_residual = rows
+        .iter()
+        .map(|r| (r[y] + 3.0 * r[a]).abs() / r[a].abs().max(1.0))
+        .fold(0.0, f64::max);
+    eprintln!("max |x - closed form| = {worst:e}, max |F + 3 a| / |a| = {loop_residual:e}");
+    assert!(loop_residual < 1e-8, "{loop_residual:e}");
+    assert!(worst < 2e-5, "{worst:e}");
 }
 
 /// libcosim (the Open Simulation Platform's master, through libcosimpy) runs

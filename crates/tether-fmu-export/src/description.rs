@@ -18,6 +18,9 @@ pub struct Capabilities {
     /// `canGetAndSetFMUstate` and `canSerializeFMUstate`: every member can
     /// save, restore and serialize its state.
     pub state: bool,
+    /// Per variable, the inputs (indices into the variables) an output
+    /// depends on directly (`Simulation::export_dependencies`).
+    pub dependencies: Vec<Vec<usize>>,
 }
 
 /// The `modelDescription.xml` of `spec` exported with `variables` (value
@@ -42,7 +45,7 @@ pub fn model_description(
     );
     let _ = writeln!(
         x,
-        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="false" maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true" maxOutputDerivativeOrder="0" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
         escape(name),
         yes(capabilities.state),
         yes(capabilities.state),
@@ -85,7 +88,7 @@ pub fn model_description(
     }
     let _ = writeln!(x, "  </ModelVariables>");
     let _ = writeln!(x, "  <ModelStructure>");
-    let structure = structure(variables);
+    let structure = structure(variables, &capabilities.dependencies);
     if !structure.is_empty() {
         let index = |list: &[usize]| {
             list.iter()
@@ -231,7 +234,7 @@ pub fn model_description_fmi3(
             .collect::<Vec<_>>()
             .join(" ")
     };
-    let structure = structure(variables);
+    let structure = structure(variables, &capabilities.dependencies);
     for o in &structure {
         let _ = writeln!(
             x,
@@ -263,23 +266,35 @@ pub struct OutputDependencies {
     pub initial: Vec<usize>,
 }
 
-/// The `ModelStructure` of both FMI versions. An output is read at the
-/// current point of the system; an input set now acts from the next step
-/// on: no output depends directly on an input. At initialization an output
-/// depends on the parameters.
-pub fn structure(variables: &[ExportVariable]) -> Vec<OutputDependencies> {
+/// The `ModelStructure` of both FMI versions. An output depends directly on
+/// the inputs that reach it through the members' feedthrough, the signal
+/// connections and the coupling (`dependencies`, from
+/// `Simulation::export_dependencies`); at initialization also on the
+/// parameters. Ascending, without repeats.
+pub fn structure(
+    variables: &[ExportVariable],
+    dependencies: &[Vec<usize>],
+) -> Vec<OutputDependencies> {
     let of_kind = |kind: ExportKind| {
         (0..variables.len())
             .filter(|&i| variables[i].kind == kind)
             .collect::<Vec<_>>()
     };
+    let sorted = |mut indices: Vec<usize>| {
+        indices.sort_unstable();
+        indices.dedup();
+        indices
+    };
     let parameters = of_kind(ExportKind::Parameter);
     of_kind(ExportKind::Output)
         .into_iter()
-        .map(|output| OutputDependencies {
-            output,
-            stepping: Vec::new(),
-            initial: parameters.clone(),
+        .map(|output| {
+            let inputs = dependencies.get(output).cloned().unwrap_or_default();
+            OutputDependencies {
+                output,
+                stepping: sorted(inputs.clone()),
+                initial: sorted([parameters.clone(), inputs].concat()),
+            }
         })
         .collect()
 }

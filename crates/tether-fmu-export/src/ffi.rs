@@ -638,18 +638,22 @@ pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
     c: C,
-    _vr: *const Vr,
-    _n: usize,
-    _order: *const c_int,
-    _v: *const f64,
+    vr: *const Vr,
+    n: usize,
+    order: *const c_int,
+    v: *const f64,
 ) -> St {
-    // SAFETY: see unsupported.
+    // SAFETY: the FMI contract: n value references, orders and values.
+    let (vr, order, v) = unsafe { (slice(vr, n), slice(order, n), slice(v, n)) };
+    // SAFETY: the FMI contract (see `with`).
     unsafe {
-        unsupported(
-            c,
-            Call::SetRealInputDerivatives,
-            "canInterpolateInputs is false: inputs are held over a step",
-        )
+        with(c, Call::SetRealInputDerivatives, |e| {
+            e.set_input_derivatives(
+                vr.ok_or_else(|| null("vr"))?,
+                order.ok_or_else(|| null("order"))?,
+                v.ok_or_else(|| null("value"))?,
+            )
+        })
     }
 }
 #[unsafe(no_mangle)]

@@ -77,15 +77,11 @@ pub fn package(
             "system file {source}: no [export] table: it declares the exported FMU's model_name and variables (docs/fmu-export.md)"
         ));
     };
-    if spec.step_control.is_some() {
-        return Err(format!(
-            "system file {source}: [step_control]: systems with adaptive steps are not exported (fixed macro steps only)"
-        ));
-    }
     // Resolve the interface against the FMUs, as the FMU's binary will.
     let sim = Simulation::new(&spec).map_err(|e| e.to_string())?;
     let variables = sim.export_interface(&spec).map_err(|e| e.to_string())?;
     let state = sim.can_save_state();
+    let dependencies = sim.export_dependencies(&variables);
     drop(sim);
     // Isolated members run in the host program, which travels in resources/.
     let isolated = spec
@@ -132,7 +128,10 @@ pub fn package(
     }
     spec.source = None;
     let text = toml::to_string(&spec).map_err(|e| format!("cannot write the system file: {e}"))?;
-    let capabilities = Capabilities { state };
+    let capabilities = Capabilities {
+        state,
+        dependencies,
+    };
     let xml = match fmi {
         FmiVersion::Fmi2 => model_description(&spec, &text, &variables, &capabilities),
         FmiVersion::Fmi3 => model_description_fmi3(&spec, &text, &variables, &capabilities),

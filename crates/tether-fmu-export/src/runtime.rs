@@ -9,6 +9,7 @@ use tether_fmi::remote::{set_host, HostCommand, HOST_NAME};
 use tether_fmu_kit::instance::{Failure, Outcome};
 use tether_fmu_kit::machine::MachineState;
 use tether_fmu_kit::xml::fnv1a64;
+use tether_fmu_kit::InputJet;
 use tether_master::spec::Isolation;
 use tether_master::{
     ExportKind, ExportVariable, Parallel, Simulation, StartValue, SystemSpec, SystemState,
@@ -21,6 +22,7 @@ use crate::SYSTEM_FILE;
 pub struct Saved {
     system: SystemState,
     values: Vec<f64>,
+    inputs: Inputs,
     /// Its bytes, once `fmi2SerializedFMUstateSize` has made them.
     bytes: Vec<u8>,
 }
@@ -28,8 +30,24 @@ pub struct Saved {
 /// The first bytes of a serialized state of an exported FMU, and the
 /// format's version (docs/fmu-export.md).
 const MAGIC: &[u8; 16] = b"tether-fmu-state";
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 const CHECKSUM_BASIS: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// The highest order of `fmi2SetRealInputDerivatives`: inputs are
+/// interpolated by polynomials of degree ≤ 2 (the FMU kit's [`InputJet`]).
+pub const MAX_INPUT_ORDER: i32 = 2;
+
+/// The exported inputs between steps: their derivatives for the coming
+/// step, and the values the current point was computed with.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Inputs {
+    /// Per exported variable, the first and second time derivative given by
+    /// `fmi2SetRealInputDerivatives` for the coming step (zero otherwise).
+    derivatives: Vec<[f64; 2]>,
+    /// Per exported variable, the value it had when the current point was
+    /// computed (for an interpolated input: its polynomial at that time).
+    at_point: Vec<f64>,
+}
 
 pub struct Exported {
     spec: SystemSpec,
@@ -38,6 +56,13 @@ pub struct Exported {
     variables: Vec<ExportVariable>,
     /// The exported parameters' and inputs' values (outputs: unused).
     values: Vec<f64>,
+    /// Per exported variable, the exported inputs an output depends on
+    /// directly (`Simulation::export_dependencies`).
+    dependencies: Vec<Vec<usize>>,
+    inputs: Inputs,
+    /// The current point's values solved again for the inputs set since it
+    /// was computed, and those inputs' values ([`Simulation::consistent_values`]).
+    resolved: Option<(Vec<f64>, Vec<f64>)>,
     /// `fmi2SetupExperiment`'s start and stop time.
     start: f64,
     stop: Option<f64>,
@@ -138,11 +163,6 @@ impl Exported {
             ));
         }
         let mut spec = SystemSpec::from_file(&file).map_err(|e| e.to_string())?;
-        if spec.step_control.is_some() {
-            return Err(
-                "systems with [step_control] are not exported (fixed macro steps only)".into(),
-            );
-        }
         // Inner perturbed runs stay on the importer's thread unless the
         // system file asks for threads.
         if spec.coupling.parallel == Parallel::Auto {
@@ -152,14 +172,22 @@ impl Exported {
         let sim = Simulation::new(&spec).map_err(|e| e.to_string())?;
         let variables = sim.export_interface(&spec).map_err(|e| e.to_string())?;
         let can_save = sim.can_save_state();
+        let dependencies = sim.export_dependencies(&variables);
         drop(sim);
-        let values = variables.iter().map(|v| v.start.unwrap_or(0.0)).collect();
+        let values: Vec<f64> = variables.iter().map(|v| v.start.unwrap_or(0.0)).collect();
+        let inputs = Inputs {
+            derivatives: vec![[0.0; 2]; values.len()],
+            at_point: values.clone(),
+        };
         let start = spec.experiment.start;
         Ok(Exported {
             spec,
             guid: guid.to_string(),
             variables,
             values,
+            dependencies,
+            inputs,
+            resolved: None,
             start,
             stop: None,
             sim: None,
@@ -209,6 +237,8 @@ impl Exported {
             }
             let sim = Simulation::new(&spec).map_err(|e| Failure::model(e.to_string()))?;
             self.sim = Some(sim);
+            self.inputs.at_point.clone_from(&self.values);
+            self.resolved = None;
         }
         Ok(self.sim.as_mut().expect("built above"))
     }
@@ -219,6 +249,8 @@ impl Exported {
 
     pub fn reset(&mut self) {
         self.sim = None;
+        self.resolved = None;
+        self.inputs.derivatives.fill([0.0; 2]);
         self.values = self
             .variables
             .iter()
@@ -241,9 +273,70 @@ impl Exported {
         for (&vr, value) in vrs.iter().zip(values.iter_mut()) {
             let v = self.variable(vr)?;
             *value = match v.column {
+                Some(column) if self.changed_input(vr as usize) => self.resolved()?[column],
                 Some(column) => self.simulation()?.values()[column],
                 None => self.values[vr as usize],
             };
+        }
+        Ok(())
+    }
+
+    /// Whether an input that output `vr` depends on directly has been set
+    /// to another value than the current point was computed with.
+    fn changed_input(&self, vr: usize) -> bool {
+        let at_point = &self.inputs.at_point;
+        self.dependencies[vr]
+            .iter()
+            .any(|&i| self.values[i].to_bits() != at_point[i].to_bits())
+    }
+
+    /// The current point's values with the multipliers solved again for the
+    /// inputs as they are set now (once per set of input values): no step,
+    /// and the next step starts from the same point.
+    fn resolved(&mut self) -> Outcome<&[f64]> {
+        let fresh = matches!(&self.resolved, Some((values, _)) if *values == self.values);
+        if !fresh {
+            let row = self
+                .simulation()?
+                .consistent_values()
+                .map_err(|e| Failure::model(e.to_string()))?;
+            self.resolved = Some((self.values.clone(), row));
+        }
+        Ok(&self.resolved.as_ref().expect("solved above").1)
+    }
+
+    /// `fmi2SetRealInputDerivatives`: the derivatives of order 1 or 2 of
+    /// inputs at the current time, for the coming `fmi2DoStep` (FMI 2.0:
+    /// the input is then u(t) + u'(t)·(τ − t) + u''(t)·(τ − t)²/2 over the
+    /// step). They hold for one step.
+    pub fn set_input_derivatives(
+        &mut self,
+        vrs: &[u32],
+        orders: &[i32],
+        values: &[f64],
+    ) -> Outcome {
+        for ((&vr, &order), &value) in vrs.iter().zip(orders).zip(values) {
+            let v = self.variable(vr)?;
+            if v.kind != ExportKind::Input {
+                return Err(Failure::usage(format!(
+                    "{} is not an input: only inputs take derivatives",
+                    v.name
+                )));
+            }
+            if !(1..=MAX_INPUT_ORDER).contains(&order) {
+                return Err(Failure::usage(format!(
+                    "{}: derivative of order {order}; inputs are interpolated with derivatives \
+                     of order 1 to {MAX_INPUT_ORDER}",
+                    v.name
+                )));
+            }
+            if !value.is_finite() {
+                return Err(Failure::usage(format!(
+                    "{}: derivative of order {order} = {value}: not a finite number",
+                    v.name
+                )));
+            }
+            self.inputs.derivatives[vr as usize][order as usize - 1] = value;
         }
         Ok(())
     }
@@ -271,53 +364,136 @@ impl Exported {
                         v.name
                     )))
                 }
-                // Before the first step an input is a start value of the
-                // run: built again with it, the run is `tether run`'s with
-                // that value (consistent multipliers included).
-                (ExportKind::Input, true) if self.time() == Some(self.start) => self.sim = None,
-                (ExportKind::Input, true) => {
-                    let sim = self.simulation()?;
-                    sim.set_parameter(&v.target, &StartValue::Real(value))
-                        .map_err(|e| Failure::usage(e.to_string()))?;
+                // An input sets the member's input at once: a dependent
+                // output read now is solved again with it. Before the first
+                // step it is also a start value of the run: the first
+                // fmi2DoStep builds the system again with it, so the run is
+                // `tether run`'s with that value (consistent multipliers
+                // included).
+                (ExportKind::Input, _) => {
+                    if let Some(sim) = self.sim.as_mut() {
+                        sim.set_parameter(&v.target, &StartValue::Real(value))
+                            .map_err(|e| Failure::usage(e.to_string()))?;
+                    }
                 }
                 // Before the run: taken when the simulation is built.
-                (_, false) => self.sim = None,
+                (ExportKind::Parameter, false) => self.sim = None,
             }
             self.values[vr as usize] = value;
         }
         Ok(())
     }
 
-    /// `fmi2DoStep(t, h)`: the macro steps over [t, t + h]; h must be a
-    /// whole multiple of the system's step H (within 1e-9·H) and t the
-    /// current time.
+    /// `fmi2DoStep(t, h)`: the macro steps over [t, t + h], t the current
+    /// time. On the fixed grid h must be a whole multiple of the system's
+    /// step H (within 1e-9·H); with `[step_control]` any h > 0, the last
+    /// inner step ending at t + h. Inputs with derivatives are set at each
+    /// inner step's start τ to their polynomial there (with its derivatives,
+    /// for a member that interpolates); other inputs are held.
     pub fn do_step(&mut self, t: f64, h: f64) -> Outcome {
         let step = self.spec.experiment.step;
+        let adaptive = self.spec.step_control.is_some();
+        let jets = self.jets();
+        if self.time() == Some(self.start) && self.inputs.at_point != self.values {
+            self.sim = None;
+        }
         let sim = self.simulation()?;
         let now = sim.time();
-        if (t - now).abs() > 1e-9 * step {
+        if (t - now).abs() > 1e-9 * step.max(h.abs()) {
             return Err(Failure::usage(format!(
                 "communication point {t} is not the FMU's time {now}"
             )));
         }
-        let n = (h / step).round();
-        if !(n >= 1.0 && (h - n * step).abs() <= 1e-9 * step) {
-            return Err(Failure::usage(format!(
-                "communication step {h} is not a whole multiple of the system's macro step {step} \
-                 (within 1e-9 of a step)"
-            )));
-        }
-        for _ in 0..n as u64 {
-            if sim.finished() {
+        let beyond = |sim: &Simulation| {
+            Failure::usage(format!(
+                "step to {} goes beyond the stop time (the run ends at {})",
+                t + h,
+                sim.time()
+            ))
+        };
+        let set_inputs = |sim: &mut Simulation| -> Outcome {
+            for (target, jet) in &jets {
+                let at = jet.shifted(sim.time() - now);
+                let derivatives = [at.d1, at.d2];
+                let order = if at.d2 == 0.0 { 1 } else { 2 };
+                sim.set_input(target, at.value, &derivatives[..order])
+                    .map_err(|e| Failure::usage(e.to_string()))?;
+            }
+            Ok(())
+        };
+        let model = |e: tether_master::MasterError| Failure::model(e.to_string());
+        if adaptive {
+            if !(h.is_finite() && h > 0.0) {
                 return Err(Failure::usage(format!(
-                    "step to {} goes beyond the stop time (the run ends at {})",
-                    t + h,
-                    sim.time()
+                    "communication step {h}: expected a positive step"
                 )));
             }
-            sim.step().map_err(|e| Failure::model(e.to_string()))?;
+            let end = now + h;
+            while end - sim.time() > 1e-9 * h {
+                if sim.finished() {
+                    return Err(beyond(sim));
+                }
+                set_inputs(sim)?;
+                sim.step_until(end).map_err(model)?;
+            }
+        } else {
+            let n = (h / step).round();
+            if !(n >= 1.0 && (h - n * step).abs() <= 1e-9 * step) {
+                return Err(Failure::usage(format!(
+                    "communication step {h} is not a whole multiple of the system's macro step {step} \
+                     (within 1e-9 of a step)"
+                )));
+            }
+            for _ in 0..n as u64 {
+                if sim.finished() {
+                    return Err(beyond(sim));
+                }
+                set_inputs(sim)?;
+                sim.step().map_err(model)?;
+            }
         }
+        // Each interpolated input is now its polynomial's value at the point
+        // reached, which the outputs there were computed with; it is held
+        // from here on (until the importer sets it), its derivatives cleared.
+        let end = sim.time();
+        for (target, jet) in &jets {
+            sim.set_input(target, jet.eval(end - now), &[])
+                .map_err(|e| Failure::usage(e.to_string()))?;
+        }
+        for (i, d) in self.inputs.derivatives.iter_mut().enumerate() {
+            if *d != [0.0; 2] {
+                let jet = InputJet {
+                    value: self.values[i],
+                    d1: d[0],
+                    d2: d[1],
+                };
+                self.values[i] = jet.eval(end - now);
+                *d = [0.0; 2];
+            }
+        }
+        self.inputs.at_point.clone_from(&self.values);
+        self.resolved = None;
         Ok(())
+    }
+
+    /// The inputs with derivatives for the coming step: each one's target and
+    /// polynomial at the current time. Empty when no input has any (held).
+    fn jets(&self) -> Vec<(String, InputJet)> {
+        (self
+            .variables
+            .iter()
+            .zip(&self.values)
+            .zip(&self.inputs.derivatives))
+        .filter(|((v, _), d)| v.kind == ExportKind::Input && **d != [0.0; 2])
+        .map(|((v, &value), d)| {
+            let jet = InputJet {
+                value,
+                d1: d[0],
+                d2: d[1],
+            };
+            (v.target.clone(), jet)
+        })
+        .collect()
     }
 
     pub fn time(&self) -> Option<f64> {
@@ -347,6 +523,7 @@ impl Exported {
     pub fn get_state(&mut self) -> Outcome<Saved> {
         self.require_state()?;
         let values = self.values.clone();
+        let inputs = self.inputs.clone();
         let system = self
             .simulation()?
             .save_state()
@@ -354,6 +531,7 @@ impl Exported {
         Ok(Saved {
             system,
             values,
+            inputs,
             bytes: Vec::new(),
         })
     }
@@ -364,6 +542,8 @@ impl Exported {
             .restore_state(&saved.system)
             .map_err(|e| Failure::model(e.to_string()))?;
         self.values.clone_from(&saved.values);
+        self.inputs.clone_from(&saved.inputs);
+        self.resolved = None;
         Ok(())
     }
 
@@ -376,6 +556,8 @@ impl Exported {
         if saved.bytes.is_empty() {
             let mut out = Out(MAGIC.to_vec());
             out.u32(VERSION).str(&self.guid).f64s(&saved.values);
+            out.f64s(saved.inputs.derivatives.as_flattened())
+                .f64s(&saved.inputs.at_point);
             saved.system.write(&mut out).map_err(Failure::usage)?;
             let checksum = fnv1a64(&out.0, CHECKSUM_BASIS);
             out.u64(checksum);
@@ -429,6 +611,17 @@ impl Exported {
                 self.values.len()
             )));
         }
+        let mut derivatives = Vec::new();
+        input.f64s(&mut derivatives).map_err(short)?;
+        let mut at_point = Vec::new();
+        input.f64s(&mut at_point).map_err(short)?;
+        if derivatives.len() != 2 * values.len() || at_point.len() != values.len() {
+            return Err(refuse("the exported inputs' sizes differ".into()));
+        }
+        let inputs = Inputs {
+            derivatives: derivatives.chunks(2).map(|d| [d[0], d[1]]).collect(),
+            at_point,
+        };
         let system = self.simulation()?.read_state(&mut input).map_err(refuse)?;
         if !input.is_empty() {
             return Err(refuse("bytes are left after the state".into()));
@@ -436,6 +629,7 @@ impl Exported {
         Ok(Saved {
             system,
             values,
+            inputs,
             bytes: Vec::new(),
         })
     }

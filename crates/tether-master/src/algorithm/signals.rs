@@ -290,6 +290,13 @@ impl Signals {
         self.save = true;
     }
 
+    /// Each connection as (sender instance, output, receiver instance, input).
+    pub fn links(&self) -> impl Iterator<Item = (usize, u32, usize, u32)> + '_ {
+        self.links
+            .iter()
+            .map(|l| (l.from, l.from_vr, l.to, l.to_vr))
+    }
+
     /// Whether the connections make a direct-feedthrough loop.
     pub fn has_loops(&self) -> bool {
         !self.loops.is_empty()
@@ -871,7 +878,7 @@ fn resolve(
 /// Whether output `output` of instance `slave` depends directly on input
 /// `input` (ModelStructure/Outputs; an output listed without dependencies
 /// depends on every input).
-fn feeds_through(slave: &Slave, input: u32, output: u32) -> bool {
+pub(crate) fn feeds_through(slave: &Slave, input: u32, output: u32) -> bool {
     let md = slave.fmu.model_description();
     let variable = |vr: u32, causality: Causality| {
         md.model_variables

@@ -89,6 +89,27 @@ impl Feedthrough {
         self.hold_inputs(system)
     }
 
+    /// Every unknown solved on `level` = 0 with two Newton steps (exact
+    /// after one for linear feedthrough), then set as constant inputs: the
+    /// consistent multipliers at an accepted point after an input changed
+    /// ([`Simulation::consistent_values`](crate::Simulation::consistent_values)).
+    pub fn solve_all(
+        &mut self,
+        system: &mut System,
+        level: RowLevel,
+        time: f64,
+        stats: &mut RunStats,
+    ) -> Result<(), MasterError> {
+        self.unknowns.clear();
+        self.unknowns.extend(0..system.coupling.len());
+        if !self.unknowns.is_empty() {
+            for _ in 0..2 {
+                self.newton(system, level, time, stats)?;
+            }
+        }
+        self.hold_inputs(system)
+    }
+
     /// One Newton step for every unknown on `level` = 0, then the unknowns
     /// set as constant inputs (the explicit method's update at T_{N+1}).
     pub fn update_all(

@@ -5,6 +5,7 @@
 use tether_fmi::{Causality, Variability};
 
 use super::Simulation;
+use crate::algorithm::signals::feeds_through;
 use crate::spec::names::{describe, find_instance, fmu_file, suggest, variable};
 use crate::MasterError;
 
@@ -156,6 +157,115 @@ impl Simulation {
         Ok(variables)
     }
 
+    /// Per exported variable (value-reference order), the exported inputs an
+    /// output depends on directly (indices into `variables`; empty for the
+    /// parameters and inputs): an input set now changes the output at the
+    /// current point, before any step. Derived from the member FMUs'
+    /// ModelStructure (an output listed without dependencies, or not listed,
+    /// depends on every input), the signal connections and the coupling,
+    /// conservatively: once an input reaches an output the coupling reads,
+    /// every coupling unknown (multiplier, coupling variable, force port)
+    /// and every coupled input depend on it, and so does every column of
+    /// the coupling (`.lambda`, residuals).
+    pub fn export_dependencies(&self, variables: &[ExportVariable]) -> Vec<Vec<usize>> {
+        let reached: Vec<Option<Reached>> = variables
+            .iter()
+            .map(|v| (v.kind == ExportKind::Input).then(|| self.reached_from(&v.target)))
+            .collect();
+        variables
+            .iter()
+            .map(|v| {
+                if v.kind != ExportKind::Output {
+                    return Vec::new();
+                }
+                (0..variables.len())
+                    .filter(|&i| {
+                        reached[i]
+                            .as_ref()
+                            .is_some_and(|r| self.column_reached(r, &v.target))
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// What an input `instance.variable` changes directly: per instance, the
+    /// inputs and outputs reached, and whether the coupling is.
+    fn reached_from(&self, target: &str) -> Reached {
+        let slaves = &self.system.slaves;
+        let mut r = Reached {
+            inputs: vec![Vec::new(); slaves.len()],
+            outputs: vec![Vec::new(); slaves.len()],
+            coupling: false,
+        };
+        let (instance, var) = target.split_once('.').unwrap_or_default();
+        let Some(s) = slaves.iter().position(|s| s.name == instance) else {
+            return r;
+        };
+        let Ok(v) = slaves[s].fmu.model_description().variable(var) else {
+            return r;
+        };
+        r.inputs[s].push(v.value_reference);
+        let links: Vec<_> = self.signals.links().collect();
+        loop {
+            let mut changed = false;
+            for (s, slave) in slaves.iter().enumerate() {
+                let md = slave.fmu.model_description();
+                let outputs = md
+                    .model_variables
+                    .iter()
+                    .filter(|v| v.causality == tether_fmi::Causality::Output);
+                for o in outputs.map(|v| v.value_reference) {
+                    if r.outputs[s].contains(&o)
+                        || !r.inputs[s].iter().any(|&i| feeds_through(slave, i, o))
+                    {
+                        continue;
+                    }
+                    r.outputs[s].push(o);
+                    changed = true;
+                    if slave.coupled_outputs.iter().any(|c| c.vr == o) {
+                        r.coupling = true;
+                    }
+                    for &(_, _, to, to_vr) in links.iter().filter(|l| (l.0, l.1) == (s, o)) {
+                        if !r.inputs[to].contains(&to_vr) {
+                            r.inputs[to].push(to_vr);
+                        }
+                    }
+                }
+                if r.coupling {
+                    for c in &slave.inputs {
+                        if !r.inputs[s].contains(&c.vr) {
+                            r.inputs[s].push(c.vr);
+                            changed = true;
+                        }
+                    }
+                }
+            }
+            if !changed {
+                return r;
+            }
+        }
+    }
+
+    /// Whether column `column` is among what `r` reached.
+    fn column_reached(&self, r: &Reached, column: &str) -> bool {
+        let slaves = &self.system.slaves;
+        let owner = slaves
+            .iter()
+            .position(|s| s.recorded_names.iter().any(|n| n == column));
+        match owner {
+            Some(s) => {
+                let var = &column[slaves[s].name.len() + 1..];
+                let md = slaves[s].fmu.model_description();
+                md.variable(var)
+                    .is_ok_and(|v| r.outputs[s].contains(&v.value_reference))
+            }
+            // A column of the coupling: a multiplier, a coupling variable, a
+            // residual.
+            None => r.coupling,
+        }
+    }
+
     /// The unit and description of an instance output column.
     fn column_unit(&self, column: &str) -> (Option<String>, Option<String>) {
         let Some((instance, var)) = column.split_once('.') else {
@@ -181,4 +291,14 @@ impl Simulation {
             cs.can_get_and_set_fmu_state && cs.can_serialize_fmu_state
         })
     }
+}
+
+/// What an exported input changes directly ([`Simulation::export_dependencies`]).
+struct Reached {
+    /// Per instance, the inputs (value references) it changes.
+    inputs: Vec<Vec<u32>>,
+    /// Per instance, the outputs that change with them.
+    outputs: Vec<Vec<u32>>,
+    /// Whether an output the coupling reads changes: then every unknown does.
+    coupling: bool,
 }

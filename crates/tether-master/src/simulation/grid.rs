@@ -169,6 +169,7 @@ impl Grid {
     /// smaller while the error norm exceeds 1. Returns the step taken.
     pub(crate) fn advance(
         &mut self,
+        limit: Option<f64>,
         mut try_step: impl FnMut(StepAt) -> Result<Option<f64>, MasterError>,
     ) -> Result<StepAt, MasterError> {
         let at = match &mut self.kind {
@@ -186,7 +187,7 @@ impl Grid {
             }
             Kind::Adaptive(a) => {
                 let degree = Degree::at(self.n, self.order);
-                a.advance((self.n, degree), self.start, &mut try_step)?
+                a.advance((self.n, degree), self.start, limit, &mut try_step)?
             }
         };
         self.n += 1;
@@ -199,11 +200,12 @@ impl Adaptive {
         &mut self,
         (n, degree): (u64, Degree),
         start: f64,
+        limit: Option<f64>,
         try_step: &mut impl FnMut(StepAt) -> Result<Option<f64>, MasterError>,
     ) -> Result<StepAt, MasterError> {
         // The point the step must not pass: the next output point (a point
         // within 1e-9 intervals of the stop time is the stop time).
-        let target = match self.output {
+        let point = match self.output {
             Some(dt) => {
                 let point = start + self.next_output as f64 * dt;
                 if point >= self.stop - 1e-9 * dt {
@@ -213,6 +215,13 @@ impl Adaptive {
                 }
             }
             None => self.stop,
+        };
+        // A limit before the next output point (or the stop) ends the step
+        // there instead; one within 1e-9 of the remaining span of the point
+        // is the point.
+        let (target, on_point) = match limit {
+            Some(l) if l < point - 1e-9 * (point - self.t) => (l, false),
+            _ => (point, true),
         };
         loop {
             let remaining = target - self.t;
@@ -247,7 +256,7 @@ impl Adaptive {
                 } else {
                     next
                 };
-                self.on_output = clipped && self.output.is_some();
+                self.on_output = clipped && on_point && self.output.is_some();
                 if self.on_output {
                     self.next_output += 1;
                 }

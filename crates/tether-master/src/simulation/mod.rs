@@ -58,6 +58,9 @@ pub struct Simulation {
     /// the rollback self-check repeated every [`RECHECK_EVERY`] accepted macro
     /// steps and after every rejected step.
     recheck: Option<f64>,
+    /// The level the multipliers are consistent on at a point (g̈ = 0, or
+    /// the explicit method's stabilised condition).
+    level: RowLevel,
 }
 
 /// With `check_rollback = "periodic"` (the default), the rollback self-check
@@ -256,6 +259,7 @@ impl Simulation {
                     CheckRollback::Periodic | CheckRollback::EveryStep
                 ))
             .then_some(exp.step),
+            level: initial_level,
         })
     }
 
@@ -379,6 +383,19 @@ impl Simulation {
     /// Advance one macro step with the configured method (with adaptive
     /// steps: one accepted step, after as many rejected tries as it takes).
     pub fn step(&mut self) -> Result<(), MasterError> {
+        self.step_limited(None)
+    }
+
+    /// [`step`](Self::step), and with adaptive steps (`[step_control]`) the
+    /// step ends at `limit` when that comes before the next point of the
+    /// output grid (within 1e-9 of the remaining span, it is that point):
+    /// an importer's communication points are reached exactly. On the
+    /// uniform grid the same as `step`.
+    pub fn step_until(&mut self, limit: f64) -> Result<(), MasterError> {
+        self.step_limited(Some(limit))
+    }
+
+    fn step_limited(&mut self, limit: Option<f64>) -> Result<(), MasterError> {
         let n = self.stats.macro_steps;
         if let Some(h) = self
             .recheck
@@ -394,7 +411,7 @@ impl Simulation {
         let (signals, method, system) = (&mut self.signals, &mut self.method, &mut self.system);
         let stats = &mut self.stats;
         let recheck = self.recheck.is_some();
-        let stepped = self.grid.advance(|at| {
+        let stepped = self.grid.advance(limit, |at| {
             let error = step_at(
                 (&mut *signals, &mut *method, &mut *system),
                 at,

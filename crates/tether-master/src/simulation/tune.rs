@@ -1,9 +1,11 @@
 //! Between macro steps: read a recorded value by name, and set an input or
 //! a tunable parameter of an instance (what FMI 2.0 allows in step mode).
 
-use tether_fmi::BaseType;
+use tether_fmi::{BaseType, Inputs};
 
 use super::Simulation;
+use crate::build::feedthrough::Feedthrough;
+use crate::slave::Run;
 use crate::spec::names::find_instance;
 use crate::spec::StartValue;
 use crate::start::set_between_steps;
@@ -57,5 +59,74 @@ impl Simulation {
             slave.counters.set_reals += 1;
         }
         Ok(())
+    }
+
+    /// [`set_parameter`](Self::set_parameter) of a Real input with its time
+    /// derivatives at the current point (`derivatives[k]` of order k + 1):
+    /// an instance that declares `canInterpolateInputs` takes them through
+    /// `fmi2SetRealInputDerivatives` and sees the polynomial over the next
+    /// step; another one holds the value.
+    pub fn set_input(
+        &mut self,
+        target: &str,
+        value: f64,
+        derivatives: &[f64],
+    ) -> Result<(), MasterError> {
+        self.set_parameter(target, &StartValue::Real(value))?;
+        let (instance, variable) = target.split_once('.').unwrap_or_default();
+        let Some(slave) = self.system.slaves.iter_mut().find(|s| s.name == instance) else {
+            return Ok(());
+        };
+        if derivatives.is_empty() || !slave.can_interpolate_inputs {
+            return Ok(());
+        }
+        let Ok(var) = slave.fmu.model_description().variable(variable) else {
+            return Ok(());
+        };
+        let vr = var.value_reference;
+        let orders: Vec<i32> = (1..=derivatives.len() as i32).collect();
+        slave.backend.set_inputs(&Inputs {
+            vrs: &[vr],
+            values: &[value],
+            derivative_vrs: &vec![vr; derivatives.len()],
+            orders: &orders,
+            derivatives,
+        })?;
+        slave.counters.set_input_derivatives += 1;
+        Ok(())
+    }
+
+    /// The values of the current point (as [`values`](Self::values)) with
+    /// the multipliers solved again for the inputs as they are set now: the
+    /// consistent multipliers (g̈ = 0, or the explicit method's condition)
+    /// at the current time (at the start time, those the system file asks to
+    /// be consistent), the signal connections settled around them, the
+    /// outputs read back. No step is taken and the point the next step starts
+    /// from is kept: the master's own state is restored afterwards and the
+    /// instances only had their coupled inputs set, which every step sets
+    /// again. For an exported FMU whose outputs depend directly on its
+    /// inputs (docs/fmu-export.md).
+    pub fn consistent_values(&mut self) -> Result<Vec<f64>, MasterError> {
+        let saved = self.save_master();
+        let time = self.time();
+        let mut stats = crate::stats::RunStats::default();
+        let solved = (|| {
+            let system = &mut self.system;
+            self.signals.initialize(&mut system.slaves)?;
+            let mut feedthrough = Feedthrough::new(system);
+            if self.grid.n() == 0 {
+                // At the start, as the run began: the multipliers the system
+                // file gives stay, "consistent" ones are solved.
+                feedthrough.initial(system, self.level, time, &mut stats)?;
+            } else {
+                feedthrough.solve_all(system, self.level, time, &mut stats)?;
+            }
+            self.signals.initialize(&mut system.slaves)?;
+            system.read_accepted(Run::Feedthrough)?;
+            self.row.fill(system);
+            Ok(self.row.values().to_vec())
+        })();
+        self.restore_master(&saved);
+        solved
     }
 }

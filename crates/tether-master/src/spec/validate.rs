@@ -146,7 +146,10 @@ impl SystemSpec {
         }
         self.validate_signals()?;
         self.method.validate()?;
-        self.output.every(e.step)?;
+        // Adaptive steps land on any output grid (docs/system-file.md).
+        if self.step_control.is_none() {
+            self.output.every(e.step)?;
+        }
         let c = &self.coupling;
         if c.order > 2 {
             return Err(param(
