@@ -33,7 +33,8 @@ pub struct Args {
     /// Tolerance for fmi2SetupExperiment (default: DefaultExperiment tolerance, if any).
     #[arg(long, allow_hyphen_values = true)]
     tolerance: Option<f64>,
-    /// Start value of a parameter or input, repeatable: --set m=2 --set exact=true.
+    /// Start value of a parameter or input, repeatable: --set m=2 --set exact=true;
+    /// an array element --set 'A[2,3]=1.5', a whole array --set 'x0=[1, 0]'.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
     /// Output CSV file (default: <modelIdentifier>.csv).
@@ -54,7 +55,6 @@ pub fn main(args: Args) -> Result<()> {
             x.end()
         );
     }
-    let outputs = SingleOutputs::all(md)?;
     let mut start_values = Vec::with_capacity(args.set.len());
     for assignment in &args.set {
         let (var, value) = assignment
@@ -63,6 +63,7 @@ pub fn main(args: Args) -> Result<()> {
         start_values.push((var.trim().to_string(), StartValue::parse_cli(value.trim())));
     }
     let mut single = SingleFmu::new(&fmu, &start_values, x)?;
+    let outputs = SingleOutputs::all(md, single.arrays())?;
     let name = single.name().to_string();
 
     let out = args

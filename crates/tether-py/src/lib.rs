@@ -66,6 +66,7 @@ fn kind_of(e: &MasterError) -> &'static str {
         | MasterError::MissingPort { .. }
         | MasterError::Joint { .. }
         | MasterError::WrongVariable { .. }
+        | MasterError::ArrayElement { .. }
         | MasterError::MissingLevel { .. }
         | MasterError::StartValue { .. }
         | MasterError::DrivesCancel { .. }
@@ -1066,8 +1067,8 @@ fn simulate_one(
     let fmu = Fmu::open(path)?;
     let md = fmu.model_description();
     let experiment = SingleExperiment::new(md, start, stop, step, tolerance)?;
-    let outputs = SingleOutputs::all(md)?;
     let mut single = SingleFmu::new(&fmu, parameters, experiment)?;
+    let outputs = SingleOutputs::all(md, single.arrays())?;
     let mut rows = Rows {
         columns: Vec::new(),
         bytes: Vec::with_capacity(
