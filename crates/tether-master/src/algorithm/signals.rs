@@ -797,14 +797,25 @@ fn resolve(
         let (instance, variable) = split(&name, text)?;
         let s = find_instance(&owner, instance, names.clone())?;
         let slave = &slaves[s];
-        let var = crate::spec::names::variable(
-            slave.fmu.model_description(),
-            &format!("{owner}, {role}"),
+        let place = format!("{owner}, {role}");
+        let md = slave.fmu.model_description();
+        let (var, element) = crate::spec::names::element(
+            md,
+            &slave.arrays,
+            &place,
             &slave.name,
             || crate::spec::names::fmu_file(slave.fmu.path()),
             variable,
-        )?
-        .clone();
+        )?;
+        if element.is_some() || var.is_array() {
+            return Err(MasterError::ArrayElement {
+                place,
+                instance: slave.name.clone(),
+                name: variable.to_string(),
+                reason: "a signal connection joins scalar variables; pass an array element with a [[coupling_variable]] (value = the output element, drives = the input element)".into(),
+            });
+        }
+        let var = var.clone();
         let kind = kind_of(&var);
         if var.causality != causality || kind.is_none() {
             return Err(MasterError::WrongVariable {

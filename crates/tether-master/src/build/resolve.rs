@@ -459,8 +459,25 @@ fn check_driven_starts(spec: &SystemSpec, slaves: &[Slave]) -> Result<(), Master
     for (inst, slave) in spec.instances.iter().zip(slaves) {
         for (name, value) in &inst.parameters {
             let md = slave.fmu.model_description();
-            let Ok(var) = md.variable(name) else { continue };
-            if slave.inputs.iter().any(|i| i.vr == var.value_reference) {
+            let named = crate::spec::names::element(
+                md,
+                &slave.arrays,
+                "parameters",
+                &slave.name,
+                String::new,
+                name,
+            );
+            let Ok((var, element)) = named else { continue };
+            // A whole array whose elements are partly driven gives the others
+            // their values; an element or a scalar the coupling drives is refused.
+            let driven = slave.inputs.iter().any(|i| {
+                i.vr == var.value_reference
+                    && match element {
+                        Some(e) => i.element == e.index,
+                        None => !var.is_array(),
+                    }
+            });
+            if driven {
                 return Err(MasterError::StartValue {
                     instance: inst.name.clone(),
                     variable: name.clone(),
