@@ -198,8 +198,13 @@ fn statespace_joined_to_the_oscillator_follows_the_closed_form_of_the_joined_mas
         }
         let fine = errors(&csv);
         let coarse = errors(&run(&joined(method, 2e-3), dir.path()));
-        eprintln!("{method:?}: errors (x, v, λ after 0.1 s, |g|) H = 1e-3 {fine:?}, H = 2e-3 {coarse:?}");
-        assert!(fine[0] < 1e-3 && fine[1] < 3e-3 && fine[2] < 5e-3, "{fine:?}");
+        eprintln!(
+            "{method:?}: errors (x, v, λ after 0.1 s, |g|) H = 1e-3 {fine:?}, H = 2e-3 {coarse:?}"
+        );
+        assert!(
+            fine[0] < 1e-3 && fine[1] < 3e-3 && fine[2] < 5e-3,
+            "{fine:?}"
+        );
         assert!(fine[3] < 1e-5, "constraint residual {}", fine[3]);
         for k in 0..2 {
             assert!(
@@ -244,7 +249,11 @@ fn statespace_with_arrays_set_equals_fmpy() {
         "--out",
         ours.to_str().unwrap(),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let sets = [
         "A=0 1 0 -5 -0.5 0 0 0 -1",
         "B=0 0 0 0.5 0 0 0 0 1",
@@ -265,7 +274,11 @@ fn statespace_with_arrays_set_equals_fmpy() {
         args.push(s.as_ref());
     }
     let out = tether_tests::fmpy::run_script("simulate.py", &args).expect("run fmpy");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let (h1, r1) = read_csv(&std::fs::read_to_string(&ours).unwrap());
     let (h2, r2) = read_csv(&std::fs::read_to_string(&theirs).unwrap());
     assert_eq!(h1, h2);
@@ -280,7 +293,10 @@ fn statespace_with_arrays_set_equals_fmpy() {
     }
     eprintln!("StateSpace with arrays set: max relative deviation tether vs fmpy = {worst:e}");
     assert!(worst <= 1e-12, "deviation {worst:e}");
-    assert!(moved > 0.01, "the force moved the mass: max |y[1]| = {moved}");
+    assert!(
+        moved > 0.01,
+        "the force moved the mass: max |y[1]| = {moved}"
+    );
 }
 
 /// Names that do not fit get one line naming the instance, the name, where it
@@ -295,7 +311,10 @@ fn array_names_that_do_not_fit_are_refused_in_one_line() {
         std::fs::write(&file, base.replace(from, to)).unwrap();
         one_line(&tether(&["run", file.to_str().unwrap(), "--stop", "0.01"]))
     };
-    let line = case(r#"position = "ss.y[1] - mass1.x""#, r#"position = "ss.y[4] - mass1.x""#);
+    let line = case(
+        r#"position = "ss.y[1] - mass1.x""#,
+        r#"position = "ss.y[4] - mass1.x""#,
+    );
     assert!(
         line.contains("constraint 'link', position")
             && line.contains("instance 'ss'")
@@ -303,17 +322,26 @@ fn array_names_that_do_not_fit_are_refused_in_one_line() {
             && line.contains("1..=3"),
         "{line}"
     );
-    let line = case(r#"drives = "mass1.F - ss.u[1]""#, r#"drives = "mass1.F - ss.u[1,1]""#);
+    let line = case(
+        r#"drives = "mass1.F - ss.u[1]""#,
+        r#"drives = "mass1.F - ss.u[1,1]""#,
+    );
     assert!(
         line.contains("drives") && line.contains("'u[1,1]'") && line.contains("1 dimension"),
         "{line}"
     );
-    let line = case(r#"position = "ss.y[1] - mass1.x""#, r#"position = "ss.y[1] - mass1.x[1]""#);
+    let line = case(
+        r#"position = "ss.y[1] - mass1.x""#,
+        r#"position = "ss.y[1] - mass1.x[1]""#,
+    );
     assert!(
         line.contains("instance 'mass1'") && line.contains("'x[1]'") && line.contains("scalar"),
         "{line}"
     );
-    let line = case(r#"position = "ss.y[1] - mass1.x""#, r#"position = "ss.y - mass1.x""#);
+    let line = case(
+        r#"position = "ss.y[1] - mass1.x""#,
+        r#"position = "ss.y - mass1.x""#,
+    );
     assert!(
         line.contains("'y'") && line.contains("it is an array") && line.contains("y[1]"),
         "{line}"
@@ -330,7 +358,10 @@ fn array_names_that_do_not_fit_are_refused_in_one_line() {
         "{line}"
     );
     let line = case(r#""u[3]" = 0.0"#, r#""u[0]" = 0.0"#);
-    assert!(line.contains("'u[0]'") && line.contains("1-based"), "{line}");
+    assert!(
+        line.contains("'u[0]'") && line.contains("1-based"),
+        "{line}"
+    );
     // tether simulate --set: the same checks.
     let fmu = statespace();
     let line = one_line(&tether(&[

@@ -25,7 +25,11 @@ pub struct Arrays {
 
 impl Arrays {
     /// The sizes of `v`'s dimensions (empty for a scalar).
-    pub fn sizes(&self, md: &ModelDescription, v: &ScalarVariable) -> Result<Vec<u64>, MasterError> {
+    pub fn sizes(
+        &self,
+        md: &ModelDescription,
+        v: &ScalarVariable,
+    ) -> Result<Vec<u64>, MasterError> {
         Ok(md.array_sizes_with(v, &|vr| self.structural.get(&vr).copied())?)
     }
 

@@ -507,7 +507,11 @@ impl StartValue {
     /// Read `NAME=VALUE` text from the command line: a boolean, a number, an
     /// array `[1, 2, 3]` (nested or flat, of those) or a string.
     pub fn parse_cli(text: &str) -> StartValue {
-        if let Some(inner) = text.trim().strip_prefix('[').and_then(|t| t.strip_suffix(']')) {
+        if let Some(inner) = text
+            .trim()
+            .strip_prefix('[')
+            .and_then(|t| t.strip_suffix(']'))
+        {
             let parsed: Option<Vec<StartValue>> = split_top(inner)
                 .into_iter()
                 .map(|part| {
