@@ -694,12 +694,21 @@ impl Slave {
     pub(crate) fn coupled_name(&self, slot: usize) -> String {
         let output = self.coupled_outputs[slot];
         let md = self.fmu.model_description();
-        let name = md
+        let var = md
             .model_variables
             .iter()
             .filter(|v| v.value_reference == output.vr && v.base_type() == BaseType::Real)
-            .max_by_key(|v| v.causality == Causality::Output)
-            .map_or_else(|| format!("#{}", output.vr), |v| v.name.clone());
+            .max_by_key(|v| v.causality == Causality::Output);
+        let name = match var {
+            None => format!("#{}", output.vr),
+            Some(v) if v.is_array() => self
+                .arrays
+                .element_names(md, v)
+                .ok()
+                .and_then(|names| names.into_iter().nth(output.element))
+                .unwrap_or_else(|| v.name.clone()),
+            Some(v) => v.name.clone(),
+        };
         match output.order {
             0 => name,
             order => format!("der({name}, {order})"),

@@ -751,6 +751,31 @@ mod tests {
     use super::*;
 
     #[test]
+    fn cli_values_read_arrays_flat_or_nested() {
+        use StartValue::{Array, Integer, Real, String as Text};
+        assert_eq!(
+            StartValue::parse_cli("[1, 2.5]"),
+            Array(vec![Integer(1), Real(2.5)])
+        );
+        let nested = StartValue::parse_cli("[[1, 0], [0, 1]]");
+        assert_eq!(
+            nested,
+            Array(vec![
+                Array(vec![Integer(1), Integer(0)]),
+                Array(vec![Integer(0), Integer(1)])
+            ])
+        );
+        let mut flat = Vec::new();
+        nested.flatten_into(&mut flat);
+        assert_eq!(flat, [Integer(1), Integer(0), Integer(0), Integer(1)]);
+        assert_eq!(nested.to_string(), "[[1, 0], [0, 1]]");
+        assert_eq!(StartValue::parse_cli("[]"), Array(vec![]));
+        // Not an array: an empty element, or no closing bracket.
+        assert_eq!(StartValue::parse_cli("[1,,2]"), Text("[1,,2]".into()));
+        assert_eq!(StartValue::parse_cli("[1"), Text("[1".into()));
+    }
+
+    #[test]
     fn an_unknown_key_is_reported_at_its_own_line_and_column() {
         let text = "[experiment]\nstop = 1.0\nstep = 1e-3\n\n[method]\nkind = \"baumgarte\"\n  \
                     betta = 1\n\n[[instance]]\nname = \"m\"\nfmu = \"o.fmu\"\n\
