@@ -686,10 +686,11 @@ fn stopped_at_0_5(dir: &Path, out: &Output, reason: &str) {
     assert_eq!(trailer, Some(format!("# incomplete: {reason}")));
 }
 
-/// An FMU that crashes on the host: its host process ends, the run ends as
-/// after a lost connection, and the host goes on serving.
+/// An FMU that crashes on the host: its host process ends, the listener tells
+/// the master how, the run ends as after a crash in isolation, and the host
+/// goes on serving.
 #[test]
-fn a_crashing_fmu_on_the_host_ends_the_run() {
+fn a_crashing_fmu_on_the_host_ends_the_run_naming_the_signal() {
     let dir = tempfile::tempdir().unwrap();
     let token_file = token(dir.path(), "token", TOKEN, 0o600);
     let host = Host::start(&token_file);
@@ -700,7 +701,7 @@ fn a_crashing_fmu_on_the_host_ends_the_run() {
     std::fs::write(&sys, text).unwrap();
     let out = run(dir.path(), &sys, "out.csv", &[]);
     let reason = format!(
-        "instance 'mass2': its host process lost the connection to 127.0.0.1:{} during fmi2DoStep at t=0.5",
+        "instance 'mass2': its host process on 127.0.0.1:{} was killed by signal 11 (SIGSEGV) during fmi2DoStep at t=0.5",
         host.port
     );
     stopped_at_0_5(dir.path(), &out, &reason);

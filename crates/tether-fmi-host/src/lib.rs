@@ -26,6 +26,10 @@ use std::time::{Duration, Instant};
 use tether_fmi::remote::protocol::{self, op, In, Out};
 use tether_fmi::{Error, FmiStandard, Fmu, FmuInstance, Inputs, InstanceOptions, Placement};
 
+/// The exit code of a host process that ended on an error of its own (a
+/// request it refused, a broken connection), said on its standard error.
+pub const GAVE_UP: u8 = 2;
+
 /// Serves the master on standard input and output; the exit code is 0 when
 /// the master closed the connection, 2 when standard input and output are not
 /// pipes or a message could not be read.
@@ -34,7 +38,7 @@ pub fn serve_stdin() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(message) => {
             let _ = writeln!(std::io::stderr(), "error: tether-fmi-host: {message}");
-            ExitCode::from(2)
+            ExitCode::from(GAVE_UP)
         }
     }
 }

@@ -9,7 +9,7 @@
 use std::io::{BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::os::fd::OwnedFd;
-use std::os::unix::process::CommandExt;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -18,6 +18,9 @@ use std::sync::Arc;
 use tether_fmi::remote::protocol::{self, In, Out};
 use tether_fmi::remote::tcp::{self, FMU_CHUNK, FMU_END, FMU_PATH, MAX_CHUNK, MAX_OPENING_FRAME};
 use tether_fmi::{Fmu, OpenOptions};
+
+/// [`crate::GAVE_UP`] as `ExitStatus::code` gives it.
+const GAVE_UP_CODE: i32 = crate::GAVE_UP as i32;
 
 /// The most connections in their opening (not yet authenticated and given
 /// their FMU) at once; more are closed at once.
@@ -127,11 +130,22 @@ fn serve_connection(
     let mut child = host
         .spawn()
         .map_err(|e| format!("cannot start {}: {e}", command.program.display()))?;
-    drop((reader, writer, stream, opened));
+    drop((reader, opened));
     let status = child.wait().map_err(io_error)?;
     if !status.success() {
         log::info!("host process {}", tether_fmi::remote::describe_exit(status));
     }
+    if status.signal().is_some() || !matches!(status.code(), Some(0) | Some(GAVE_UP_CODE)) {
+        // The master waits for a reply: it learns how the host process ended
+        // (an FMU that crashed it or exited) instead of only that the
+        // connection closed.
+        let how = tether_fmi::remote::describe_exit(status);
+        let _ = Out::default()
+            .start(protocol::ENDED)
+            .str(&how)
+            .send(&mut writer);
+    }
+    drop((writer, stream));
     drop(fmu); // and its unpacked directory
     Ok(())
 }

@@ -34,6 +34,7 @@ impl<M: Model> Instance<M> {
 
     /// Outputs and state derivatives are evaluated only when asked for, once per
     /// call. The value references are checked before anything is evaluated.
+    #[inline(always)]
     pub fn get_real(&mut self, vrs: &[u32], values: &mut [f64]) -> Outcome {
         let (mut wants_y, mut wants_dx, mut wants_model) = (false, false, false);
         for &vr in vrs {
@@ -130,6 +131,7 @@ impl<M: Model> Instance<M> {
     /// Setting an input resets its derivatives to 0 (the new value is held constant
     /// until fmi2SetRealInputDerivatives says otherwise). Every value is checked
     /// before any is set.
+    #[inline(always)]
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Outcome {
         for (&vr, &value) in vrs.iter().zip(values) {
             self.check_real(vr, value)?;
@@ -214,6 +216,7 @@ impl<M: Model> Instance<M> {
 
     /// Orders 1 and 2 are held; the input is then the Taylor polynomial around the
     /// current communication point during the next fmi2DoStep.
+    #[inline(always)]
     pub fn set_real_input_derivatives(
         &mut self,
         vrs: &[u32],

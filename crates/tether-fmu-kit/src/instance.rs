@@ -140,7 +140,7 @@ impl<M: Model> Instance<M> {
 
     /// Runs one FMI call: state-table check, the call, failure logging and the
     /// resulting state transition.
-    #[inline]
+    #[inline(always)]
     pub fn call(&mut self, call: Call, f: impl FnOnce(&mut Self) -> Outcome) -> Status {
         let state = self.data.machine;
         let result = if call.allowed_in(state) {
@@ -340,6 +340,7 @@ impl<M: Model> Instance<M> {
     /// One communication step. The communication point must equal the FMU's time
     /// within [`TIME_TOLERANCE`]; the new time is `step_base + n·h` while h is
     /// unchanged (no accumulation of `t += h`), else `t_c + h` starts a new count.
+    #[inline(always)]
     pub fn do_step(&mut self, t_c: f64, h: f64) -> Outcome {
         let t = self.data.time;
         if !(h > 0.0 && h.is_finite() && t_c.is_finite()) {

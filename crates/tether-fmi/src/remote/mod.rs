@@ -466,7 +466,30 @@ impl RemoteInstance {
                 let call = self.calls.get(index as usize).copied();
                 Err((error, call))
             }
+            Some(&protocol::ENDED) => {
+                let how = In::new(&self.reply[1..]).str().map(str::to_string);
+                match how {
+                    Ok(how) => Err((self.host_ended_as(&how, blamed.function, blamed.time), None)),
+                    Err(e) => Err((self.protocol_error(e), None)),
+                }
+            }
             _ => Err((self.protocol_error(io::ErrorKind::InvalidData.into()), None)),
+        }
+    }
+
+    /// The listener of a remote host reported how its host process ended.
+    #[cold]
+    fn host_ended_as(&mut self, how: &str, function: &'static str, time: f64) -> Error {
+        let how = match &self.socket {
+            Some((_, address)) => format!("on {address} {how}"),
+            None => how.to_string(),
+        };
+        self.ended = Some(how.clone());
+        Error::HostEnded {
+            instance: self.name.to_string(),
+            function,
+            time,
+            how,
         }
     }
 

@@ -15,7 +15,7 @@ use crate::error::{Error, FmuMessages};
 use crate::model_description::FmiStandard;
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -52,6 +52,10 @@ pub mod op {
 pub const OK: u8 = 0;
 /// First byte of a failed reply; an encoded error follows.
 pub const ERR: u8 = 1;
+/// First byte of the last frame a listener (`tether host --listen`) sends on a
+/// connection whose host process ended without finishing (an FMU that crashed
+/// it): how it ended (`was killed by signal 11 (SIGSEGV)`) follows as a string.
+pub const ENDED: u8 = 2;
 
 /// The largest frame accepted (a serialised FMU state can be large).
 const MAX_FRAME: usize = 1 << 30;
