@@ -62,7 +62,25 @@ pub fn main(args: Args) -> Result<()> {
             .with_context(|| format!("--set {assignment}: expected NAME=VALUE"))?;
         start_values.push((var.trim().to_string(), StartValue::parse_cli(value.trim())));
     }
-    let mut single = SingleFmu::new(&fmu, &start_values, x)?;
+    // Start values come from --set: a name that does not fit says so.
+    let mut single = SingleFmu::new(&fmu, &start_values, x).map_err(|e| match e {
+        MasterError::UnknownVariable(mut u) if u.place == "parameters" => {
+            u.place = format!("--set {}", u.name);
+            MasterError::UnknownVariable(u)
+        }
+        MasterError::ArrayElement {
+            place,
+            instance,
+            name,
+            reason,
+        } if place == "parameters" => MasterError::ArrayElement {
+            place: format!("--set {name}"),
+            instance,
+            name,
+            reason,
+        },
+        e => e,
+    })?;
     let outputs = SingleOutputs::all(md, single.arrays())?;
     let name = single.name().to_string();
 

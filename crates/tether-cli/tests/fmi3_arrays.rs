@@ -373,7 +373,7 @@ fn array_names_that_do_not_fit_are_refused_in_one_line() {
         dir.path().join("x.csv").to_str().unwrap(),
     ]));
     assert!(
-        line.contains("parameters") && line.contains("'A[4,1]'") && line.contains("dimension 1"),
+        line.contains("--set A[4,1]") && line.contains("'A[4,1]'") && line.contains("dimension 1"),
         "{line}"
     );
 }

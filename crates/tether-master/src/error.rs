@@ -428,8 +428,8 @@ pub struct UnknownName {
 }
 
 impl MasterError {
-    /// An unknown start-value name made exact with the system: the FMU's file
-    /// (the error names only its model), and the place `set_by(instance,
+    /// An unknown start-value name (or array element) made exact with the
+    /// system: the FMU's file (the error names only its model), and the place `set_by(instance,
     /// variable)` says the value came from (`--set mass1.xx`; `None`: the
     /// instance's `parameters`). Other errors are returned unchanged.
     pub fn located(
@@ -447,6 +447,17 @@ impl MasterError {
                 }
                 MasterError::UnknownVariable(u)
             }
+            MasterError::ArrayElement {
+                place,
+                instance,
+                name,
+                reason,
+            } if place == "parameters" => MasterError::ArrayElement {
+                place: set_by(&instance, &name).unwrap_or(place),
+                instance,
+                name,
+                reason,
+            },
             other => other,
         }
     }
