@@ -404,3 +404,54 @@ fn the_reference_statespace_refuses_its_structural_parameters() {
         "{line}"
     );
 }
+
+/// Typed start values on the Reference FMU `Feedthrough`: a String value is text, a
+/// Binary value hexadecimal text (either case); text that is not hexadecimal, and an
+/// Int64 value outside the 32-bit range Tether's integer values travel in, are
+/// refused in one line naming the variable.
+#[test]
+fn feedthrough_takes_string_and_binary_values_and_refuses_what_does_not_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/reference-fmus/fmi3/Feedthrough.fmu");
+    let csv = dir.path().join("out.csv");
+    let simulate = |sets: &[&str]| {
+        let mut args = vec![
+            "simulate",
+            fmu.to_str().unwrap(),
+            "--stop",
+            "0.1",
+            "--step",
+            "0.1",
+            "--out",
+            csv.to_str().unwrap(),
+        ];
+        for s in sets {
+            args.extend(["--set", s]);
+        }
+        tether(&args)
+    };
+    let out = simulate(&[
+        "String_input=hello",
+        "Binary_input=0A0bff",
+        "Int64_input=-7",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (header, rows) = read_csv(&std::fs::read_to_string(&csv).unwrap());
+    let col = header.iter().position(|h| h == "Int64_output").unwrap();
+    assert_eq!(rows[0][col], -7.0, "Int64_input passed through");
+    let line = one_line(&simulate(&["Binary_input=xyz"]));
+    assert!(
+        line.contains("Feedthrough") && line.contains("\"xyz\" is not hexadecimal"),
+        "{line}"
+    );
+    let line = one_line(&simulate(&["Int64_input=1099511627776"]));
+    assert!(
+        line.contains("Int64_input = 1099511627776") && line.contains("32-bit"),
+        "{line}"
+    );
+}

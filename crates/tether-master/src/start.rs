@@ -404,3 +404,53 @@ fn check_range(kind: &VariableKind, value: &StartValue) -> Result<(), String> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The Reference FMU `StateSpace` (beside the repository): `y` has `r`
+    /// elements, `C` is `r`×`n`.
+    fn state_space() -> tether_fmi::Fmu {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/reference-fmus/fmi3/StateSpace.fmu");
+        tether_fmi::Fmu::open_unloaded(&path, &Default::default()).unwrap()
+    }
+
+    #[test]
+    fn sizes_names_and_elements_follow_the_structural_parameters_set() {
+        let fmu = state_space();
+        let md = fmu.model_description();
+        let vr = |name: &str| md.variable(name).unwrap().value_reference;
+        let y = md.variable("y").unwrap();
+        let c = md.variable("C").unwrap();
+        let start = Arrays::default();
+        assert_eq!(start.sizes(md, y).unwrap(), [3]);
+        let mut set = Arrays::default();
+        set.structural.insert(vr("r"), 2);
+        set.structural.insert(vr("n"), 1);
+        assert_eq!(set.sizes(md, y).unwrap(), [2]);
+        assert_eq!(set.element_names(md, c).unwrap(), ["C[1,1]", "C[2,1]"]);
+        let find = |arrays: &Arrays, name: &str| {
+            crate::spec::names::element(md, arrays, "here", "ss", String::new, name)
+                .map(|(v, e)| (v.name.clone(), e))
+        };
+        assert_eq!(
+            find(&set, "y[2]").unwrap(),
+            ("y".into(), Some(Element { index: 1, count: 2 }))
+        );
+        assert_eq!(
+            find(&start, "C[3,2]").unwrap().1,
+            Some(Element { index: 7, count: 9 })
+        );
+        let err = find(&set, "y[3]").unwrap_err().to_string();
+        assert!(err.contains("valid: 1..=2"), "{err}");
+        let err = find(&set, "C[1,2]").unwrap_err().to_string();
+        assert!(err.contains("dimension 2") && err.contains("2×1"), "{err}");
+        // A Real array set whole keeps its values for the elements nobody drives.
+        set.reals.insert(vr("y"), vec![4.0, 5.0]);
+        assert_eq!(set.real_values(md, y).unwrap(), [4.0, 5.0]);
+        let u = md.variable("u").unwrap();
+        assert_eq!(start.real_values(md, u).unwrap(), [1.0, 2.0, 3.0]);
+    }
+}
