@@ -455,3 +455,69 @@ fn feedthrough_takes_string_and_binary_values_and_refuses_what_does_not_fit() {
         "{line}"
     );
 }
+
+/// Signal connections to and from array elements: the workspace oscillator's `x`
+/// into StateSpace's `u[2]` (the array set whole, `u[1]` and `u[3]` keeping their
+/// start values 1 and 3), StateSpace's `y[2]` (y = D u with D = diag(1, 2, 1), A, B,
+/// C zero) into a second oscillator. A connection hands the sender's value at the
+/// previous macro point: y[2](T_n) = 2·x(T_{n−1}), bit for bit.
+#[test]
+fn signal_connections_take_array_elements() {
+    let dir = tempfile::tempdir().unwrap();
+    let zeros = "[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]";
+    let toml = format!(
+        r#"
+[experiment]
+stop = 0.5
+step = 1e-2
+
+[[instance]]
+name = "mass1"
+fmu = "{osc}"
+parameters = {{ m = 1.0, c = 10.0, d = 0.0, x0 = 0.0, v0 = 1.0, exact = true }}
+
+[[instance]]
+name = "ss"
+fmu = "{ss}"
+parameters = {{ A = {zeros}, B = {zeros}, C = {zeros}, D = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]] }}
+
+[[instance]]
+name = "mass2"
+fmu = "{osc}"
+parameters = {{ m = 1.0, c = 10.0, d = 0.0, x0 = 0.0, v0 = 0.0, exact = true }}
+
+[[connection]]
+from = "mass1.x"
+to = "ss.u[2]"
+
+[[connection]]
+from = "ss.y[2]"
+to = "mass2.F_ext"
+"#,
+        osc = oscillator().display(),
+        ss = statespace().display(),
+    );
+    let (header, rows) = read_csv(&run(&toml, dir.path()));
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let (x, y1, y2, y3, x2) = (
+        col("mass1.x"),
+        col("ss.y[1]"),
+        col("ss.y[2]"),
+        col("ss.y[3]"),
+        col("mass2.x"),
+    );
+    assert_eq!(rows.len(), 51);
+    for n in 1..rows.len() {
+        assert_eq!(rows[n][y2], 2.0 * rows[n - 1][x], "row {n}");
+        assert_eq!((rows[n][y1], rows[n][y3]), (1.0, 3.0), "row {n}");
+    }
+    assert!(rows[50][x2].abs() > 0.01, "mass2 moved: {}", rows[50][x2]);
+    // A whole array in a connection is refused in one line.
+    let file = dir.path().join("whole.toml");
+    std::fs::write(&file, toml.replace("\"ss.u[2]\"", "\"ss.u\"")).unwrap();
+    let line = one_line(&tether(&["run", file.to_str().unwrap()]));
+    assert!(
+        line.contains("'u'") && line.contains("name an element"),
+        "{line}"
+    );
+}

@@ -131,6 +131,10 @@ pub struct Slave {
     /// The place of each coupled input's value among the values set (the
     /// elements of an array input are set together).
     input_positions: Vec<usize>,
+    /// Signal connections: an array output read whole (its values), and the
+    /// array inputs they set, whole, by value reference.
+    pub(crate) signal_buf: Vec<f64>,
+    signal_inputs: Vec<(u32, Vec<f64>)>,
     /// The output derivatives read, `(variable, order)`.
     derivative_reads: Vec<(u32, i32)>,
     /// The slot in the coupled outputs of each value of `value_buf`.
@@ -350,6 +354,8 @@ impl Slave {
             value_count: None,
             arrays: Default::default(),
             input_positions: Vec::new(),
+            signal_buf: Vec::new(),
+            signal_inputs: Vec::new(),
             derivative_reads: Vec::new(),
             slots: Vec::new(),
             value_buf: Vec::new(),
@@ -422,6 +428,34 @@ impl Slave {
         self.int_buf = vec![0; ints];
         self.bool_buf = vec![false; bools];
         self.recorded_values = vec![0.0; self.recorded_names.len()];
+        Ok(())
+    }
+
+    /// Set element `e` of Real array input `vr` to `value` (a signal
+    /// connection's receiver): the array is set whole, its other elements at
+    /// the values set so far (at first their start values).
+    pub(crate) fn set_array_element(
+        &mut self,
+        vr: u32,
+        e: crate::spec::names::Element,
+        value: f64,
+    ) -> Result<(), MasterError> {
+        let k = match self.signal_inputs.iter().position(|(v, _)| *v == vr) {
+            Some(k) => k,
+            None => {
+                let md = self.fmu.model_description();
+                let values = match md.variable_by_vr(vr) {
+                    Some(var) => self.arrays.real_values(md, var)?,
+                    None => vec![0.0; e.count],
+                };
+                self.signal_inputs.push((vr, values));
+                self.signal_inputs.len() - 1
+            }
+        };
+        let values = &mut self.signal_inputs[k].1;
+        values.resize(e.count, 0.0);
+        values[e.index] = value;
+        self.backend.set_reals(&[vr], values)?;
         Ok(())
     }
 
