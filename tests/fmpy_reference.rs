@@ -341,7 +341,9 @@ fn the_reference_reads_the_method_index_as_tether_does() {
 
 /// FMI 3.0 FMUs (the workspace FMUs built as FMI 3.0, alone and mixed with FMI 2.0
 /// in one system): the reference drives them through fmpy's FMU3Slave, and both
-/// hosts agree to the last bit (validate.sh's `fmi3-*` variants).
+/// hosts agree to the last bit (validate.sh's `fmi3-*` variants), at k = 1 too,
+/// where both hand the polynomial to the FMU through the intermediate update
+/// callback.
 #[test]
 fn fmi3_builds_alone_and_mixed_with_fmi2_agree_with_the_fmpy_reference_exactly() {
     let Some(python) = tether_tests::tools::fmpy() else {
@@ -354,16 +356,27 @@ fn fmi3_builds_alone_and_mixed_with_fmi2_agree_with_the_fmpy_reference_exactly()
         beta: 2e-3,
         gamma: 1e-6,
     };
-    for (system, stop) in [
-        ("tests/validation/oscillator_fmi3.toml", None),
-        ("tests/validation/mixed_fmi3.toml", None),
-        ("tests/validation/double_pendulum_fmi3.toml", Some(0.05)),
+    for (system, stop, k) in [
+        ("tests/validation/oscillator_fmi3.toml", None, 0),
+        ("tests/validation/mixed_fmi3.toml", None, 0),
+        ("tests/validation/double_pendulum_fmi3.toml", Some(0.05), 0),
+        ("tests/validation/oscillator_fmi3.toml", None, 1),
+        ("tests/validation/mixed_fmi3.toml", None, 1),
     ] {
-        let flags = ["--method", "baumgarte", "--beta", "2e-3", "--gamma", "1e-6"];
-        let (a, b) = both(&python, system, index1, 0, stop, &flags);
+        let flags = [
+            "--method",
+            "baumgarte",
+            "--beta",
+            "2e-3",
+            "--gamma",
+            "1e-6",
+            "--order",
+            if k == 0 { "0" } else { "1" },
+        ];
+        let (a, b) = both(&python, system, index1, k, stop, &flags);
         let (rel, column) = worst(&a, &b, "\u{0}");
         eprintln!(
-            "{system}: {} rows, max relative deviation {rel:e} ({column})",
+            "{system} at k = {k}: {} rows, max relative deviation {rel:e} ({column})",
             a.times.len()
         );
         assert!(a.times.len() > 10, "{system}");

@@ -6,6 +6,7 @@ import atexit
 import os
 import shutil
 from ctypes import byref
+from xml.etree import ElementTree
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
@@ -21,7 +22,39 @@ _INTEGER = ("Integer", "Enumeration", "Int32")
 class FMU3Reference(FMU3Slave):
     """An FMI 3.0 co-simulation FMU under the FMU2Slave calls the reference makes
     (the one place that knows the FMI version). FMI 3.0 has no input derivatives:
-    the master refuses k > 0 for it (no canInterpolateInputs)."""
+    an input declared intermediateUpdate="true" of an FMU that provides
+    intermediate update takes its polynomial through the intermediate update
+    callback, which sets it to the polynomial's value at each intermediate time the
+    FMU asks for inputs (setRealInputDerivatives records the polynomial for the
+    coming step)."""
+
+    def instantiate(self, polynomial_inputs=()):
+        # Per input with a polynomial: [t0 (None: the coming step's start), value,
+        # derivatives...]; the values last set.
+        self.polynomial_inputs = list(polynomial_inputs)
+        self.polynomials = {}
+        self.values_set = {}
+        self.callback_failure = None
+        if self.polynomial_inputs:
+            super().instantiate(intermediateUpdate=self._intermediate_update,
+                                requiredIntermediateVariables=self.polynomial_inputs)
+        else:
+            super().instantiate()
+
+    def _intermediate_update(self, env, time, set_requested, get_allowed, step_finished,
+                             can_return_early, early_return_requested, early_return_time):
+        try:
+            if early_return_requested:
+                early_return_requested[0] = False
+            if not set_requested or not self.polynomials or self.callback_failure:
+                return
+            vrs, values = [], []
+            for vr, (t0, coefficients) in self.polynomials.items():
+                vrs.append(vr)
+                values.append(_evaluate(coefficients, time - t0))
+            self.setFloat64(vrs, values)
+        except Exception as e:  # noqa: BLE001 - reported after the step
+            self.callback_failure = e
 
     def setupExperiment(self, tolerance=None, startTime=0.0, stopTime=None):
         self.experiment = (tolerance, startTime, stopTime)
@@ -35,6 +68,22 @@ class FMU3Reference(FMU3Slave):
 
     def setReal(self, vr, values):
         self.setFloat64(vr, values)
+        # A value set on an input ends its polynomial.
+        for v, x in zip(vr, values):
+            self.polynomials.pop(v, None)
+            self.values_set[v] = x
+
+    def setRealInputDerivatives(self, vr, order, value):
+        """The polynomial of each input for the coming step: its value (the last
+        set) and its derivatives of the given orders (missing ones 0)."""
+        for v, k, d in zip(vr, order, value):
+            if v not in self.polynomial_inputs:
+                raise RunError(f"input {v} of {self.modelIdentifier} cannot take a polynomial "
+                               f"(no intermediate update for it)")
+            t0, coefficients = self.polynomials.get(v, (None, [self.values_set[v]]))
+            coefficients = coefficients + [0.0] * (k + 1 - len(coefficients))
+            coefficients[k] = d
+            self.polynomials[v] = (None, coefficients)
 
     def getInteger(self, vr):
         return self.getInt32(vr)
@@ -58,7 +107,36 @@ class FMU3Reference(FMU3Slave):
         self.freeFMUState(state)
 
     def doStep(self, currentCommunicationPoint, communicationStepSize):
+        for v, (t0, coefficients) in list(self.polynomials.items()):
+            if t0 is None:
+                self.polynomials[v] = (currentCommunicationPoint, coefficients)
         super().doStep(currentCommunicationPoint, communicationStepSize)
+        if self.callback_failure is not None:
+            failure, self.callback_failure = self.callback_failure, None
+            raise RunError(f"fmi3SetFloat64 in the intermediate update callback failed: {failure}")
+
+
+def _evaluate(c, dt):
+    """u(t0 + dt) from the value and derivatives at t0, in Horner's form
+    c0 + dt*(c1 + dt/2*(c2 + ...)), the operations of tether's callback."""
+    derivatives = c[1:]
+    acc = 0.0
+    for j in range(len(derivatives) - 1, -1, -1):
+        acc = derivatives[j] if j + 1 == len(derivatives) else derivatives[j] + dt / (j + 2) * acc
+    return c[0] + dt * acc
+
+
+def intermediate_update_inputs(unzipped, md):
+    """The value references of the Float64 inputs declared intermediateUpdate="true"
+    of an FMI 3.0 FMU that provides intermediate update (fmpy does not read the
+    attribute)."""
+    if not getattr(md.coSimulation, "providesIntermediateUpdate", False):
+        return []
+    root = ElementTree.parse(os.path.join(unzipped, "modelDescription.xml")).getroot()
+    return [int(e.get("valueReference")) for e in root.iter("Float64")
+            if e.get("causality") == "input" and e.get("intermediateUpdate") == "true"
+            and e.find("Dimension") is None]
+
 
 _NOT_SETTABLE = {"output", "local", "independent", "calculatedParameter"}
 
@@ -109,10 +187,15 @@ class Host:
                 # leaves it there; remove it when the run ends.
                 atexit.register(shutil.rmtree, Host._unpacked[key], ignore_errors=True)
             unzipped = Host._unpacked[key]
-        slave = FMU3Reference if md.fmiVersion.startswith("3.") else FMU2Slave
+        self.fmi3 = md.fmiVersion.startswith("3.")
+        slave = FMU3Reference if self.fmi3 else FMU2Slave
         self.fmu = slave(guid=md.guid, unzipDirectory=unzipped,
                          modelIdentifier=self.cs.modelIdentifier, instanceName=self.name)
-        self.fmu.instantiate()
+        if self.fmi3:
+            self.polynomial_inputs = intermediate_update_inputs(unzipped, md)
+            self.fmu.instantiate(self.polynomial_inputs)
+        else:
+            self.fmu.instantiate()
         self.recorded = [v for v in md.modelVariables if v.causality == "output" and v.type in REAL]
         self.recorded_vrs = [v.valueReference for v in self.recorded]
         self.recorded_values = [0.0] * len(self.recorded)
@@ -126,6 +209,18 @@ class Host:
         self.counters = Counters()
         for name, value in spec.parameters.items():
             self._start_value(name, value)
+
+    def can_interpolate(self):
+        """Polynomial inputs at all: FMI 2.0 canInterpolateInputs, FMI 3.0
+        providesIntermediateUpdate."""
+        if self.fmi3:
+            return bool(getattr(self.cs, "providesIntermediateUpdate", False))
+        return bool(self.cs.canInterpolateInputs)
+
+    def interpolates(self, vr):
+        """Whether input vr takes a polynomial (FMI 3.0: declared
+        intermediateUpdate="true")."""
+        return self.can_interpolate() and (not self.fmi3 or vr in self.polynomial_inputs)
 
     def variable(self, name):
         var = self.variables.get(name)

@@ -163,9 +163,14 @@ class Master:
         for host in self.hosts:
             if not host.is_coupled():
                 continue
-            if self.k > 0 and not host.cs.canInterpolateInputs:
-                raise RunError(f"instance '{host.name}' ({host.md.modelName}) lacks canInterpolateInputs, "
+            if self.k > 0 and not host.can_interpolate():
+                flag = "providesIntermediateUpdate" if host.fmi3 else "canInterpolateInputs"
+                raise RunError(f"instance '{host.name}' ({host.md.modelName}) lacks {flag}, "
                                f"which coupling polynomials of degree k = {self.k} need (use order = 0)")
+            if self.k > 0 and any(not host.interpolates(vr) for vr, _ in host.inputs):
+                raise RunError(f"instance '{host.name}' ({host.md.modelName}) does not declare "
+                               f"intermediateUpdate=\"true\" on its coupled inputs, which coupling "
+                               f"polynomials of degree k = {self.k} need (use order = 0)")
             if self.method.kind != "explicit" and not host.cs.canGetAndSetFMUstate:
                 raise RunError(f"instance '{host.name}' ({host.md.modelName}) lacks canGetAndSetFMUstate, "
                                f"which the predictor/corrector method {self.method.kind} needs")

@@ -158,7 +158,7 @@ class Signals:
                              f"and there is no conversion")
         link = Link(name, out.name, frm, out.valueReference, to, inp.valueReference, kind,
                     1.0 if c.gain is None else c.gain, 0.0 if c.offset is None else c.offset,
-                    kind == "Real" and bool(self.hosts[to].cs.canInterpolateInputs))
+                    kind == "Real" and self.hosts[to].interpolates(inp.valueReference))
         return link, units
 
     def _feeds_through(self, s, input_vr, output_vr):

@@ -152,8 +152,13 @@ variant controlled_oscillator_gauss_seidel signals-ctrl-iter-gs completes 0 0 --
 variant controlled_oscillator_newton signals-ctrl-newton-explicit completes 0 0 -- --method explicit --mu 1e-2 --order 0
 
 # FMI 3.0: the workspace FMUs built as FMI 3.0 (docs/fmu-kit.md), alone and mixed
-# with FMI 2.0 in one system; deviation exactly 0 (rtol = atol = 0).
+# with FMI 2.0 in one system; deviation exactly 0 (rtol = atol = 0). At k = 1 the
+# FMI 3.0 instances take the polynomials through the intermediate update callback
+# (the constraint's multiplier, and the control loop's signal).
 variant oscillator_fmi3 fmi3-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0
+variant oscillator_fmi3 fmi3-m1-index1-k1 completes 0 0 -- "${i1m1[@]}" --order 1
+variant mixed_fmi3 fmi3-mixed-m1-index1-k1 completes 0 0 -- "${i1m1[@]}" --order 1
+variant control_loop_fmi3 fmi3-loop-gs-k1 completes 0 0 -- --order 1
 variant oscillator_fmi3 fmi3-m2-index2-k0 completes 0 0 -- "${i2m2[@]}" --order 0
 variant mixed_fmi3 fmi3-mixed-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0
 variant double_pendulum_fmi3 fmi3-dp-m1-index1-k0 completes 0 0 -- "${i1m1[@]}" --order 0 --stop 0.2

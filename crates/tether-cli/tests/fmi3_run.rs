@@ -255,8 +255,8 @@ fn adaptive_steps_with_an_fmi3_mass_match_the_workspace_pair() {
     }
 }
 
-/// k > 0 needs input derivatives, which FMI 3.0 has not: refused in one line naming
-/// the instance, before any step.
+/// k > 0 on FMI 3.0 needs intermediate update, which the pythonfmu3 mass does not
+/// provide: refused in one line naming the instance, before any step.
 #[test]
 fn coupling_polynomials_of_degree_one_are_refused_for_the_fmi3_instance() {
     let Some((mass, libpython)) = python_mass() else {
@@ -270,7 +270,7 @@ fn coupling_polynomials_of_degree_one_are_refused_for_the_fmi3_instance() {
     assert_eq!(line.lines().count(), 1, "one line: {stderr}");
     assert!(
         line.contains("instance 'mass2'")
-            && line.contains("FMI 3.0 has none")
+            && line.contains("providesIntermediateUpdate")
             && line.contains("k = 1"),
         "{line}"
     );

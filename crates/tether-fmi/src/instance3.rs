@@ -2,9 +2,16 @@
 //! drives it ([`FmuInstance`]).
 //!
 //! The instance is made with `fmi3InstantiateCoSimulation`, `eventModeUsed` and
-//! `earlyReturnAllowed` false and no intermediate variables: an FMU that declares
-//! `hasEventMode` or `canReturnEarlyAfterIntermediateUpdate` runs without them, as the
-//! standard allows. FMUs with clocks are refused (clocks need event mode).
+//! `earlyReturnAllowed` false: an FMU that declares `hasEventMode` or
+//! `canReturnEarlyAfterIntermediateUpdate` runs without them, as the standard allows.
+//! FMUs with clocks are refused (clocks need event mode).
+//!
+//! An FMU that declares `providesIntermediateUpdate` gets the intermediate update
+//! callback, and its Float64 inputs declared `intermediateUpdate="true"` as the
+//! required intermediate variables: such an input takes a polynomial over a step
+//! ([`FmuInstance::set_inputs`] with derivatives), set to the polynomial's value at
+//! every intermediate time at which the FMU asks for inputs
+//! (`raw::fmi3::intermediate`). Other inputs take values only (k = 0).
 //!
 //! Values go through the [`FmuInstance`] methods by kind: `get_reals`/`set_reals` for
 //! `Float64` and `Float32`, `get_integers`/`set_integers` for every integer type and
@@ -21,7 +28,7 @@ use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
 use crate::interface::{FmuInstance, Inputs, Slot, SLOTS};
 use crate::model_description::{
-    hex_decode, hex_encode, ModelDescription, ScalarVariable, ValueReference, ValueType,
+    hex_decode, hex_encode, Causality, ModelDescription, ScalarVariable, ValueReference, ValueType,
 };
 use crate::raw::fmi3::component::{InstantiateArgs3, RawInstance3, RawState3};
 use crate::shared::{FmuShared, OnceGuard};
@@ -58,6 +65,10 @@ pub struct Fmi3Instance {
     /// No `Float32` and no floating-point array: Real values go straight to
     /// `fmi3GetFloat64`/`fmi3SetFloat64`.
     plain_reals: bool,
+    /// The inputs that take a polynomial over a step (intermediate update).
+    polynomial_inputs: Vec<ValueReference>,
+    /// The coefficients of one input's polynomial (reused).
+    coefficients: Vec<f64>,
 }
 
 impl Fmi3Instance {
@@ -93,6 +104,20 @@ impl Fmi3Instance {
             None
         };
         let debug = crate::fmu::debug_logging();
+        let polynomial_inputs: Vec<ValueReference> = if cs.provides_intermediate_update {
+            md.model_variables
+                .iter()
+                .filter(|v| {
+                    v.causality == Causality::Input
+                        && v.intermediate_update
+                        && v.value_type == ValueType::Float64
+                        && !v.is_array()
+                })
+                .map(|v| v.value_reference)
+                .collect()
+        } else {
+            Vec::new()
+        };
         let mut resources = shared.dir.resources().to_string_lossy().into_owned();
         if !resources.ends_with('/') {
             resources.push('/');
@@ -109,7 +134,8 @@ impl Fmi3Instance {
                 logging_on: options.logging_on || debug.is_some(),
                 event_mode_used: false,
                 early_return_allowed: false,
-                required_intermediate_variables: &[],
+                required_intermediate_variables: &polynomial_inputs,
+                intermediate_update: cs.provides_intermediate_update,
             },
         )?;
         raw.once = once;
@@ -134,6 +160,8 @@ impl Fmi3Instance {
             index,
             structural: HashMap::new(),
             plain_reals,
+            polynomial_inputs,
+            coefficients: Vec::new(),
         };
         if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
             let declared = &md.log_categories;
@@ -441,6 +469,8 @@ impl FmuInstance for Fmi3Instance {
 
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
         const F: &str = "fmi3SetFloat64";
+        // A value set on an input ends its polynomial.
+        self.raw.env.hold(vrs);
         if self.plain_reals && vrs.len() == values.len() {
             return self.raw.fmi3SetFloat64(vrs, values);
         }
@@ -584,14 +614,53 @@ impl FmuInstance for Fmi3Instance {
         Ok(())
     }
 
+    /// The values now; with derivatives, each input's polynomial for the coming
+    /// step, which the intermediate update callback evaluates at the FMU's
+    /// intermediate times (FMI 3.0 has no input derivatives).
     fn set_inputs(&mut self, inputs: &Inputs<'_>) -> Result<()> {
-        if !inputs.derivative_vrs.is_empty() {
+        if let Some(&vr) = inputs
+            .derivative_vrs
+            .iter()
+            .find(|vr| !self.polynomial_inputs.contains(vr))
+        {
+            let name = self.variable("fmi3SetFloat64", vr)?.name.clone();
             return Err(self.invalid(
                 "fmi3SetFloat64",
-                "inputs with derivatives (a coupling polynomial of degree k > 0) cannot be given to an FMI 3.0 FMU: FMI 3.0 has no input derivatives, and intermediate update is not supported yet; use k = 0".into(),
+                format!(
+                    "input '{name}' cannot take a polynomial (a coupling polynomial of degree k > 0): FMI 3.0 has no input derivatives, and model '{}' does not provide intermediate update for it (providesIntermediateUpdate and intermediateUpdate=\"true\"); use k = 0",
+                    self.md().model_name
+                ),
             ));
         }
-        self.set_reals(inputs.vrs, inputs.values)
+        self.set_reals(inputs.vrs, inputs.values)?;
+        if inputs.derivative_vrs.is_empty() {
+            return Ok(());
+        }
+        let k = inputs.orders.iter().copied().max().unwrap_or(0).max(0) as usize;
+        for (&vr, &value) in inputs.vrs.iter().zip(inputs.values) {
+            self.coefficients.clear();
+            self.coefficients.push(value);
+            self.coefficients.resize(k + 1, 0.0);
+            let mut given = false;
+            for ((&dvr, &order), &d) in inputs
+                .derivative_vrs
+                .iter()
+                .zip(inputs.orders)
+                .zip(inputs.derivatives)
+            {
+                if dvr == vr && order >= 1 {
+                    self.coefficients[order as usize] = d;
+                    given = true;
+                }
+            }
+            if given {
+                // Around the start of the coming step (`step`).
+                self.raw
+                    .env
+                    .set_polynomial(vr, f64::NAN, &self.coefficients);
+            }
+        }
+        Ok(())
     }
 
     fn get_output_derivatives(
@@ -608,6 +677,7 @@ impl FmuInstance for Fmi3Instance {
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
         let end = t + h;
         let no_set_prior = self.states.iter().all(Option::is_none);
+        self.raw.env.begin_step(t);
         let (result, answers) = self.raw.fmi3DoStep(t, h, no_set_prior);
         let terminated = |time: f64, this: &mut Self| {
             this.raw.time = time;

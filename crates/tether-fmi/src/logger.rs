@@ -121,14 +121,20 @@ impl LogEnv {
     /// A boxed environment for the instance called `instance` (the box keeps its address
     /// stable for as long as the FMU may call back).
     pub(crate) fn new(instance: &str) -> Box<LogEnv> {
-        Box::new(LogEnv {
+        Box::new(LogEnv::plain(instance))
+    }
+
+    /// The environment itself, for a caller that boxes it inside its own (the FMI
+    /// 3.0 instance environment, whose first field it is).
+    pub(crate) fn plain(instance: &str) -> LogEnv {
+        LogEnv {
             sink,
             wanted,
             target: format!("fmu::{instance}"),
             windows: Mutex::new(Vec::new()),
             show: AtomicBool::new(false),
             recent: Mutex::new(VecDeque::with_capacity(RECENT)),
-        })
+        }
     }
 
     /// The last messages of the instance, oldest first (at most [`RECENT`]).
@@ -285,8 +291,8 @@ extern "C" fn wanted(env: *const LogEnv, status: c_int, category: *const c_char)
 }
 
 /// The FMI 3.0 log callback (`fmi3LogMessageCallback`): FMI 3.0 hands over the
-/// finished message, so no C shim is needed; the instance environment is the
-/// instance's [`LogEnv`], as for FMI 2.0.
+/// finished message, so no C shim is needed; the instance environment starts with
+/// the instance's [`LogEnv`] (`Env3`, `#[repr(C)]`), as for FMI 2.0.
 pub(crate) extern "C" fn fmi3_log_message(
     env: *mut c_void,
     status: c_int,
@@ -298,14 +304,6 @@ pub(crate) extern "C" fn fmi3_log_message(
         return;
     }
     sink(env, std::ptr::null(), status, category, message);
-}
-
-impl LogEnv {
-    /// The `instanceEnvironment` for `fmi3InstantiateCoSimulation`: this environment.
-    pub(crate) fn fmi3_environment(self: &mut Box<Self>) -> *mut c_void {
-        let env: *mut LogEnv = &mut **self;
-        env.cast()
-    }
 }
 
 /// Receives a formatted message from `c/logger.c`.

@@ -136,6 +136,22 @@ impl<M: Model> Instance<M> {
         for (&vr, &value) in vrs.iter().zip(values) {
             self.check_real(vr, value)?;
         }
+        if let Some(set) = &mut self.intermediate {
+            // FMI 3.0 intermediate update mode: only inputs, taken as the values at
+            // the intermediate time.
+            for (&vr, &value) in vrs.iter().zip(values) {
+                match self.slots[vr as usize] {
+                    Slot::Input(i) => set[i] = Some(value),
+                    _ => {
+                        return Err(Failure::usage(format!(
+                            "{} (value reference {vr}) cannot be set in intermediate update mode (only inputs can)",
+                            M::DECLARATION.name(self.slots[vr as usize])
+                        )))
+                    }
+                }
+            }
+            return Ok(());
+        }
         for (&vr, &value) in vrs.iter().zip(values) {
             match self.slots[vr as usize] {
                 Slot::RealParameter(i) => {

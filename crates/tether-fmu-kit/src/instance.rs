@@ -85,6 +85,9 @@ pub struct Instance<M: Model> {
     /// Made by `fmi3InstantiateCoSimulation`: log messages name the fmi3 functions,
     /// and `time` is a variable (value reference after the declared ones).
     pub fmi3: bool,
+    /// FMI 3.0 intermediate update mode (during the importer's callback): the input
+    /// values set there, by input.
+    pub(crate) intermediate: Option<Vec<Option<f64>>>,
 }
 
 /// Per-instance work buffers (see [`Instance::scratch`]), borrowed next to the
@@ -111,6 +114,7 @@ impl<M: Model> Instance<M> {
             scratch: Scratch::default(),
             terminated: false,
             fmi3: false,
+            intermediate: None,
         }
     }
 
@@ -335,6 +339,37 @@ impl<M: Model> Instance<M> {
         };
         self.scratch.u = u;
         result
+    }
+
+    /// FMI 3.0 intermediate update: the inputs as the importer set them at the
+    /// intermediate times `t_c + s` of `samples` (the kit asks at s = h/2 and s = h,
+    /// see `ffi::fmi3::do_step`) become, with the value at t_c, the quadratic through
+    /// these points: the same Taylor polynomial around t_c as the FMI 2.0 build takes
+    /// from `fmi2SetRealInputDerivatives`, to rounding. An input set in none of the
+    /// callbacks keeps its polynomial; one not set at an intermediate time keeps the
+    /// last value set, as the standard says.
+    pub(crate) fn take_intermediate_inputs(&mut self, samples: &[(f64, Vec<Option<f64>>); 2]) {
+        let [(sa, at_a), (sb, at_b)] = samples;
+        for (i, jet) in self.data.inputs.iter_mut().enumerate() {
+            let (a, b) = (
+                at_a.get(i).copied().flatten(),
+                at_b.get(i).copied().flatten(),
+            );
+            if a.is_none() && b.is_none() {
+                continue;
+            }
+            let u0 = jet.value;
+            let a = a.unwrap_or(u0);
+            let b = b.unwrap_or(a);
+            let fa = (a - u0) / sa;
+            let fb = (b - u0) / sb;
+            let d2 = 2.0 * (fb - fa) / (sb - sa);
+            *jet = InputJet {
+                value: u0,
+                d1: fa - 0.5 * sa * d2,
+                d2,
+            };
+        }
     }
 
     /// One communication step. The communication point must equal the FMU's time

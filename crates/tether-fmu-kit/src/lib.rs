@@ -366,11 +366,18 @@ macro_rules! export_fmu {
                 _n_required_intermediate: usize,
                 environment: *mut c_void,
                 log_message: k3::Fmi3LogMessageCallback,
-                _intermediate_update: k3::Fmi3IntermediateUpdateCallback,
+                intermediate_update: k3::Fmi3IntermediateUpdateCallback,
             ) -> C {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe {
-                    k3::instantiate_co_simulation::<M>(name, token, logging_on, environment, log_message)
+                    k3::instantiate_co_simulation::<M>(
+                        name,
+                        token,
+                        logging_on,
+                        environment,
+                        log_message,
+                        intermediate_update,
+                    )
                 }
             }
             #[unsafe(no_mangle)]

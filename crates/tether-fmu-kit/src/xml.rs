@@ -314,6 +314,13 @@ pub fn model_description_fmi3(declaration: &Declaration) -> Result<String, Strin
     Ok(render3(declaration, &guid(declaration)))
 }
 
+/// Whether the FMI 3.0 build provides intermediate update: it takes its inputs'
+/// polynomial there (`ffi::fmi3::do_step`), as the FMI 2.0 build takes input
+/// derivatives (`canInterpolateInputs`).
+pub(crate) fn intermediate_update(d: &Declaration) -> bool {
+    d.capabilities.can_interpolate_inputs && !d.inputs.is_empty()
+}
+
 fn render3(d: &Declaration, token: &str) -> String {
     let mut x = String::new();
     let slots = d.slots();
@@ -332,11 +339,12 @@ fn render3(d: &Declaration, token: &str) -> String {
     );
     let _ = writeln!(
         x,
-        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="{}" providesIntermediateUpdate="false" canReturnEarlyAfterIntermediateUpdate="false" hasEventMode="false" providesEvaluateDiscreteStates="false"/>"#,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="{}" providesIntermediateUpdate="{}" canReturnEarlyAfterIntermediateUpdate="false" hasEventMode="false" providesEvaluateDiscreteStates="false"/>"#,
         escape(d.model_identifier),
         d.capabilities.can_get_and_set_fmu_state,
         d.capabilities.can_get_and_set_fmu_state,
         d.max_output_derivative_order,
+        intermediate_update(d),
     );
     units_and_log_categories(&mut x, &used_units(d));
     let e = d.default_experiment;
@@ -392,8 +400,13 @@ fn render3(d: &Declaration, token: &str) -> String {
             Slot::Input(i) => {
                 let u = &d.inputs[i];
                 format!(
-                    r#"<Float64 name="{name}" valueReference="{vr}"{} causality="input" variability="continuous" start="{}"{}{}{}/>"#,
+                    r#"<Float64 name="{name}" valueReference="{vr}"{} causality="input" variability="continuous"{} start="{}"{}{}{}/>"#,
                     description(u.description),
+                    if intermediate_update(d) {
+                        r#" intermediateUpdate="true""#
+                    } else {
+                        ""
+                    },
                     real(u.start),
                     opt_attr("unit", u.unit.map(String::from)),
                     opt_attr("min", u.min.map(real)),

@@ -307,7 +307,9 @@ impl Slave {
     fn instantiate_as(fmu: Fmu, spec: &InstanceSpec, name: &str) -> Result<Slave, MasterError> {
         let md = fmu.model_description();
         let cs = &md.co_simulation;
-        let can_interpolate_inputs = cs.can_interpolate_inputs;
+        // FMI 3.0: a polynomial input goes through intermediate update (for the
+        // inputs declared `intermediateUpdate="true"`, `Slave::interpolates`).
+        let can_interpolate_inputs = cs.can_interpolate_inputs || cs.provides_intermediate_update;
         let max_output_derivative_order = cs.max_output_derivative_order;
         let can_get_and_set_state = cs.can_get_and_set_fmu_state;
         let model_name = md.model_name.clone();
@@ -575,6 +577,20 @@ impl Slave {
     }
 
     /// Whether any unknown drives this instance.
+    /// Whether the input `vr` takes a polynomial over a step: FMI 2.0
+    /// `canInterpolateInputs`, FMI 3.0 `providesIntermediateUpdate` and the input's
+    /// `intermediateUpdate="true"`.
+    pub(crate) fn interpolates(&self, vr: u32) -> bool {
+        let md = self.fmu.model_description();
+        self.can_interpolate_inputs
+            && (md.standard != tether_fmi::FmiStandard::Fmi3
+                || md.model_variables.iter().any(|v| {
+                    v.value_reference == vr
+                        && v.causality == tether_fmi::Causality::Input
+                        && v.intermediate_update
+                }))
+    }
+
     pub(crate) fn is_coupled(&self) -> bool {
         !self.inputs.is_empty()
     }

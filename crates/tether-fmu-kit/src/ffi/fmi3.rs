@@ -18,7 +18,7 @@ use std::ptr;
 
 use super::{
     c_string, get_values, null, set_values, simple, slice, slice_mut, with_instance, Component,
-    Fmi2Component as Fmi3Instance, ERROR,
+    EnvironmentLogger, Fmi2Component as Fmi3Instance, ERROR,
 };
 use crate::instance::{Failure, Instance, LogFn, Status};
 use crate::machine::Call;
@@ -34,21 +34,45 @@ pub type Fmi3String = *const c_char;
 /// `fmi3LogMessageCallback`.
 pub type Fmi3LogMessageCallback =
     Option<unsafe extern "C" fn(*mut c_void, Fmi3Status, Fmi3String, Fmi3String)>;
-/// `fmi3IntermediateUpdateCallback` (not called: `providesIntermediateUpdate="false"`).
-pub type Fmi3IntermediateUpdateCallback = Option<
-    unsafe extern "C" fn(
-        *mut c_void,
-        f64,
-        Fmi3Boolean,
-        Fmi3Boolean,
-        Fmi3Boolean,
-        Fmi3Boolean,
-        *mut Fmi3Boolean,
-        *mut f64,
-    ),
->;
+/// `fmi3IntermediateUpdateCallback`: called in `fmi3DoStep` to ask for the inputs
+/// at intermediate times ([`do_step`]).
+pub type Fmi3IntermediateUpdateCallback = Option<IntermediateUpdate>;
+
+/// The function of a non-null [`Fmi3IntermediateUpdateCallback`].
+pub type IntermediateUpdate = unsafe extern "C" fn(
+    *mut c_void,
+    f64,
+    Fmi3Boolean,
+    Fmi3Boolean,
+    Fmi3Boolean,
+    Fmi3Boolean,
+    *mut Fmi3Boolean,
+    *mut f64,
+);
 
 const TRUE: Fmi3Boolean = 1;
+const FALSE: Fmi3Boolean = 0;
+
+/// The component environment of a model's own messages in an FMI 3.0 build
+/// ([`crate::environment_logger`]): `c/fmi3_logger.c` formats a message given the
+/// fmi2 way and passes it to the importer's `fmi3LogMessageCallback`.
+#[repr(C)]
+pub struct Fmi3LogEnv {
+    log: unsafe extern "C" fn(*mut c_void, Fmi3Status, Fmi3String, Fmi3String),
+    instance_environment: *mut c_void,
+}
+
+extern "C" {
+    /// `c/fmi3_logger.c`: the fmi2CallbackLogger signature over an [`Fmi3LogEnv`].
+    fn tether_kit_fmi3_logger(
+        component_environment: *mut c_void,
+        instance_name: Fmi3String,
+        status: Fmi3Status,
+        category: Fmi3String,
+        format: Fmi3String,
+        ...
+    );
+}
 
 pub fn get_version() -> *const c_char {
     c"3.0".as_ptr()
@@ -87,6 +111,7 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
     logging_on: Fmi3Boolean,
     environment: *mut c_void,
     log_message: Fmi3LogMessageCallback,
+    intermediate_update: Fmi3IntermediateUpdateCallback,
 ) -> Fmi3Instance {
     let result = catch_unwind(|| {
         if instance_name.is_null() {
@@ -114,12 +139,29 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             );
             return ptr::null_mut();
         }
+        // A model's own messages (`environment_logger`) go through the fmi2
+        // logger's signature: the C shim formats them for fmi3LogMessageCallback.
+        let name = c_string(&name);
+        let mut fmi3_log = log_message.map(|log| {
+            Box::new(Fmi3LogEnv {
+                log,
+                instance_environment: environment,
+            })
+        });
+        let logger = fmi3_log.as_mut().map(|env| {
+            let env: *mut Fmi3LogEnv = &mut **env;
+            EnvironmentLogger {
+                logger: tether_kit_fmi3_logger,
+                component_environment: env.cast(),
+                instance_name: name.as_ptr(),
+            }
+        });
         let component = Component {
             instance,
-            // A model's own messages (`environment_logger`) use the fmi2 logger's
-            // signature: an FMI 3.0 instance gives them none.
-            logger: None,
-            _name: c_string(&name),
+            logger,
+            intermediate_update: intermediate_update.map(|f| (f, environment)),
+            _fmi3_log: fmi3_log,
+            _name: name,
         };
         Box::into_raw(Box::new(component)).cast::<c_void>()
     });
@@ -308,6 +350,14 @@ pub unsafe fn get_output_derivatives<M: Model>(
 /// that asks to end the simulation ([`Model::terminate`]) sets `terminateSimulation`
 /// (status fmi3Discard, as fmi2DoStep). `lastSuccessfulTime` is the FMU's time after
 /// the call.
+///
+/// With an intermediate update callback and inputs, the step first asks for the
+/// inputs at `t + h/2` and at `t + h` (intermediateVariableSetRequested, no gets,
+/// intermediateStepFinished false, no early return) and takes the quadratic through
+/// them and the value at `t` as the inputs' polynomial over the step
+/// ([`Instance::take_intermediate_inputs`]); the model then steps as with
+/// `fmi2SetRealInputDerivatives`. No reference to the instance is live while the
+/// importer's callback runs (it calls `fmi3SetFloat64` on this instance).
 #[allow(clippy::too_many_arguments)]
 pub unsafe fn do_step<M: Model>(
     c: Fmi3Instance,
@@ -339,14 +389,84 @@ pub unsafe fn do_step<M: Model>(
     terminate[0] = 0;
     early[0] = 0;
     // SAFETY: this module's contract.
+    let samples = match unsafe { intermediate_inputs::<M>(c, t, h) } {
+        Ok(samples) => samples,
+        Err(status) => return status,
+    };
+    // SAFETY: this module's contract.
     unsafe {
         simple::<M>(c, Call::DoStep, |i| {
+            if let Some(samples) = &samples {
+                i.take_intermediate_inputs(samples);
+            }
             let result = i.do_step(t, h);
             terminate[0] = Fmi3Boolean::from(i.terminated);
             last[0] = i.data.time;
             result
         })
     }
+}
+
+/// The inputs the importer sets in intermediate update mode at `t + h/2` and `t + h`
+/// (see [`do_step`]): `None` without a callback, inputs or a valid step.
+///
+/// # Safety
+/// This module's contract.
+#[allow(clippy::type_complexity)]
+unsafe fn intermediate_inputs<M: Model>(
+    c: Fmi3Instance,
+    t: f64,
+    h: f64,
+) -> Result<Option<[(f64, Vec<Option<f64>>); 2]>, Fmi3Status> {
+    let n = M::DECLARATION.inputs.len();
+    let provided = xml::intermediate_update(&M::DECLARATION);
+    if c.is_null() || !provided || !(h > 0.0 && h.is_finite() && t.is_finite()) {
+        return Ok(None);
+    }
+    // SAFETY: c is a live instance of M (this module's contract); the borrow ends
+    // with this statement.
+    let hook = unsafe { (*c.cast::<Component<M>>()).intermediate_update };
+    let Some((callback, environment)) = hook else {
+        return Ok(None);
+    };
+    let mut samples = [(0.0, Vec::new()), (0.0, Vec::new())];
+    for (sample, time) in samples.iter_mut().zip([t + 0.5 * h, t + h]) {
+        let enter = |i: &mut Instance<M>| {
+            i.intermediate = Some(vec![None; n]);
+            Ok(())
+        };
+        // SAFETY: this module's contract.
+        let status = unsafe { simple::<M>(c, Call::DoStep, enter) };
+        if status != Status::Ok as Fmi3Status {
+            return Err(status);
+        }
+        let (mut early, mut early_time) = (FALSE, time);
+        // SAFETY: the importer's callback with the environment it gave to
+        // fmi3InstantiateCoSimulation and two writable out-arguments; no Rust
+        // reference to the instance is held across the call.
+        unsafe {
+            callback(
+                environment,
+                time,
+                TRUE,
+                FALSE,
+                FALSE,
+                FALSE,
+                &mut early,
+                &mut early_time,
+            )
+        };
+        let leave = |i: &mut Instance<M>| {
+            *sample = (time - t, i.intermediate.take().unwrap_or_default());
+            Ok(())
+        };
+        // SAFETY: this module's contract.
+        let status = unsafe { simple::<M>(c, Call::DoStep, leave) };
+        if status != Status::Ok as Fmi3Status {
+            return Err(status);
+        }
+    }
+    Ok(Some(samples))
 }
 
 /// fmi3EnterStepMode: only for FMUs with event mode, which this is not.
@@ -411,6 +531,7 @@ mod tests {
                 0,
                 ptr::null_mut(),
                 Some(log),
+                None,
             )
         }
     }
@@ -493,6 +614,207 @@ mod tests {
         }
     }
 
+    /// One callback: its time, `intermediateVariableSetRequested`,
+    /// `intermediateVariableGetAllowed`, `intermediateStepFinished`, and the status
+    /// of the set made in it.
+    type Call = (f64, u8, u8, u8, Fmi3Status);
+
+    /// The instance environment of [`intermediate_update`]: the instance and the
+    /// callbacks made.
+    struct Environment {
+        c: std::cell::Cell<Fmi3Instance>,
+        calls: std::cell::RefCell<Vec<Call>>,
+    }
+
+    /// u(t) = 0.5 + 2 (t − 0.5) − (t − 0.5)²/2, set at every intermediate time.
+    unsafe extern "C" fn intermediate_update(
+        env: *mut c_void,
+        time: f64,
+        set_requested: Fmi3Boolean,
+        get_allowed: Fmi3Boolean,
+        finished: Fmi3Boolean,
+        _can_return_early: Fmi3Boolean,
+        _early_return_requested: *mut Fmi3Boolean,
+        _early_return_time: *mut f64,
+    ) {
+        // SAFETY: the environment is the test's `Environment`, alive for the call.
+        let env = unsafe { &*env.cast_const().cast::<Environment>() };
+        let s = time - 0.5;
+        let u = [0.5 + s * (2.0 - 0.5 * s)];
+        // SAFETY: the instance that is calling back; one value reference, one value.
+        let status = unsafe { set_float64::<D>(env.c.get(), &3, 1, u.as_ptr(), 1) };
+        env.calls
+            .borrow_mut()
+            .push((time, set_requested, get_allowed, finished, status));
+    }
+
+    /// The FMI 3.0 build asks for its inputs at t + h/2 and t + h and steps with the
+    /// quadratic through them: the FMI 2.0 build's step with the same polynomial as
+    /// input derivatives, to rounding.
+    #[test]
+    fn inputs_set_in_intermediate_update_are_the_steps_polynomial() {
+        let env = Box::new(Environment {
+            c: std::cell::Cell::new(ptr::null_mut()),
+            calls: Default::default(),
+        });
+        let name = CString::new("decay3").unwrap();
+        let token = CString::new(xml::model_guid::<D>()).unwrap();
+        let env_ptr: *const Environment = &*env;
+        // SAFETY: valid NUL-terminated strings; the environment outlives the instance.
+        let c = unsafe {
+            instantiate_co_simulation::<D>(
+                name.as_ptr(),
+                token.as_ptr(),
+                0,
+                env_ptr.cast_mut().cast(),
+                Some(log),
+                Some(intermediate_update),
+            )
+        };
+        assert!(!c.is_null());
+        env.c.set(c);
+        let (mut event, mut terminate, mut early, mut last) = (1u8, 1u8, 1u8, f64::NAN);
+        // SAFETY: c is a live instance of D; every array holds what the call says.
+        unsafe {
+            let parameters = [1.0, 1.0, 1e-10];
+            assert_eq!(
+                set_float64::<D>(c, [0, 1, 2].as_ptr(), 3, parameters.as_ptr(), 3),
+                OK
+            );
+            assert_eq!(enter_initialization_mode::<D>(c, 0, 0.0, 0.5, 0, 0.0), OK);
+            assert_eq!(crate::ffi::exit_initialization_mode::<D>(c), OK);
+            assert_eq!(set_float64::<D>(c, &3, 1, [0.5].as_ptr(), 1), OK);
+            let status = do_step::<D>(
+                c,
+                0.5,
+                0.25,
+                &mut event,
+                &mut terminate,
+                &mut early,
+                &mut last,
+            );
+            assert_eq!(status, OK);
+        }
+        let calls = env.calls.borrow().clone();
+        assert_eq!(
+            calls,
+            [(0.625, 1, 0, 0, OK), (0.75, 1, 0, 0, OK)],
+            "asked at t + h/2 and t + h, sets only"
+        );
+        let x = get(c, 6);
+        let model = D::new(&crate::Parameters::new(
+            &D::DECLARATION,
+            &[1.0, 1.0],
+            &[],
+            &[],
+        ))
+        .unwrap();
+        let jets = [crate::InputJet {
+            value: 0.5,
+            d1: 2.0,
+            d2: -1.0,
+        }];
+        let mut expected = [1.0];
+        crate::integrate::step(&model, 0.5, 0.25, &mut expected, &jets, 1e-10).unwrap();
+        assert!(
+            (x - expected[0]).abs() <= 1e-13 * expected[0].abs(),
+            "x = {x}, with input derivatives {}",
+            expected[0]
+        );
+        // The input after the step is the polynomial's value at t + h.
+        let u_end = 0.5 + 0.25 * (2.0 - 0.5 * 0.25);
+        assert!((get(c, 3) - u_end).abs() < 1e-14, "u = {}", get(c, 3));
+        // SAFETY: c is live; freed once.
+        unsafe { free_instance::<D>(c) };
+    }
+
+    /// Decay, logging two messages of its own in every step: one through
+    /// [`EnvironmentLogger::log`], one with a printf format as a C FMU logs.
+    struct Talker(Decay);
+
+    impl Model for Talker {
+        const DECLARATION: crate::Declaration = Decay::DECLARATION;
+        const LOGS: bool = true;
+        fn new(p: &crate::Parameters) -> Result<Self, String> {
+            Decay::new(p).map(Talker)
+        }
+        fn initial_states(&self, x: &mut [f64]) {
+            self.0.initial_states(x)
+        }
+        fn derivatives(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+            self.0.derivatives(t, x, u, dx)
+        }
+        fn outputs(&self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
+            self.0.outputs(t, x, u, y)
+        }
+        fn exact_step(&self, t: f64, _h: f64, _x: &mut [f64], _u: &[crate::InputJet]) -> bool {
+            if let Some(logger) = crate::environment_logger() {
+                logger.log(
+                    Status::Warning,
+                    "logStatusWarning",
+                    "the talker's own message",
+                );
+                // SAFETY: the hook's logger, environment and name, during the call;
+                // "%d at t = %g" matches the int and the double passed.
+                unsafe {
+                    (logger.logger)(
+                        logger.component_environment,
+                        logger.instance_name,
+                        1,
+                        c"logStatusWarning".as_ptr(),
+                        c"formatted %d at t = %g".as_ptr(),
+                        42 as std::ffi::c_int,
+                        t,
+                    )
+                };
+            }
+            false
+        }
+    }
+
+    /// A model's own messages reach the importer's fmi3LogMessageCallback, formatted.
+    #[test]
+    fn the_models_own_messages_reach_the_fmi3_log_callback() {
+        let name = CString::new("talker").unwrap();
+        let token = CString::new(xml::model_guid::<Talker>()).unwrap();
+        let (mut event, mut terminate, mut early, mut last) = (0u8, 0u8, 0u8, 0.0);
+        // SAFETY: valid NUL-terminated strings; c is a live instance while used.
+        unsafe {
+            let c = instantiate_co_simulation::<Talker>(
+                name.as_ptr(),
+                token.as_ptr(),
+                0,
+                ptr::null_mut(),
+                Some(log),
+                None,
+            );
+            assert!(!c.is_null());
+            assert_eq!(
+                enter_initialization_mode::<Talker>(c, 0, 0.0, 0.0, 0, 0.0),
+                OK
+            );
+            assert_eq!(crate::ffi::exit_initialization_mode::<Talker>(c), OK);
+            let status = do_step::<Talker>(
+                c,
+                0.0,
+                0.5,
+                &mut event,
+                &mut terminate,
+                &mut early,
+                &mut last,
+            );
+            assert_eq!(status, OK);
+            free_instance::<Talker>(c);
+        }
+        let messages = MESSAGES.lock().unwrap().join("\n");
+        for expected in ["the talker's own message", "formatted 42 at t = 0"] {
+            assert!(
+                messages.contains(expected),
+                "{expected:?} not in\n{messages}"
+            );
+        }
+    }
+
     #[test]
     fn bad_fmi3_calls_return_error_with_a_message_naming_the_fmi3_function() {
         let c = instantiate(xml::model_guid::<D>());
@@ -529,14 +851,14 @@ mod tests {
         for expected in [
             r#"fmiVersion="3.0""#,
             &format!(r#"instantiationToken="{}""#, xml::guid(&D::DECLARATION)),
-            r#"<Float64 name="u" valueReference="3" causality="input" variability="continuous" start="0.0"/>"#,
+            r#"<Float64 name="u" valueReference="3" causality="input" variability="continuous" intermediateUpdate="true" start="0.0"/>"#,
             r#"<Float64 name="der(x)" valueReference="7" description="Derivative of x" causality="local" variability="continuous" initial="calculated" derivative="6"/>"#,
             r#"<Float64 name="time" valueReference="8" description="Simulation time" causality="independent" variability="continuous"/>"#,
             r#"<Output valueReference="4" dependencies="3 6"/>"#,
             r#"<Output valueReference="5" dependencies="6"/>"#,
             r#"<InitialUnknown valueReference="4"/>"#,
             r#"canGetAndSetFMUState="true" canSerializeFMUState="true""#,
-            r#"canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="1" providesIntermediateUpdate="false""#,
+            r#"canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="1" providesIntermediateUpdate="true""#,
         ] {
             assert!(text.contains(expected), "{expected}\nnot in\n{text}");
         }

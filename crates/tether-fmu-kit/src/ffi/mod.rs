@@ -115,6 +115,11 @@ impl Drop for LoggerScope {
 struct Component<M: Model> {
     instance: Instance<M>,
     logger: Option<EnvironmentLogger>,
+    /// FMI 3.0: the importer's intermediate update callback and its instance
+    /// environment, when given.
+    intermediate_update: Option<(fmi3::IntermediateUpdate, *mut c_void)>,
+    /// FMI 3.0: what `logger.component_environment` points at.
+    _fmi3_log: Option<Box<fmi3::Fmi3LogEnv>>,
     /// The instance name `logger.instance_name` points into.
     _name: CString,
 }
@@ -335,6 +340,8 @@ pub unsafe fn instantiate<M: Model>(
         let component = Component {
             instance,
             logger,
+            intermediate_update: None,
+            _fmi3_log: None,
             _name: name,
         };
         Box::into_raw(Box::new(component)).cast::<c_void>()

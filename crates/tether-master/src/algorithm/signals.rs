@@ -7,9 +7,9 @@
 //! input for the step T_N → T_{N+1} (before `save`, so that repeated runs of
 //! a constraint-coupled instance see the same signal inputs), and
 //! [`Signals::receive`] reads the senders at T_{N+1} (after `correct`).
-//! A Real input of an instance that declares `canInterpolateInputs` gets the
-//! polynomial of degree k through the sender's last values; every other
-//! input is held constant over the step.
+//! A Real input of an instance that declares `canInterpolateInputs` (FMI 3.0:
+//! intermediate update for that input) gets the polynomial of degree k through
+//! the sender's last values; every other input is held constant over the step.
 
 use tether_fmi::{BaseType, Causality, ScalarVariable};
 
@@ -51,7 +51,7 @@ struct Link {
     kind: Kind,
     gain: f64,
     offset: f64,
-    /// The receiver takes the polynomial (Real input, `canInterpolateInputs`).
+    /// The receiver takes the polynomial (Real input, `Slave::interpolates`).
     interpolate: bool,
 }
 
@@ -907,7 +907,7 @@ fn resolve(
         offset: c.offset.unwrap_or(0.0),
         interpolate: kind == Kind::Real
             && to_element.is_none()
-            && slaves[to].can_interpolate_inputs,
+            && slaves[to].interpolates(input.value_reference),
     };
     Ok((link, units))
 }

@@ -503,14 +503,41 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                 capability,
                 needed_by,
             };
-        let fmi3 = slave.fmu.model_description().standard == tether_fmi::FmiStandard::Fmi3;
+        let md = slave.fmu.model_description();
+        let fmi3 = md.standard == tether_fmi::FmiStandard::Fmi3;
         if order > 0 && fmi3 {
             // FMI 3.0 has no input derivatives: a polynomial input goes through
-            // intermediate update, which Tether does not offer yet.
-            return Err(capability(
-                "input derivatives (FMI 3.0 has none, and Tether does not pass a polynomial input by intermediate update yet)",
-                format!("coupling polynomials of degree k = {order} (use order = 0)"),
-            ));
+            // intermediate update, for inputs that may be set there.
+            if !slave.can_interpolate_inputs {
+                return Err(capability(
+                    "providesIntermediateUpdate (FMI 3.0 has no input derivatives: a polynomial input goes through intermediate update)",
+                    format!("coupling polynomials of degree k = {order} (use order = 0)"),
+                ));
+            }
+            if let Some(input) = slave.inputs.iter().find(|i| i.count > 1) {
+                let name = md
+                    .variable_by_vr(input.vr)
+                    .map_or_else(|| input.vr.to_string(), |v| v.name.clone());
+                return Err(capability(
+                    "polynomial inputs into array elements (an array input takes values only; Tether does not pass a polynomial into an element)",
+                    format!(
+                        "coupling polynomials of degree k = {order} into an element of '{name}' (use order = 0)"
+                    ),
+                ));
+            }
+            if let Some(input) = slave.inputs.iter().find(|i| !slave.interpolates(i.vr)) {
+                let name = md
+                    .model_variables
+                    .iter()
+                    .find(|v| v.value_reference == input.vr)
+                    .map_or_else(|| input.vr.to_string(), |v| v.name.clone());
+                return Err(capability(
+                    "intermediateUpdate=\"true\" on its coupled inputs (FMI 3.0: only those may be set in intermediate update)",
+                    format!(
+                        "coupling polynomials of degree k = {order} into input '{name}' (use order = 0)"
+                    ),
+                ));
+            }
         }
         if order > 0 && !slave.can_interpolate_inputs {
             return Err(capability(

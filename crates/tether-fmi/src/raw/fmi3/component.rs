@@ -8,11 +8,12 @@
 use std::ffi::{c_char, CStr, CString};
 use std::sync::Arc;
 
+use super::intermediate::{intermediate_update, Env3};
 use super::*;
 use crate::archive::FmuDir;
 use crate::error::{Error, Result};
 use crate::library::Library;
-use crate::logger::{fmi3_log_message, LogEnv};
+use crate::logger::fmi3_log_message;
 use crate::raw::{check, CallSite};
 
 /// An FMU state pointer of an FMI 3.0 instance, freed by its owner
@@ -42,7 +43,7 @@ pub(crate) struct RawInstance3 {
     /// The communication time reported in errors; maintained by the safe layer.
     pub(crate) time: f64,
     /// Must outlive the instance: the FMU keeps the pointer.
-    env: Box<LogEnv>,
+    pub(crate) env: Box<Env3>,
     library: Arc<Library<Fmi3Functions>>,
     _dir: Arc<FmuDir>,
     /// Held while the instance lives when the model declares
@@ -75,6 +76,8 @@ pub(crate) struct InstantiateArgs3<'a> {
     pub event_mode_used: bool,
     pub early_return_allowed: bool,
     pub required_intermediate_variables: &'a [fmi3ValueReference],
+    /// Pass the intermediate update callback (the FMU provides intermediate update).
+    pub intermediate_update: bool,
 }
 
 fn boolean(b: bool) -> fmi3Boolean {
@@ -126,8 +129,8 @@ impl RawInstance3 {
         let token_c = CString::new(args.instantiation_token)
             .map_err(|_| invalid("the instantiation token"))?;
         let path_c = CString::new(args.resource_path).map_err(|_| invalid("the resource path"))?;
-        let mut env = LogEnv::new(args.instance_name);
-        let environment = env.fmi3_environment();
+        let mut env = Env3::new(args.instance_name);
+        let environment = env.pointer();
         if library.is_fatal() {
             return Err(Error::FmuDead {
                 function: F,
@@ -142,8 +145,8 @@ impl RawInstance3 {
         let required = args.required_intermediate_variables;
         // SAFETY: all strings are NUL-terminated and live across the call; `required`
         // holds `required.len()` references; the environment is boxed and kept in the
-        // returned instance until after fmi3FreeInstance; the log callback matches
-        // fmi3LogMessageCallback; no intermediate update callback is passed (NULL).
+        // returned instance until after fmi3FreeInstance; the callbacks match
+        // fmi3LogMessageCallback and fmi3IntermediateUpdateCallback.
         let instance = unsafe {
             (library.functions().fmi3InstantiateCoSimulation)(
                 name_c.as_ptr(),
@@ -161,7 +164,11 @@ impl RawInstance3 {
                 required.len(),
                 environment,
                 Some(fmi3_log_message),
-                None,
+                if args.intermediate_update {
+                    Some(intermediate_update)
+                } else {
+                    None
+                },
             )
         };
         drop(entered);
@@ -169,9 +176,10 @@ impl RawInstance3 {
             return Err(Error::InstantiationFailed {
                 model: args.model.to_owned(),
                 instance: args.instance_name.to_owned(),
-                messages: crate::error::FmuMessages(env.recent()),
+                messages: crate::error::FmuMessages(env.log.recent()),
             });
         }
+        env.set_target(instance, library.functions().fmi3SetFloat64);
         Ok(RawInstance3 {
             instance,
             name,
@@ -221,7 +229,7 @@ impl RawInstance3 {
             function,
             instance: self.name.to_string(),
             time: self.time,
-            messages: crate::error::FmuMessages(self.env.recent()),
+            messages: crate::error::FmuMessages(self.env.log.recent()),
         }
     }
 
@@ -242,7 +250,7 @@ impl RawInstance3 {
             | Error::Failed { messages, .. }
             | Error::Fatal { messages, .. } = &mut e
             {
-                *messages = crate::error::FmuMessages(self.env.recent());
+                *messages = crate::error::FmuMessages(self.env.log.recent());
             }
             e
         })
@@ -525,6 +533,17 @@ impl RawInstance3 {
                 &mut last,
             )
         });
+        // An input the intermediate update callback could not set is the cause of
+        // whatever the step returned.
+        let result = match self.env.take_failure() {
+            Some((status, at)) => {
+                let time = std::mem::replace(&mut self.time, at);
+                let set = self.finish("fmi3SetFloat64", status);
+                self.time = time;
+                set.and(result)
+            }
+            None => result,
+        };
         let answers = StepAnswers {
             event_handling_needed: event != fmi3False,
             terminate_simulation: terminate != fmi3False,

@@ -10,6 +10,7 @@
 
 pub(crate) mod component;
 mod functions;
+pub(crate) mod intermediate;
 
 use std::ffi::{c_char, c_int, c_void};
 
@@ -82,7 +83,7 @@ pub type fmi3LogMessageCallback = Option<
     ),
 >;
 
-/// `fmi3IntermediateUpdateCallback` (not used yet: Tether passes NULL).
+/// `fmi3IntermediateUpdateCallback` (Tether's: [`intermediate::intermediate_update`]).
 pub type fmi3IntermediateUpdateCallback = Option<
     unsafe extern "C" fn(
         instanceEnvironment: fmi3InstanceEnvironment,
