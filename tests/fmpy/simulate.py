@@ -4,7 +4,8 @@
 
 The CSV has a `time` column followed by every output, values printed with full
 (round-trip) precision; an array output (FMI 3.0) is one column per element, named
-`y[1]`, `A[2,3]` (1-based, row-major) as Tether names them. Values of --set: true/false for Booleans, numbers otherwise.
+`y[1]`, `A[2,3]` (1-based, row-major) as Tether names them. Values of --set: true/false for Booleans, numbers otherwise;
+an array's values separated by spaces, row-major (`--set "A=1 0 0 1"`).
 """
 
 import argparse
@@ -42,8 +43,13 @@ def main(argv):
         name, sep, value = assignment.partition("=")
         if not sep or name not in types:
             parser.error(f"--set {assignment!r}: expected NAME=VALUE with a variable of the FMU")
+        real = types[name] in ("Real", "Float64")
+        if " " in value.strip():
+            values = [parse_value(v) for v in value.split()]
+            start_values[name] = [float(v) for v in values] if real else values
+            continue
         value = parse_value(value)
-        start_values[name] = float(value) if types[name] in ("Real", "Float64") else value
+        start_values[name] = float(value) if real else value
 
     result = simulate_fmu(
         args.fmu,

@@ -33,7 +33,8 @@ pub struct Args {
     /// Tolerance for fmi2SetupExperiment (default: DefaultExperiment tolerance, if any).
     #[arg(long, allow_hyphen_values = true)]
     tolerance: Option<f64>,
-    /// Start value of a parameter or input, repeatable: --set m=2 --set exact=true.
+    /// Start value of a parameter or input, repeatable: --set m=2 --set exact=true;
+    /// an array element --set 'A[2,3]=1.5', a whole array --set 'x0=[1, 0]'.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
     /// Output CSV file (default: <modelIdentifier>.csv).
@@ -54,7 +55,6 @@ pub fn main(args: Args) -> Result<()> {
             x.end()
         );
     }
-    let outputs = SingleOutputs::all(md)?;
     let mut start_values = Vec::with_capacity(args.set.len());
     for assignment in &args.set {
         let (var, value) = assignment
@@ -62,7 +62,26 @@ pub fn main(args: Args) -> Result<()> {
             .with_context(|| format!("--set {assignment}: expected NAME=VALUE"))?;
         start_values.push((var.trim().to_string(), StartValue::parse_cli(value.trim())));
     }
-    let mut single = SingleFmu::new(&fmu, &start_values, x)?;
+    // Start values come from --set: a name that does not fit says so.
+    let mut single = SingleFmu::new(&fmu, &start_values, x).map_err(|e| match e {
+        MasterError::UnknownVariable(mut u) if u.place == "parameters" => {
+            u.place = format!("--set {}", u.name);
+            MasterError::UnknownVariable(u)
+        }
+        MasterError::ArrayElement {
+            place,
+            instance,
+            name,
+            reason,
+        } if place == "parameters" => MasterError::ArrayElement {
+            place: format!("--set {name}"),
+            instance,
+            name,
+            reason,
+        },
+        e => e,
+    })?;
+    let outputs = SingleOutputs::all(md, single.arrays())?;
     let name = single.name().to_string();
 
     let out = args

@@ -82,12 +82,17 @@ pub struct RunRequest<'a> {
     pub step: Option<(f64, f64)>,
     /// Read these Real values into the run's output (`outputs[..len]`).
     pub outputs: &'a [ValueReference],
+    /// The number of values `outputs` reads when some are FMI 3.0 arrays (one
+    /// per element); `None`: one per variable.
+    pub output_values: Option<usize>,
     /// Then read these output derivatives `(variable, order)`, one call each,
     /// into the run's output after the values.
     pub output_derivatives: &'a [(ValueReference, i32)],
     /// Then read these Real values (the recorded outputs, a second
     /// `fmi2GetReal`) into the rest of the run's output.
     pub recorded: &'a [ValueReference],
+    /// The number of values `recorded` reads, as `output_values`.
+    pub recorded_values: Option<usize>,
     /// Save the state into this slot last.
     pub save: Option<Slot>,
 }
@@ -95,7 +100,17 @@ pub struct RunRequest<'a> {
 impl RunRequest<'_> {
     /// The number of values the run reads: its output's length.
     pub fn outputs_len(&self) -> usize {
-        self.outputs.len() + self.output_derivatives.len() + self.recorded.len()
+        self.values_len() + self.output_derivatives.len() + self.recorded_len()
+    }
+
+    /// The number of values `outputs` reads.
+    pub fn values_len(&self) -> usize {
+        self.output_values.unwrap_or(self.outputs.len())
+    }
+
+    /// The number of values `recorded` reads.
+    pub fn recorded_len(&self) -> usize {
+        self.recorded_values.unwrap_or(self.recorded.len())
     }
 }
 
@@ -196,7 +211,7 @@ pub trait FmuInstance: Debug + Send {
         if let Some((t, h)) = run.step {
             self.step(t, h)?;
         }
-        let (values, derivatives) = out.split_at_mut(run.outputs.len());
+        let (values, derivatives) = out.split_at_mut(run.values_len());
         if !run.outputs.is_empty() {
             self.get_reals(run.outputs, values)?;
         }

@@ -59,6 +59,19 @@ pub enum MasterError {
     /// A name refers to a variable its instance's FMU does not have.
     #[error("{0}")]
     UnknownVariable(Box<UnknownName>),
+    /// An array element that does not exist: a subscript on a scalar, the
+    /// wrong number of indices, an index out of range.
+    #[error("{place}: instance '{instance}', '{name}': {reason}")]
+    ArrayElement {
+        /// Where the name appears: `constraint 'link', position`, `parameters` …
+        place: String,
+        /// Instance name.
+        instance: String,
+        /// The name as written.
+        name: String,
+        /// What is wrong, with the valid range.
+        reason: String,
+    },
     /// A joint names a marker its instance does not have.
     #[error("{owner}: instance '{instance}' has no marker '{marker}' (no output '{marker}.r[1]'); {hint}")]
     UnknownMarker {
@@ -335,6 +348,7 @@ impl MasterError {
             MasterError::Expression { .. } => "expression",
             MasterError::UnknownInstance { .. } => "unknown_instance",
             MasterError::UnknownVariable(_) => "unknown_variable",
+            MasterError::ArrayElement { .. } => "array_element",
             MasterError::UnknownMarker { .. } => "unknown_marker",
             MasterError::IncompleteMarker { .. } => "incomplete_marker",
             MasterError::MissingPort { .. } => "missing_port",
@@ -414,8 +428,8 @@ pub struct UnknownName {
 }
 
 impl MasterError {
-    /// An unknown start-value name made exact with the system: the FMU's file
-    /// (the error names only its model), and the place `set_by(instance,
+    /// An unknown start-value name (or array element) made exact with the
+    /// system: the FMU's file (the error names only its model), and the place `set_by(instance,
     /// variable)` says the value came from (`--set mass1.xx`; `None`: the
     /// instance's `parameters`). Other errors are returned unchanged.
     pub fn located(
@@ -433,6 +447,17 @@ impl MasterError {
                 }
                 MasterError::UnknownVariable(u)
             }
+            MasterError::ArrayElement {
+                place,
+                instance,
+                name,
+                reason,
+            } if place == "parameters" => MasterError::ArrayElement {
+                place: set_by(&instance, &name).unwrap_or(place),
+                instance,
+                name,
+                reason,
+            },
             other => other,
         }
     }

@@ -230,7 +230,8 @@ impl<'a> Parser<'a> {
     }
 
     /// `instance.variable`, where the variable may itself contain dots and
-    /// brackets (`body.r[1]`, `marker.p.x`), or be quoted (`inst.'a b'`).
+    /// brackets (`body.r[1]`, `marker.p.x`, `ss.A[2,3]`: commas inside
+    /// brackets), or be quoted (`inst.'a b'`).
     fn reference(&mut self) -> Result<(String, String), ExprError> {
         self.skip_ws();
         let rest = self.rest();
@@ -256,8 +257,17 @@ impl<'a> Parser<'a> {
                 None => return self.fail("unterminated quoted variable name"),
             }
         } else {
+            let mut depth = 0;
             let len = rest
-                .find(|c: char| !(c.is_alphanumeric() || matches!(c, '_' | '.' | '[' | ']')))
+                .find(|c: char| {
+                    match c {
+                        '[' => depth += 1,
+                        ']' => depth -= 1,
+                        ',' | ' ' if depth > 0 => return false,
+                        _ => {}
+                    }
+                    !(c.is_alphanumeric() || matches!(c, '_' | '.' | '[' | ']'))
+                })
                 .unwrap_or(rest.len());
             if len == 0 {
                 return self.fail("expected a variable name");
@@ -306,6 +316,11 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "-0.5*a.r[1] + 0.2*b.p.x - der(c.v) + der(c.x, 2)"
+        );
+        let e = LinearExpr::parse("ss.A[2, 3] - der(ss.y[1], 2)").unwrap();
+        assert_eq!(
+            e.terms,
+            vec![t(1.0, "ss", "A[2, 3]", 0), t(-1.0, "ss", "y[1]", 2)]
         );
     }
 

@@ -53,7 +53,7 @@ pub use spec::{
     JacobianMode, JointInitial, JointSpec, OutputSpec, ResidualLimit, SignalScheme, SignalSettings,
     SignalSolver, StartValue, SystemSpec,
 };
-pub use start::apply_start_value;
+pub use start::{apply_start_value, apply_start_values, Arrays};
 pub use stats::{
     AdaptiveStats, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, SignalStats,
     Termination, SUMMARY_SCHEMA,

@@ -18,8 +18,8 @@
 //! let fmu = tether_fmi::Fmu::open("target/fmus/oscillator.fmu")?;
 //! let md = fmu.model_description();
 //! let experiment = SingleExperiment::new(md, None, Some(1.0), Some(1e-3), None)?;
-//! let outputs = SingleOutputs::all(md)?;
 //! let mut single = SingleFmu::new(&fmu, &[], experiment)?;
+//! let outputs = SingleOutputs::all(md, single.arrays())?;
 //! let mut rows = MemoryRecorder::default();
 //! let run = single.run(&outputs, &mut rows, &mut || None);
 //! let end = run.end?;
@@ -33,7 +33,7 @@ use tether_fmi::{
     ScalarVariable, ValueReference, ValueType,
 };
 
-use crate::{apply_start_value, MasterError, Observer, Sample, StartValue};
+use crate::{apply_start_values, Arrays, MasterError, Observer, Sample, StartValue};
 
 /// The time grid of a single-FMU simulation: `start + n·step`, n = 0 … `steps`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -122,20 +122,23 @@ pub struct SingleOutputs {
 }
 
 impl SingleOutputs {
-    /// Every output that is neither a String nor a Clock, in file order.
-    pub fn all(md: &ModelDescription) -> Result<SingleOutputs, MasterError> {
+    /// Every output that is neither a String nor a Clock, in file order; the
+    /// arrays' sizes follow the structural parameters set (`arrays`).
+    pub fn all(md: &ModelDescription, arrays: &Arrays) -> Result<SingleOutputs, MasterError> {
         SingleOutputs::of(
             md,
+            arrays,
             md.model_variables
                 .iter()
                 .filter(|v| v.causality == Causality::Output),
         )
     }
 
-    /// The given variables, in the given order (a String or Clock variable is
-    /// an error: it has no column).
+    /// The given variables, in the given order (String and Clock variables
+    /// have no column and are left out).
     pub fn of<'a>(
         md: &ModelDescription,
+        arrays: &Arrays,
         variables: impl IntoIterator<Item = &'a ScalarVariable>,
     ) -> Result<SingleOutputs, MasterError> {
         let mut outputs = SingleOutputs {
@@ -154,7 +157,7 @@ impl SingleOutputs {
                 _ => &mut outputs.boolean,
             };
             slots.vrs.push(v.value_reference);
-            for element in md.element_names(v)? {
+            for element in arrays.element_names(md, v)? {
                 slots.columns.push(outputs.columns.len());
                 outputs.columns.push(element);
             }
@@ -197,6 +200,7 @@ pub struct SingleRun {
 pub struct SingleFmu {
     instance: Box<dyn FmuInstance>,
     experiment: SingleExperiment,
+    arrays: Arrays,
 }
 
 impl SingleFmu {
@@ -211,9 +215,11 @@ impl SingleFmu {
         let name = &md.co_simulation.model_identifier;
         let mut instance =
             tether_fmi::instantiate(fmu, name, Default::default(), Placement::InProcess)?;
-        for (variable, value) in start_values {
-            apply_start_value(instance.as_mut(), md, variable, value)?;
-        }
+        let arrays = apply_start_values(
+            instance.as_mut(),
+            md,
+            start_values.iter().map(|(n, v)| (n.as_str(), v)),
+        )?;
         instance.setup(
             experiment.tolerance,
             experiment.start,
@@ -224,7 +230,13 @@ impl SingleFmu {
         Ok(SingleFmu {
             instance,
             experiment,
+            arrays,
         })
+    }
+
+    /// The arrays' sizes and values as the start values set them.
+    pub fn arrays(&self) -> &Arrays {
+        &self.arrays
     }
 
     /// The instance name (the FMU's model identifier).

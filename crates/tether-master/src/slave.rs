@@ -18,20 +18,44 @@ const CHECK: Slot = 1;
 /// The state slot of the whole system's saved state (`Simulation::save_state`).
 const SNAPSHOT: Slot = 2;
 
-/// A coupled input: `value = Σ coefficient · u[unknown]`.
+/// A coupled input: `value = Σ coefficient · u[unknown]`; an element of an
+/// FMI 3.0 array input is `element` of its `count` values (the others keep
+/// their start values: an array is set whole).
 #[derive(Debug, Clone)]
 pub(crate) struct CoupledInput {
     pub vr: u32,
+    pub element: usize,
+    pub count: usize,
     pub terms: Vec<(usize, f64)>,
 }
 
 /// An output value read after each run: the variable itself or one of its
-/// derivatives (order 1 or 2) through `fmi2GetRealOutputDerivatives`.
+/// derivatives (order 1 or 2) through `fmi2GetRealOutputDerivatives`; an
+/// element of an FMI 3.0 array output is `element` of its `count` values (the
+/// array is read once per run).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct CoupledOutput {
     pub vr: u32,
     pub order: u32,
+    pub element: usize,
+    pub count: usize,
 }
+
+impl CoupledOutput {
+    /// A scalar output (or its derivative).
+    pub(crate) fn scalar(vr: u32, order: u32) -> CoupledOutput {
+        CoupledOutput {
+            vr,
+            order,
+            element: 0,
+            count: 1,
+        }
+    }
+}
+
+/// The slot of a value read that no coupled output uses (an element of an
+/// array nobody couples).
+const UNUSED: usize = usize::MAX;
 
 /// Which call's results an instance's outputs are read after, for the message
 /// naming a non-finite output.
@@ -99,6 +123,18 @@ pub struct Slave {
     order: usize,
     pub(crate) coupled_outputs: Vec<CoupledOutput>,
     value_vrs: Vec<u32>,
+    /// The number of values `value_vrs` reads, when arrays make it differ
+    /// from their number.
+    value_count: Option<usize>,
+    /// The start values' effect on the FMI 3.0 arrays: sizes, values.
+    pub(crate) arrays: crate::start::Arrays,
+    /// The place of each coupled input's value among the values set (the
+    /// elements of an array input are set together).
+    input_positions: Vec<usize>,
+    /// Signal connections: an array output read whole (its values), and the
+    /// array inputs they set, whole, by value reference.
+    pub(crate) signal_buf: Vec<f64>,
+    signal_inputs: Vec<(u32, Vec<f64>)>,
     /// The output derivatives read, `(variable, order)`.
     derivative_reads: Vec<(u32, i32)>,
     /// The slot in the coupled outputs of each value of `value_buf`.
@@ -108,6 +144,8 @@ pub struct Slave {
     value_buf: Vec<f64>,
     pub(crate) recorded_names: Vec<String>,
     recorded_vrs: Vec<u32>,
+    /// The number of values `recorded_vrs` reads (arrays: one per element).
+    recorded_reals: usize,
     /// Integer and Enumeration outputs, recorded after the Real ones.
     recorded_ints: Vec<u32>,
     int_buf: Vec<i32>,
@@ -280,28 +318,6 @@ impl Slave {
             model: model_name.clone(),
             ..Default::default()
         };
-        let mut recorded_names = Vec::new();
-        let mut recorded_vrs = Vec::new();
-        let mut recorded_ints = Vec::new();
-        let mut recorded_bools = Vec::new();
-        // Columns: the Real outputs, then the Integer (and Enumeration)
-        // ones, then the Boolean ones, each in the order of the model description.
-        for kind in [BaseType::Real, BaseType::Integer, BaseType::Boolean] {
-            for v in &md.model_variables {
-                let base = match v.base_type() {
-                    BaseType::Enumeration => BaseType::Integer,
-                    other => other,
-                };
-                if v.causality == Causality::Output && base == kind {
-                    recorded_names.push(format!("{}.{}", spec.name, v.name));
-                    match kind {
-                        BaseType::Real => recorded_vrs.push(v.value_reference),
-                        BaseType::Integer => recorded_ints.push(v.value_reference),
-                        _ => recorded_bools.push(v.value_reference),
-                    }
-                }
-            }
-        }
         let timeout = spec.call_timeout.map(std::time::Duration::from_secs_f64);
         let placement = match (&spec.host, &spec.token_file, spec.isolation) {
             (Some(host), Some(token_file), _) => Placement::Remote {
@@ -337,16 +353,22 @@ impl Slave {
             order: 0,
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
+            value_count: None,
+            arrays: Default::default(),
+            input_positions: Vec::new(),
+            signal_buf: Vec::new(),
+            signal_inputs: Vec::new(),
             derivative_reads: Vec::new(),
             slots: Vec::new(),
             value_buf: Vec::new(),
-            recorded_values: vec![0.0; recorded_names.len()],
-            recorded_names,
-            recorded_vrs,
-            int_buf: vec![0; recorded_ints.len()],
-            recorded_ints,
-            bool_buf: vec![false; recorded_bools.len()],
-            recorded_bools,
+            recorded_values: Vec::new(),
+            recorded_names: Vec::new(),
+            recorded_vrs: Vec::new(),
+            recorded_reals: 0,
+            int_buf: Vec::new(),
+            recorded_ints: Vec::new(),
+            bool_buf: Vec::new(),
+            recorded_bools: Vec::new(),
             counters,
             can_interpolate_inputs,
             max_output_derivative_order,
@@ -359,24 +381,107 @@ impl Slave {
             beyond: None,
             check_trips: 0,
         };
-        for (name, value) in &spec.parameters {
-            crate::start::apply_start_value(
-                slave.backend.as_mut(),
-                slave.fmu.model_description(),
-                name,
-                value,
-            )?;
-        }
+        slave.arrays = crate::start::apply_start_values(
+            slave.backend.as_mut(),
+            slave.fmu.model_description(),
+            spec.parameters.iter().map(|(n, v)| (n.as_str(), v)),
+        )?;
+        slave.record_columns(&spec.name)?;
         Ok(slave)
     }
 
-    /// Register a coupled Real input driven by unknowns; returns its index.
-    pub(crate) fn add_input(&mut self, vr: u32, unknown: usize, coefficient: f64) {
-        if let Some(i) = self.inputs.iter_mut().find(|i| i.vr == vr) {
+    /// The recorded outputs and their columns: the Real outputs, then the
+    /// Integer (and Enumeration) ones, then the Boolean ones, each in the
+    /// order of the model description, an array one column per element
+    /// (`inst.y[1]`).
+    fn record_columns(&mut self, instance: &str) -> Result<(), MasterError> {
+        let md = self.fmu.model_description();
+        let (mut reals, mut ints, mut bools) = (0, 0, 0);
+        for kind in [BaseType::Real, BaseType::Integer, BaseType::Boolean] {
+            for v in &md.model_variables {
+                let base = match v.base_type() {
+                    BaseType::Enumeration => BaseType::Integer,
+                    other => other,
+                };
+                if v.causality != Causality::Output || base != kind {
+                    continue;
+                }
+                let names = self.arrays.element_names(md, v)?;
+                let n = names.len();
+                self.recorded_names
+                    .extend(names.into_iter().map(|e| format!("{instance}.{e}")));
+                match kind {
+                    BaseType::Real => {
+                        self.recorded_vrs.push(v.value_reference);
+                        reals += n;
+                    }
+                    BaseType::Integer => {
+                        self.recorded_ints.push(v.value_reference);
+                        ints += n;
+                    }
+                    _ => {
+                        self.recorded_bools.push(v.value_reference);
+                        bools += n;
+                    }
+                }
+            }
+        }
+        self.recorded_reals = reals;
+        self.int_buf = vec![0; ints];
+        self.bool_buf = vec![false; bools];
+        self.recorded_values = vec![0.0; self.recorded_names.len()];
+        Ok(())
+    }
+
+    /// Set element `e` of Real array input `vr` to `value` (a signal
+    /// connection's receiver): the array is set whole, its other elements at
+    /// the values set so far (at first their start values).
+    pub(crate) fn set_array_element(
+        &mut self,
+        vr: u32,
+        e: crate::spec::names::Element,
+        value: f64,
+    ) -> Result<(), MasterError> {
+        let k = match self.signal_inputs.iter().position(|(v, _)| *v == vr) {
+            Some(k) => k,
+            None => {
+                let md = self.fmu.model_description();
+                let values = match md.variable_by_vr(vr) {
+                    Some(var) => self.arrays.real_values(md, var)?,
+                    None => vec![0.0; e.count],
+                };
+                self.signal_inputs.push((vr, values));
+                self.signal_inputs.len() - 1
+            }
+        };
+        let values = &mut self.signal_inputs[k].1;
+        values.resize(e.count, 0.0);
+        values[e.index] = value;
+        self.backend.set_reals(&[vr], values)?;
+        Ok(())
+    }
+
+    /// Register a coupled Real input (an array's `element`, if any) driven by
+    /// unknowns.
+    pub(crate) fn add_input(
+        &mut self,
+        vr: u32,
+        element: Option<crate::spec::names::Element>,
+        unknown: usize,
+        coefficient: f64,
+    ) {
+        let (element, count) = element.map_or((0, 1), |e| (e.index, e.count));
+        if let Some(i) = self
+            .inputs
+            .iter_mut()
+            .find(|i| i.vr == vr && i.element == element)
+        {
             i.terms.push((unknown, coefficient));
         } else {
             self.inputs.push(CoupledInput {
                 vr,
+                element,
+                count,
                 terms: vec![(unknown, coefficient)],
             });
         }
@@ -396,8 +501,34 @@ impl Slave {
     /// derivatives up to order min(k, 2) go to the FMU.
     pub(crate) fn finalize(&mut self, order: usize) {
         self.order = order;
-        self.input.vrs = self.inputs.iter().map(|i| i.vr).collect();
-        self.input.values = vec![0.0; self.inputs.len()];
+        // The inputs' values as set: an array whole (its elements no
+        // unknown drives at their start values), each other input alone.
+        self.input.vrs.clear();
+        self.input.values.clear();
+        self.input_positions.clear();
+        for (k, i) in self.inputs.iter().enumerate() {
+            let first = self.inputs[..k].iter().position(|j| j.vr == i.vr);
+            let position = match first {
+                Some(j) => self.input_positions[j] - self.inputs[j].element + i.element,
+                None => {
+                    let start = self.input.values.len();
+                    self.input.vrs.push(i.vr);
+                    if i.count == 1 {
+                        self.input.values.push(0.0);
+                    } else {
+                        let md = self.fmu.model_description();
+                        let starts = md
+                            .variable_by_vr(i.vr)
+                            .and_then(|v| self.arrays.real_values(md, v).ok())
+                            .filter(|x| x.len() == i.count)
+                            .unwrap_or_else(|| vec![0.0; i.count]);
+                        self.input.values.extend(starts);
+                    }
+                    start + i.element
+                }
+            };
+            self.input_positions.push(position);
+        }
         self.input.derivative_vrs.clear();
         self.input.orders.clear();
         for d in 1..=order.min(2) as i32 {
@@ -411,17 +542,30 @@ impl Slave {
         self.derivative_reads.clear();
         let mut derivative_slots = Vec::new();
         self.slots.clear();
+        // Each variable read once: an array's values all, the elements
+        // nobody couples unused.
+        let mut firsts: Vec<usize> = Vec::new();
         for (slot, o) in self.coupled_outputs.iter().enumerate() {
-            if o.order == 0 {
-                self.value_vrs.push(o.vr);
-                self.slots.push(slot);
-            } else {
+            if o.order != 0 {
                 self.derivative_reads.push((o.vr, o.order as i32));
                 derivative_slots.push(slot);
+                continue;
             }
+            let first = match self.value_vrs.iter().position(|&vr| vr == o.vr) {
+                Some(k) => firsts[k],
+                None => {
+                    self.value_vrs.push(o.vr);
+                    firsts.push(self.slots.len());
+                    self.slots.resize(self.slots.len() + o.count, UNUSED);
+                    *firsts.last().expect("pushed")
+                }
+            };
+            self.slots[first + o.element] = slot;
         }
+        let values = self.slots.len();
+        self.value_count = (values != self.value_vrs.len()).then_some(values);
         self.slots.extend(derivative_slots);
-        self.value_buf = vec![0.0; self.coupled_outputs.len()];
+        self.value_buf = vec![0.0; self.slots.len()];
         self.run_inputs.clear();
         self.at_save = vec![0.0; self.coupled_outputs.len()];
         self.readback = vec![0.0; self.coupled_outputs.len()];
@@ -600,12 +744,21 @@ impl Slave {
     pub(crate) fn coupled_name(&self, slot: usize) -> String {
         let output = self.coupled_outputs[slot];
         let md = self.fmu.model_description();
-        let name = md
+        let var = md
             .model_variables
             .iter()
             .filter(|v| v.value_reference == output.vr && v.base_type() == BaseType::Real)
-            .max_by_key(|v| v.causality == Causality::Output)
-            .map_or_else(|| format!("#{}", output.vr), |v| v.name.clone());
+            .max_by_key(|v| v.causality == Causality::Output);
+        let name = match var {
+            None => format!("#{}", output.vr),
+            Some(v) if v.is_array() => self
+                .arrays
+                .element_names(md, v)
+                .ok()
+                .and_then(|names| names.into_iter().nth(output.element))
+                .unwrap_or_else(|| v.name.clone()),
+            Some(v) => v.name.clone(),
+        };
         match output.order {
             0 => name,
             order => format!("der({name}, {order})"),
@@ -620,6 +773,7 @@ impl Slave {
         }
         combine_inputs(
             &self.inputs,
+            &self.input_positions,
             polys,
             &mut self.input.values,
             &mut self.input.derivatives,
@@ -659,7 +813,7 @@ impl Slave {
     /// Every value must be finite: otherwise the error names this instance,
     /// the output, the call `run` and the time.
     pub(crate) fn read_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
-        let nv = self.value_vrs.len();
+        let nv = self.values_len();
         if nv > 0 {
             self.backend
                 .get_reals(&self.value_vrs, &mut self.value_buf[..nv])?;
@@ -675,14 +829,16 @@ impl Slave {
     /// of `out`, counted, and checked to be finite.
     #[inline]
     fn take_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
-        let nv = self.value_vrs.len();
-        if nv > 0 {
+        if !self.value_vrs.is_empty() {
             self.counters.get_reals += 1;
         }
         self.counters.get_output_derivatives += self.derivative_reads.len() as u64;
         // Every slot of `out` is written: when every value is finite, `out` is.
         let mut finite = true;
         for (&value, &slot) in self.value_buf.iter().zip(&self.slots) {
+            if slot == UNUSED {
+                continue;
+            }
             out[slot] = value;
             finite &= value.is_finite();
         }
@@ -711,11 +867,20 @@ impl Slave {
     /// the last read (the initial point's), for crate::culprit; the output
     /// derivatives are not limited.
     pub(crate) fn set_divergence_limits(&mut self, factor: f64) {
-        let nv = self.value_vrs.len();
+        let nv = self.values_len();
         self.limits = self.value_buf[..nv]
             .iter()
-            .map(|v| (factor * v.abs().max(1.0)).min(f64::MAX))
+            .zip(&self.slots)
+            .map(|(v, &slot)| match slot {
+                UNUSED => f64::INFINITY,
+                _ => (factor * v.abs().max(1.0)).min(f64::MAX),
+            })
             .collect();
+    }
+
+    /// The number of values the coupled outputs' read returns.
+    fn values_len(&self) -> usize {
+        self.value_count.unwrap_or(self.value_vrs.len())
     }
 
     /// Coupled value `k` of the last read is beyond its limit: noted, unless
@@ -870,6 +1035,7 @@ impl Slave {
             if let (Some((polys, _, _)), true) = (p.step, driven) {
                 combine_inputs(
                     &self.inputs,
+                    &self.input_positions,
                     polys,
                     &mut input.values,
                     &mut input.derivatives,
@@ -879,7 +1045,7 @@ impl Slave {
                 len += self.value_buf.len();
             }
             if p.record {
-                len += self.recorded_vrs.len();
+                len += self.recorded_reals;
             }
         }
         self.batch_buf.resize(len, 0.0);
@@ -897,12 +1063,14 @@ impl Slave {
                     } else {
                         &[]
                     },
+                    output_values: p.out.as_ref().and(self.value_count),
                     output_derivatives: if p.out.is_some() {
                         &self.derivative_reads
                     } else {
                         &[]
                     },
                     recorded: if p.record { &self.recorded_vrs } else { &[] },
+                    recorded_values: p.record.then_some(self.recorded_reals),
                     save: None,
                 }),
         );
@@ -930,7 +1098,7 @@ impl Slave {
                 self.take_coupled(out, p.run)?;
             }
             if p.record {
-                let (recorded, rest) = values.split_at(self.recorded_vrs.len());
+                let (recorded, rest) = values.split_at(self.recorded_reals);
                 values = rest;
                 self.take_recorded(recorded, p.run)?;
             }
@@ -961,7 +1129,7 @@ impl Slave {
             self.backend
                 .get_booleans(&self.recorded_bools, &mut self.bool_buf)?;
             self.counters.get_booleans += 1;
-            let first = reals + self.recorded_ints.len();
+            let first = reals + self.int_buf.len();
             for (slot, &v) in self.recorded_values[first..].iter_mut().zip(&self.bool_buf) {
                 *slot = if v { 1.0 } else { 0.0 };
             }
@@ -1059,19 +1227,20 @@ fn first_difference(a: &[f64], b: &[f64]) -> Option<usize> {
 /// sums over their terms.
 fn combine_inputs(
     inputs: &[CoupledInput],
+    positions: &[usize],
     polys: &[Taylor],
     values: &mut [f64],
     derivatives: &mut [f64],
 ) {
     let n = inputs.len();
-    for (i, input) in inputs.iter().enumerate() {
+    for (i, (input, &position)) in inputs.iter().zip(positions).enumerate() {
         let mut p = Taylor::default();
         for &(m, c) in &input.terms {
             p.value += c * polys[m].value;
             p.d1 += c * polys[m].d1;
             p.d2 += c * polys[m].d2;
         }
-        values[i] = p.value;
+        values[position] = p.value;
         if let Some(d1) = derivatives.get_mut(i) {
             *d1 = p.d1;
         }
@@ -1103,15 +1272,19 @@ mod tests {
         let inputs = [
             CoupledInput {
                 vr: 0,
+                element: 0,
+                count: 1,
                 terms: vec![(0, 1.0), (1, -2.0)],
             },
             CoupledInput {
                 vr: 1,
+                element: 0,
+                count: 1,
                 terms: vec![(1, 0.5)],
             },
         ];
         let (mut values, mut derivatives) = ([0.0; 2], [0.0; 4]);
-        combine_inputs(&inputs, &polys, &mut values, &mut derivatives);
+        combine_inputs(&inputs, &[0, 1], &polys, &mut values, &mut derivatives);
         assert_eq!(values, [-19.0, 5.0]);
         assert_eq!(derivatives, [-38.0, 10.0, -57.0, 15.0]);
     }

@@ -1,12 +1,280 @@
-//! Applying start values (parameters, input starts) to an instance by name.
+//! Applying start values (parameters, input starts) to an instance by name:
+//! scalars, FMI 3.0 arrays whole (a TOML array, flat in row-major order or
+//! nested) or element by element (`A[2,3]`), structural parameters first.
+
+use std::collections::HashMap;
 
 use tether_fmi::{
-    BaseType, Causality, FmuInstance, ModelDescription, ScalarVariable, Variability, VariableKind,
+    BaseType, Causality, FmuInstance, ModelDescription, ScalarVariable, Values, Variability,
+    VariableKind,
 };
 
-use crate::spec::names::describe;
+use crate::spec::names::{describe, Element};
 use crate::spec::StartValue;
 use crate::MasterError;
+
+/// What an instance's start values did to its FMI 3.0 arrays: the structural
+/// parameters set (the arrays' sizes follow them), and the Real arrays set.
+#[derive(Debug, Clone, Default)]
+pub struct Arrays {
+    /// Structural parameters set, by value reference.
+    structural: HashMap<u32, u64>,
+    /// Real arrays set, by value reference: all their values.
+    reals: HashMap<u32, Vec<f64>>,
+}
+
+impl Arrays {
+    /// The sizes of `v`'s dimensions (empty for a scalar).
+    pub fn sizes(
+        &self,
+        md: &ModelDescription,
+        v: &ScalarVariable,
+    ) -> Result<Vec<u64>, MasterError> {
+        Ok(md.array_sizes_with(v, &|vr| self.structural.get(&vr).copied())?)
+    }
+
+    /// The number of values of `v` (1 for a scalar).
+    pub fn count(&self, md: &ModelDescription, v: &ScalarVariable) -> Result<usize, MasterError> {
+        Ok(self.sizes(md, v)?.iter().product::<u64>() as usize)
+    }
+
+    /// The names of `v`'s values: `y[1]`, `A[2,3]`, or the name of a scalar.
+    pub fn element_names(
+        &self,
+        md: &ModelDescription,
+        v: &ScalarVariable,
+    ) -> Result<Vec<String>, MasterError> {
+        Ok(tether_fmi::element_names(&v.name, &self.sizes(md, v)?))
+    }
+
+    /// The values of Real array `v` as set, else its start values (one start
+    /// value stands for every element), else zeros.
+    pub(crate) fn real_values(
+        &self,
+        md: &ModelDescription,
+        v: &ScalarVariable,
+    ) -> Result<Vec<f64>, MasterError> {
+        let n = self.count(md, v)?;
+        if let Some(set) = self.reals.get(&v.value_reference).filter(|x| x.len() == n) {
+            return Ok(set.clone());
+        }
+        Ok(match &v.start_values {
+            Some(Values::Float(x)) if x.len() == n => x.clone(),
+            Some(Values::Float(x)) if x.len() == 1 => vec![x[0]; n],
+            _ => vec![0.0; n],
+        })
+    }
+}
+
+/// Set every `name = value` on `instance` before initialization: structural
+/// parameters first (in configuration mode, FMI 3.0), then the others in
+/// order; an array is set whole, elements given one by one completing the
+/// start values. Refuses what [`apply_start_value`] refuses, and arrays of the
+/// wrong length, with a message naming the variable.
+pub fn apply_start_values<'v>(
+    instance: &mut dyn FmuInstance,
+    md: &ModelDescription,
+    values: impl IntoIterator<Item = (&'v str, &'v StartValue)>,
+) -> Result<Arrays, MasterError> {
+    let values: Vec<(&str, &StartValue)> = values.into_iter().collect();
+    let mut arrays = Arrays::default();
+    let structural = |name: &str| md.variable(name).ok().filter(|v| v.structural_parameter);
+    for &(name, value) in &values {
+        if let Some(var) = structural(name) {
+            apply_start_value(instance, md, name, value)?;
+            if let StartValue::Integer(n) = value {
+                if let Ok(n) = u64::try_from(*n) {
+                    arrays.structural.insert(var.value_reference, n);
+                }
+            }
+        }
+    }
+    // Arrays: all their values, set once after the scalars.
+    let mut pending: Vec<(&ScalarVariable, Vec<StartValue>, &str, &StartValue)> = Vec::new();
+    for &(name, value) in &values {
+        if structural(name).is_some() {
+            continue;
+        }
+        let owner = instance.name().to_string();
+        let (var, element) = crate::spec::names::element(
+            md,
+            &arrays,
+            "parameters",
+            &owner,
+            || format!("model '{}'", md.model_name),
+            name,
+        )?;
+        if !var.is_array() {
+            apply_start_value(instance, md, name, value)?;
+            continue;
+        }
+        let fail = |reason: String| MasterError::StartValue {
+            instance: owner.clone(),
+            variable: name.to_string(),
+            value: value.to_string(),
+            reason,
+        };
+        settable(var).map_err(&fail)?;
+        let sizes = arrays.sizes(md, var)?;
+        let n = sizes.iter().product::<u64>() as usize;
+        let slot = match pending.iter().position(|p| std::ptr::eq(p.0, var)) {
+            Some(i) => i,
+            None => {
+                pending.push((var, start_list(var, n), name, value));
+                pending.len() - 1
+            }
+        };
+        match element {
+            Some(Element { index, .. }) => {
+                if matches!(value, StartValue::Array(_)) {
+                    return Err(fail("an element takes one value, not an array".into()));
+                }
+                if pending[slot].1.len() != n {
+                    return Err(fail(format!(
+                        "array '{}' has {n} elements but {} start values (its sizes changed): set it whole",
+                        var.name,
+                        pending[slot].1.len()
+                    )));
+                }
+                pending[slot].1[index] = value.clone();
+            }
+            None => {
+                let mut flat = Vec::new();
+                value.flatten_into(&mut flat);
+                if flat.len() != n {
+                    let shown: Vec<String> = sizes.iter().map(u64::to_string).collect();
+                    return Err(fail(format!(
+                        "array '{}' is {} = {n} elements (row-major), the value has {}",
+                        var.name,
+                        shown.join("×"),
+                        flat.len()
+                    )));
+                }
+                pending[slot].1 = flat;
+            }
+        }
+        pending[slot].2 = name;
+        pending[slot].3 = value;
+    }
+    for (var, list, name, value) in pending {
+        let owner = instance.name().to_string();
+        let fail = |reason: String| MasterError::StartValue {
+            instance: owner.clone(),
+            variable: name.to_string(),
+            value: value.to_string(),
+            reason,
+        };
+        let reals = set_array(instance, var, &list, fail)?;
+        if let Some(reals) = reals {
+            arrays.reals.insert(var.value_reference, reals);
+        }
+    }
+    Ok(arrays)
+}
+
+/// Whether a start value may be given for `var`, or why not.
+fn settable(var: &ScalarVariable) -> Result<(), String> {
+    if matches!(
+        var.causality,
+        Causality::Output
+            | Causality::Local
+            | Causality::Independent
+            | Causality::CalculatedParameter
+    ) || var.variability == Variability::Constant
+    {
+        return Err(format!("it is {} and cannot be set", describe(var)));
+    }
+    Ok(())
+}
+
+/// `var`'s start values as `n` start values (one stands for all; none or
+/// another number: `n` of a type's zero, to be overwritten).
+fn start_list(var: &ScalarVariable, n: usize) -> Vec<StartValue> {
+    let list: Vec<StartValue> = match &var.start_values {
+        Some(Values::Float(x)) => x.iter().map(|&x| StartValue::Real(x)).collect(),
+        Some(Values::Int(x)) => x.iter().map(|&x| StartValue::Integer(x)).collect(),
+        Some(Values::UInt(x)) => x
+            .iter()
+            .map(|&x| StartValue::Integer(i64::try_from(x).unwrap_or(i64::MAX)))
+            .collect(),
+        Some(Values::Boolean(x)) => x.iter().map(|&x| StartValue::Boolean(x)).collect(),
+        Some(Values::String(x)) => x.iter().map(|x| StartValue::String(x.clone())).collect(),
+        Some(Values::Binary(x)) => x
+            .iter()
+            .map(|x| StartValue::String(x.iter().map(|b| format!("{b:02x}")).collect()))
+            .collect(),
+        None => Vec::new(),
+    };
+    match list.len() {
+        l if l == n => list,
+        1 => vec![list[0].clone(); n],
+        _ => Vec::new(),
+    }
+}
+
+/// Set all values of array `var` (checked against its type and range); the
+/// values of a Real array are returned.
+fn set_array(
+    instance: &mut dyn FmuInstance,
+    var: &ScalarVariable,
+    list: &[StartValue],
+    fail: impl Fn(String) -> MasterError,
+) -> Result<Option<Vec<f64>>, MasterError> {
+    let vr = [var.value_reference];
+    let at = |k: usize, reason: String| fail(format!("element {} (row-major): {reason}", k + 1));
+    for (k, x) in list.iter().enumerate() {
+        check_range(&var.kind, x).map_err(|r| at(k, r))?;
+    }
+    let wrong = |k: usize| at(k, format!("the variable is {}", describe(var)));
+    match var.base_type() {
+        BaseType::Real => {
+            let mut reals = Vec::with_capacity(list.len());
+            for (k, x) in list.iter().enumerate() {
+                reals.push(match x {
+                    StartValue::Real(x) => *x,
+                    StartValue::Integer(i) => *i as f64,
+                    _ => return Err(wrong(k)),
+                });
+            }
+            instance.set_reals(&vr, &reals)?;
+            return Ok(Some(reals));
+        }
+        BaseType::Integer | BaseType::Enumeration => {
+            let mut ints = Vec::with_capacity(list.len());
+            for (k, x) in list.iter().enumerate() {
+                let StartValue::Integer(i) = x else {
+                    return Err(wrong(k));
+                };
+                ints.push(
+                    i32::try_from(*i)
+                        .map_err(|_| at(k, "out of the 32-bit integer range".into()))?,
+                );
+            }
+            instance.set_integers(&vr, &ints)?;
+        }
+        BaseType::Boolean => {
+            let mut bools = Vec::with_capacity(list.len());
+            for (k, x) in list.iter().enumerate() {
+                let StartValue::Boolean(b) = x else {
+                    return Err(wrong(k));
+                };
+                bools.push(*b);
+            }
+            instance.set_booleans(&vr, &bools)?;
+        }
+        BaseType::String => {
+            let mut texts = Vec::with_capacity(list.len());
+            for (k, x) in list.iter().enumerate() {
+                let StartValue::String(s) = x else {
+                    return Err(wrong(k));
+                };
+                texts.push(s.as_str());
+            }
+            instance.set_strings(&vr, &texts)?;
+        }
+    }
+    Ok(None)
+}
 
 /// Set `name = value` on `instance` before initialization. Refuses outputs,
 /// locals, constants and type mismatches with a message naming the variable.
@@ -30,15 +298,9 @@ pub fn apply_start_value(
         || format!("model '{}'", md.model_name),
         name,
     )?;
-    if matches!(
-        var.causality,
-        Causality::Output
-            | Causality::Local
-            | Causality::Independent
-            | Causality::CalculatedParameter
-    ) || var.variability == Variability::Constant
-    {
-        return Err(fail(format!("it is {} and cannot be set", describe(var))));
+    settable(var).map_err(&fail)?;
+    if var.is_array() {
+        return apply_start_values(instance, md, [(name, value)]).map(|_| ());
     }
     set_value(instance, var, value, fail)
 }
@@ -141,4 +403,54 @@ fn check_range(kind: &VariableKind, value: &StartValue) -> Result<(), String> {
         return Err(format!("above the declared max = {max}"));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The Reference FMU `StateSpace` (beside the repository): `y` has `r`
+    /// elements, `C` is `r`×`n`.
+    fn state_space() -> tether_fmi::Fmu {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/reference-fmus/fmi3/StateSpace.fmu");
+        tether_fmi::Fmu::open_unloaded(&path, &Default::default()).unwrap()
+    }
+
+    #[test]
+    fn sizes_names_and_elements_follow_the_structural_parameters_set() {
+        let fmu = state_space();
+        let md = fmu.model_description();
+        let vr = |name: &str| md.variable(name).unwrap().value_reference;
+        let y = md.variable("y").unwrap();
+        let c = md.variable("C").unwrap();
+        let start = Arrays::default();
+        assert_eq!(start.sizes(md, y).unwrap(), [3]);
+        let mut set = Arrays::default();
+        set.structural.insert(vr("r"), 2);
+        set.structural.insert(vr("n"), 1);
+        assert_eq!(set.sizes(md, y).unwrap(), [2]);
+        assert_eq!(set.element_names(md, c).unwrap(), ["C[1,1]", "C[2,1]"]);
+        let find = |arrays: &Arrays, name: &str| {
+            crate::spec::names::element(md, arrays, "here", "ss", String::new, name)
+                .map(|(v, e)| (v.name.clone(), e))
+        };
+        assert_eq!(
+            find(&set, "y[2]").unwrap(),
+            ("y".into(), Some(Element { index: 1, count: 2 }))
+        );
+        assert_eq!(
+            find(&start, "C[3,2]").unwrap().1,
+            Some(Element { index: 7, count: 9 })
+        );
+        let err = find(&set, "y[3]").unwrap_err().to_string();
+        assert!(err.contains("valid: 1..=2"), "{err}");
+        let err = find(&set, "C[1,2]").unwrap_err().to_string();
+        assert!(err.contains("dimension 2") && err.contains("2×1"), "{err}");
+        // A Real array set whole keeps its values for the elements nobody drives.
+        set.reals.insert(vr("y"), vec![4.0, 5.0]);
+        assert_eq!(set.real_values(md, y).unwrap(), [4.0, 5.0]);
+        let u = md.variable("u").unwrap();
+        assert_eq!(start.real_values(md, u).unwrap(), [1.0, 2.0, 3.0]);
+    }
 }

@@ -66,6 +66,7 @@ fn kind_of(e: &MasterError) -> &'static str {
         | MasterError::MissingPort { .. }
         | MasterError::Joint { .. }
         | MasterError::WrongVariable { .. }
+        | MasterError::ArrayElement { .. }
         | MasterError::MissingLevel { .. }
         | MasterError::StartValue { .. }
         | MasterError::DrivesCancel { .. }
@@ -226,8 +227,19 @@ fn stats_dict<'py>(
 // ---------------------------------------------------------------------------
 // Systems and overrides
 
-/// A start value from a Python bool, int, float or str.
+/// A start value from a Python bool, int, float or str, or a list or tuple of
+/// them (an FMI 3.0 array, flat row-major or nested).
 fn start_value(value: &Bound<'_, PyAny>) -> PyResult<StartValue> {
+    if value.is_instance_of::<pyo3::types::PyList>()
+        || value.is_instance_of::<pyo3::types::PyTuple>()
+    {
+        let items: Vec<Bound<'_, PyAny>> = value.try_iter()?.collect::<PyResult<_>>()?;
+        return items
+            .iter()
+            .map(start_value)
+            .collect::<PyResult<Vec<_>>>()
+            .map(StartValue::Array);
+    }
     if value.is_instance_of::<PyBool>() {
         Ok(StartValue::Boolean(value.extract()?))
     } else if value.is_instance_of::<PyInt>() {
@@ -241,7 +253,7 @@ fn start_value(value: &Bound<'_, PyAny>) -> PyResult<StartValue> {
         Ok(StartValue::Real(real))
     } else {
         Err(PyTypeError::new_err(format!(
-            "a parameter value must be a bool, int, float or str, not {}",
+            "a parameter value must be a bool, int, float or str (or a list of them), not {}",
             value.get_type().name()?
         )))
     }
@@ -1075,8 +1087,8 @@ fn simulate_one(
     let fmu = Fmu::open(path)?;
     let md = fmu.model_description();
     let experiment = SingleExperiment::new(md, start, stop, step, tolerance)?;
-    let outputs = SingleOutputs::all(md)?;
     let mut single = SingleFmu::new(&fmu, parameters, experiment)?;
+    let outputs = SingleOutputs::all(md, single.arrays())?;
     let mut rows = Rows {
         columns: Vec::new(),
         bytes: Vec::with_capacity(

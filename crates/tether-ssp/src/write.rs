@@ -72,17 +72,19 @@ fn connector(md: &ModelDescription, name: &str) -> Option<String> {
     ))
 }
 
-fn parameter(name: &str, value: &StartValue) -> String {
+/// One `ssv:Parameter` line; `None` for an array (SSP 1.0 has none).
+fn parameter(name: &str, value: &StartValue) -> Option<String> {
     let v = match value {
         StartValue::Real(r) => format!(r#"<ssv:Real value="{r:?}"/>"#),
         StartValue::Integer(i) => format!(r#"<ssv:Integer value="{i}"/>"#),
         StartValue::Boolean(b) => format!(r#"<ssv:Boolean value="{b}"/>"#),
         StartValue::String(s) => format!(r#"<ssv:String value="{}"/>"#, esc(s)),
+        StartValue::Array(_) => return None,
     };
-    format!(
+    Some(format!(
         r#"                <ssv:Parameter name="{}">{v}</ssv:Parameter>"#,
         esc(name)
-    )
+    ))
 }
 
 /// The SSD of `spec`, with each instance's FMU at `sources[i]`.
@@ -146,7 +148,13 @@ fn ssd(
             );
             let _ = writeln!(x, "              <ssv:Parameters>");
             for (name, value) in &inst.parameters {
-                let _ = writeln!(x, "{}", parameter(name, value));
+                let Some(line) = parameter(name, value) else {
+                    return Err(SspError::Other(format!(
+                        "instance '{}': parameter '{name}' is a whole array, which SSP 1.0 parameter sets cannot hold; set its elements ('{name}[1]', …)",
+                        inst.name
+                    )));
+                };
+                let _ = writeln!(x, "{line}");
             }
             let _ = writeln!(x, "              </ssv:Parameters>");
             let _ = writeln!(x, "              </ssv:ParameterSet>");

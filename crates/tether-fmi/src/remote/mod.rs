@@ -1023,7 +1023,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
             if !run.outputs.is_empty() {
                 self.queue(op::GET_REAL)
                     .u32s(run.outputs)
-                    .u32(count(run.outputs.len()));
+                    .u32(count(run.values_len()));
             }
             for &(vr, order) in run.output_derivatives {
                 self.queue(op::GET_REAL_OUTPUT_DERIVATIVES)
@@ -1033,7 +1033,7 @@ impl crate::interface::FmuInstance for RemoteInstance {
             if !run.recorded.is_empty() {
                 self.queue(op::GET_REAL)
                     .u32s(run.recorded)
-                    .u32(count(run.recorded.len()));
+                    .u32(count(run.recorded_len()));
             }
             if let Some(slot) = run.save {
                 self.queue(op::SAVE_STATE).u32(slot as u32);
@@ -1048,9 +1048,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
         let mut rest = out;
         let mut read = || -> io::Result<()> {
             for run in runs {
-                let parts = std::iter::once(run.outputs.len())
+                let parts = std::iter::once(run.values_len())
                     .chain(run.output_derivatives.iter().map(|_| 1))
-                    .chain(std::iter::once(run.recorded.len()));
+                    .chain(std::iter::once(run.recorded_len()));
                 for n in parts.filter(|&n| n > 0) {
                     if rest.len() < n {
                         return Err(io::ErrorKind::InvalidData.into());

@@ -17,7 +17,7 @@ use crate::build::system::{MacroStep, StepAt, System};
 use crate::linalg::solve::Solver;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
-use crate::spec::names::{describe, find_instance};
+use crate::spec::names::{describe, find_instance, Element};
 use crate::spec::{ConnectionSpec, SignalScheme, SignalSolver, SystemSpec};
 use crate::stats::{Lap, RunStats, SignalStats};
 use crate::MasterError;
@@ -40,8 +40,14 @@ struct Link {
     variable: String,
     from: usize,
     from_vr: u32,
+    /// An element of a Real array output: its index and the array's size
+    /// (the array is read whole, the element picked).
+    from_element: Option<Element>,
     to: usize,
     to_vr: u32,
+    /// An element of a Real array input (the array is set whole, its other
+    /// elements at their values so far).
+    to_element: Option<Element>,
     kind: Kind,
     gain: f64,
     offset: f64,
@@ -104,10 +110,9 @@ impl Signals {
         for c in &spec.connections {
             let (link, units) = resolve(c, slaves)?;
             unit_errors.extend(units);
-            if let Some(other) = links
-                .iter()
-                .find(|l| l.to == link.to && l.to_vr == link.to_vr)
-            {
+            if let Some(other) = links.iter().find(|l| {
+                l.to == link.to && l.to_vr == link.to_vr && l.to_element == link.to_element
+            }) {
                 return Err(MasterError::Connection {
                     connection: link.name.clone(),
                     reason: format!(
@@ -605,11 +610,19 @@ impl Signals {
         let link = &self.links[l];
         let slave = &mut slaves[link.from];
         let value = match link.kind {
-            Kind::Real => {
-                let mut v = [0.0];
-                slave.backend.get_reals(&[link.from_vr], &mut v)?;
-                v[0]
-            }
+            Kind::Real => match link.from_element {
+                Some(e) => {
+                    let buf = &mut slave.signal_buf;
+                    buf.resize(e.count, 0.0);
+                    slave.backend.get_reals(&[link.from_vr], buf)?;
+                    buf[e.index]
+                }
+                None => {
+                    let mut v = [0.0];
+                    slave.backend.get_reals(&[link.from_vr], &mut v)?;
+                    v[0]
+                }
+            },
             Kind::Integer => {
                 let mut v = [0];
                 slave.backend.get_integers(&[link.from_vr], &mut v)?;
@@ -635,6 +648,11 @@ impl Signals {
         let slave = &mut slaves[link.to];
         let vr = [link.to_vr];
         match link.kind {
+            Kind::Real if link.to_element.is_some() => {
+                let e = link.to_element.expect("an element");
+                let value = link.gain * p.value + link.offset;
+                slave.set_array_element(link.to_vr, e, value)?;
+            }
             Kind::Real => {
                 let value = link.gain * p.value + link.offset;
                 let orders = [1, 2];
@@ -804,14 +822,33 @@ fn resolve(
         let (instance, variable) = split(&name, text)?;
         let s = find_instance(&owner, instance, names.clone())?;
         let slave = &slaves[s];
-        let var = crate::spec::names::variable(
-            slave.fmu.model_description(),
-            &format!("{owner}, {role}"),
+        let place = format!("{owner}, {role}");
+        let md = slave.fmu.model_description();
+        let (var, element) = crate::spec::names::element(
+            md,
+            &slave.arrays,
+            &place,
             &slave.name,
             || crate::spec::names::fmu_file(slave.fmu.path()),
             variable,
-        )?
-        .clone();
+        )?;
+        let refuse = |reason: &str| MasterError::ArrayElement {
+            place: place.clone(),
+            instance: slave.name.clone(),
+            name: variable.to_string(),
+            reason: reason.to_string(),
+        };
+        if element.is_none() && var.is_array() {
+            return Err(refuse(
+                "it is an array; a signal connection joins one value: name an element",
+            ));
+        }
+        if element.is_some() && var.base_type() != BaseType::Real {
+            return Err(refuse(
+                "a signal connection takes elements of Real arrays only",
+            ));
+        }
+        let var = var.clone();
         let kind = kind_of(&var);
         if var.causality != causality || kind.is_none() {
             return Err(MasterError::WrongVariable {
@@ -829,10 +866,10 @@ fn resolve(
                 ),
             });
         }
-        Ok((s, var, kind.unwrap_or(Kind::Real)))
+        Ok((s, var, element, kind.unwrap_or(Kind::Real)))
     };
-    let (from, out, kind) = end(&c.from, Causality::Output, "from")?;
-    let (to, input, to_kind) = end(&c.to, Causality::Input, "to")?;
+    let (from, out, from_element, kind) = end(&c.from, Causality::Output, "from")?;
+    let (to, input, to_element, to_kind) = end(&c.to, Causality::Input, "to")?;
     let fail = |reason: String| MasterError::Connection {
         connection: name.clone(),
         reason,
@@ -862,15 +899,22 @@ fn resolve(
     };
     let link = Link {
         name,
-        variable: out.name.clone(),
+        variable: c
+            .from
+            .split_once('.')
+            .map_or_else(|| out.name.clone(), |(_, v)| v.to_string()),
         from,
         from_vr: out.value_reference,
+        from_element,
         to,
         to_vr: input.value_reference,
+        to_element,
         kind,
         gain: c.gain.unwrap_or(1.0),
         offset: c.offset.unwrap_or(0.0),
-        interpolate: kind == Kind::Real && slaves[to].interpolates(input.value_reference),
+        interpolate: kind == Kind::Real
+            && to_element.is_none()
+            && slaves[to].interpolates(input.value_reference),
     };
     Ok((link, units))
 }

@@ -10,7 +10,7 @@ use crate::coupling::rows::Level;
 use crate::coupling::{Constraint, Coupling, Port, Row, Unknown, Variable};
 use crate::expr::LinearExpr;
 use crate::slave::{CoupledOutput, Slave};
-use crate::spec::names::{describe, find_instance};
+use crate::spec::names::{describe, find_instance, Element};
 use crate::spec::{ConstraintSpec, InitialMultiplier, JointInitial, JointSpec, SystemSpec};
 use crate::{MasterError, Method};
 
@@ -57,7 +57,7 @@ impl Coupling {
         }
         for (slave, vr, name, contributions) in port_specs {
             let m = coupling.unknowns.len();
-            slaves[slave].add_input(vr, m, 1.0);
+            slaves[slave].add_input(vr, None, m, 1.0);
             for &(j, c, component) in &contributions {
                 coupling.joints[j].targets.push((c, component, m));
             }
@@ -373,7 +373,7 @@ fn resolve_marker(
     }
     let mut slots = [0usize; MARKER_OUTPUTS];
     for (k, &vr) in vrs.iter().enumerate() {
-        slots[k] = slave.add_output(CoupledOutput { vr, order: 0 });
+        slots[k] = slave.add_output(CoupledOutput::scalar(vr, 0));
     }
     Ok(Side {
         slave: s,
@@ -420,18 +420,12 @@ fn drive_inputs(
 ) -> Result<(), MasterError> {
     // Per driven input, the sum of its coefficients: all zero means the
     // terms cancel.
-    let mut sums: Vec<(usize, u32, f64)> = Vec::new();
+    let mut sums: Vec<(usize, (u32, usize), f64)> = Vec::new();
     for term in &expr.terms {
         let s = find_slave(owner, &term.instance, slaves)?;
         let slave = &slaves[s];
-        let var = crate::spec::names::variable(
-            slave.fmu.model_description(),
-            &format!("{owner}, drives"),
-            &slave.name,
-            || crate::spec::names::fmu_file(slave.fmu.path()),
-            &term.variable,
-        )?
-        .clone();
+        let place = format!("{owner}, drives");
+        let (var, element) = named(slave, &place, &term.variable)?;
         let is_real = var.base_type() == BaseType::Real;
         if var.causality != Causality::Input || !is_real || term.derivative_order != 0 {
             return Err(MasterError::WrongVariable {
@@ -442,13 +436,11 @@ fn drive_inputs(
                 expected: "a Real input".into(),
             });
         }
-        slaves[s].add_input(var.value_reference, m, term.coefficient);
-        match sums
-            .iter_mut()
-            .find(|(i, vr, _)| *i == s && *vr == var.value_reference)
-        {
+        slaves[s].add_input(var.value_reference, element, m, term.coefficient);
+        let key = (var.value_reference, element.map_or(0, |e| e.index));
+        match sums.iter_mut().find(|(i, k, _)| *i == s && *k == key) {
             Some(sum) => sum.2 += term.coefficient,
-            None => sums.push((s, var.value_reference, term.coefficient)),
+            None => sums.push((s, key, term.coefficient)),
         }
     }
     if sums.iter().all(|&(_, _, sum)| sum == 0.0) {
@@ -467,8 +459,25 @@ fn check_driven_starts(spec: &SystemSpec, slaves: &[Slave]) -> Result<(), Master
     for (inst, slave) in spec.instances.iter().zip(slaves) {
         for (name, value) in &inst.parameters {
             let md = slave.fmu.model_description();
-            let Ok(var) = md.variable(name) else { continue };
-            if slave.inputs.iter().any(|i| i.vr == var.value_reference) {
+            let named = crate::spec::names::element(
+                md,
+                &slave.arrays,
+                "parameters",
+                &slave.name,
+                String::new,
+                name,
+            );
+            let Ok((var, element)) = named else { continue };
+            // A whole array whose elements are partly driven gives the others
+            // their values; an element or a scalar the coupling drives is refused.
+            let driven = slave.inputs.iter().any(|i| {
+                i.vr == var.value_reference
+                    && match element {
+                        Some(e) => i.element == e.index,
+                        None => !var.is_array(),
+                    }
+            });
+            if driven {
                 return Err(MasterError::StartValue {
                     instance: inst.name.clone(),
                     variable: name.clone(),
@@ -503,6 +512,17 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                 return Err(capability(
                     "providesIntermediateUpdate (FMI 3.0 has no input derivatives: a polynomial input goes through intermediate update)",
                     format!("coupling polynomials of degree k = {order} (use order = 0)"),
+                ));
+            }
+            if let Some(input) = slave.inputs.iter().find(|i| i.count > 1) {
+                let name = md
+                    .variable_by_vr(input.vr)
+                    .map_or_else(|| input.vr.to_string(), |v| v.name.clone());
+                return Err(capability(
+                    "polynomial inputs into array elements (an array input takes values only; Tether does not pass a polynomial into an element)",
+                    format!(
+                        "coupling polynomials of degree k = {order} into an element of '{name}' (use order = 0)"
+                    ),
                 ));
             }
             if let Some(input) = slave.inputs.iter().find(|i| !slave.interpolates(i.vr)) {
@@ -548,14 +568,7 @@ fn output_level(
     for term in &expr.terms {
         let s = find_slave(owner, &term.instance, slaves)?;
         let slave = &mut slaves[s];
-        let var = crate::spec::names::variable(
-            slave.fmu.model_description(),
-            &format!("{owner}, {level}"),
-            &slave.name,
-            || crate::spec::names::fmu_file(slave.fmu.path()),
-            &term.variable,
-        )?
-        .clone();
+        let (var, element) = named(slave, &format!("{owner}, {level}"), &term.variable)?;
         let is_real = var.base_type() == BaseType::Real;
         if var.causality != Causality::Output || !is_real {
             return Err(MasterError::WrongVariable {
@@ -574,13 +587,58 @@ fn output_level(
                 needed_by: format!("{term} in {owner}"),
             });
         }
+        if element.is_some() && term.derivative_order > 0 {
+            return Err(MasterError::ArrayElement {
+                place: format!("{owner}, {level}"),
+                instance: slave.name.clone(),
+                name: term.variable.clone(),
+                reason: "output derivatives of an array element are not read (FMI 3.0 FMUs take no input derivatives either); use order = 0".into(),
+            });
+        }
+        let (element, count) = element.map_or((0, 1), |e| (e.index, e.count));
         let slot = slave.add_output(CoupledOutput {
             vr: var.value_reference,
             order: term.derivative_order,
+            element,
+            count,
         });
         out.terms.push((s, slot, term.coefficient));
     }
     Ok(out)
+}
+
+/// The variable or array element `name` of `slave`, named where it appears
+/// (`place`) in errors.
+fn named(
+    slave: &Slave,
+    place: &str,
+    name: &str,
+) -> Result<(tether_fmi::ScalarVariable, Option<Element>), MasterError> {
+    let md = slave.fmu.model_description();
+    let (var, element) = crate::spec::names::element(
+        md,
+        &slave.arrays,
+        place,
+        &slave.name,
+        || crate::spec::names::fmu_file(slave.fmu.path()),
+        name,
+    )?;
+    if element.is_none() && var.is_array() {
+        let sizes = slave.arrays.sizes(md, var)?;
+        let shown: Vec<String> = sizes.iter().map(u64::to_string).collect();
+        let first = vec!["1"; sizes.len()].join(",");
+        return Err(MasterError::ArrayElement {
+            place: place.to_string(),
+            instance: slave.name.clone(),
+            name: name.to_string(),
+            reason: format!(
+                "it is an array ({}); name one element, e.g. '{}[{first}]'",
+                shown.join("×"),
+                var.name
+            ),
+        });
+    }
+    Ok((var.clone(), element))
 }
 
 fn find_slave(owner: &str, instance: &str, slaves: &[Slave]) -> Result<usize, MasterError> {

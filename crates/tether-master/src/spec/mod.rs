@@ -468,8 +468,10 @@ pub enum StartValue {
     Integer(i64),
     /// A floating-point literal.
     Real(f64),
-    /// A string.
+    /// A string (also a Binary value, in hexadecimal).
     String(String),
+    /// An FMI 3.0 array: its values in row-major order, or nested by dimension.
+    Array(Vec<StartValue>),
 }
 
 impl std::fmt::Display for StartValue {
@@ -479,13 +481,48 @@ impl std::fmt::Display for StartValue {
             StartValue::Integer(i) => write!(f, "{i}"),
             StartValue::Real(r) => write!(f, "{r}"),
             StartValue::String(s) => write!(f, "{s:?}"),
+            StartValue::Array(a) => {
+                write!(f, "[")?;
+                for (k, x) in a.iter().enumerate() {
+                    if k > 0 {
+                        write!(f, ", ")?;
+                    }
+                    write!(f, "{x}")?;
+                }
+                write!(f, "]")
+            }
         }
     }
 }
 
 impl StartValue {
-    /// Read `NAME=VALUE` text from the command line: a boolean, a number or a string.
+    /// The values of an array, nested ones flattened in order (a scalar: itself).
+    pub fn flatten_into(&self, out: &mut Vec<StartValue>) {
+        match self {
+            StartValue::Array(a) => a.iter().for_each(|x| x.flatten_into(out)),
+            x => out.push(x.clone()),
+        }
+    }
+
+    /// Read `NAME=VALUE` text from the command line: a boolean, a number, an
+    /// array `[1, 2, 3]` (nested or flat, of those) or a string.
     pub fn parse_cli(text: &str) -> StartValue {
+        if let Some(inner) = text
+            .trim()
+            .strip_prefix('[')
+            .and_then(|t| t.strip_suffix(']'))
+        {
+            let parsed: Option<Vec<StartValue>> = split_top(inner)
+                .into_iter()
+                .map(|part| {
+                    let part = part.trim();
+                    (!part.is_empty()).then(|| StartValue::parse_cli(part))
+                })
+                .collect();
+            if let Some(values) = parsed {
+                return StartValue::Array(values);
+            }
+        }
         match text {
             "true" => StartValue::Boolean(true),
             "false" => StartValue::Boolean(false),
@@ -496,6 +533,27 @@ impl StartValue {
                 .unwrap_or_else(|_| StartValue::String(text.to_string())),
         }
     }
+}
+
+/// `text` split at the commas outside brackets (an empty text: no parts).
+fn split_top(text: &str) -> Vec<&str> {
+    if text.trim().is_empty() {
+        return Vec::new();
+    }
+    let (mut parts, mut depth, mut from) = (Vec::new(), 0i32, 0);
+    for (i, c) in text.char_indices() {
+        match c {
+            '[' => depth += 1,
+            ']' => depth -= 1,
+            ',' if depth == 0 => {
+                parts.push(&text[from..i]);
+                from = i + 1;
+            }
+            _ => {}
+        }
+    }
+    parts.push(&text[from..]);
+    parts
 }
 
 /// One scalar algebraic constraint `g = 0` with its multiplier λ.
@@ -691,6 +749,31 @@ impl std::str::FromStr for JacobianMode {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cli_values_read_arrays_flat_or_nested() {
+        use StartValue::{Array, Integer, Real, String as Text};
+        assert_eq!(
+            StartValue::parse_cli("[1, 2.5]"),
+            Array(vec![Integer(1), Real(2.5)])
+        );
+        let nested = StartValue::parse_cli("[[1, 0], [0, 1]]");
+        assert_eq!(
+            nested,
+            Array(vec![
+                Array(vec![Integer(1), Integer(0)]),
+                Array(vec![Integer(0), Integer(1)])
+            ])
+        );
+        let mut flat = Vec::new();
+        nested.flatten_into(&mut flat);
+        assert_eq!(flat, [Integer(1), Integer(0), Integer(0), Integer(1)]);
+        assert_eq!(nested.to_string(), "[[1, 0], [0, 1]]");
+        assert_eq!(StartValue::parse_cli("[]"), Array(vec![]));
+        // Not an array: an empty element, or no closing bracket.
+        assert_eq!(StartValue::parse_cli("[1,,2]"), Text("[1,,2]".into()));
+        assert_eq!(StartValue::parse_cli("[1"), Text("[1".into()));
+    }
 
     #[test]
     fn an_unknown_key_is_reported_at_its_own_line_and_column() {

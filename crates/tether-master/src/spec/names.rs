@@ -29,6 +29,104 @@ pub(crate) fn variable<'a>(
     })
 }
 
+/// An element of an FMI 3.0 array variable: its place among the array's
+/// values (row-major, 0-based) and their number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Element {
+    /// Row-major, 0-based.
+    pub index: usize,
+    /// The number of values of the array.
+    pub count: usize,
+}
+
+/// The variable or array element `name` (`y`, `y[2]`, `A[2,3]`, 1-based,
+/// row-major) of an instance's model: the name is first looked up exactly
+/// (FMI 3.0 structured names such as `pipe[3,4].T[14]` exist), then a
+/// trailing subscript is read as an array index. `Some(element)` for an
+/// element; the sizes follow the structural parameters set (`arrays`).
+/// Errors say where the name appears, as [`variable`]'s.
+pub(crate) fn element<'a>(
+    md: &'a ModelDescription,
+    arrays: &crate::start::Arrays,
+    place: &str,
+    instance: &str,
+    fmu: impl FnOnce() -> String,
+    name: &str,
+) -> Result<(&'a ScalarVariable, Option<Element>), MasterError> {
+    if let Ok(var) = md.variable(name) {
+        return Ok((var, None));
+    }
+    let split = name
+        .strip_suffix(']')
+        .and_then(|head| head.rsplit_once('['))
+        .filter(|(base, _)| !base.is_empty());
+    let Some((base, subscript)) = split else {
+        return variable(md, place, instance, fmu, name).map(|v| (v, None));
+    };
+    let Ok(var) = md.variable(base) else {
+        return variable(md, place, instance, fmu, name).map(|v| (v, None));
+    };
+    let fail = |reason: String| MasterError::ArrayElement {
+        place: place.to_string(),
+        instance: instance.to_string(),
+        name: name.to_string(),
+        reason,
+    };
+    if !var.is_array() {
+        return Err(fail(format!(
+            "'{base}' is {}, a scalar: it has no elements",
+            describe(var)
+        )));
+    }
+    let sizes = arrays.sizes(md, var)?;
+    let shown = sizes
+        .iter()
+        .map(u64::to_string)
+        .collect::<Vec<_>>()
+        .join("×");
+    let indices: Vec<u64> = subscript
+        .split(',')
+        .map(|i| i.trim().parse::<u64>().ok().filter(|&i| i >= 1))
+        .collect::<Option<_>>()
+        .ok_or_else(|| {
+            fail(format!(
+                "'[{subscript}]' is not a list of 1-based indices (array '{base}' is {shown})"
+            ))
+        })?;
+    if indices.len() != sizes.len() {
+        return Err(fail(format!(
+            "array '{base}' has {} dimension{} ({shown}): give {} ind{}",
+            sizes.len(),
+            if sizes.len() == 1 { "" } else { "s" },
+            sizes.len(),
+            if sizes.len() == 1 { "ex" } else { "ices" },
+        )));
+    }
+    let mut index = 0u64;
+    for (k, (&i, &size)) in indices.iter().zip(&sizes).enumerate() {
+        if i > size {
+            let range = if size == 0 {
+                "it is empty".to_string()
+            } else {
+                format!("valid: 1..={size}")
+            };
+            return Err(fail(format!(
+                "index {i} is out of range in dimension {} of array '{base}' ({shown}; {range})",
+                k + 1
+            )));
+        }
+        index = index * size + (i - 1);
+    }
+    let count: u64 = sizes.iter().product();
+    Ok((
+        var,
+        Some(Element {
+            index: index as usize,
+            count: count as usize,
+        }),
+    ))
+}
+
 /// An FMU's file name for messages: `oscillator.fmu`.
 pub(crate) fn fmu_file(path: &std::path::Path) -> String {
     path.file_name()
