@@ -98,7 +98,8 @@ pub fn package(
             return Err(format!(
                 "instance '{}' runs isolated (isolation = \"process\"): the exported FMU carries the host \
                  program {HOST_NAME}, which was not found (`tether fmu export` takes it from the tether \
-                 binary's folder: `cargo build --release -p tether-fmi-host`)",
+                 binary's folder: `cargo build --release -p tether-fmi-host`; `tether.export_fmu` from the \
+                 package, installed by tools/install-python.sh)",
                 instance.name
             ))
         }

@@ -791,14 +791,16 @@ impl PySimulation {
 /// A model description as a dict, with fmpy's attribute names.
 /// Export a system with an `[export]` table as one FMI 2.0 or 3.0 (`fmi`)
 /// co-simulation FMU at `out`, its binary the runtime library `runtime`
-/// (shipped in the package); returns the numbers of parameters, inputs,
-/// outputs and member FMU files.
+/// (shipped in the package) and, for isolated members, the host program
+/// `host` (shipped too); returns the numbers of parameters, inputs, outputs
+/// and member FMU files.
 #[pyfunction]
-#[pyo3(signature = (out, runtime, path=None, text=None, fmi=2))]
+#[pyo3(signature = (out, runtime, host=None, path=None, text=None, fmi=2))]
 fn export_fmu(
     py: Python<'_>,
     out: PathBuf,
     runtime: PathBuf,
+    host: Option<PathBuf>,
     path: Option<PathBuf>,
     text: Option<&str>,
     fmi: u32,
@@ -813,7 +815,7 @@ fn export_fmu(
         .detach(move || {
             let programs = tether_fmu_export::package::Programs {
                 runtime: &runtime,
-                host: None,
+                host: host.as_deref(),
             };
             tether_fmu_export::package::package(spec, &source, &programs, &out, fmi)
         })

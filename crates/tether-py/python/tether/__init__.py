@@ -884,6 +884,8 @@ def info(fmu: PathLike) -> Dict[str, Any]:
 #: wheel: tools/install-python.sh builds it and copies it into python/tether
 #: while the wheel is built (docs/fmu-export.md).
 _EXPORT_RUNTIME = "libtether_fmu_export.so"
+# The host program an exported FMU carries for its isolated members.
+_HOST_PROGRAM = "tether-fmi-host"
 
 
 def export_fmu(system: Union[PathLike, "System"], path: PathLike, fmi: int = 2) -> str:
@@ -891,15 +893,18 @@ def export_fmu(system: Union[PathLike, "System"], path: PathLike, fmi: int = 2) 
     ``[export]`` table as one FMI 2.0 (``fmi=2``) or FMI 3.0 (``fmi=3``)
     co-simulation FMU at ``path``, as ``tether fmu export`` does
     (docs/fmu-export.md); returns the path. The FMU's binary is the runtime
-    library shipped in this package."""
-    runtime = os.path.join(os.path.dirname(os.path.abspath(__file__)), _EXPORT_RUNTIME)
+    library shipped in this package; a system with isolated members also
+    carries the package's host program."""
+    folder = os.path.dirname(os.path.abspath(__file__))
+    runtime, host = (os.path.join(folder, name) for name in (_EXPORT_RUNTIME, _HOST_PROGRAM))
     if not os.path.isfile(runtime):
         raise SettingsError(
             f"the FMU runtime {runtime} is not installed with the tether package "
             "(install the package with tools/install-python.sh, which builds it into the wheel)"
         )
+    host = host if os.path.isfile(host) else None
     try:
-        _tether.export_fmu(os.fspath(path), runtime, fmi=fmi, **_source(system))
+        _tether.export_fmu(os.fspath(path), runtime, host=host, fmi=fmi, **_source(system))
     except _tether.Failure as f:
         raise _error(f) from None
     return os.fspath(path)
