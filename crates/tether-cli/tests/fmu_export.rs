@@ -57,23 +57,7 @@ fn the_exported_rigid_pair_runs_in_fmpy_bit_for_bit_as_tether_run() {
     ] {
         assert!(report.contains(check), "{check}: {report}");
     }
-    let (h1, r1) = read_csv(&ours);
-    let (h2, r2) = read_csv(&theirs);
-    assert_eq!(r1.len(), 1001);
-    assert_eq!(r1.len(), r2.len(), "same rows");
-    for (name, column) in [
-        ("time", "time"),
-        ("x", "mass1.x"),
-        ("v", "mass1.v"),
-        ("a", "mass1.a"),
-        ("lambda", "link.lambda"),
-    ] {
-        let i = h1.iter().position(|c| c == column).unwrap();
-        let j = h2.iter().position(|c| c == name).unwrap();
-        for (a, b) in r1.iter().zip(&r2) {
-            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
-        }
-    }
+    same_columns(&ours, &theirs, &PAIR_COLUMNS, 1001);
 }
 
 /// The rigid pair exported as FMI 3.0 (`--fmi 3`): fmpy validates it, its
@@ -124,23 +108,7 @@ fn the_fmi3_export_runs_in_fmpy_as_tether_run_and_nests_as_the_fmi2_export() {
     ] {
         assert!(report.contains(check), "{check}: {report}");
     }
-    let (h1, r1) = read_csv(&ours);
-    let (h2, r2) = read_csv(&theirs);
-    assert_eq!(r1.len(), 1001);
-    assert_eq!(r1.len(), r2.len(), "same rows");
-    for (name, column) in [
-        ("time", "time"),
-        ("x", "mass1.x"),
-        ("v", "mass1.v"),
-        ("a", "mass1.a"),
-        ("lambda", "link.lambda"),
-    ] {
-        let i = h1.iter().position(|c| c == column).unwrap();
-        let j = h2.iter().position(|c| c == name).unwrap();
-        for (a, b) in r1.iter().zip(&r2) {
-            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
-        }
-    }
+    same_columns(&ours, &theirs, &PAIR_COLUMNS, 1001);
     let nested = std::fs::read_to_string(root().join("examples/nested_three_masses.toml")).unwrap();
     let mut csvs = Vec::new();
     for version in ["2", "3"] {
@@ -250,23 +218,8 @@ fn an_ssp_exports_with_its_root_connectors_as_the_interface() {
             ("output", "a", "mass1.a"),
         ]
     );
-    let (h1, r1) = read_csv(&ours);
-    let (h2, r2) = read_csv(&theirs);
-    assert_eq!(h2, ["time", "x", "v", "a"]);
-    assert_eq!(r1.len(), 501);
-    assert_eq!(r1.len(), r2.len(), "same rows");
-    for (name, column) in [
-        ("time", "time"),
-        ("x", "mass1.x"),
-        ("v", "mass1.v"),
-        ("a", "mass1.a"),
-    ] {
-        let i = h1.iter().position(|c| c == column).unwrap();
-        let j = h2.iter().position(|c| c == name).unwrap();
-        for (a, b) in r1.iter().zip(&r2) {
-            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
-        }
-    }
+    assert_eq!(read_csv(&theirs).0, ["time", "x", "v", "a"]);
+    same_columns(&ours, &theirs, &PAIR_COLUMNS[..4], 501);
 }
 
 /// A system whose member runs isolated (`isolation = "process"`) exported:
@@ -330,23 +283,7 @@ fn an_exported_system_with_an_isolated_member_runs_from_the_fmu_alone() {
         "{report}{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let (h1, r1) = read_csv(&ours);
-    let (h2, r2) = read_csv(&theirs);
-    assert_eq!(r1.len(), 1001);
-    assert_eq!(r1.len(), r2.len(), "same rows");
-    for (name, column) in [
-        ("time", "time"),
-        ("x", "mass1.x"),
-        ("v", "mass1.v"),
-        ("a", "mass1.a"),
-        ("lambda", "link.lambda"),
-    ] {
-        let i = h1.iter().position(|c| c == column).unwrap();
-        let j = h2.iter().position(|c| c == name).unwrap();
-        for (a, b) in r1.iter().zip(&r2) {
-            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
-        }
-    }
+    same_columns(&ours, &theirs, &PAIR_COLUMNS, 1001);
 }
 
 /// The rigid pair with `export` as its [export] table.
@@ -460,24 +397,8 @@ fn an_exported_system_with_adaptive_steps_takes_any_communication_step() {
     };
     let theirs = dir.path().join("fmpy.csv");
     simulate("0.0123", &theirs);
-    let (h1, r1) = read_csv(&ours);
-    let (h2, r2) = read_csv(&theirs);
     // 0, 0.0123, …, 0.9963 and the stop time.
-    assert_eq!(r1.len(), 83);
-    assert_eq!(r1.len(), r2.len(), "same rows");
-    for (name, column) in [
-        ("time", "time"),
-        ("x", "mass1.x"),
-        ("v", "mass1.v"),
-        ("a", "mass1.a"),
-        ("lambda", "link.lambda"),
-    ] {
-        let i = h1.iter().position(|c| c == column).unwrap();
-        let j = h2.iter().position(|c| c == name).unwrap();
-        for (a, b) in r1.iter().zip(&r2) {
-            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
-        }
-    }
+    let (h1, r1) = same_columns(&ours, &theirs, &PAIR_COLUMNS, 83);
     let x = h1.iter().position(|c| c == "mass1.x").unwrap();
     let closed = |t: f64| damped(3.0, 2000.0, 20.0, 100.0, t);
     let run_error = r1
@@ -714,4 +635,37 @@ fn libcosim_runs_the_exported_pair_under_control_as_tether_run_does() {
             );
         }
     }
+}
+
+/// fmpy's columns of the exported pair (time, x, v, a, lambda) and the
+/// `tether run` columns they stand for.
+const PAIR_COLUMNS: [(&str, &str); 5] = [
+    ("time", "time"),
+    ("x", "mass1.x"),
+    ("v", "mass1.v"),
+    ("a", "mass1.a"),
+    ("lambda", "link.lambda"),
+];
+
+/// `rows` rows in both CSVs, and each of `columns` (fmpy's name, `tether
+/// run`'s column) in `theirs` equal to its column in `ours` bit for bit;
+/// returns `ours` (header, rows).
+fn same_columns(
+    ours: &Path,
+    theirs: &Path,
+    columns: &[(&str, &str)],
+    rows: usize,
+) -> (Vec<String>, Vec<Vec<f64>>) {
+    let (h1, r1) = read_csv(ours);
+    let (h2, r2) = read_csv(theirs);
+    assert_eq!(r1.len(), rows);
+    assert_eq!(r1.len(), r2.len(), "same rows");
+    for &(name, column) in columns {
+        let i = h1.iter().position(|c| c == column).unwrap();
+        let j = h2.iter().position(|c| c == name).unwrap();
+        for (a, b) in r1.iter().zip(&r2) {
+            assert_eq!(a[i].to_bits(), b[j].to_bits(), "{name} at t = {}", a[0]);
+        }
+    }
+    (h1, r1)
 }
