@@ -232,12 +232,15 @@ fresh.freeFMUstate(restored)
 fresh.terminate()
 fresh.freeInstance()
 # 9. The true ModelStructure.
+# (An FMU without lambda, the SSP export, checks the others.)
 outputs_deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
-if outputs_deps != {"x": [], "v": [], "a": ["F"], "lambda": ["F"]}:
+expected = {"x": [], "v": [], "a": ["F"], "lambda": ["F"]}
+if outputs_deps != {k: d for k, d in expected.items() if k in vr}:
     fail(f"dependencies: Outputs {outputs_deps}")
 initial_deps = {u.variable.name: sorted(d.name for d in u.dependencies)
                 for u in md.initialUnknowns}
-if initial_deps != {"x": ["m1"], "v": ["m1"], "a": ["F", "m1"], "lambda": ["F", "m1"]}:
+expected = {"x": ["m1"], "v": ["m1"], "a": ["F", "m1"], "lambda": ["F", "m1"]}
+if initial_deps != {k: d for k, d in expected.items() if k in vr}:
     fail(f"dependencies: InitialUnknowns {initial_deps}")
 if not md.coSimulation.canInterpolateInputs:
     fail("canInterpolateInputs is false")
@@ -245,12 +248,15 @@ print("dependencies: a and lambda on F, x and v on none")
 
 # 10. Direct feedthrough: a newly set F shows when a dependent output is read.
 M1, M2 = 1.5, 2.0
-F, A, LAMBDA, X, V = vr["F"], vr["a"], vr["lambda"], vr["x"], vr["v"]
+F, A, LAMBDA, X, V = vr["F"], vr["a"], vr.get("lambda"), vr["x"], vr["v"]
+READ = [r for r in [A, LAMBDA, X, V] if r is not None]
 
 
 def check_change(what, before, after, dF):
     # lambda acts on mass 2 with the sign of its drives term: its magnitude.
     for name, ref, d in [("a", A, dF / (M1 + M2)), ("lambda", LAMBDA, M2 * dF / (M1 + M2))]:
+        if ref is None:
+            continue
         change = after[ref] - before[ref]
         off = abs(change - d) if name == "a" else abs(abs(change) - abs(d))
         if off > 1e-12:
@@ -261,7 +267,7 @@ def check_change(what, before, after, dF):
 
 
 def read(s):
-    return dict(zip([A, LAMBDA, X, V], s.getReal([A, LAMBDA, X, V])))
+    return dict(zip(READ, s.getReal(READ)))
 
 
 s = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
@@ -332,7 +338,8 @@ RAMP_A, RAMP_B = 100.0, 2000.0
 def ramp(every, derivatives):
     s = instance(f"ramp{every}{derivatives}", 1.0)
     xs = []
-    for n in range(round(1.0 / (every * H))):
+    # Over the FMU's experiment (1 s for the rigid pair, 0.5 s for its SSP).
+    for n in range(round(float(md.defaultExperiment.stopTime) / (every * H))):
         t = n * every * H
         s.setReal([F], [RAMP_A + RAMP_B * t])
         if derivatives:
