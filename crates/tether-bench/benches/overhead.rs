@@ -958,7 +958,7 @@ fn loopback_host(dir: &std::path::Path) -> (String, PathBuf) {
 /// over TCP on loopback; alternated repetitions, medians and their ratios
 /// from the same run, with the load average before and after.
 fn bench_isolation() {
-    use tether_bench::{transport_round_trip, Transport};
+    use tether_bench::{on_one_core, transport_round_trip, Transport};
     use tether_fmi::remote::tcp::RemoteHost;
     use tether_fmi::remote::{set_host, HostCommand, RemoteInstance};
     println!("\n== isolation: FMU instances in host processes ==");
@@ -977,6 +977,7 @@ fn bench_isolation() {
         ("shared memory + futex", Transport::SharedMemoryFutex),
         ("shared memory, spinning", Transport::SharedMemorySpin),
         ("TCP on 127.0.0.1", Transport::TcpLoopback),
+        ("pipes, one core", Transport::PipesOnOneCore),
     ];
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); transports.len()];
     for _ in 0..reps {
@@ -1068,23 +1069,33 @@ fn bench_isolation() {
         ),
     ] {
         let steps = spec.macro_steps() as f64;
-        let mut times: [Vec<f64>; 3] = Default::default();
+        // In process, pipes, TCP, and pipes with the master and its hosts on
+        // one core (no idle core to wake for each round trip).
+        let mut times: [Vec<f64>; 4] = Default::default();
         let (mut calls, mut trips) = (0, [0.0; 2]);
         for _ in 0..reps {
             for (i, times) in times.iter_mut().enumerate() {
                 let mut spec = spec.clone();
                 for instance in &mut spec.instances {
-                    if i == 1 {
+                    if i == 1 || i == 3 {
                         instance.isolation = Isolation::Process;
                     } else if i == 2 {
                         instance.host = Some(url.clone());
                         instance.token_file = Some(token_file.clone());
                     }
                 }
-                let mut sim = Simulation::new(&spec).expect("simulation");
-                let clock = Instant::now();
-                let stats = sim.run(&mut [], &mut |_, _| {}).expect("run");
-                times.push(clock.elapsed().as_secs_f64() / steps);
+                let run = || {
+                    let mut sim = Simulation::new(&spec).expect("simulation");
+                    let clock = Instant::now();
+                    let stats = sim.run(&mut [], &mut |_, _| {}).expect("run");
+                    (clock.elapsed().as_secs_f64() / steps, stats)
+                };
+                let (time, stats) = if i == 3 {
+                    on_one_core(run).expect("one core")
+                } else {
+                    run()
+                };
+                times.push(time);
                 calls = stats
                     .instances
                     .iter()
@@ -1099,7 +1110,7 @@ fn bench_isolation() {
                     })
                     .sum::<u64>()
                     / stats.macro_steps;
-                if i > 0 {
+                if i == 1 || i == 2 {
                     // Setup included: a few round trips over the whole run.
                     let round_trips = stats.instances.iter().map(|c| c.round_trips).sum::<u64>();
                     trips[i - 1] = round_trips as f64
@@ -1107,22 +1118,24 @@ fn bench_isolation() {
                 }
             }
         }
-        let [a, b, c] = times.clone().map(median);
+        let [a, b, c, d] = times.clone().map(median);
         println!(
             "{name} ({calls} FMI calls a step; round trips per instance and step: pipes {:.2}, TCP {:.2}, setup included)",
             trips[0], trips[1]
         );
         println!(
-            "  per macro step: in-process {}   pipes {}   TCP {}",
+            "  per macro step: in-process {}   pipes {}   TCP {}   pipes on one core {}",
             us2(&times[0]),
             us2(&times[1]),
-            us2(&times[2])
+            us2(&times[2]),
+            us2(&times[3])
         );
         println!(
-            "  isolated / in-process {:.2}x   TCP / in-process {:.2}x   TCP / pipes {:.2}x",
+            "  isolated / in-process {:.2}x   TCP / in-process {:.2}x   TCP / pipes {:.2}x   on one core / in-process {:.2}x",
             b / a,
             c / a,
-            c / b
+            c / b,
+            d / a
         );
     }
     println!("load average (1 min) at the end: {}", load());

@@ -9,10 +9,13 @@
  *           reference, not a candidate)
  *   kind 4: a TCP connection on 127.0.0.1 with TCP_NODELAY (what remote
  *           hosts use)
+ *   kind 5: two pipes, both processes on the parent's current core (no
+ *           wake-up of another core: see tether_one_core)
  * The child does only read/write/futex system calls and _exit (safe after
  * fork in a threaded process). */
 #define _GNU_SOURCE
 #include <linux/futex.h>
+#include <sched.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <signal.h>
@@ -150,8 +153,35 @@ static double by_memory(long n, size_t size, int spin) {
     return WIFEXITED(status) && WEXITSTATUS(status) == 0 ? (t1 - t0) / (double)n * 1e6 : -1;
 }
 
+/* on = 1: pins the calling thread (and so the processes it starts from now
+ * on) to the core it runs on, keeping its former set of cores; on = 0: gives
+ * that set back. Returns 0, or -1 when the system refuses. */
+int tether_one_core(int on) {
+    static cpu_set_t former;
+    static int pinned = 0;
+    if (!on) {
+        if (!pinned) return 0;
+        pinned = 0;
+        return sched_setaffinity(0, sizeof former, &former);
+    }
+    int cpu = sched_getcpu();
+    if (pinned || cpu < 0 || sched_getaffinity(0, sizeof former, &former)) return -1;
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(cpu, &one);
+    if (sched_setaffinity(0, sizeof one, &one)) return -1;
+    pinned = 1;
+    return 0;
+}
+
 double tether_transport_roundtrip(int kind, long n, long size) {
     if (size < 1 || size > 4096) return -1;
+    if (kind == 5) {
+        if (tether_one_core(1)) return -1;
+        double us = by_fds(0, n, (size_t)size);
+        tether_one_core(0);
+        return us;
+    }
     if (kind <= 1 || kind == 4) return by_fds(kind, n, (size_t)size);
     return by_memory(n, (size_t)size, kind == 3);
 }

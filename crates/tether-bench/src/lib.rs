@@ -120,6 +120,7 @@ pub struct FloorResult {
 
 extern "C" {
     fn tether_transport_roundtrip(kind: c_int, n: c_long, size: c_long) -> f64;
+    fn tether_one_core(on: c_int) -> c_int;
     fn tether_probe_independent(n: c_long) -> f64;
     fn tether_probe_dependent(n: c_long) -> f64;
     fn tether_floor_run(
@@ -160,6 +161,8 @@ pub enum Transport {
     SharedMemorySpin,
     /// A TCP connection on 127.0.0.1 with TCP_NODELAY (what remote hosts use).
     TcpLoopback,
+    /// Two pipes with both processes on one core: no other core to wake.
+    PipesOnOneCore,
 }
 
 /// Microseconds per round trip of `size` bytes each way between this process
@@ -174,6 +177,20 @@ pub fn transport_round_trip(transport: Transport, n: u32, size: usize) -> Result
     } else {
         Ok(us)
     }
+}
+
+/// Runs `f` with this thread, and the processes it starts, on the core it
+/// runs on now; the former set of cores is given back afterwards.
+pub fn on_one_core<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    // SAFETY: the C function only calls sched_getcpu/sched_{get,set}affinity
+    // on the calling thread.
+    if unsafe { tether_one_core(1) } != 0 {
+        return Err("cannot pin this thread to one core".into());
+    }
+    let value = f();
+    // SAFETY: as above; gives back the set saved by the call before.
+    unsafe { tether_one_core(0) };
+    Ok(value)
 }
 
 /// What [`host_probe`] measured, ns per iteration.
