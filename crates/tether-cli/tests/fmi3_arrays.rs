@@ -18,6 +18,11 @@ fn statespace() -> PathBuf {
         .join("../../../shared/reference-fmus/fmi3/StateSpace.fmu")
 }
 
+fn feedthrough() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/reference-fmus/fmi3/Feedthrough.fmu")
+}
+
 fn oscillator() -> PathBuf {
     tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU")
 }
@@ -406,14 +411,14 @@ fn the_reference_statespace_refuses_its_structural_parameters() {
 }
 
 /// Typed start values on the Reference FMU `Feedthrough`: a String value is text, a
-/// Binary value hexadecimal text (either case); text that is not hexadecimal, and an
-/// Int64 value outside the 32-bit range Tether's integer values travel in, are
-/// refused in one line naming the variable.
+/// Binary value hexadecimal text (either case); Int64 and UInt64 values pass through
+/// exactly, also beyond 2^53 where a float would round them (the CSV column holds
+/// the integer's digits). Text that is not hexadecimal and a value outside the
+/// variable's type are refused in one line naming the variable.
 #[test]
-fn feedthrough_takes_string_and_binary_values_and_refuses_what_does_not_fit() {
+fn feedthrough_takes_typed_values_and_64_bit_integers_exactly() {
     let dir = tempfile::tempdir().unwrap();
-    let fmu = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/reference-fmus/fmi3/Feedthrough.fmu");
+    let fmu = feedthrough();
     let csv = dir.path().join("out.csv");
     let simulate = |sets: &[&str]| {
         let mut args = vec![
@@ -434,24 +439,121 @@ fn feedthrough_takes_string_and_binary_values_and_refuses_what_does_not_fit() {
     let out = simulate(&[
         "String_input=hello",
         "Binary_input=0A0bff",
-        "Int64_input=-7",
+        "Int64_input=-9007199254740993",
+        "UInt64_input=9223372036854775807",
+        "Int32_input=-7",
     ]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let (header, rows) = read_csv(&std::fs::read_to_string(&csv).unwrap());
-    let col = header.iter().position(|h| h == "Int64_output").unwrap();
-    assert_eq!(rows[0][col], -7.0, "Int64_input passed through");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for row in text.lines().skip(1) {
+        let row: Vec<&str> = row.split(',').collect();
+        assert_eq!(row[col("Int64_output")], "-9007199254740993", "{text}");
+        assert_eq!(row[col("UInt64_output")], "9223372036854775807", "{text}");
+        assert_eq!(row[col("Int32_output")].parse::<f64>().unwrap(), -7.0);
+    }
     let line = one_line(&simulate(&["Binary_input=xyz"]));
     assert!(
         line.contains("Feedthrough") && line.contains("\"xyz\" is not hexadecimal"),
         "{line}"
     );
-    let line = one_line(&simulate(&["Int64_input=1099511627776"]));
+    let line = one_line(&simulate(&["Int8_input=300"]));
     assert!(
-        line.contains("Int64_input = 1099511627776") && line.contains("32-bit"),
+        line.contains("fmi3SetInt8")
+            && line.contains("300 is outside the range of Int8 'Int8_input'"),
+        "{line}"
+    );
+    let line = one_line(&simulate(&["UInt64_input=-1"]));
+    assert!(
+        line.contains("-1 is outside the range of UInt64 'UInt64_input'"),
+        "{line}"
+    );
+    let line = one_line(&simulate(&["Float64_continuous_input=9007199254740993"]));
+    assert!(
+        line.contains("Float64_continuous_input")
+            && line.contains("the integer 9007199254740993 has no exact Real value"),
+        "{line}"
+    );
+}
+
+/// In a system, an Int64 output beyond 2^53 is recorded exactly, in process and
+/// isolated alike; a signal
+/// connection, which carries Reals, refuses it in one line naming the
+/// connection, the variable, the value and the time.
+#[test]
+fn a_system_records_64_bit_integers_exactly_and_a_connection_refuses_what_a_float_rounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = feedthrough();
+    let system = |connect: &str| {
+        format!(
+            r#"
+[experiment]
+stop = 0.3
+step = 0.1
+
+[[instance]]
+name = "a"
+fmu = "{fmu}"
+parameters = {{ Int64_input = 9007199254740993 }}
+
+[[instance]]
+name = "b"
+fmu = "{fmu}"
+{connect}
+"#,
+            fmu = fmu.display()
+        )
+    };
+    let file = dir.path().join("plain.toml");
+    std::fs::write(&file, system("")).unwrap();
+    let csv = dir.path().join("plain.csv");
+    let out = tether(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "a.Int64_output").unwrap();
+    assert_eq!(text.lines().count(), 5, "{text}");
+    for row in text.lines().skip(1) {
+        assert_eq!(row.split(',').nth(col), Some("9007199254740993"), "{text}");
+    }
+    // The same through host processes (the integers cross the protocol whole).
+    let isolated = dir.path().join("isolated.csv");
+    let out = tether(&[
+        "run",
+        file.to_str().unwrap(),
+        "--isolate",
+        "--out",
+        isolated.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    assert_eq!(std::fs::read_to_string(&isolated).unwrap(), text);
+    let file = dir.path().join("connected.toml");
+    let connect = "\n[[connection]]\nfrom = \"a.Int64_output\"\nto = \"b.Int64_input\"\n";
+    std::fs::write(&file, system(connect)).unwrap();
+    let line = one_line(&tether(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        dir.path().join("connected.csv").to_str().unwrap(),
+    ]));
+    assert!(
+        line.contains("a.Int64_output")
+            && line.contains("'Int64_output' = 9007199254740993 at t = 0")
+            && line.contains("no exact Real value"),
         "{line}"
     );
 }

@@ -2,10 +2,11 @@
 //! polynomials, coupled outputs read after each run, a saved state to roll back
 //! to, and the outputs recorded at accepted steps.
 
-use tether_fmi::{BaseType, Causality, Fmu, FmuInstance, Inputs, Placement, RunRequest, Slot};
+use tether_fmi::{BaseType, Causality, Fmu, FmuInstance, Inputs, Int, Placement, RunRequest, Slot};
 
 use crate::spec::Isolation;
 
+use crate::observer::integer_value;
 use crate::polynomial::Taylor;
 use crate::spec::InstanceSpec;
 use crate::stats::InstanceCounters;
@@ -148,12 +149,14 @@ pub struct Slave {
     recorded_reals: usize,
     /// Integer and Enumeration outputs, recorded after the Real ones.
     recorded_ints: Vec<u32>,
-    int_buf: Vec<i32>,
+    int_buf: Vec<Int>,
     /// Boolean outputs, recorded after the Integer ones (as 0 and 1).
     recorded_bools: Vec<u32>,
     bool_buf: Vec<bool>,
     /// Recorded outputs after the latest read.
     pub(crate) recorded_values: Vec<f64>,
+    /// The integers among them that a float rounds, exactly (by index).
+    recorded_exact: Vec<(usize, Int)>,
     pub(crate) counters: InstanceCounters,
     pub(crate) can_interpolate_inputs: bool,
     pub(crate) max_output_derivative_order: u32,
@@ -301,6 +304,7 @@ impl Slave {
         self.backend.restore(SNAPSHOT)?;
         self.backend.free(SNAPSHOT)?;
         self.recorded_values.copy_from_slice(recorded);
+        self.recorded_exact.clear();
         Ok(())
     }
 
@@ -362,6 +366,7 @@ impl Slave {
             slots: Vec::new(),
             value_buf: Vec::new(),
             recorded_values: Vec::new(),
+            recorded_exact: Vec::new(),
             recorded_names: Vec::new(),
             recorded_vrs: Vec::new(),
             recorded_reals: 0,
@@ -1121,8 +1126,13 @@ impl Slave {
             self.backend
                 .get_integers(&self.recorded_ints, &mut self.int_buf)?;
             self.counters.get_integers += 1;
-            for (slot, &v) in self.recorded_values[reals..].iter_mut().zip(&self.int_buf) {
-                *slot = f64::from(v);
+            self.recorded_exact.clear();
+            for (k, &x) in self.int_buf.iter().enumerate() {
+                let (v, exact) = integer_value(x);
+                self.recorded_values[reals + k] = v;
+                if !exact {
+                    self.recorded_exact.push((reals + k, x));
+                }
             }
         }
         if !self.recorded_bools.is_empty() {
@@ -1156,6 +1166,12 @@ impl Slave {
     /// Recorded outputs after the latest read.
     pub fn recorded_values(&self) -> &[f64] {
         &self.recorded_values
+    }
+
+    /// The integers among the recorded outputs that a float rounds, exactly,
+    /// by index in [`recorded_values`](Self::recorded_values).
+    pub fn recorded_exact(&self) -> &[(usize, Int)] {
+        &self.recorded_exact
     }
 
     /// Call counters, with the round trips to the instance's host process.

@@ -5,10 +5,11 @@
 use std::collections::HashMap;
 
 use tether_fmi::{
-    BaseType, Causality, FmuInstance, ModelDescription, ScalarVariable, Values, Variability,
+    BaseType, Causality, FmuInstance, Int, ModelDescription, ScalarVariable, Values, Variability,
     VariableKind,
 };
 
+use crate::observer::integer_value;
 use crate::spec::names::{describe, Element};
 use crate::spec::StartValue;
 use crate::MasterError;
@@ -232,7 +233,7 @@ fn set_array(
             for (k, x) in list.iter().enumerate() {
                 reals.push(match x {
                     StartValue::Real(x) => *x,
-                    StartValue::Integer(i) => *i as f64,
+                    StartValue::Integer(i) => as_real(*i).map_err(|r| at(k, r))?,
                     _ => return Err(wrong(k)),
                 });
             }
@@ -245,10 +246,7 @@ fn set_array(
                 let StartValue::Integer(i) = x else {
                     return Err(wrong(k));
                 };
-                ints.push(
-                    i32::try_from(*i)
-                        .map_err(|_| at(k, "out of the 32-bit integer range".into()))?,
-                );
+                ints.push(Int::from(*i));
             }
             instance.set_integers(&vr, &ints)?;
         }
@@ -365,11 +363,11 @@ fn set_value(
     check_range(&var.kind, value).map_err(&fail)?;
     match (var.base_type(), value) {
         (BaseType::Real, StartValue::Real(x)) => instance.set_reals(&vr, &[*x])?,
-        (BaseType::Real, StartValue::Integer(i)) => instance.set_reals(&vr, &[*i as f64])?,
+        (BaseType::Real, StartValue::Integer(i)) => {
+            instance.set_reals(&vr, &[as_real(*i).map_err(&fail)?])?
+        }
         (BaseType::Integer | BaseType::Enumeration, StartValue::Integer(i)) => {
-            let i =
-                i32::try_from(*i).map_err(|_| fail("out of the 32-bit integer range".into()))?;
-            instance.set_integers(&vr, &[i])?
+            instance.set_integers(&vr, &[Int::from(*i)])?
         }
         (BaseType::Boolean, StartValue::Boolean(b)) => instance.set_booleans(&vr, &[*b])?,
         (BaseType::String, StartValue::String(s)) => instance.set_strings(&vr, &[s.as_str()])?,
@@ -380,6 +378,17 @@ fn set_value(
 
 /// Refuses NaN/infinite Reals and values outside the variable's declared `min`/`max`
 /// before the FMU sees them (FMUs are not required to check, and many do not).
+/// An integer literal given for a Real variable, refused where the float
+/// would round it.
+fn as_real(i: i64) -> Result<f64, String> {
+    match integer_value(Int::from(i)) {
+        (x, true) => Ok(x),
+        (x, false) => Err(format!(
+            "the integer {i} has no exact Real value (the nearest is {x}); write it as a float"
+        )),
+    }
+}
+
 fn check_range(kind: &VariableKind, value: &StartValue) -> Result<(), String> {
     let (min, max, x) = match (kind, value) {
         (VariableKind::Real(r), StartValue::Real(x)) => (r.attributes.min, r.attributes.max, *x),

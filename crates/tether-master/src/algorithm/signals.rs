@@ -21,7 +21,9 @@ use crate::spec::names::{describe, find_instance, Element};
 use crate::spec::{ConnectionSpec, SignalScheme, SignalSolver, SystemSpec};
 use crate::stats::{Lap, RunStats, SignalStats};
 use crate::MasterError;
-use tether_fmi::Inputs;
+use tether_fmi::{Inputs, Int};
+
+use crate::observer::integer_value;
 
 /// The FMI type a connection carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -626,7 +628,21 @@ impl Signals {
             Kind::Integer => {
                 let mut v = [0];
                 slave.backend.get_integers(&[link.from_vr], &mut v)?;
-                f64::from(v[0])
+                match integer_value(v[0]) {
+                    (x, true) => x,
+                    (_, false) => {
+                        return Err(MasterError::Connection {
+                            connection: link.name.clone(),
+                            reason: format!(
+                                "'{}' = {} at t = {} has no exact Real value (beyond ±2^53), \
+                                 and a connection carries Reals",
+                                link.variable,
+                                v[0],
+                                slave.backend.time()
+                            ),
+                        })
+                    }
+                }
             }
             Kind::Boolean => {
                 let mut v = [false];
@@ -673,8 +689,8 @@ impl Signals {
                     slave.counters.set_input_derivatives += 1;
                 }
             }
-            // Values read from an Integer output: exact in f64.
-            Kind::Integer => slave.backend.set_integers(&vr, &[p.value as i32])?,
+            // Values read from an Integer output: exact in f64 (checked by `read`).
+            Kind::Integer => slave.backend.set_integers(&vr, &[p.value as Int])?,
             Kind::Boolean => slave.backend.set_booleans(&vr, &[p.value != 0.0])?,
         }
         slave.counters.set_reals += 1;
