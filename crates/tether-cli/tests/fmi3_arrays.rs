@@ -558,6 +558,100 @@ fmu = "{fmu}"
     );
 }
 
+/// The pythonfmu3 FMU of tests/fixtures/pythonfmu3/Decays.py, built once; `None`
+/// (skip) without Python or pythonfmu3 outside CI.
+fn decays() -> Option<&'static tether_tests::fmpy::PythonFmu> {
+    static BUILT: std::sync::OnceLock<Result<tether_tests::fmpy::PythonFmu, String>> =
+        std::sync::OnceLock::new();
+    match BUILT.get_or_init(|| tether_tests::fmpy::pythonfmu3("Decays")) {
+        Ok(built) => Some(built),
+        Err(reason) if std::env::var_os("CI").is_some() => {
+            panic!("the pythonfmu3 FMU is needed on CI: {reason}")
+        }
+        Err(reason) => {
+            eprintln!("skipped: no pythonfmu3 FMU ({reason})");
+            None
+        }
+    }
+}
+
+/// Structural parameters end to end on a third-party FMU: the pythonfmu3 FMU
+/// `Decays` (tests/fixtures/pythonfmu3/Decays.py) has an output array x of n
+/// elements, n a fixed structural parameter (3 by default), x_i(t) = exp(−i·t).
+/// `parameters = { n = 5 }` (set in configuration mode) makes x and its columns
+/// follow: `d.x[1]` … `d.x[5]`, each the closed form to 1e-15 relative, and
+/// `d.x[5]` a name a connection can take; at the default n = 3 that name is
+/// refused in one line. The instance runs isolated: pythonfmu3's runtime can
+/// abort the process that loaded it at exit (its interpreter finalizer reads an
+/// object already freed), after the results, and isolated that exit is the host's.
+#[test]
+fn a_structural_parameter_resizes_the_array_its_columns_and_its_names() {
+    let Some(py) = decays() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let system = |parameters: &str| {
+        format!(
+            r#"
+[experiment]
+stop = 0.5
+step = 0.1
+
+[[instance]]
+name = "d"
+fmu = "{decays}"
+isolation = "process"
+{parameters}
+
+[[instance]]
+name = "o"
+fmu = "{osc}"
+parameters = {{ exact = true }}
+
+[[connection]]
+from = "d.x[5]"
+to = "o.F"
+"#,
+            decays = py.fmu.display(),
+            osc = oscillator().display()
+        )
+    };
+    let run = |toml: &str, name: &str| {
+        let file = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&file, toml).unwrap();
+        py.env(&mut Command::new(env!("CARGO_BIN_EXE_tether")))
+            .args(["run", file.to_str().unwrap(), "--out"])
+            .arg(dir.path().join(format!("{name}.csv")))
+            .output()
+            .unwrap()
+    };
+    let out = run(&system("parameters = { n = 5 }"), "five");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (header, rows) = read_csv(&std::fs::read_to_string(dir.path().join("five.csv")).unwrap());
+    let x: Vec<String> = (1..=5).map(|i| format!("d.x[{i}]")).collect();
+    assert_eq!(header[1..6], x[..], "{header:?}");
+    assert!(!header.iter().any(|h| h == "d.x[6]"), "{header:?}");
+    assert_eq!(rows.len(), 6);
+    for row in &rows {
+        for i in 1..=5 {
+            let exact = (-(i as f64) * row[0]).exp();
+            assert!(
+                ((row[i] - exact) / exact).abs() <= 1e-15,
+                "x[{i}] at t = {}: {} against {exact}",
+                row[0],
+                row[i]
+            );
+        }
+    }
+    let line = one_line(&run(&system(""), "three"));
+    assert!(
+        line.contains("index 5 is out of range") && line.contains("valid: 1..=3"),
+        "{line}"
+    );
+}
+
 /// Signal connections to and from array elements: the workspace oscillator's `x`
 /// into StateSpace's `u[2]` (the array set whole, `u[1]` and `u[3]` keeping their
 /// start values 1 and 3), StateSpace's `y[2]` (y = D u with D = diag(1, 2, 1), A, B,
