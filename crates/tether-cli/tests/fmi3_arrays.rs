@@ -645,11 +645,174 @@ to = "o.F"
             );
         }
     }
-    let line = one_line(&run(&system(""), "three"));
+    // The FMU's host may add its own exit message (see above) to stderr: the
+    // error is the one `error:` line.
+    let out = run(&system(""), "three");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{stderr}");
     assert!(
-        line.contains("index 5 is out of range") && line.contains("valid: 1..=3"),
-        "{line}"
+        errors[0].contains("index 5 is out of range") && errors[0].contains("valid: 1..=3"),
+        "{stderr}"
     );
+}
+
+/// Signal connections take elements of Integer and Boolean arrays as of Real ones:
+/// two `Decays` instances (n = 4 and n = 3), `a.k[2] → b.shift[3]` (Int64) and
+/// `a.held[1] → b.hold[2]` (Boolean), the receivers' other elements at their
+/// values set in `parameters`. After step s, a.k[2] = 2s and b.k[3] = 3s plus the
+/// value a.k[2] had at the previous point, 2(s − 1); b.held = [false, true, true].
+#[test]
+fn signal_connections_take_integer_and_boolean_array_elements() {
+    let Some(py) = decays() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let toml = format!(
+        r#"
+[experiment]
+stop = 0.5
+step = 0.1
+
+[[instance]]
+name = "a"
+fmu = "{fmu}"
+isolation = "process"
+parameters = {{ n = 4, hold = [true, false, false, false] }}
+
+[[instance]]
+name = "b"
+fmu = "{fmu}"
+isolation = "process"
+parameters = {{ shift = [10, 20, 30], hold = [false, false, true] }}
+
+[[connection]]
+from = "a.k[2]"
+to = "b.shift[3]"
+
+[[connection]]
+from = "a.held[1]"
+to = "b.hold[2]"
+"#,
+        fmu = py.fmu.display()
+    );
+    let file = dir.path().join("system.toml");
+    std::fs::write(&file, toml).unwrap();
+    let csv = dir.path().join("out.csv");
+    let out = py
+        .env(&mut Command::new(env!("CARGO_BIN_EXE_tether")))
+        .args([
+            "run",
+            file.to_str().unwrap(),
+            "--out",
+            csv.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (header, rows) = read_csv(&std::fs::read_to_string(&csv).unwrap());
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    assert_eq!(rows.len(), 6);
+    for (s, row) in rows.iter().enumerate().skip(1) {
+        let s = s as f64;
+        assert_eq!(row[col("a.k[2]")], 2.0 * s);
+        assert_eq!(row[col("b.k[1]")], 10.0 + s);
+        assert_eq!(row[col("b.k[2]")], 20.0 + 2.0 * s);
+        assert_eq!(row[col("b.k[3]")], 3.0 * s + 2.0 * (s - 1.0), "step {s}");
+        assert_eq!(
+            [
+                row[col("b.held[1]")],
+                row[col("b.held[2]")],
+                row[col("b.held[3]")]
+            ],
+            [0.0, 1.0, 1.0]
+        );
+    }
+}
+
+/// `Simulation::set_parameter` (Python's `Simulation.set_parameter`) takes array
+/// elements and whole arrays between steps, the other elements keeping their
+/// values; out-of-range elements, a wrong length and an array for an element are
+/// refused with the variable named. `Decays` runs isolated, in `tether`'s host
+/// given the environment its embedded Python needs.
+#[test]
+fn set_parameter_takes_array_elements_and_whole_arrays_between_steps() {
+    use tether_master::{Simulation, StartValue, SystemSpec};
+    let Some(py) = decays() else { return };
+    tether_fmi::remote::set_host(tether_fmi::remote::HostCommand {
+        program: "/usr/bin/env".into(),
+        args: vec![
+            format!("LD_PRELOAD={}", py.libpython.display()).into(),
+            format!("PYTHONPATH={}", py.site_packages.display()).into(),
+            env!("CARGO_BIN_EXE_tether").into(),
+            "__fmi-host".into(),
+        ],
+    });
+    let spec = SystemSpec::from_toml(&format!(
+        r#"
+[experiment]
+stop = 1.0
+step = 0.1
+
+[[instance]]
+name = "d"
+fmu = "{}"
+isolation = "process"
+"#,
+        py.fmu.display()
+    ))
+    .unwrap();
+    let mut sim = Simulation::new(&spec).unwrap();
+    let k = |sim: &Simulation| -> Vec<f64> {
+        (1..=3)
+            .map(|i| sim.value(&format!("d.k[{i}]")).unwrap())
+            .collect()
+    };
+    sim.step().unwrap();
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [2.0, 4.0, 6.0]);
+    sim.set_parameter("d.shift[2]", &StartValue::Integer(100))
+        .unwrap();
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [3.0, 106.0, 9.0]);
+    let whole = StartValue::Array(vec![
+        StartValue::Integer(-1),
+        StartValue::Integer(-2),
+        StartValue::Integer(-3),
+    ]);
+    sim.set_parameter("d.shift", &whole).unwrap();
+    sim.set_parameter("d.hold[3]", &StartValue::Boolean(true))
+        .unwrap();
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [3.0, 6.0, 9.0]);
+    assert_eq!(sim.value("d.held[3]"), Some(1.0));
+    assert_eq!(sim.value("d.held[1]"), Some(0.0));
+    let refused = |sim: &mut Simulation, target: &str, value: StartValue| {
+        sim.set_parameter(target, &value).unwrap_err().to_string()
+    };
+    let e = refused(&mut sim, "d.shift[4]", StartValue::Integer(1));
+    assert!(
+        e.contains("index 4 is out of range") && e.contains("'d'"),
+        "{e}"
+    );
+    let e = refused(
+        &mut sim,
+        "d.shift",
+        StartValue::Array(vec![StartValue::Integer(1)]),
+    );
+    assert!(
+        e.contains("3 = 3 elements") && e.contains("the value has 1"),
+        "{e}"
+    );
+    let e = refused(&mut sim, "d.shift[1]", whole.clone());
+    assert!(e.contains("an element takes one value"), "{e}");
+    let e = refused(&mut sim, "d.k[1]", StartValue::Integer(1));
+    assert!(e.contains("only inputs and tunable parameters"), "{e}");
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [4.0, 8.0, 12.0], "nothing refused was set");
 }
 
 /// Signal connections to and from array elements: the workspace oscillator's `x`

@@ -8,7 +8,7 @@ use crate::spec::Isolation;
 
 use crate::observer::integer_value;
 use crate::polynomial::Taylor;
-use crate::spec::InstanceSpec;
+use crate::spec::{InstanceSpec, StartValue};
 use crate::stats::InstanceCounters;
 use crate::MasterError;
 
@@ -132,10 +132,8 @@ pub struct Slave {
     /// The place of each coupled input's value among the values set (the
     /// elements of an array input are set together).
     input_positions: Vec<usize>,
-    /// Signal connections: an array output read whole (its values), and the
-    /// array inputs they set, whole, by value reference.
+    /// Signal connections: an array output read whole (its values).
     pub(crate) signal_buf: Vec<f64>,
-    signal_inputs: Vec<(u32, Vec<f64>)>,
     /// The output derivatives read, `(variable, order)`.
     derivative_reads: Vec<(u32, i32)>,
     /// The slot in the coupled outputs of each value of `value_buf`.
@@ -361,7 +359,6 @@ impl Slave {
             arrays: Default::default(),
             input_positions: Vec::new(),
             signal_buf: Vec::new(),
-            signal_inputs: Vec::new(),
             derivative_reads: Vec::new(),
             slots: Vec::new(),
             value_buf: Vec::new(),
@@ -438,32 +435,32 @@ impl Slave {
         Ok(())
     }
 
-    /// Set element `e` of Real array input `vr` to `value` (a signal
-    /// connection's receiver): the array is set whole, its other elements at
-    /// the values set so far (at first their start values).
+    /// Set element `e` of array input `vr` to `value` (a signal connection's
+    /// receiver): the array is set whole, its other elements at their values
+    /// as last set.
     pub(crate) fn set_array_element(
         &mut self,
         vr: u32,
         e: crate::spec::names::Element,
-        value: f64,
+        value: StartValue,
     ) -> Result<(), MasterError> {
-        let k = match self.signal_inputs.iter().position(|(v, _)| *v == vr) {
-            Some(k) => k,
-            None => {
-                let md = self.fmu.model_description();
-                let values = match md.variable_by_vr(vr) {
-                    Some(var) => self.arrays.real_values(md, var)?,
-                    None => vec![0.0; e.count],
-                };
-                self.signal_inputs.push((vr, values));
-                self.signal_inputs.len() - 1
-            }
+        let md = self.fmu.model_description();
+        let Some(var) = md.variable_by_vr(vr) else {
+            return Err(MasterError::StartValue {
+                instance: self.name.clone(),
+                variable: format!("#{vr}"),
+                value: value.to_string(),
+                reason: "no variable has this value reference".into(),
+            });
         };
-        let values = &mut self.signal_inputs[k].1;
-        values.resize(e.count, 0.0);
-        values[e.index] = value;
-        self.backend.set_reals(&[vr], values)?;
-        Ok(())
+        let fail = |reason: String| MasterError::StartValue {
+            instance: self.name.clone(),
+            variable: format!("{}[{}]", var.name, e.index + 1),
+            value: value.to_string(),
+            reason,
+        };
+        self.arrays
+            .set_element(self.backend.as_mut(), md, var, e.index, value.clone(), fail)
     }
 
     /// Register a coupled Real input (an array's `element`, if any) driven by
