@@ -6,9 +6,11 @@
 //! `canReturnEarlyAfterIntermediateUpdate` runs without them, as the standard allows.
 //! FMUs with clocks are refused (clocks need event mode).
 //!
-//! An FMU that declares `providesIntermediateUpdate` gets the intermediate update
-//! callback, and its Float64 inputs declared `intermediateUpdate="true"` as the
-//! required intermediate variables: such an input takes a polynomial over a step
+//! An FMU that declares `providesIntermediateUpdate`, instantiated for polynomial
+//! inputs ([`InstanceOptions::polynomial_inputs`], the master's k > 0), gets the
+//! intermediate update callback, and its Float64 inputs declared
+//! `intermediateUpdate="true"` as the required intermediate variables; otherwise
+//! no callback (the FMU makes none). Such an input takes a polynomial over a step
 //! ([`FmuInstance::set_inputs`] with derivatives), set to the polynomial's value at
 //! every intermediate time at which the FMU asks for inputs
 //! (`raw::fmi3::intermediate`). Other inputs take values only (k = 0).
@@ -104,7 +106,8 @@ impl Fmi3Instance {
             None
         };
         let debug = crate::fmu::debug_logging();
-        let polynomial_inputs: Vec<ValueReference> = if cs.provides_intermediate_update {
+        let intermediate_update = cs.provides_intermediate_update && options.polynomial_inputs;
+        let polynomial_inputs: Vec<ValueReference> = if intermediate_update {
             md.model_variables
                 .iter()
                 .filter(|v| {
@@ -135,7 +138,7 @@ impl Fmi3Instance {
                 event_mode_used: false,
                 early_return_allowed: false,
                 required_intermediate_variables: &polynomial_inputs,
-                intermediate_update: cs.provides_intermediate_update,
+                intermediate_update,
             },
         )?;
         raw.once = once;
@@ -623,12 +626,20 @@ impl FmuInstance for Fmi3Instance {
             .iter()
             .find(|vr| !self.polynomial_inputs.contains(vr))
         {
-            let name = self.variable("fmi3SetFloat64", vr)?.name.clone();
+            let variable = self.variable("fmi3SetFloat64", vr)?;
+            let name = variable.name.clone();
+            let md = self.md();
+            let why = if md.co_simulation.provides_intermediate_update
+                && variable.intermediate_update
+            {
+                format!("instance '{}' was instantiated for values only (InstanceOptions::polynomial_inputs false: no intermediate update callback)", self.raw.name())
+            } else {
+                format!("FMI 3.0 has no input derivatives, and model '{}' does not provide intermediate update for it (providesIntermediateUpdate and intermediateUpdate=\"true\")", md.model_name)
+            };
             return Err(self.invalid(
                 "fmi3SetFloat64",
                 format!(
-                    "input '{name}' cannot take a polynomial (a coupling polynomial of degree k > 0): FMI 3.0 has no input derivatives, and model '{}' does not provide intermediate update for it (providesIntermediateUpdate and intermediateUpdate=\"true\"); use k = 0",
-                    self.md().model_name
+                    "input '{name}' cannot take a polynomial (a coupling polynomial of degree k > 0): {why}; use k = 0"
                 ),
             ));
         }

@@ -15,7 +15,7 @@ use crate::error::{Error, FmuMessages};
 use crate::model_description::FmiStandard;
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]

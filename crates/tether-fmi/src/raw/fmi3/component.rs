@@ -76,7 +76,8 @@ pub(crate) struct InstantiateArgs3<'a> {
     pub event_mode_used: bool,
     pub early_return_allowed: bool,
     pub required_intermediate_variables: &'a [fmi3ValueReference],
-    /// Pass the intermediate update callback (the FMU provides intermediate update).
+    /// Pass the intermediate update callback (the FMU provides intermediate update
+    /// and its inputs take polynomials).
     pub intermediate_update: bool,
 }
 
