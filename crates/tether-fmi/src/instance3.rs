@@ -473,7 +473,9 @@ impl FmuInstance for Fmi3Instance {
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
         const F: &str = "fmi3SetFloat64";
         // A value set on an input ends its polynomial.
-        self.raw.env.hold(vrs);
+        if self.raw.intermediate_update {
+            self.raw.env.hold(vrs);
+        }
         if self.plain_reals && vrs.len() == values.len() {
             return self.raw.fmi3SetFloat64(vrs, values);
         }
@@ -688,7 +690,9 @@ impl FmuInstance for Fmi3Instance {
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
         let end = t + h;
         let no_set_prior = self.states.iter().all(Option::is_none);
-        self.raw.env.begin_step(t);
+        if self.raw.intermediate_update {
+            self.raw.env.begin_step(t);
+        }
         let (result, answers) = self.raw.fmi3DoStep(t, h, no_set_prior);
         let terminated = |time: f64, this: &mut Self| {
             this.raw.time = time;
