@@ -857,7 +857,7 @@ const GOAL_FMI3: f64 = 1.10;
 /// k = 1), medians.
 fn bench_fmi3() {
     let reps = reps();
-    println!("\n== FMI 3.0 against FMI 2.0 instances (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps) ==");
+    println!("\n== FMI 3.0 against FMI 2.0 instances (oscillator pair, Method 1 index 1, H = 1e-3, 1000 steps; load average {}) ==", load());
     println!("FMU       k   FMI 2.0/step   FMI 3.0/step   FMI 3.0 / FMI 2.0   goal");
     let fmu3 =
         tether_fmu_build::workspace_fmu3("oscillator").expect("package the FMI 3.0 oscillator");
@@ -916,6 +916,7 @@ fn bench_fmi3() {
             if ratio <= GOAL_FMI3 { "met" } else { "missed" }
         );
     }
+    println!("load average after: {}", load());
 }
 
 /// The load average of the last minute (what shares the cores with the bench).

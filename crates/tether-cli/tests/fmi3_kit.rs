@@ -286,6 +286,55 @@ fn isolated_fmi3_instances_at_k_1_give_the_in_process_csv_in_two_round_trips_a_s
     assert_eq!(per_step, [2.0, 2.0]);
 }
 
+/// The intermediate update callback only where polynomials go: at k = 0 the FMI 3.0
+/// builds get no callback and make none, at k = 1 they call back twice in each
+/// `fmi3DoStep` (at T_N + H/2 and T_{N+1}), in this process and in an isolated
+/// instance's host alike. The kit logs each callback and each step (logEvents), so
+/// the counts are the FMU's own.
+#[test]
+fn the_fmi3_builds_are_called_back_only_at_k_above_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let system = fmi3_oscillator(dir.path());
+    let csv = dir.path().join("log.csv");
+    for isolation in [&[][..], &["--isolate"][..]] {
+        for k in ["0", "1"] {
+            let mut args = vec![
+                "run",
+                system.to_str().unwrap(),
+                "--order",
+                k,
+                "--stop",
+                "0.01",
+                "--parallel",
+                "off",
+                "--fmu-log=logEvents",
+                "--fmu-log-limit",
+                "off",
+                "--out",
+                csv.to_str().unwrap(),
+            ];
+            args.extend_from_slice(isolation);
+            let text = success(&tether(&args, dir.path()));
+            let count = |instance: &str, what: &str| {
+                text.lines()
+                    .filter(|l| l.contains(&format!("fmu::{instance}]")) && l.contains(what))
+                    .count()
+            };
+            for instance in ["mass1", "mass2"] {
+                let steps = count(instance, "[logEvents] step ");
+                let callbacks = count(instance, "[logEvents] intermediate update at t = ");
+                println!("{isolation:?} k = {k}, {instance}: {steps} steps, {callbacks} callbacks");
+                assert!(steps >= 10, "{isolation:?} k = {k}: {steps} steps\n{text}");
+                let expected = if k == "0" { 0 } else { 2 * steps };
+                assert_eq!(
+                    callbacks, expected,
+                    "{isolation:?} k = {k}, {instance}\n{text}"
+                );
+            }
+        }
+    }
+}
+
 /// Adaptive steps at k = 1 with the FMI 3.0 builds: the error estimate compares the
 /// predicted and corrected runs, each taking its polynomial through intermediate
 /// update. The run ends at the stop time after as many steps as with the FMI 2.0

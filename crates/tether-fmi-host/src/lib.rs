@@ -324,9 +324,17 @@ impl Host {
                 let options = InstanceOptions {
                     logging_on: input.bool()?,
                     visible: input.bool()?,
+                    polynomial_inputs: input.bool()?,
                 };
                 let timeout = input.f64()?;
                 self.timeout = (timeout > 0.0).then(|| Duration::from_secs_f64(timeout));
+                // The master's FMU debug logging (`--fmu-log`), for this process.
+                let debug = input.bool()?;
+                let mut categories = Vec::new();
+                for _ in 0..input.u32()? {
+                    categories.push(input.str()?.to_string());
+                }
+                tether_fmi::set_debug_logging(debug.then_some(categories));
                 Fmu::open(dir)
                     .and_then(|fmu| {
                         tether_fmi::instantiate(&fmu, name, options, Placement::InProcess)

@@ -201,3 +201,67 @@ fn fmi3_instances_are_batched_and_their_errors_cross_as_in_process() {
     );
     assert_eq!(isolated.to_string(), in_process.to_string());
 }
+
+/// An FMI 3.0 instance takes polynomial inputs only if it was made for them
+/// (`InstanceOptions::polynomial_inputs`: the intermediate update callback is
+/// passed then only), in process and in a host process alike (the option
+/// crosses with `INSTANTIATE`): without it a polynomial is refused by name,
+/// with it the step takes the polynomial, the same in both places.
+#[test]
+fn fmi3_polynomial_inputs_need_the_instance_option_in_process_and_in_the_host() {
+    use tether_fmi::InstanceOptions;
+    let fmu = Fmu::open(tether_fmu_build::workspace_fmu3("oscillator").unwrap()).unwrap();
+    let md = fmu.model_description();
+    let (x, force) = (
+        md.value_reference("x").unwrap(),
+        md.value_reference("F").unwrap(),
+    );
+    let force = [force];
+    let polynomial = Inputs {
+        vrs: &force,
+        values: &[1.0],
+        derivative_vrs: &force,
+        orders: &[1],
+        derivatives: &[200.0],
+    };
+    let mut ends = Vec::new();
+    for placement in [Placement::InProcess, Placement::Process { timeout: None }] {
+        for polynomial_inputs in [false, true] {
+            let options = InstanceOptions::default().with_polynomial_inputs(polynomial_inputs);
+            let mut i = instantiate(&fmu, "m", options, placement.clone()).unwrap();
+            i.setup(None, 0.0, Some(1.0)).unwrap();
+            i.enter_initialization().unwrap();
+            i.exit_initialization().unwrap();
+            // In the host the inputs and the step travel with the read (they
+            // answer nothing).
+            let mut out = [0.0];
+            let set = i
+                .set_inputs(&polynomial)
+                .and_then(|()| i.step(0.0, 0.01))
+                .and_then(|()| i.get_reals(&[x], &mut out));
+            if !polynomial_inputs {
+                let e = set.expect_err(&format!("{placement:?}")).to_string();
+                assert!(
+                    e.contains("input 'F' cannot take a polynomial")
+                        && e.contains("instantiated for values only"),
+                    "{placement:?}: {e}"
+                );
+                continue;
+            }
+            set.unwrap();
+            ends.push(out[0]);
+        }
+    }
+    // The same step in both places, and not the step with the force held at 1.
+    assert_eq!(ends[0].to_bits(), ends[1].to_bits(), "{ends:?}");
+    let mut held = started(&fmu, Placement::InProcess);
+    held.set_reals(&force, &[1.0]).unwrap();
+    held.step(0.0, 0.01).unwrap();
+    let mut out = [0.0];
+    held.get_reals(&[x], &mut out).unwrap();
+    assert_ne!(
+        out[0].to_bits(),
+        ends[0].to_bits(),
+        "the polynomial changed nothing"
+    );
+}

@@ -26,12 +26,24 @@ pub struct InstanceOptions {
     pub logging_on: bool,
     /// `visible` of `fmi2Instantiate` (Tether runs FMUs headless: default false).
     pub visible: bool,
+    /// The inputs will take polynomials over a step (coupling polynomials of
+    /// degree k > 0, [`crate::FmuInstance::set_inputs`] with derivatives). An
+    /// FMI 3.0 instance gets the intermediate update callback only then (at
+    /// k = 0 its calls would set nothing); FMI 2.0 instances take input
+    /// derivatives either way.
+    pub polynomial_inputs: bool,
 }
 
 impl InstanceOptions {
     /// Options with FMU debug logging switched on.
     pub fn with_logging(mut self, logging_on: bool) -> Self {
         self.logging_on = logging_on;
+        self
+    }
+
+    /// Options for inputs that take polynomials over a step (`polynomial_inputs`).
+    pub fn with_polynomial_inputs(mut self, polynomial_inputs: bool) -> Self {
+        self.polynomial_inputs = polynomial_inputs;
         self
     }
 }

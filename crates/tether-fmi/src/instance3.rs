@@ -6,9 +6,11 @@
 //! `canReturnEarlyAfterIntermediateUpdate` runs without them, as the standard allows.
 //! FMUs with clocks are refused (clocks need event mode).
 //!
-//! An FMU that declares `providesIntermediateUpdate` gets the intermediate update
-//! callback, and its Float64 inputs declared `intermediateUpdate="true"` as the
-//! required intermediate variables: such an input takes a polynomial over a step
+//! An FMU that declares `providesIntermediateUpdate`, instantiated for polynomial
+//! inputs ([`InstanceOptions::polynomial_inputs`], the master's k > 0), gets the
+//! intermediate update callback, and its Float64 inputs declared
+//! `intermediateUpdate="true"` as the required intermediate variables; otherwise
+//! no callback (the FMU makes none). Such an input takes a polynomial over a step
 //! ([`FmuInstance::set_inputs`] with derivatives), set to the polynomial's value at
 //! every intermediate time at which the FMU asks for inputs
 //! (`raw::fmi3::intermediate`). Other inputs take values only (k = 0).
@@ -105,7 +107,8 @@ impl Fmi3Instance {
             None
         };
         let debug = crate::fmu::debug_logging();
-        let polynomial_inputs: Vec<ValueReference> = if cs.provides_intermediate_update {
+        let intermediate_update = cs.provides_intermediate_update && options.polynomial_inputs;
+        let polynomial_inputs: Vec<ValueReference> = if intermediate_update {
             md.model_variables
                 .iter()
                 .filter(|v| {
@@ -136,7 +139,7 @@ impl Fmi3Instance {
                 event_mode_used: false,
                 early_return_allowed: false,
                 required_intermediate_variables: &polynomial_inputs,
-                intermediate_update: cs.provides_intermediate_update,
+                intermediate_update,
             },
         )?;
         raw.once = once;
@@ -453,7 +456,9 @@ impl FmuInstance for Fmi3Instance {
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
         const F: &str = "fmi3SetFloat64";
         // A value set on an input ends its polynomial.
-        self.raw.env.hold(vrs);
+        if self.raw.intermediate_update {
+            self.raw.env.hold(vrs);
+        }
         if self.plain_reals && vrs.len() == values.len() {
             return self.raw.fmi3SetFloat64(vrs, values);
         }
@@ -604,12 +609,20 @@ impl FmuInstance for Fmi3Instance {
             .iter()
             .find(|vr| !self.polynomial_inputs.contains(vr))
         {
-            let name = self.variable("fmi3SetFloat64", vr)?.name.clone();
+            let variable = self.variable("fmi3SetFloat64", vr)?;
+            let name = variable.name.clone();
+            let md = self.md();
+            let why = if md.co_simulation.provides_intermediate_update
+                && variable.intermediate_update
+            {
+                format!("instance '{}' was instantiated for values only (InstanceOptions::polynomial_inputs false: no intermediate update callback)", self.raw.name())
+            } else {
+                format!("FMI 3.0 has no input derivatives, and model '{}' does not provide intermediate update for it (providesIntermediateUpdate and intermediateUpdate=\"true\")", md.model_name)
+            };
             return Err(self.invalid(
                 "fmi3SetFloat64",
                 format!(
-                    "input '{name}' cannot take a polynomial (a coupling polynomial of degree k > 0): FMI 3.0 has no input derivatives, and model '{}' does not provide intermediate update for it (providesIntermediateUpdate and intermediateUpdate=\"true\"); use k = 0",
-                    self.md().model_name
+                    "input '{name}' cannot take a polynomial (a coupling polynomial of degree k > 0): {why}; use k = 0"
                 ),
             ));
         }
@@ -658,7 +671,9 @@ impl FmuInstance for Fmi3Instance {
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
         let end = t + h;
         let no_set_prior = self.states.iter().all(Option::is_none);
-        self.raw.env.begin_step(t);
+        if self.raw.intermediate_update {
+            self.raw.env.begin_step(t);
+        }
         let (result, answers) = self.raw.fmi3DoStep(t, h, no_set_prior);
         let terminated = |time: f64, this: &mut Self| {
             this.raw.time = time;

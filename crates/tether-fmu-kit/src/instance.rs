@@ -212,7 +212,7 @@ impl<M: Model> Instance<M> {
     }
 
     /// Logs a routine event; `message` is only called when the event is logged.
-    fn log_event(&self, message: impl FnOnce() -> String) {
+    pub(crate) fn log_event(&self, message: impl FnOnce() -> String) {
         if self.logs(Status::Ok) {
             self.log(Status::Ok, &message());
         }

@@ -183,9 +183,13 @@ impl Slave {
     /// Instantiate the FMU of `spec` and apply the start values. Instances of
     /// the same `.fmu` file share one opened FMU in `opened` (one extraction,
     /// one loaded library), as the C floor of docs/performance.md does.
+    /// `order` is the system's degree k: at k > 0 the inputs take polynomials
+    /// (an FMI 3.0 instance gets the intermediate update callback), at k = 0
+    /// values only.
     pub(crate) fn instantiate(
         spec: &InstanceSpec,
         opened: &mut Vec<(std::path::PathBuf, Fmu)>,
+        order: usize,
     ) -> Result<Slave, MasterError> {
         let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
             Some((_, fmu)) => fmu.clone(),
@@ -203,7 +207,7 @@ impl Slave {
                 fmu
             }
         };
-        Slave::instantiate_as(fmu, spec, &spec.name)
+        Slave::instantiate_as(fmu, spec, &spec.name, order)
     }
 
     /// Another instance of this slave's FMU with the same start values and the
@@ -216,7 +220,7 @@ impl Slave {
         experiment: (f64, f64, Option<f64>),
     ) -> Result<Slave, MasterError> {
         let name = format!("{}#{copy}", spec.name);
-        let mut extra = Slave::instantiate_as(self.fmu.clone(), spec, &name)?;
+        let mut extra = Slave::instantiate_as(self.fmu.clone(), spec, &name, self.order)?;
         extra.inputs = self.inputs.clone();
         extra.coupled_outputs = self.coupled_outputs.clone();
         extra.finalize(self.order);
@@ -306,7 +310,12 @@ impl Slave {
         Ok(())
     }
 
-    fn instantiate_as(fmu: Fmu, spec: &InstanceSpec, name: &str) -> Result<Slave, MasterError> {
+    fn instantiate_as(
+        fmu: Fmu,
+        spec: &InstanceSpec,
+        name: &str,
+        order: usize,
+    ) -> Result<Slave, MasterError> {
         let md = fmu.model_description();
         let cs = &md.co_simulation;
         // FMI 3.0: a polynomial input goes through intermediate update (for the
@@ -338,7 +347,8 @@ impl Slave {
             (_, _, Isolation::Process) => Placement::Process { timeout },
             (_, _, Isolation::None) => Placement::InProcess,
         };
-        let backend = tether_fmi::instantiate(&fmu, name, Default::default(), placement)?;
+        let options = tether_fmi::InstanceOptions::default().with_polynomial_inputs(order > 0);
+        let backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
         let mut slave = Slave {
             name: name.to_string(),
             model_name,

@@ -321,13 +321,22 @@ impl RemoteInstance {
                 protocol::VERSION
             )));
         }
-        remote
+        // The process's FMU debug logging (`--fmu-log`) holds in the host too.
+        let debug = crate::fmu::debug_logging();
+        let categories = debug.clone().unwrap_or_default();
+        let out = remote
             .queue(op::INSTANTIATE)
             .str(dir)
             .str(name)
             .bool(options.logging_on)
             .bool(options.visible)
-            .f64(timeout.map_or(0.0, |t| t.as_secs_f64()));
+            .bool(options.polynomial_inputs)
+            .f64(timeout.map_or(0.0, |t| t.as_secs_f64()))
+            .bool(debug.is_some())
+            .u32(u32::try_from(categories.len()).unwrap_or(u32::MAX));
+        for category in &categories {
+            out.str(category);
+        }
         remote.send()?;
         Ok(remote)
     }

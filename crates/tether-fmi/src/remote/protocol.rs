@@ -16,7 +16,7 @@ use crate::interface::Int;
 use crate::model_description::FmiStandard;
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]

@@ -357,7 +357,8 @@ pub unsafe fn get_output_derivatives<M: Model>(
 /// them and the value at `t` as the inputs' polynomial over the step
 /// ([`Instance::take_intermediate_inputs`]); the model then steps as with
 /// `fmi2SetRealInputDerivatives`. No reference to the instance is live while the
-/// importer's callback runs (it calls `fmi3SetFloat64` on this instance).
+/// importer's callback runs (it calls `fmi3SetFloat64` on this instance). Each
+/// callback is logged (logEvents): "intermediate update at t = …".
 #[allow(clippy::too_many_arguments)]
 pub unsafe fn do_step<M: Model>(
     c: Fmi3Instance,
@@ -432,6 +433,7 @@ unsafe fn intermediate_inputs<M: Model>(
     let mut samples = [(0.0, Vec::new()), (0.0, Vec::new())];
     for (sample, time) in samples.iter_mut().zip([t + 0.5 * h, t + h]) {
         let enter = |i: &mut Instance<M>| {
+            i.log_event(|| format!("intermediate update at t = {time} (step {t} + {h})"));
             i.intermediate = Some(vec![None; n]);
             Ok(())
         };

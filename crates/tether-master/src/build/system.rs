@@ -44,7 +44,7 @@ impl System {
         let mut slaves = spec
             .instances
             .iter()
-            .map(|instance| Slave::instantiate(instance, &mut opened))
+            .map(|instance| Slave::instantiate(instance, &mut opened, order))
             .collect::<Result<Vec<_>, _>>()?;
         let coupling = Coupling::build(spec, &mut slaves, method, order)?;
         let mut owners: Vec<Vec<usize>> = vec![Vec::new(); coupling.len()];

@@ -44,6 +44,9 @@ pub(crate) struct RawInstance3 {
     pub(crate) time: f64,
     /// Must outlive the instance: the FMU keeps the pointer.
     pub(crate) env: Box<Env3>,
+    /// The intermediate update callback was given: the environment's
+    /// polynomials are used (else they stay empty and are not touched).
+    pub(crate) intermediate_update: bool,
     library: Arc<Library<Fmi3Functions>>,
     _dir: Arc<FmuDir>,
     /// Held while the instance lives when the model declares
@@ -76,7 +79,8 @@ pub(crate) struct InstantiateArgs3<'a> {
     pub event_mode_used: bool,
     pub early_return_allowed: bool,
     pub required_intermediate_variables: &'a [fmi3ValueReference],
-    /// Pass the intermediate update callback (the FMU provides intermediate update).
+    /// Pass the intermediate update callback (the FMU provides intermediate update
+    /// and its inputs take polynomials).
     pub intermediate_update: bool,
 }
 
@@ -185,6 +189,7 @@ impl RawInstance3 {
             name,
             time: 0.0,
             env,
+            intermediate_update: args.intermediate_update,
             library,
             _dir: dir,
             once: None,
@@ -535,7 +540,12 @@ impl RawInstance3 {
         });
         // An input the intermediate update callback could not set is the cause of
         // whatever the step returned.
-        let result = match self.env.take_failure() {
+        let failure = if self.intermediate_update {
+            self.env.take_failure()
+        } else {
+            None
+        };
+        let result = match failure {
             Some((status, at)) => {
                 let time = std::mem::replace(&mut self.time, at);
                 let set = self.finish("fmi3SetFloat64", status);
