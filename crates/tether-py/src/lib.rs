@@ -124,7 +124,11 @@ impl Rows {
     /// names the columns whose integers the floats rounded.
     fn into_py(self, py: Python<'_>, stats: Py<PyAny>) -> PyResult<Py<PyAny>> {
         if !self.rounded.is_empty() {
-            let names: Vec<&str> = self.rounded.iter().map(|&k| self.columns[k].as_str()).collect();
+            let names: Vec<&str> = self
+                .rounded
+                .iter()
+                .map(|&k| self.columns[k].as_str())
+                .collect();
             let text = format!(
                 "integers beyond ±2^53 in column(s) {} are rounded in the result's floats \
                  (tether run's CSV writes them exactly)",
