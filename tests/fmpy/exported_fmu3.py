@@ -18,9 +18,21 @@ usage: exported_fmu3.py FMU OUT.csv
    the reason reaching the importer's log callback.
 7. A function the FMU does not offer (fmi3GetInt32): fmi3Error, logged under
    its name.
+8. Intermediate update (providesIntermediateUpdate, the input declared
+   intermediateUpdate="true"): with fmpy's intermediate update callback,
+   fmi3DoStep over 10 H calls back once per inner step, at its start time
+   (intermediateVariableSetRequested true, intermediateVariableGetAllowed and
+   canReturnEarly false); a ramp F(t) = A + B·t set in the callback equals
+   the same ramp set with fmi3SetFloat64 before steps of H to 1e-11 m (each
+   inner step sees the input at its own time), follows the closed form of
+   the two joined masses within 1e-3 m (the input is held over each inner
+   step H: it lags the ramp by H/2, B·H/(2c) = 5e-4 m), where inputs held
+   over the 10 H (no callback) are off by more than 2e-3 m. In the callback
+   an output cannot be set nor a value read (fmi3Error, logged).
 Prints one line per check; exit 1 on the first that fails.
 """
 
+import math
 import shutil
 import sys
 
@@ -66,10 +78,10 @@ def log(environment, status, category, message):
     messages.append((status, message.decode()))
 
 
-def instance(name, parameter, token=None):
+def instance(name, parameter, token=None, update=None):
     s = FMU3Slave(guid=token or md.instantiationToken, unzipDirectory=unzipped,
                   modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-    s.instantiate(logMessage=log)
+    s.instantiate(logMessage=log, intermediateUpdate=update)
     if parameters:
         s.setFloat64(parameters[:1], [parameter])
     s.enterInitializationMode(startTime=float(md.defaultExperiment.startTime))
@@ -149,4 +161,92 @@ logged = [m for st, m in messages if st == 3 and m.startswith("fmi3InstantiateCo
 if not logged or "GUID" not in logged[0]:
     fail(f"wrong token: no logged reason: {messages}")
 print(f"wrong token: NULL, logged: {logged[0]}")
+
+
+# 8. Intermediate update: a ramp force set in the callback at each inner step.
+def ramp_closed_form(t, m, c, d, v0, a0, b0):
+    """x(t) of m x'' + d x' + c x = a0 + b0 t, x(0) = 0, x'(0) = v0."""
+    p1 = b0 / c
+    p0 = (a0 - d * p1) / c
+    y0, dy0 = -p0, v0 - p1
+    sigma = d / (2 * m)
+    omega = math.sqrt(c / m - sigma * sigma)
+    y = math.exp(-sigma * t) * (y0 * math.cos(omega * t) + (dy0 + sigma * y0) / omega
+                                * math.sin(omega * t))
+    return p0 + p1 * t + y
+
+
+if not md.coSimulation.providesIntermediateUpdate:
+    fail("intermediate update: providesIntermediateUpdate is false")
+with open(f"{unzipped}/modelDescription.xml", encoding="utf-8") as f:
+    declared = [line for line in f if 'causality="input"' in line]
+if not declared or not all('intermediateUpdate="true"' in line for line in declared):
+    fail(f"intermediate update: an input is not declared intermediateUpdate: {declared}")
+RAMP_A, RAMP_B = 100.0, 2000.0
+F, X = inputs[0], vr["x"]
+calls = []
+current = []
+refusals = []
+
+
+def update(environment, time, set_requested, get_allowed, step_finished, can_return_early,
+           early_return_requested, early_return_time):
+    calls.append((time, set_requested, get_allowed, can_return_early))
+    s = current[0]
+    s.setFloat64([F], [RAMP_A + RAMP_B * time])
+    if len(calls) == 1:
+        # Once: what intermediate update mode refuses.
+        for what, call in [("set an output", lambda: s.setFloat64([X], [0.0])),
+                           ("read", lambda: s.getFloat64([X]))]:
+            messages.clear()
+            try:
+                call()
+                refusals.append(f"{what}: accepted")
+            except FMICallException as e:
+                logged = [m for st, m in messages if st == 3]
+                refusals.append(f"{what}: status {e.status}, logged: {logged}")
+
+
+def ramp(every, callback):
+    s = instance(f"ramp{every}{callback}", 1.0, update=update if callback else None)
+    current[:] = [s]
+    xs = []
+    # Over the FMU's experiment (1 s for the rigid pair, 0.5 s for its SSP).
+    for n in range(round(float(md.defaultExperiment.stopTime) / (every * H))):
+        t = n * every * H
+        s.setFloat64([F], [RAMP_A + RAMP_B * t])
+        s.doStep(t, every * H)
+        xs.append((t + every * H, s.getFloat64([X])[0]))
+    s.terminate()
+    s.freeInstance()
+    return xs
+
+
+coarse = ramp(10, True)
+steps = round(float(md.defaultExperiment.stopTime) / H)
+if len(calls) != steps:
+    fail(f"intermediate update: {len(calls)} callbacks, expected one per inner step ({steps})")
+expected = [n * H for n in range(steps)]
+if max(abs(c[0] - e) for c, e in zip(calls, expected)) > 1e-9 * H:
+    fail(f"intermediate update: callback times {[c[0] for c in calls[:12]]}...")
+if any(c[1:] != (1, 0, 0) for c in calls):
+    fail(f"intermediate update: flags (set, get, early) {set(c[1:] for c in calls)}")
+if len(refusals) != 2 or not all("status 3" in r for r in refusals) \
+        or "intermediate update mode" not in refusals[1]:
+    fail(f"intermediate update: {refusals}")
+fine, held = ramp(1, False)[9::10], ramp(10, False)
+error = max(abs(x - ramp_closed_form(t, 3.0, 2000.0, 20.0, 100.0, RAMP_A, RAMP_B))
+            for t, x in coarse)
+error_held = max(abs(x - ramp_closed_form(t, 3.0, 2000.0, 20.0, 100.0, RAMP_A, RAMP_B))
+                 for t, x in held)
+same = max(abs(a[1] - b[1]) for a, b in zip(coarse, fine))
+if not same <= 1e-11:
+    fail(f"intermediate update: steps of 10 H differ from steps of H by {same:.3g} m")
+if not error <= 1e-3:
+    fail(f"intermediate update: {error:.3g} m from the closed form (tolerance 1e-3)")
+if not error_held > 2e-3:
+    fail(f"intermediate update: held inputs are only {error_held:.3g} m off: the check cannot tell")
+print(f"intermediate update: {len(calls)} callbacks at the inner steps' starts; ramp within "
+      f"{error:.3g} m of the closed form (held: {error_held:.3g} m), steps of 10 H and of H "
+      f"agree to {same:.3g} m; in the callback an output set and a read are refused")
 shutil.rmtree(unzipped, ignore_errors=True)

@@ -73,10 +73,10 @@ fn export(system: &Path, out: &Path, fmi: u32) -> Result<()> {
     let fmi = FmiVersion::from_number(fmi).map_err(anyhow::Error::msg)?;
     crate::output::not_an_input(out, std::iter::once(system))?;
     // `_ssp` keeps an extracted archive's FMUs until they are packed.
-    let (spec, _ssp) = crate::ssp::load(system, None, None)?;
+    let (spec, _ssp) = tether_ssp::load(system, None, None)?;
     let runtime = runtime_library()?;
     let source = match &_ssp {
-        Some(_) => crate::ssp::ssd_name(system),
+        Some(_) => tether_ssp::ssd_name(system),
         None => system.display().to_string(),
     };
     // The host program of isolated members: the dedicated one built with the

@@ -70,7 +70,7 @@ pub fn main(args: Args) -> Result<()> {
     crate::interrupt::install()?;
     let overrides = args.settings.overrides()?;
     // `_ssp` keeps an extracted archive's FMUs until the run ends.
-    let (mut spec, _ssp) = crate::ssp::load(&args.system, overrides.step, overrides.stop)?;
+    let (mut spec, _ssp) = tether_ssp::load(&args.system, overrides.step, overrides.stop)?;
     crate::settings::apply(&overrides, &mut spec)?;
     crate::isolation::apply(args.isolate, args.call_timeout, &mut spec)?;
     if let (Some(host), Some(token_file)) = (&args.host, &args.token_file) {
@@ -142,7 +142,7 @@ pub fn main(args: Args) -> Result<()> {
             tether_master::MasterError::UnknownVariable(mut u)
                 if _ssp.is_some() && !u.place.starts_with("--set") =>
             {
-                u.place = format!("{}: {}", crate::ssp::ssd_name(&args.system), u.place);
+                u.place = format!("{}: {}", tether_ssp::ssd_name(&args.system), u.place);
                 tether_master::MasterError::UnknownVariable(u)
             }
             e => e,

@@ -1,11 +1,11 @@
-//! SSP on the command line: `tether run` of `.ssp`, `.ssd` and SSP folders,
-//! and `tether ssp export` / `tether ssp import` (docs/ssp.md).
+//! SSP on the command line: `tether ssp export` / `tether ssp import`
+//! (docs/ssp.md). `tether run` and `tether fmu export` read `.ssp`, `.ssd` and
+//! SSP folders through [`tether_ssp::load`].
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use tether_master::SystemSpec;
-use tether_ssp::Loaded;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -41,53 +41,6 @@ enum Command {
     },
 }
 
-/// Whether `path` is SSP rather than a system file: a folder, `.ssp` or `.ssd`.
-pub fn is_ssp(path: &Path) -> bool {
-    path.is_dir()
-        || path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("ssp") || e.eq_ignore_ascii_case("ssd"))
-}
-
-/// Read a system file or SSP (the latter kept alive by the returned
-/// [`Loaded`], which owns an extracted archive). Skipped annotations of
-/// other tools are logged (`-v`).
-pub fn load(
-    path: &Path,
-    step: Option<f64>,
-    stop: Option<f64>,
-) -> Result<(SystemSpec, Option<Loaded>)> {
-    if !is_ssp(path) {
-        return Ok((SystemSpec::from_file(path)?, None));
-    }
-    let loaded = read(path, step, stop)?;
-    Ok((loaded.spec.clone(), Some(loaded)))
-}
-
-/// Where an SSP system's names are written, for messages: `SystemStructure.ssd`
-/// (a folder or the file itself), `system.ssp, SystemStructure.ssd` (an archive).
-pub fn ssd_name(path: &Path) -> String {
-    let archive = path.is_file()
-        && path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("ssp"));
-    if archive {
-        format!("{}, SystemStructure.ssd", path.display())
-    } else if path.is_file() {
-        path.display().to_string()
-    } else {
-        path.join("SystemStructure.ssd").display().to_string()
-    }
-}
-
-fn read(path: &Path, step: Option<f64>, stop: Option<f64>) -> Result<Loaded> {
-    let loaded = tether_ssp::read(path, step, stop)?;
-    for skipped in &loaded.skipped {
-        log::info!("skipped another tool's annotation {skipped}");
-    }
-    Ok(loaded)
-}
-
 pub fn main(args: Args) -> Result<()> {
     match args.command {
         Command::Export { system, out } => {
@@ -103,7 +56,7 @@ pub fn main(args: Args) -> Result<()> {
             stop,
         } => {
             crate::output::not_an_input(&out, std::iter::once(ssp.as_path()))?;
-            let loaded = read(&ssp, step, stop)?;
+            let loaded = tether_ssp::read(&ssp, step, stop)?;
             tether_ssp::write_toml(&loaded, &out)
                 .with_context(|| format!("importing {}", ssp.display()))?;
         }

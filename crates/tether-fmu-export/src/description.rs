@@ -177,7 +177,7 @@ pub fn model_description_fmi3(
     );
     let _ = writeln!(
         x,
-        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="0" providesIntermediateUpdate="false" canReturnEarlyAfterIntermediateUpdate="false" hasEventMode="false" providesEvaluateDiscreteStates="false"/>"#,
+        r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="0" providesIntermediateUpdate="true" canReturnEarlyAfterIntermediateUpdate="false" hasEventMode="false" providesEvaluateDiscreteStates="false"/>"#,
         escape(name),
         yes(capabilities.state),
         yes(capabilities.state),
@@ -199,7 +199,9 @@ pub fn model_description_fmi3(
             ExportKind::Parameter => {
                 r#" causality="parameter" variability="fixed" initial="exact""#
             }
-            ExportKind::Input => r#" causality="input" variability="continuous""#,
+            ExportKind::Input => {
+                r#" causality="input" variability="continuous" intermediateUpdate="true""#
+            }
             ExportKind::Output => {
                 r#" causality="output" variability="continuous" initial="calculated""#
             }

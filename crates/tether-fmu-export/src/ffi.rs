@@ -14,7 +14,7 @@ use std::ffi::{c_char, c_int, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::ptr;
 
-use tether_fmu_kit::ffi::fmi3::Fmi3Status;
+use tether_fmu_kit::ffi::fmi3::{Fmi3Status, IntermediateUpdate};
 use tether_fmu_kit::ffi::{
     null, slice, slice_mut, EnvironmentLogger, Fmi2Boolean as B, Fmi2CallbackFunctions,
     Fmi2Component as C, Fmi2FmuState as S, Fmi2Status as St, Fmi2String as Str,
@@ -72,6 +72,12 @@ pub(crate) struct Component {
     logging_on: bool,
     /// Made by fmi3InstantiateCoSimulation: messages name the fmi3 functions.
     fmi3: bool,
+    /// FMI 3.0: the importer's intermediate update callback and its
+    /// instance environment, if it gave one ([`crate::ffi3::fmi3DoStep`]).
+    pub(crate) intermediate_update: Option<(IntermediateUpdate, *mut c_void)>,
+    /// In intermediate update mode (the importer's callback runs): only
+    /// inputs may be set.
+    pub(crate) intermediate: bool,
     /// The instance name `logger.instance_name` points into.
     _name: CString,
 }
@@ -195,9 +201,14 @@ pub(crate) unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Out
     let component = unsafe { &mut *c.cast::<Component>() };
     let _scope = Scope::enter(component.logger, component.logging_on);
     let exported = &mut component.exported;
+    let intermediate = component.intermediate;
     let result = catch_unwind(AssertUnwindSafe(|| {
         let state = exported.machine;
-        if call.allowed_in(state) {
+        if intermediate && !matches!(call, Call::SetReal) {
+            Err(Failure::usage(
+                "not allowed in intermediate update mode (only fmi3SetFloat64 of inputs)",
+            ))
+        } else if call.allowed_in(state) {
             f(exported)
         } else {
             Err(Failure::usage(format!("not allowed in state {state:?}")))
@@ -214,6 +225,32 @@ pub(crate) unsafe fn with(c: C, call: Call, f: impl FnOnce(&mut Exported) -> Out
     };
     let status = catch_unwind(AssertUnwindSafe(|| component.fail(call, failure)));
     status.unwrap_or(Status::Fatal as St)
+}
+
+/// FMI 3.0: the importer's intermediate update callback and environment of
+/// the instance behind `c` (`None` for null or without one).
+///
+/// # Safety
+/// As [`with`].
+pub(crate) unsafe fn intermediate_update(c: C) -> Option<(IntermediateUpdate, *mut c_void)> {
+    // SAFETY: c is null or a live Box<Component> (the caller's contract); the
+    // borrow ends with this statement.
+    (!c.is_null())
+        .then(|| unsafe { (*c.cast::<Component>()).intermediate_update })
+        .flatten()
+}
+
+/// Enters (`true`) or leaves intermediate update mode: while the importer's
+/// callback runs, [`with`] refuses every call but setting inputs.
+///
+/// # Safety
+/// As [`with`]; no reference to the instance is live.
+pub(crate) unsafe fn set_intermediate(c: C, on: bool) {
+    if !c.is_null() {
+        // SAFETY: c is a live Box<Component> (the caller's contract); the
+        // borrow ends with this statement.
+        unsafe { (*c.cast::<Component>()).intermediate = on };
+    }
 }
 
 /// # Safety
@@ -235,12 +272,14 @@ pub extern "C" fn fmi2GetVersion() -> *const c_char {
 
 /// A new instance of the system in `resources` (checked against `guid`),
 /// boxed as a component pointer; null with the reason logged (as a message
-/// of the instantiate function of the FMI version) otherwise.
+/// of the instantiate function of the FMI version) otherwise. `fmi3`: made
+/// by fmi3InstantiateCoSimulation, with the importer's intermediate update
+/// callback if it gave one.
 pub(crate) fn instantiate(
     name: CString,
     logger: Option<Logger>,
     logging_on: bool,
-    fmi3: bool,
+    fmi3: Option<Option<(IntermediateUpdate, *mut c_void)>>,
     resources: Result<std::path::PathBuf, String>,
     guid: Option<String>,
 ) -> C {
@@ -253,14 +292,16 @@ pub(crate) fn instantiate(
                 exported,
                 logger,
                 logging_on,
-                fmi3,
+                fmi3: fmi3.is_some(),
+                intermediate_update: fmi3.flatten(),
+                intermediate: false,
                 _name: name,
             };
             Box::into_raw(Box::new(component)).cast::<c_void>()
         }
         Err(reason) => {
             if let Some(logger) = logger {
-                let function = if fmi3 {
+                let function = if fmi3.is_some() {
                     "fmi3InstantiateCoSimulation"
                 } else {
                     "fmi2Instantiate"
@@ -311,7 +352,7 @@ pub unsafe extern "C" fn fmi2Instantiate(
                 .ok_or_else(|| "no fmuResourceLocation given".to_string())
                 .and_then(|r| uri_path(&r))
         };
-        instantiate(name, logger, logging_on != 0, false, resources, guid)
+        instantiate(name, logger, logging_on != 0, None, resources, guid)
     }));
     made.unwrap_or(ptr::null_mut())
 }

@@ -23,7 +23,10 @@ use tether_fmu_kit::ffi::{null, slice, slice_mut};
 use tether_fmu_kit::instance::{Failure, Outcome};
 use tether_fmu_kit::machine::{Call, MachineState};
 
-use crate::ffi::{self as f2, c_string, instantiate, text, with, Logger, ERROR};
+use crate::ffi::{
+    self as f2, c_string, instantiate, intermediate_update, set_intermediate, text, with, Logger,
+    ERROR, OK,
+};
 use crate::runtime::Exported;
 
 type C = *mut c_void;
@@ -31,6 +34,7 @@ type S = *mut c_void;
 type Vr = *const Fmi3ValueReference;
 
 const TRUE: B = 1;
+const FALSE: B = 0;
 
 #[unsafe(no_mangle)]
 pub extern "C" fn fmi3GetVersion() -> *const c_char {
@@ -46,7 +50,8 @@ pub unsafe extern "C" fn fmi3SetDebugLogging(c: C, on: B, n: usize, categories: 
 /// Null with a logged reason when the resources are missing or broken or
 /// the instantiation token is not the system file's. Event mode and early
 /// return are not offered (`hasEventMode="false"`): asking for them changes
-/// nothing, as the standard allows.
+/// nothing, as the standard allows. An intermediate update callback is
+/// called in every inner step of `fmi3DoStep` (see there).
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
     name: Str,
@@ -60,7 +65,7 @@ pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
     _n_required_intermediate: usize,
     environment: *mut c_void,
     log_message: Fmi3LogMessageCallback,
-    _intermediate_update: Fmi3IntermediateUpdateCallback,
+    intermediate_update: Fmi3IntermediateUpdateCallback,
 ) -> C {
     let made = catch_unwind(AssertUnwindSafe(|| {
         // SAFETY: the FMI contract: a NUL-terminated name or null.
@@ -81,7 +86,7 @@ pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
             c_string(&name),
             logger,
             logging_on == TRUE,
-            true,
+            Some(intermediate_update.map(|callback| (callback, environment))),
             resources,
             token,
         )
@@ -244,6 +249,14 @@ pub unsafe extern "C" fn fmi3DeserializeFMUState(
 /// The macro steps over [t, t + h] (see [`Exported::do_step`]). No event
 /// handling and no early return; `lastSuccessfulTime` is the system's time
 /// after the call, also after a failed step.
+///
+/// With the importer's intermediate update callback, each inner macro step
+/// starts with a call back at its start time τ (intermediateVariableSetRequested
+/// true, intermediateVariableGetAllowed false, intermediateStepFinished true:
+/// the point at τ is accepted, canReturnEarly false), in which the importer
+/// sets the inputs (`fmi3SetFloat64`) for that time; they hold over that
+/// inner step. Without a callback the inputs are held over the whole step.
+/// No reference to the instance is live while the callback runs.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi3DoStep(
     c: C,
@@ -264,20 +277,78 @@ pub unsafe extern "C" fn fmi3DoStep(
             slice_mut(last_successful_time, 1),
         )
     };
+    let (Some(event), Some(terminate), Some(early), Some(last)) = outs else {
+        // SAFETY: the FMI contract (see `with`).
+        return unsafe {
+            with(c, Call::DoStep, |_| {
+                Err(null("an output argument of fmi3DoStep"))
+            })
+        };
+    };
+    event[0] = 0;
+    terminate[0] = 0;
+    early[0] = 0;
+    // One part of the step: `lastSuccessfulTime` follows the system's time.
+    let mut part = |f: &mut dyn FnMut(&mut Exported) -> Outcome| {
+        // SAFETY: the FMI contract (see `with`).
+        unsafe {
+            with(c, Call::DoStep, |e| {
+                let result = f(e);
+                last[0] = e.time().unwrap_or(t);
+                result
+            })
+        }
+    };
     // SAFETY: the FMI contract (see `with`).
-    unsafe {
-        with(c, Call::DoStep, |e| {
-            let (Some(event), Some(terminate), Some(early), Some(last)) = outs else {
-                return Err(null("an output argument of fmi3DoStep"));
-            };
-            event[0] = 0;
-            terminate[0] = 0;
-            early[0] = 0;
-            let result = e.do_step(t, h);
-            last[0] = e.time().unwrap_or(t);
-            result
-        })
+    let Some((callback, environment)) = (unsafe { intermediate_update(c) }) else {
+        return part(&mut |e| e.do_step(t, h));
+    };
+    let mut step = None;
+    let status = part(&mut |e| {
+        step = Some(e.begin_step(t, h)?);
+        Ok(())
+    });
+    let Some(mut step) = step.filter(|_| status == OK) else {
+        return status;
+    };
+    loop {
+        let mut next = None;
+        let status = part(&mut |e| {
+            next = e.next_inner_step(&step)?;
+            Ok(())
+        });
+        if status != OK {
+            return status;
+        }
+        let Some(tau) = next else {
+            break;
+        };
+        let (mut early_requested, mut early_time) = (0, tau);
+        // SAFETY: the importer's callback with the environment it gave to
+        // fmi3InstantiateCoSimulation and two writable out-arguments; no
+        // reference to the instance is held across the call (it calls
+        // fmi3SetFloat64 on this instance), which `with` refuses anything
+        // but setting inputs meanwhile.
+        unsafe {
+            set_intermediate(c, true);
+            callback(
+                environment,
+                tau,
+                TRUE,
+                FALSE,
+                TRUE,
+                FALSE,
+                &mut early_requested,
+                &mut early_time,
+            );
+            set_intermediate(c, false);
+        }
+        let status = part(&mut |e| e.inner_step(&mut step));
+        if status != OK {
+            return status;
+        }
     }
+    part(&mut |e| e.end_step(&step))
 }
 
 /// A function the FMU does not offer: fmi3Error with a message naming it.
@@ -295,75 +366,17 @@ unsafe fn unsupported(c: C, function: &'static str) -> St {
     }
 }
 
-macro_rules! unsupported {
-    ($($name:ident($($arg:ty),*);)*) => {
-        $(
-            #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn $name(c: C, $(_: $arg),*) -> St {
-                // SAFETY: the FMI contract; only `c` is used (see `with`).
-                unsafe { unsupported(c, stringify!($name)) }
-            }
-        )*
-    };
-}
-
-unsupported! {
+// The functions of the kit's list (tether_fmu_kit::fmi3_unsupported!), and
+// those the kit offers but this FMU does not: step mode (no event mode),
+// Int32 and Boolean variables, output derivatives.
+tether_fmu_kit::fmi3_unsupported! {
+    unsupported;
     fmi3EnterStepMode();
-    fmi3EnterEventMode();
-    fmi3EnterConfigurationMode();
-    fmi3ExitConfigurationMode();
-    fmi3EvaluateDiscreteStates();
-    fmi3UpdateDiscreteStates(*mut B, *mut B, *mut B, *mut B, *mut B, *mut f64);
-    fmi3GetFloat32(Vr, usize, *mut f32, usize);
-    fmi3GetInt8(Vr, usize, *mut i8, usize);
-    fmi3GetUInt8(Vr, usize, *mut u8, usize);
-    fmi3GetInt16(Vr, usize, *mut i16, usize);
-    fmi3GetUInt16(Vr, usize, *mut u16, usize);
     fmi3GetInt32(Vr, usize, *mut i32, usize);
-    fmi3GetUInt32(Vr, usize, *mut u32, usize);
-    fmi3GetInt64(Vr, usize, *mut i64, usize);
-    fmi3GetUInt64(Vr, usize, *mut u64, usize);
     fmi3GetBoolean(Vr, usize, *mut B, usize);
-    fmi3GetString(Vr, usize, *mut Str, usize);
-    fmi3GetBinary(Vr, usize, *mut usize, *mut *const u8, usize);
-    fmi3GetClock(Vr, usize, *mut B);
-    fmi3SetFloat32(Vr, usize, *const f32, usize);
-    fmi3SetInt8(Vr, usize, *const i8, usize);
-    fmi3SetUInt8(Vr, usize, *const u8, usize);
-    fmi3SetInt16(Vr, usize, *const i16, usize);
-    fmi3SetUInt16(Vr, usize, *const u16, usize);
     fmi3SetInt32(Vr, usize, *const i32, usize);
-    fmi3SetUInt32(Vr, usize, *const u32, usize);
-    fmi3SetInt64(Vr, usize, *const i64, usize);
-    fmi3SetUInt64(Vr, usize, *const u64, usize);
     fmi3SetBoolean(Vr, usize, *const B, usize);
-    fmi3SetString(Vr, usize, *const Str, usize);
-    fmi3SetBinary(Vr, usize, *const usize, *const *const u8, usize);
-    fmi3SetClock(Vr, usize, *const B);
-    fmi3GetNumberOfVariableDependencies(u32, *mut usize);
-    fmi3GetVariableDependencies(u32, *mut usize, *mut u32, *mut usize, *mut i32, usize);
-    fmi3GetDirectionalDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
-    fmi3GetAdjointDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
     fmi3GetOutputDerivatives(Vr, usize, *const i32, *mut f64, usize);
-    fmi3GetIntervalDecimal(Vr, usize, *mut f64, *mut i32);
-    fmi3GetIntervalFraction(Vr, usize, *mut u64, *mut u64, *mut i32);
-    fmi3GetShiftDecimal(Vr, usize, *mut f64);
-    fmi3GetShiftFraction(Vr, usize, *mut u64, *mut u64);
-    fmi3SetIntervalDecimal(Vr, usize, *const f64);
-    fmi3SetIntervalFraction(Vr, usize, *const u64, *const u64);
-    fmi3SetShiftDecimal(Vr, usize, *const f64);
-    fmi3SetShiftFraction(Vr, usize, *const u64, *const u64);
-    fmi3ActivateModelPartition(u32, f64);
-    fmi3EnterContinuousTimeMode();
-    fmi3CompletedIntegratorStep(B, *mut B, *mut B);
-    fmi3SetTime(f64);
-    fmi3SetContinuousStates(*const f64, usize);
-    fmi3GetContinuousStateDerivatives(*mut f64, usize);
-    fmi3GetEventIndicators(*mut f64, usize);
-    fmi3GetContinuousStates(*mut f64, usize);
-    fmi3GetNominalsOfContinuousStates(*mut f64, usize);
-    fmi3GetNumberOfEventIndicators(*mut usize);
-    fmi3GetNumberOfContinuousStates(*mut usize);
 }
 
 /// Model exchange and scheduled execution are not offered (the model

@@ -49,6 +49,19 @@ pub struct Inputs {
     at_point: Vec<f64>,
 }
 
+/// One `fmi2DoStep`/`fmi3DoStep` under way ([`Exported::begin_step`]).
+pub struct Step {
+    /// The communication point t the step started at.
+    now: f64,
+    /// The communication step h.
+    h: f64,
+    /// On the fixed grid, the inner steps still to make; with step control
+    /// `None` (the steps end at t + h).
+    remaining: Option<u64>,
+    /// The inputs with derivatives: each one's target and its polynomial at t.
+    jets: Vec<(String, InputJet)>,
+}
+
 pub struct Exported {
     spec: SystemSpec,
     /// The GUID, which a serialized state carries.
@@ -391,51 +404,36 @@ impl Exported {
     /// inner step's start τ to their polynomial there (with its derivatives,
     /// for a member that interpolates); other inputs are held.
     pub fn do_step(&mut self, t: f64, h: f64) -> Outcome {
+        let mut step = self.begin_step(t, h)?;
+        while self.next_inner_step(&step)?.is_some() {
+            self.inner_step(&mut step)?;
+        }
+        self.end_step(&step)
+    }
+
+    /// The checks of [`do_step`](Self::do_step) and what its inner steps
+    /// need. `fmi3DoStep` with an intermediate update callback runs the
+    /// inner steps itself, calling back before each one
+    /// ([`next_inner_step`](Self::next_inner_step)), so that the importer
+    /// sets the inputs for that time.
+    pub fn begin_step(&mut self, t: f64, h: f64) -> Outcome<Step> {
         let step = self.spec.experiment.step;
         let adaptive = self.spec.step_control.is_some();
         let jets = self.jets();
-        if self.time() == Some(self.start) && self.inputs.at_point != self.values {
-            self.sim = None;
-        }
-        let sim = self.simulation()?;
-        let now = sim.time();
+        self.restart_with_new_inputs();
+        let now = self.simulation()?.time();
         if (t - now).abs() > 1e-9 * step.max(h.abs()) {
             return Err(Failure::usage(format!(
                 "communication point {t} is not the FMU's time {now}"
             )));
         }
-        let beyond = |sim: &Simulation| {
-            Failure::usage(format!(
-                "step to {} goes beyond the stop time (the run ends at {})",
-                t + h,
-                sim.time()
-            ))
-        };
-        let set_inputs = |sim: &mut Simulation| -> Outcome {
-            for (target, jet) in &jets {
-                let at = jet.shifted(sim.time() - now);
-                let derivatives = [at.d1, at.d2];
-                let order = if at.d2 == 0.0 { 1 } else { 2 };
-                sim.set_input(target, at.value, &derivatives[..order])
-                    .map_err(|e| Failure::usage(e.to_string()))?;
-            }
-            Ok(())
-        };
-        let model = |e: tether_master::MasterError| Failure::model(e.to_string());
-        if adaptive {
+        let remaining = if adaptive {
             if !(h.is_finite() && h > 0.0) {
                 return Err(Failure::usage(format!(
                     "communication step {h}: expected a positive step"
                 )));
             }
-            let end = now + h;
-            while end - sim.time() > 1e-9 * h {
-                if sim.finished() {
-                    return Err(beyond(sim));
-                }
-                set_inputs(sim)?;
-                sim.step_until(end).map_err(model)?;
-            }
+            None
         } else {
             let n = (h / step).round();
             if !(n >= 1.0 && (h - n * step).abs() <= 1e-9 * step) {
@@ -444,19 +442,78 @@ impl Exported {
                      (within 1e-9 of a step)"
                 )));
             }
-            for _ in 0..n as u64 {
-                if sim.finished() {
-                    return Err(beyond(sim));
-                }
-                set_inputs(sim)?;
-                sim.step().map_err(model)?;
-            }
+            Some(n as u64)
+        };
+        Ok(Step {
+            now,
+            h,
+            remaining,
+            jets,
+        })
+    }
+
+    /// Before the first step an input set since the run was built is a
+    /// start value of the run: the run is built again with it, so that it
+    /// is `tether run`'s with that value (consistent multipliers included).
+    fn restart_with_new_inputs(&mut self) {
+        if self.time() == Some(self.start) && self.inputs.at_point != self.values {
+            self.sim = None;
         }
-        // Each interpolated input is now its polynomial's value at the point
-        // reached, which the outputs there were computed with; it is held
-        // from here on (until the importer sets it), its derivatives cleared.
+    }
+
+    /// The start time of the step's next inner step, `None` when the step
+    /// has reached its end.
+    pub fn next_inner_step(&mut self, step: &Step) -> Outcome<Option<f64>> {
+        let sim = self.simulation()?;
+        let more = match step.remaining {
+            Some(n) => n > 0,
+            None => step.now + step.h - sim.time() > 1e-9 * step.h,
+        };
+        if !more {
+            return Ok(None);
+        }
+        if sim.finished() {
+            return Err(Failure::usage(format!(
+                "step to {} goes beyond the stop time (the run ends at {})",
+                step.now + step.h,
+                sim.time()
+            )));
+        }
+        Ok(Some(sim.time()))
+    }
+
+    /// One inner step, its inputs with derivatives set to their polynomial
+    /// at its start; the others as they are set.
+    pub fn inner_step(&mut self, step: &mut Step) -> Outcome {
+        self.restart_with_new_inputs();
+        let sim = self.simulation()?;
+        for (target, jet) in &step.jets {
+            let at = jet.shifted(sim.time() - step.now);
+            let derivatives = [at.d1, at.d2];
+            let order = if at.d2 == 0.0 { 1 } else { 2 };
+            sim.set_input(target, at.value, &derivatives[..order])
+                .map_err(|e| Failure::usage(e.to_string()))?;
+        }
+        let model = |e: tether_master::MasterError| Failure::model(e.to_string());
+        match &mut step.remaining {
+            Some(n) => {
+                sim.step().map_err(model)?;
+                *n -= 1;
+            }
+            None => sim.step_until(step.now + step.h).map_err(model)?,
+        }
+        Ok(())
+    }
+
+    /// The end of a step: each interpolated input is now its polynomial's
+    /// value at the point reached, which the outputs there were computed
+    /// with; it is held from here on (until the importer sets it), its
+    /// derivatives cleared.
+    pub fn end_step(&mut self, step: &Step) -> Outcome {
+        let now = step.now;
+        let sim = self.simulation()?;
         let end = sim.time();
-        for (target, jet) in &jets {
+        for (target, jet) in &step.jets {
             sim.set_input(target, jet.eval(end - now), &[])
                 .map_err(|e| Failure::usage(e.to_string()))?;
         }

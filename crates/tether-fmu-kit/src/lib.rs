@@ -396,7 +396,14 @@ macro_rules! export_fmu {
             ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe {
-                    k3::enter_initialization_mode::<M>(c, tol_defined, tol, start, stop_defined, stop)
+                    k3::enter_initialization_mode::<M>(
+                        c,
+                        tol_defined,
+                        tol,
+                        start,
+                        stop_defined,
+                        stop,
+                    )
                 }
             }
             #[unsafe(no_mangle)]
@@ -415,32 +422,68 @@ macro_rules! export_fmu {
                 unsafe { k::reset::<M>(c) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3GetFloat64(c: C, vr: Vr, n: usize, v: *mut f64, nv: usize) -> St {
+            pub unsafe extern "C" fn fmi3GetFloat64(
+                c: C,
+                vr: Vr,
+                n: usize,
+                v: *mut f64,
+                nv: usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k3::get_float64::<M>(c, vr, n, v, nv) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3SetFloat64(c: C, vr: Vr, n: usize, v: *const f64, nv: usize) -> St {
+            pub unsafe extern "C" fn fmi3SetFloat64(
+                c: C,
+                vr: Vr,
+                n: usize,
+                v: *const f64,
+                nv: usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k3::set_float64::<M>(c, vr, n, v, nv) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3GetInt32(c: C, vr: Vr, n: usize, v: *mut i32, nv: usize) -> St {
+            pub unsafe extern "C" fn fmi3GetInt32(
+                c: C,
+                vr: Vr,
+                n: usize,
+                v: *mut i32,
+                nv: usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k3::get_int32::<M>(c, vr, n, v, nv) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3SetInt32(c: C, vr: Vr, n: usize, v: *const i32, nv: usize) -> St {
+            pub unsafe extern "C" fn fmi3SetInt32(
+                c: C,
+                vr: Vr,
+                n: usize,
+                v: *const i32,
+                nv: usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k3::set_int32::<M>(c, vr, n, v, nv) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3GetBoolean(c: C, vr: Vr, n: usize, v: *mut B, nv: usize) -> St {
+            pub unsafe extern "C" fn fmi3GetBoolean(
+                c: C,
+                vr: Vr,
+                n: usize,
+                v: *mut B,
+                nv: usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k3::get_boolean::<M>(c, vr, n, v, nv) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3SetBoolean(c: C, vr: Vr, n: usize, v: *const B, nv: usize) -> St {
+            pub unsafe extern "C" fn fmi3SetBoolean(
+                c: C,
+                vr: Vr,
+                n: usize,
+                v: *const B,
+                nv: usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k3::set_boolean::<M>(c, vr, n, v, nv) }
             }
@@ -460,12 +503,21 @@ macro_rules! export_fmu {
                 unsafe { k::free_fmu_state::<M>(c, s) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3SerializedFMUStateSize(c: C, s: S, size: *mut usize) -> St {
+            pub unsafe extern "C" fn fmi3SerializedFMUStateSize(
+                c: C,
+                s: S,
+                size: *mut usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k::serialized_fmu_state_size::<M>(c, s, size) }
             }
             #[unsafe(no_mangle)]
-            pub unsafe extern "C" fn fmi3SerializeFMUState(c: C, s: S, bytes: *mut u8, size: usize) -> St {
+            pub unsafe extern "C" fn fmi3SerializeFMUState(
+                c: C,
+                s: S,
+                bytes: *mut u8,
+                size: usize,
+            ) -> St {
                 // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
                 unsafe { k::serialize_fmu_state::<M>(c, s, bytes.cast(), size) }
             }
@@ -521,58 +573,7 @@ macro_rules! export_fmu {
                 unsafe { k3::enter_step_mode::<M>(c) }
             }
 
-            $crate::__fmi3_unsupported! {
-                fmi3EnterEventMode();
-                fmi3EnterConfigurationMode();
-                fmi3ExitConfigurationMode();
-                fmi3EvaluateDiscreteStates();
-                fmi3UpdateDiscreteStates(*mut B, *mut B, *mut B, *mut B, *mut B, *mut f64);
-                fmi3GetFloat32(Vr, usize, *mut f32, usize);
-                fmi3GetInt8(Vr, usize, *mut i8, usize);
-                fmi3GetUInt8(Vr, usize, *mut u8, usize);
-                fmi3GetInt16(Vr, usize, *mut i16, usize);
-                fmi3GetUInt16(Vr, usize, *mut u16, usize);
-                fmi3GetUInt32(Vr, usize, *mut u32, usize);
-                fmi3GetInt64(Vr, usize, *mut i64, usize);
-                fmi3GetUInt64(Vr, usize, *mut u64, usize);
-                fmi3GetString(Vr, usize, *mut Str, usize);
-                fmi3GetBinary(Vr, usize, *mut usize, *mut *const u8, usize);
-                fmi3GetClock(Vr, usize, *mut B);
-                fmi3SetFloat32(Vr, usize, *const f32, usize);
-                fmi3SetInt8(Vr, usize, *const i8, usize);
-                fmi3SetUInt8(Vr, usize, *const u8, usize);
-                fmi3SetInt16(Vr, usize, *const i16, usize);
-                fmi3SetUInt16(Vr, usize, *const u16, usize);
-                fmi3SetUInt32(Vr, usize, *const u32, usize);
-                fmi3SetInt64(Vr, usize, *const i64, usize);
-                fmi3SetUInt64(Vr, usize, *const u64, usize);
-                fmi3SetString(Vr, usize, *const Str, usize);
-                fmi3SetBinary(Vr, usize, *const usize, *const *const u8, usize);
-                fmi3SetClock(Vr, usize, *const B);
-                fmi3GetNumberOfVariableDependencies(u32, *mut usize);
-                fmi3GetVariableDependencies(u32, *mut usize, *mut u32, *mut usize, *mut i32, usize);
-                fmi3GetDirectionalDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
-                fmi3GetAdjointDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
-                fmi3GetIntervalDecimal(Vr, usize, *mut f64, *mut i32);
-                fmi3GetIntervalFraction(Vr, usize, *mut u64, *mut u64, *mut i32);
-                fmi3GetShiftDecimal(Vr, usize, *mut f64);
-                fmi3GetShiftFraction(Vr, usize, *mut u64, *mut u64);
-                fmi3SetIntervalDecimal(Vr, usize, *const f64);
-                fmi3SetIntervalFraction(Vr, usize, *const u64, *const u64);
-                fmi3SetShiftDecimal(Vr, usize, *const f64);
-                fmi3SetShiftFraction(Vr, usize, *const u64, *const u64);
-                fmi3ActivateModelPartition(u32, f64);
-                fmi3EnterContinuousTimeMode();
-                fmi3CompletedIntegratorStep(B, *mut B, *mut B);
-                fmi3SetTime(f64);
-                fmi3SetContinuousStates(*const f64, usize);
-                fmi3GetContinuousStateDerivatives(*mut f64, usize);
-                fmi3GetEventIndicators(*mut f64, usize);
-                fmi3GetContinuousStates(*mut f64, usize);
-                fmi3GetNominalsOfContinuousStates(*mut f64, usize);
-                fmi3GetNumberOfEventIndicators(*mut usize);
-                fmi3GetNumberOfContinuousStates(*mut usize);
-            }
+            $crate::fmi3_unsupported! { k3::unsupported::<M>; }
 
             // Model exchange and scheduled execution are not offered (the model
             // description has only <CoSimulation>): no instance.
@@ -607,18 +608,83 @@ macro_rules! export_fmu {
     };
 }
 
-/// The FMI 3.0 functions the kit refuses (see [`ffi::fmi3::unsupported`]), with
-/// their C signatures; used by [`export_fmu!`] inside its FMI 3.0 module (where
-/// `M`, `C` and `St` are defined).
+/// The FMI 3.0 functions that a Float64-only co-simulation FMU without event
+/// mode, clocks or derivatives refuses: one list for the kit's [`export_fmu!`]
+/// and for the runtime of an exported Tether system (tether-fmu-export), which
+/// names the functions it refuses besides these after the `;`. Each becomes a
+/// `#[no_mangle]` function with its C signature that returns `$refuse(c,
+/// "fmi3Name")`; `C`, `St`, `Vr`, `B` and `Str` are the caller's FMI 3.0 types.
 #[doc(hidden)]
 #[macro_export]
-macro_rules! __fmi3_unsupported {
-    ($($name:ident($($arg:ty),*);)*) => {
+macro_rules! fmi3_unsupported {
+    ($refuse:path; $($name:ident($($arg:ty),*);)*) => {
+        $crate::__fmi3_refused! {
+            $refuse;
+            $($name($($arg),*);)*
+            fmi3EnterEventMode();
+            fmi3EnterConfigurationMode();
+            fmi3ExitConfigurationMode();
+            fmi3EvaluateDiscreteStates();
+            fmi3UpdateDiscreteStates(*mut B, *mut B, *mut B, *mut B, *mut B, *mut f64);
+            fmi3GetFloat32(Vr, usize, *mut f32, usize);
+            fmi3GetInt8(Vr, usize, *mut i8, usize);
+            fmi3GetUInt8(Vr, usize, *mut u8, usize);
+            fmi3GetInt16(Vr, usize, *mut i16, usize);
+            fmi3GetUInt16(Vr, usize, *mut u16, usize);
+            fmi3GetUInt32(Vr, usize, *mut u32, usize);
+            fmi3GetInt64(Vr, usize, *mut i64, usize);
+            fmi3GetUInt64(Vr, usize, *mut u64, usize);
+            fmi3GetString(Vr, usize, *mut Str, usize);
+            fmi3GetBinary(Vr, usize, *mut usize, *mut *const u8, usize);
+            fmi3GetClock(Vr, usize, *mut B);
+            fmi3SetFloat32(Vr, usize, *const f32, usize);
+            fmi3SetInt8(Vr, usize, *const i8, usize);
+            fmi3SetUInt8(Vr, usize, *const u8, usize);
+            fmi3SetInt16(Vr, usize, *const i16, usize);
+            fmi3SetUInt16(Vr, usize, *const u16, usize);
+            fmi3SetUInt32(Vr, usize, *const u32, usize);
+            fmi3SetInt64(Vr, usize, *const i64, usize);
+            fmi3SetUInt64(Vr, usize, *const u64, usize);
+            fmi3SetString(Vr, usize, *const Str, usize);
+            fmi3SetBinary(Vr, usize, *const usize, *const *const u8, usize);
+            fmi3SetClock(Vr, usize, *const B);
+            fmi3GetNumberOfVariableDependencies(u32, *mut usize);
+            fmi3GetVariableDependencies(u32, *mut usize, *mut u32, *mut usize, *mut i32, usize);
+            fmi3GetDirectionalDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
+            fmi3GetAdjointDerivative(Vr, usize, Vr, usize, *const f64, usize, *mut f64, usize);
+            fmi3GetIntervalDecimal(Vr, usize, *mut f64, *mut i32);
+            fmi3GetIntervalFraction(Vr, usize, *mut u64, *mut u64, *mut i32);
+            fmi3GetShiftDecimal(Vr, usize, *mut f64);
+            fmi3GetShiftFraction(Vr, usize, *mut u64, *mut u64);
+            fmi3SetIntervalDecimal(Vr, usize, *const f64);
+            fmi3SetIntervalFraction(Vr, usize, *const u64, *const u64);
+            fmi3SetShiftDecimal(Vr, usize, *const f64);
+            fmi3SetShiftFraction(Vr, usize, *const u64, *const u64);
+            fmi3ActivateModelPartition(u32, f64);
+            fmi3EnterContinuousTimeMode();
+            fmi3CompletedIntegratorStep(B, *mut B, *mut B);
+            fmi3SetTime(f64);
+            fmi3SetContinuousStates(*const f64, usize);
+            fmi3GetContinuousStateDerivatives(*mut f64, usize);
+            fmi3GetEventIndicators(*mut f64, usize);
+            fmi3GetContinuousStates(*mut f64, usize);
+            fmi3GetNominalsOfContinuousStates(*mut f64, usize);
+            fmi3GetNumberOfEventIndicators(*mut usize);
+            fmi3GetNumberOfContinuousStates(*mut usize);
+        }
+    };
+}
+
+/// The functions of [`fmi3_unsupported!`], each refused by `$refuse`.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi3_refused {
+    ($refuse:path; $($name:ident($($arg:ty),*);)*) => {
         $(
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn $name(c: C, $(_: $arg),*) -> St {
                 // SAFETY: the FMI 3.0 contract; only `c` is used, checked for null.
-                unsafe { k3::unsupported::<M>(c, stringify!($name)) }
+                unsafe { $refuse(c, stringify!($name)) }
             }
         )*
     };

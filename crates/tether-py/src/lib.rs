@@ -124,7 +124,11 @@ impl Rows {
     /// names the columns whose integers the floats rounded.
     fn into_py(self, py: Python<'_>, stats: Py<PyAny>) -> PyResult<Py<PyAny>> {
         if !self.rounded.is_empty() {
-            let names: Vec<&str> = self.rounded.iter().map(|&k| self.columns[k].as_str()).collect();
+            let names: Vec<&str> = self
+                .rounded
+                .iter()
+                .map(|&k| self.columns[k].as_str())
+                .collect();
             let text = format!(
                 "integers beyond ±2^53 in column(s) {} are rounded in the result's floats \
                  (tether run's CSV writes them exactly)",
@@ -382,20 +386,31 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
     Ok(o)
 }
 
-/// The system from a file path or TOML text, with the overrides applied.
+/// The system from a path (a system file or SSP: `.ssp`, `.ssd` or a folder,
+/// read by `tether run`'s loader, [`tether_ssp::load`]) or TOML text, with
+/// the overrides applied. For SSP the [`Loaded`](tether_ssp::Loaded) owns
+/// the extracted archive the system's FMUs are in: keep it while they are
+/// used.
 fn load_spec(
     path: Option<PathBuf>,
     text: Option<&str>,
     kwargs: Option<&Bound<'_, PyDict>>,
-) -> PyResult<SystemSpec> {
+) -> PyResult<(SystemSpec, Option<tether_ssp::Loaded>)> {
     // The overrides first: a bad keyword is reported as such.
     let overrides = overrides(kwargs)?;
-    let mut spec = match (path, text) {
-        (Some(path), _) => SystemSpec::from_file(&path),
-        (None, Some(text)) => SystemSpec::from_toml(text),
+    let (mut spec, ssp) = match (path, text) {
+        (Some(path), _) => {
+            tether_ssp::load(&path, overrides.step, overrides.stop).map_err(|e| match e {
+                tether_ssp::SspError::Master(e) => master_failure(&e, None),
+                e => failure("system", e.to_string(), None),
+            })?
+        }
+        (None, Some(text)) => (
+            SystemSpec::from_toml(text).map_err(|e| master_failure(&e, None))?,
+            None,
+        ),
         (None, None) => return Err(PyValueError::new_err("no system given")),
-    }
-    .map_err(|e| master_failure(&e, None))?;
+    };
     overrides
         .apply(&mut spec)
         .map_err(|e| override_failure(&e))?;
@@ -434,7 +449,7 @@ fn load_spec(
             };
         }
     }
-    Ok(spec)
+    Ok((spec, ssp))
 }
 
 /// A TOML value as a Python object (tables as dicts).
@@ -534,7 +549,8 @@ fn run(
     progress: Option<Py<PyAny>>,
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Py<PyAny>> {
-    let spec = load_spec(path, text, kwargs)?;
+    // `_ssp` keeps an extracted archive's FMUs until the run ends.
+    let (spec, _ssp) = load_spec(path, text, kwargs)?;
     // A divergence of a formulation known to be unstable says so again, as the CLI does.
     let unstable = spec.method.stability_warning(spec.coupling.order);
     let outcome = py.detach(move || -> Result<_, MasterError> {
@@ -604,6 +620,8 @@ struct PySimulation {
     unstable: Option<String>,
     /// The setup's notes.
     notes: Vec<String>,
+    /// An SSP system's extracted archive, kept while its FMUs are used.
+    _ssp: Option<tether_ssp::Loaded>,
 }
 
 impl PySimulation {
@@ -625,7 +643,7 @@ impl PySimulation {
         text: Option<&str>,
         kwargs: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        let spec = load_spec(path, text, kwargs)?;
+        let (spec, ssp) = load_spec(path, text, kwargs)?;
         let sim = Simulation::new(&spec)
             .map_err(|e| master_failure(&e.located(&spec, |_, _| None), None))?;
         let mut rows = Rows {
@@ -645,6 +663,7 @@ impl PySimulation {
             closed_stats: None,
             unstable: spec.method.stability_warning(spec.coupling.order),
             notes,
+            _ssp: ssp,
         })
     }
 
@@ -825,12 +844,15 @@ fn export_fmu(
     text: Option<&str>,
     fmi: u32,
 ) -> PyResult<(usize, usize, usize, usize)> {
-    let source = path
-        .as_ref()
-        .map_or("(text)".to_string(), |p| p.display().to_string());
+    let source = match &path {
+        None => "(text)".to_string(),
+        Some(p) if tether_ssp::is_ssp(p) => tether_ssp::ssd_name(p),
+        Some(p) => p.display().to_string(),
+    };
     let fmi = tether_fmu_export::package::FmiVersion::from_number(fmi)
         .map_err(|e| failure("settings", e, None))?;
-    let spec = load_spec(path, text, None)?;
+    // `_ssp` keeps an extracted archive's FMUs until they are packed.
+    let (spec, _ssp) = load_spec(path, text, None)?;
     let packaged = py
         .detach(move || {
             let programs = tether_fmu_export::package::Programs {

@@ -1,7 +1,8 @@
 //! SSP 1.0 (System Structure and Parameterization, Modelica Association) for
 //! Tether: [`read`] turns an `.ssp` archive, an unpacked SSP folder or a
 //! `SystemStructure.ssd` into a [`SystemSpec`]; [`write`] packs a system as an
-//! `.ssp`. docs/ssp.md describes the mapping both ways.
+//! `.ssp`. docs/ssp.md describes the mapping both ways. [`load`] reads a
+//! system given by path, a system file or SSP alike.
 //!
 //! Components become instances, connections become signal connections
 //! (`[[connection]]`), parameter bindings (inline and `.ssv`) become start
@@ -9,6 +10,7 @@
 //! joints, coupling variables, the method and the macro step — travels in an
 //! annotation of type [`ANNOTATION_TYPE`] that other tools skip.
 
+mod load;
 mod read;
 mod write;
 
@@ -20,6 +22,7 @@ use tether_master::{
     SignalSettings, StepControl,
 };
 
+pub use load::{is_ssp, load, ssd_name};
 pub use read::{read, Loaded};
 pub use write::{write, write_toml};
 

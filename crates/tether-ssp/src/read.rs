@@ -26,7 +26,8 @@ pub struct Loaded {
 
 /// Read an SSP system. `step` and `stop` (from the command line) win over
 /// the Tether annotation's step and DefaultExperiment's stopTime; without a
-/// step from either, reading fails.
+/// step from either, reading fails. Skipped annotations of other tools are
+/// logged (info) and listed in [`Loaded::skipped`].
 ///
 /// The `source` of a component or a parameter binding in an `.ssp` archive must be
 /// a relative path to a file in the archive; in an SSD file or a folder on disk it
@@ -48,6 +49,9 @@ pub fn read(path: &Path, step: Option<f64>, stop: Option<f64>) -> Result<Loaded,
         ..Reader::default()
     };
     let spec = reader.description(&root, step, stop)?;
+    for skipped in &reader.skipped {
+        log::info!("skipped another tool's annotation {skipped}");
+    }
     Ok(Loaded {
         spec,
         skipped: reader.skipped,

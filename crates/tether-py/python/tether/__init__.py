@@ -560,8 +560,10 @@ def run(
 ) -> Result:
     """Run a coupled system to its stop time, like ``tether run``.
 
-    ``system`` is a system-file path or a :class:`System`. The keyword
-    arguments override the system's settings as the CLI flags do:
+    ``system`` is a system-file path, an SSP (an ``.ssp`` archive, a
+    ``SystemStructure.ssd`` or a folder holding one, read as ``tether run``
+    reads it, docs/ssp.md) or a :class:`System`. The keyword arguments
+    override the system's settings as the CLI flags do:
 
     - ``stop``, ``step``: stop time and macro-step size H,
     - ``method``: ``"baumgarte"``, ``"weighted"`` or ``"explicit"``, with
@@ -694,7 +696,8 @@ class Simulation:
         sim.run_until(1.0)
         result = sim.result()
 
-    Takes the same arguments as :func:`run`. The run is instantiated (FMUs
+    Takes the same arguments as :func:`run` (a system file, an SSP or a
+    :class:`System`). The run is instantiated (FMUs
     loaded, initialised, consistent multipliers solved) on construction.
     The steps are the same as those of :func:`run`: ``sim.result()`` after
     the last step equals ``tether.run(...)`` bit for bit.
@@ -889,10 +892,12 @@ _HOST_PROGRAM = "tether-fmi-host"
 
 
 def export_fmu(system: Union[PathLike, "System"], path: PathLike, fmi: int = 2) -> str:
-    """Export ``system`` (a system file path or a :class:`System`) with its
-    ``[export]`` table as one FMI 2.0 (``fmi=2``) or FMI 3.0 (``fmi=3``)
-    co-simulation FMU at ``path``, as ``tether fmu export`` does
-    (docs/fmu-export.md); returns the path. The FMU's binary is the runtime
+    """Export ``system`` (a system file path with an ``[export]`` table, an
+    SSP — ``.ssp``, ``.ssd`` or folder — whose root connectors are the
+    interface unless its Tether annotation has an ``[export]`` table, or a
+    :class:`System`) as one FMI 2.0 (``fmi=2``) or FMI 3.0 (``fmi=3``)
+    co-simulation FMU at ``path``, as ``tether fmu export`` does, with the
+    same loader (docs/fmu-export.md); returns the path. The FMU's binary is the runtime
     library shipped in this package; a system with isolated members also
     carries the package's host program."""
     folder = os.path.dirname(os.path.abspath(__file__))
