@@ -146,3 +146,68 @@ pub fn run_script(script_name: &str, args: &[&std::ffi::OsStr]) -> Result<Output
         .output()
         .map_err(|e| format!("cannot run {} {}: {e}", python.display(), script.display()))
 }
+
+/// An FMI 3.0 FMU made by pythonfmu3 from `tests/fixtures/pythonfmu3/<name>.py`
+/// (state handling and serialization on), and what a process that loads it
+/// needs: the FMU embeds the interpreter, so that process preloads `libpython`
+/// and finds the test Python's packages (numpy, for arrays) on `site_packages`.
+#[derive(Debug, Clone)]
+pub struct PythonFmu {
+    /// The `.fmu`.
+    pub fmu: PathBuf,
+    /// The shared libpython of the Python that built it (`LD_PRELOAD`).
+    pub libpython: PathBuf,
+    /// That Python's site-packages (`PYTHONPATH`).
+    pub site_packages: PathBuf,
+}
+
+impl PythonFmu {
+    /// `command` with the environment the FMU needs.
+    pub fn env<'a>(&self, command: &'a mut Command) -> &'a mut Command {
+        command
+            .env("LD_PRELOAD", &self.libpython)
+            .env("PYTHONPATH", &self.site_packages)
+    }
+}
+
+/// Builds the pythonfmu3 FMU of fixture `name` into `target/pythonfmu3/`.
+pub fn pythonfmu3(name: &str) -> Result<PythonFmu, String> {
+    let python = python()?;
+    let root = workspace_root();
+    let dir = root.join("target").join("pythonfmu3");
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    run(Command::new(&python)
+        .args(["-m", "pythonfmu3", "build", "-f"])
+        .arg(root.join(format!("tests/fixtures/pythonfmu3/{name}.py")))
+        .args([
+            "--no-external-tool",
+            "--handle-state",
+            "--serialize-state",
+            "-d",
+        ])
+        .arg(&dir))?;
+    let ask = |code: &str| -> Result<String, String> {
+        let out = Command::new(&python)
+            .args(["-c", code])
+            .output()
+            .map_err(|e| e.to_string())?;
+        let text = String::from_utf8_lossy(&out.stdout).trim().to_string();
+        if out.status.success() && !text.is_empty() {
+            Ok(text)
+        } else {
+            Err(format!("{} -c {code:?} failed", python.display()))
+        }
+    };
+    let libpython = ask(
+        "import sysconfig, os; d = sysconfig.get_config_var('LIBDIR'); \
+         names = [sysconfig.get_config_var(k) for k in ('INSTSONAME', 'LDLIBRARY')]; \
+         print(next(os.path.join(d, n) for n in names if n and os.path.exists(os.path.join(d, n))))",
+    )
+    .map_err(|e| format!("this Python has no shared libpython to preload ({e})"))?;
+    let site_packages = ask("import sysconfig; print(sysconfig.get_paths()['purelib'])")?;
+    Ok(PythonFmu {
+        fmu: dir.join(format!("{name}.fmu")),
+        libpython: PathBuf::from(libpython),
+        site_packages: PathBuf::from(site_packages),
+    })
+}

@@ -511,6 +511,7 @@ fn bench_recording() {
                 step: i,
                 time: i as f64 * 1e-3,
                 values: &row,
+                exact: &[],
             })
             .unwrap();
         }
@@ -525,6 +526,7 @@ fn bench_recording() {
                 step: i,
                 time: i as f64 * 1e-3,
                 values: &row,
+                exact: &[],
             })
             .unwrap();
         }

@@ -18,6 +18,11 @@ fn statespace() -> PathBuf {
         .join("../../../shared/reference-fmus/fmi3/StateSpace.fmu")
 }
 
+fn feedthrough() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/reference-fmus/fmi3/Feedthrough.fmu")
+}
+
 fn oscillator() -> PathBuf {
     tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU")
 }
@@ -406,14 +411,14 @@ fn the_reference_statespace_refuses_its_structural_parameters() {
 }
 
 /// Typed start values on the Reference FMU `Feedthrough`: a String value is text, a
-/// Binary value hexadecimal text (either case); text that is not hexadecimal, and an
-/// Int64 value outside the 32-bit range Tether's integer values travel in, are
-/// refused in one line naming the variable.
+/// Binary value hexadecimal text (either case); Int64 and UInt64 values pass through
+/// exactly, also beyond 2^53 where a float would round them (the CSV column holds
+/// the integer's digits). Text that is not hexadecimal and a value outside the
+/// variable's type are refused in one line naming the variable.
 #[test]
-fn feedthrough_takes_string_and_binary_values_and_refuses_what_does_not_fit() {
+fn feedthrough_takes_typed_values_and_64_bit_integers_exactly() {
     let dir = tempfile::tempdir().unwrap();
-    let fmu = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/reference-fmus/fmi3/Feedthrough.fmu");
+    let fmu = feedthrough();
     let csv = dir.path().join("out.csv");
     let simulate = |sets: &[&str]| {
         let mut args = vec![
@@ -434,26 +439,380 @@ fn feedthrough_takes_string_and_binary_values_and_refuses_what_does_not_fit() {
     let out = simulate(&[
         "String_input=hello",
         "Binary_input=0A0bff",
-        "Int64_input=-7",
+        "Int64_input=-9007199254740993",
+        "UInt64_input=9223372036854775807",
+        "Int32_input=-7",
     ]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let (header, rows) = read_csv(&std::fs::read_to_string(&csv).unwrap());
-    let col = header.iter().position(|h| h == "Int64_output").unwrap();
-    assert_eq!(rows[0][col], -7.0, "Int64_input passed through");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for row in text.lines().skip(1) {
+        let row: Vec<&str> = row.split(',').collect();
+        assert_eq!(row[col("Int64_output")], "-9007199254740993", "{text}");
+        assert_eq!(row[col("UInt64_output")], "9223372036854775807", "{text}");
+        assert_eq!(row[col("Int32_output")].parse::<f64>().unwrap(), -7.0);
+    }
     let line = one_line(&simulate(&["Binary_input=xyz"]));
     assert!(
         line.contains("Feedthrough") && line.contains("\"xyz\" is not hexadecimal"),
         "{line}"
     );
-    let line = one_line(&simulate(&["Int64_input=1099511627776"]));
+    let line = one_line(&simulate(&["Int8_input=300"]));
     assert!(
-        line.contains("Int64_input = 1099511627776") && line.contains("32-bit"),
+        line.contains("fmi3SetInt8")
+            && line.contains("300 is outside the range of Int8 'Int8_input'"),
         "{line}"
     );
+    let line = one_line(&simulate(&["UInt64_input=-1"]));
+    assert!(
+        line.contains("-1 is outside the range of UInt64 'UInt64_input'"),
+        "{line}"
+    );
+    let line = one_line(&simulate(&["Float64_continuous_input=9007199254740993"]));
+    assert!(
+        line.contains("Float64_continuous_input")
+            && line.contains("the integer 9007199254740993 has no exact Real value"),
+        "{line}"
+    );
+}
+
+/// In a system, an Int64 output beyond 2^53 is recorded exactly, in process and
+/// isolated alike; a signal
+/// connection, which carries Reals, refuses it in one line naming the
+/// connection, the variable, the value and the time.
+#[test]
+fn a_system_records_64_bit_integers_exactly_and_a_connection_refuses_what_a_float_rounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = feedthrough();
+    let system = |connect: &str| {
+        format!(
+            r#"
+[experiment]
+stop = 0.3
+step = 0.1
+
+[[instance]]
+name = "a"
+fmu = "{fmu}"
+parameters = {{ Int64_input = 9007199254740993 }}
+
+[[instance]]
+name = "b"
+fmu = "{fmu}"
+{connect}
+"#,
+            fmu = fmu.display()
+        )
+    };
+    let file = dir.path().join("plain.toml");
+    std::fs::write(&file, system("")).unwrap();
+    let csv = dir.path().join("plain.csv");
+    let out = tether(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "a.Int64_output").unwrap();
+    assert_eq!(text.lines().count(), 5, "{text}");
+    for row in text.lines().skip(1) {
+        assert_eq!(row.split(',').nth(col), Some("9007199254740993"), "{text}");
+    }
+    // The same through host processes (the integers cross the protocol whole).
+    let isolated = dir.path().join("isolated.csv");
+    let out = tether(&[
+        "run",
+        file.to_str().unwrap(),
+        "--isolate",
+        "--out",
+        isolated.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    assert_eq!(std::fs::read_to_string(&isolated).unwrap(), text);
+    let file = dir.path().join("connected.toml");
+    let connect = "\n[[connection]]\nfrom = \"a.Int64_output\"\nto = \"b.Int64_input\"\n";
+    std::fs::write(&file, system(connect)).unwrap();
+    let line = one_line(&tether(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        dir.path().join("connected.csv").to_str().unwrap(),
+    ]));
+    assert!(
+        line.contains("a.Int64_output")
+            && line.contains("'Int64_output' = 9007199254740993 at t = 0")
+            && line.contains("no exact Real value"),
+        "{line}"
+    );
+}
+
+/// The pythonfmu3 FMU of tests/fixtures/pythonfmu3/Decays.py, built once; `None`
+/// (skip) without Python or pythonfmu3 outside CI.
+fn decays() -> Option<&'static tether_tests::fmpy::PythonFmu> {
+    static BUILT: std::sync::OnceLock<Result<tether_tests::fmpy::PythonFmu, String>> =
+        std::sync::OnceLock::new();
+    match BUILT.get_or_init(|| tether_tests::fmpy::pythonfmu3("Decays")) {
+        Ok(built) => Some(built),
+        Err(reason) if std::env::var_os("CI").is_some() => {
+            panic!("the pythonfmu3 FMU is needed on CI: {reason}")
+        }
+        Err(reason) => {
+            eprintln!("skipped: no pythonfmu3 FMU ({reason})");
+            None
+        }
+    }
+}
+
+/// Structural parameters end to end on a third-party FMU: the pythonfmu3 FMU
+/// `Decays` (tests/fixtures/pythonfmu3/Decays.py) has an output array x of n
+/// elements, n a fixed structural parameter (3 by default), x_i(t) = exp(−i·t).
+/// `parameters = { n = 5 }` (set in configuration mode) makes x and its columns
+/// follow: `d.x[1]` … `d.x[5]`, each the closed form to 1e-15 relative, and
+/// `d.x[5]` a name a connection can take; at the default n = 3 that name is
+/// refused in one line. The instance runs isolated: pythonfmu3's runtime can
+/// abort the process that loaded it at exit (its interpreter finalizer reads an
+/// object already freed), after the results, and isolated that exit is the host's.
+#[test]
+fn a_structural_parameter_resizes_the_array_its_columns_and_its_names() {
+    let Some(py) = decays() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let system = |parameters: &str| {
+        format!(
+            r#"
+[experiment]
+stop = 0.5
+step = 0.1
+
+[[instance]]
+name = "d"
+fmu = "{decays}"
+isolation = "process"
+{parameters}
+
+[[instance]]
+name = "o"
+fmu = "{osc}"
+parameters = {{ exact = true }}
+
+[[connection]]
+from = "d.x[5]"
+to = "o.F"
+"#,
+            decays = py.fmu.display(),
+            osc = oscillator().display()
+        )
+    };
+    let run = |toml: &str, name: &str| {
+        let file = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&file, toml).unwrap();
+        py.env(&mut Command::new(env!("CARGO_BIN_EXE_tether")))
+            .args(["run", file.to_str().unwrap(), "--out"])
+            .arg(dir.path().join(format!("{name}.csv")))
+            .output()
+            .unwrap()
+    };
+    let out = run(&system("parameters = { n = 5 }"), "five");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (header, rows) = read_csv(&std::fs::read_to_string(dir.path().join("five.csv")).unwrap());
+    let x: Vec<String> = (1..=5).map(|i| format!("d.x[{i}]")).collect();
+    assert_eq!(header[1..6], x[..], "{header:?}");
+    assert!(!header.iter().any(|h| h == "d.x[6]"), "{header:?}");
+    assert_eq!(rows.len(), 6);
+    for row in &rows {
+        for i in 1..=5 {
+            let exact = (-(i as f64) * row[0]).exp();
+            assert!(
+                ((row[i] - exact) / exact).abs() <= 1e-15,
+                "x[{i}] at t = {}: {} against {exact}",
+                row[0],
+                row[i]
+            );
+        }
+    }
+    // The FMU's host may add its own exit message (see above) to stderr: the
+    // error is the one `error:` line.
+    let out = run(&system(""), "three");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{stderr}");
+    assert!(
+        errors[0].contains("index 5 is out of range") && errors[0].contains("valid: 1..=3"),
+        "{stderr}"
+    );
+}
+
+/// Signal connections take elements of Integer and Boolean arrays as of Real ones:
+/// two `Decays` instances (n = 4 and n = 3), `a.k[2] → b.shift[3]` (Int64) and
+/// `a.held[1] → b.hold[2]` (Boolean), the receivers' other elements at their
+/// values set in `parameters`. After step s, a.k[2] = 2s and b.k[3] = 3s plus the
+/// value a.k[2] had at the previous point, 2(s − 1); b.held = [false, true, true].
+#[test]
+fn signal_connections_take_integer_and_boolean_array_elements() {
+    let Some(py) = decays() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let toml = format!(
+        r#"
+[experiment]
+stop = 0.5
+step = 0.1
+
+[[instance]]
+name = "a"
+fmu = "{fmu}"
+isolation = "process"
+parameters = {{ n = 4, hold = [true, false, false, false] }}
+
+[[instance]]
+name = "b"
+fmu = "{fmu}"
+isolation = "process"
+parameters = {{ shift = [10, 20, 30], hold = [false, false, true] }}
+
+[[connection]]
+from = "a.k[2]"
+to = "b.shift[3]"
+
+[[connection]]
+from = "a.held[1]"
+to = "b.hold[2]"
+"#,
+        fmu = py.fmu.display()
+    );
+    let file = dir.path().join("system.toml");
+    std::fs::write(&file, toml).unwrap();
+    let csv = dir.path().join("out.csv");
+    let out = py
+        .env(&mut Command::new(env!("CARGO_BIN_EXE_tether")))
+        .args([
+            "run",
+            file.to_str().unwrap(),
+            "--out",
+            csv.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (header, rows) = read_csv(&std::fs::read_to_string(&csv).unwrap());
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    assert_eq!(rows.len(), 6);
+    for (s, row) in rows.iter().enumerate().skip(1) {
+        let s = s as f64;
+        assert_eq!(row[col("a.k[2]")], 2.0 * s);
+        assert_eq!(row[col("b.k[1]")], 10.0 + s);
+        assert_eq!(row[col("b.k[2]")], 20.0 + 2.0 * s);
+        assert_eq!(row[col("b.k[3]")], 3.0 * s + 2.0 * (s - 1.0), "step {s}");
+        assert_eq!(
+            [
+                row[col("b.held[1]")],
+                row[col("b.held[2]")],
+                row[col("b.held[3]")]
+            ],
+            [0.0, 1.0, 1.0]
+        );
+    }
+}
+
+/// `Simulation::set_parameter` (Python's `Simulation.set_parameter`) takes array
+/// elements and whole arrays between steps, the other elements keeping their
+/// values; out-of-range elements, a wrong length and an array for an element are
+/// refused with the variable named. `Decays` runs isolated, in `tether`'s host
+/// given the environment its embedded Python needs.
+#[test]
+fn set_parameter_takes_array_elements_and_whole_arrays_between_steps() {
+    use tether_master::{Simulation, StartValue, SystemSpec};
+    let Some(py) = decays() else { return };
+    tether_fmi::remote::set_host(tether_fmi::remote::HostCommand {
+        program: "/usr/bin/env".into(),
+        args: vec![
+            format!("LD_PRELOAD={}", py.libpython.display()).into(),
+            format!("PYTHONPATH={}", py.site_packages.display()).into(),
+            env!("CARGO_BIN_EXE_tether").into(),
+            "__fmi-host".into(),
+        ],
+    });
+    let spec = SystemSpec::from_toml(&format!(
+        r#"
+[experiment]
+stop = 1.0
+step = 0.1
+
+[[instance]]
+name = "d"
+fmu = "{}"
+isolation = "process"
+"#,
+        py.fmu.display()
+    ))
+    .unwrap();
+    let mut sim = Simulation::new(&spec).unwrap();
+    let k = |sim: &Simulation| -> Vec<f64> {
+        (1..=3)
+            .map(|i| sim.value(&format!("d.k[{i}]")).unwrap())
+            .collect()
+    };
+    sim.step().unwrap();
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [2.0, 4.0, 6.0]);
+    sim.set_parameter("d.shift[2]", &StartValue::Integer(100))
+        .unwrap();
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [3.0, 106.0, 9.0]);
+    let whole = StartValue::Array(vec![
+        StartValue::Integer(-1),
+        StartValue::Integer(-2),
+        StartValue::Integer(-3),
+    ]);
+    sim.set_parameter("d.shift", &whole).unwrap();
+    sim.set_parameter("d.hold[3]", &StartValue::Boolean(true))
+        .unwrap();
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [3.0, 6.0, 9.0]);
+    assert_eq!(sim.value("d.held[3]"), Some(1.0));
+    assert_eq!(sim.value("d.held[1]"), Some(0.0));
+    let refused = |sim: &mut Simulation, target: &str, value: StartValue| {
+        sim.set_parameter(target, &value).unwrap_err().to_string()
+    };
+    let e = refused(&mut sim, "d.shift[4]", StartValue::Integer(1));
+    assert!(
+        e.contains("index 4 is out of range") && e.contains("'d'"),
+        "{e}"
+    );
+    let e = refused(
+        &mut sim,
+        "d.shift",
+        StartValue::Array(vec![StartValue::Integer(1)]),
+    );
+    assert!(
+        e.contains("3 = 3 elements") && e.contains("the value has 1"),
+        "{e}"
+    );
+    let e = refused(&mut sim, "d.shift[1]", whole.clone());
+    assert!(e.contains("an element takes one value"), "{e}");
+    let e = refused(&mut sim, "d.k[1]", StartValue::Integer(1));
+    assert!(e.contains("only inputs and tunable parameters"), "{e}");
+    sim.step().unwrap();
+    assert_eq!(k(&sim), [4.0, 8.0, 12.0], "nothing refused was set");
 }
 
 /// Signal connections to and from array elements: the workspace oscillator's `x`

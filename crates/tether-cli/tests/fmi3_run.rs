@@ -21,42 +21,8 @@ use tether_tests::oscillator::{reference, C, D, M1, M2, V0};
 fn python_mass() -> Option<&'static (PathBuf, PathBuf)> {
     static BUILT: OnceLock<Result<(PathBuf, PathBuf), String>> = OnceLock::new();
     let built = BUILT.get_or_init(|| {
-        let python = tether_tests::fmpy::python()?;
-        let root = tether_tests::fmpy::workspace_root();
-        let dir = root.join("target").join("fmi3-run");
-        std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-        let output = Command::new(&python)
-            .args(["-m", "pythonfmu3", "build", "-f"])
-            .arg(root.join("tests/fixtures/pythonfmu3/Mass.py"))
-            .args([
-                "--no-external-tool",
-                "--handle-state",
-                "--serialize-state",
-                "-d",
-            ])
-            .arg(&dir)
-            .output()
-            .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
-        if !output.status.success() {
-            return Err(format!(
-                "pythonfmu3 build failed: {}",
-                String::from_utf8_lossy(&output.stderr)
-            ));
-        }
-        let where_ = Command::new(&python)
-            .args([
-                "-c",
-                "import sysconfig, os; d = sysconfig.get_config_var('LIBDIR'); \
-                 names = [sysconfig.get_config_var(k) for k in ('INSTSONAME', 'LDLIBRARY')]; \
-                 print(next(os.path.join(d, n) for n in names if n and os.path.exists(os.path.join(d, n))))",
-            ])
-            .output()
-            .map_err(|e| e.to_string())?;
-        let libpython = String::from_utf8_lossy(&where_.stdout).trim().to_string();
-        if !where_.status.success() || libpython.is_empty() {
-            return Err("this Python has no shared libpython to preload".into());
-        }
-        Ok((dir.join("Mass.fmu"), PathBuf::from(libpython)))
+        let built = tether_tests::fmpy::pythonfmu3("Mass")?;
+        Ok((built.fmu, built.libpython))
     });
     match built {
         Ok(built) => Some(built),

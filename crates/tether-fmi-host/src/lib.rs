@@ -128,7 +128,10 @@ struct Host {
     instance: Option<Box<dyn FmuInstance>>,
     vrs: Vec<u32>,
     derivative_vrs: Vec<u32>,
+    /// Derivative orders.
     ints: Vec<i32>,
+    /// Integer values.
+    integers: Vec<tether_fmi::Int>,
     reals: Vec<f64>,
     derivatives: Vec<f64>,
     bools: Vec<bool>,
@@ -376,10 +379,10 @@ impl Host {
             }
             op::GET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
-                self.ints.clear();
-                self.ints.resize(input.u32()? as usize, 0);
-                i.get_integers(&self.vrs, &mut self.ints).map(|()| {
-                    out.i32s(&self.ints);
+                self.integers.clear();
+                self.integers.resize(input.u32()? as usize, 0);
+                i.get_integers(&self.vrs, &mut self.integers).map(|()| {
+                    out.ints(&self.integers);
                 })
             }
             op::GET_BOOLEAN => {
@@ -392,8 +395,8 @@ impl Host {
             }
             op::SET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
-                input.i32s(&mut self.ints)?;
-                i.set_integers(&self.vrs, &self.ints)
+                input.ints(&mut self.integers)?;
+                i.set_integers(&self.vrs, &self.integers)
             }
             op::SET_BOOLEAN => {
                 input.u32s(&mut self.vrs)?;

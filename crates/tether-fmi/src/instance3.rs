@@ -15,7 +15,8 @@
 //!
 //! Values go through the [`FmuInstance`] methods by kind: `get_reals`/`set_reals` for
 //! `Float64` and `Float32`, `get_integers`/`set_integers` for every integer type and
-//! enumerations (values that do not fit an `i32` are an error, never wrapped),
+//! enumerations (exactly, as [`Int`]; a value set outside the variable's type is an
+//! error, never wrapped),
 //! `get_booleans`/`set_booleans` for `Boolean`, `get_strings`/`set_strings` for `String`
 //! and `Binary` (as hexadecimal text). An array variable takes as many values as it has
 //! elements, row-major, its sizes following the structural parameters set so far. A
@@ -26,7 +27,7 @@ use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
-use crate::interface::{FmuInstance, Inputs, Slot, SLOTS};
+use crate::interface::{FmuInstance, Inputs, Int, Slot, SLOTS};
 use crate::model_description::{
     hex_decode, hex_encode, Causality, ModelDescription, ScalarVariable, ValueReference, ValueType,
 };
@@ -265,18 +266,6 @@ impl Fmi3Instance {
         Ok(groups)
     }
 
-    fn too_wide(&self, function: &'static str, vr: ValueReference, value: String) -> Error {
-        let name = self
-            .index
-            .get(&vr)
-            .map(|&i| self.md().model_variables[i].name.clone())
-            .unwrap_or_else(|| vr.to_string());
-        self.invalid(
-            function,
-            format!("the value {value} of '{name}' does not fit a 32-bit integer"),
-        )
-    }
-
     /// The value reference of the group's variable holding value `k` (for messages).
     fn vr_at(&self, vrs: &[ValueReference], g: &Group, k: usize) -> ValueReference {
         let mut offset = g.values.start;
@@ -372,24 +361,18 @@ fn is_text(t: ValueType) -> bool {
     matches!(t, ValueType::String | ValueType::Binary)
 }
 
-/// Reads one group of integers of type `$t` with `$get`, narrowed to `i32`.
+/// Reads one group of integers of type `$t` with `$get`.
 macro_rules! get_ints {
-    ($self:ident, $function:expr, $vrs:ident, $g:ident, $out:ident, $get:ident, $t:ty) => {{
+    ($self:ident, $vrs:ident, $g:ident, $out:ident, $get:ident, $t:ty) => {{
         let mut wide: Vec<$t> = vec![0; $g.values.len()];
         $self.raw.$get(&$vrs[$g.vrs.clone()], &mut wide)?;
-        for (k, (o, x)) in $out[$g.values.clone()].iter_mut().zip(wide).enumerate() {
-            *o = match i32::try_from(x) {
-                Ok(x) => x,
-                Err(_) => {
-                    let vr = $self.vr_at($vrs, &$g, $g.values.start + k);
-                    return Err($self.too_wide($function, vr, x.to_string()));
-                }
-            };
+        for (o, x) in $out[$g.values.clone()].iter_mut().zip(wide) {
+            *o = Int::from(x);
         }
     }};
 }
 
-/// Writes one group of `i32`s as integers of type `$t` with `$set`.
+/// Writes one group of integers as integers of type `$t` with `$set`.
 macro_rules! set_ints {
     ($self:ident, $function:expr, $vrs:ident, $g:ident, $values:ident, $set:ident, $t:ty) => {{
         let mut wide: Vec<$t> = Vec::with_capacity($g.values.len());
@@ -487,32 +470,30 @@ impl FmuInstance for Fmi3Instance {
         Ok(())
     }
 
-    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()> {
         const F: &str = "fmi3GetInt32";
         for g in self.groups(F, "an integer or enumeration", vrs, out.len(), is_integer)? {
             match g.ty {
-                ValueType::Int32 => self
-                    .raw
-                    .fmi3GetInt32(&vrs[g.vrs.clone()], &mut out[g.values.clone()])?,
-                ValueType::Int8 => get_ints!(self, "fmi3GetInt8", vrs, g, out, fmi3GetInt8, i8),
-                ValueType::UInt8 => get_ints!(self, "fmi3GetUInt8", vrs, g, out, fmi3GetUInt8, u8),
-                ValueType::Int16 => get_ints!(self, "fmi3GetInt16", vrs, g, out, fmi3GetInt16, i16),
+                ValueType::Int32 => get_ints!(self, vrs, g, out, fmi3GetInt32, i32),
+                ValueType::Int8 => get_ints!(self, vrs, g, out, fmi3GetInt8, i8),
+                ValueType::UInt8 => get_ints!(self, vrs, g, out, fmi3GetUInt8, u8),
+                ValueType::Int16 => get_ints!(self, vrs, g, out, fmi3GetInt16, i16),
                 ValueType::UInt16 => {
-                    get_ints!(self, "fmi3GetUInt16", vrs, g, out, fmi3GetUInt16, u16)
+                    get_ints!(self, vrs, g, out, fmi3GetUInt16, u16)
                 }
                 ValueType::UInt32 => {
-                    get_ints!(self, "fmi3GetUInt32", vrs, g, out, fmi3GetUInt32, u32)
+                    get_ints!(self, vrs, g, out, fmi3GetUInt32, u32)
                 }
                 ValueType::UInt64 => {
-                    get_ints!(self, "fmi3GetUInt64", vrs, g, out, fmi3GetUInt64, u64)
+                    get_ints!(self, vrs, g, out, fmi3GetUInt64, u64)
                 }
-                _ => get_ints!(self, "fmi3GetInt64", vrs, g, out, fmi3GetInt64, i64),
+                _ => get_ints!(self, vrs, g, out, fmi3GetInt64, i64),
             }
         }
         Ok(())
     }
 
-    fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
+    fn set_integers(&mut self, vrs: &[ValueReference], values: &[Int]) -> Result<()> {
         const F: &str = "fmi3SetInt32";
         let groups = self.groups(
             F,
@@ -528,9 +509,9 @@ impl FmuInstance for Fmi3Instance {
             |this| {
                 for g in groups {
                     match g.ty {
-                        ValueType::Int32 => this
-                            .raw
-                            .fmi3SetInt32(&vrs[g.vrs.clone()], &values[g.values.clone()])?,
+                        ValueType::Int32 => {
+                            set_ints!(this, "fmi3SetInt32", vrs, g, values, fmi3SetInt32, i32)
+                        }
                         ValueType::Int8 => {
                             set_ints!(this, "fmi3SetInt8", vrs, g, values, fmi3SetInt8, i8)
                         }

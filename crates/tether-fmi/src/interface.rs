@@ -1,8 +1,8 @@
 //! [`FmuInstance`]: the one interface between a master and an FMU instance.
 //!
 //! For an FMI 3.0 instance ([`Fmi3Instance`](crate::Fmi3Instance)) "Real" means
-//! `Float64` or `Float32`, "Integer" every integer type and enumerations (values
-//! outside `i32` are errors), "String" also `Binary` as hexadecimal text; an array
+//! `Float64` or `Float32`, "Integer" every integer type and enumerations (each
+//! value exactly, as an [`Int`]), "String" also `Binary` as hexadecimal text; an array
 //! variable takes as many values as it has elements, row-major.
 //!
 //! The master speaks this interface only, in its own words (save, restore,
@@ -43,8 +43,12 @@ use std::fmt::Debug;
 use crate::error::{Error, Result};
 
 use crate::instance::Instance;
-use crate::model_description::{ModelDescription, ValueReference};
+use crate::model_description::{BaseType, ModelDescription, ValueReference};
 use crate::state::FmuState;
+
+/// An integer value of any FMI type (FMI 2.0 `Integer`, FMI 3.0 `Int8` …
+/// `UInt64`, enumerations), exactly.
+pub type Int = i128;
 
 /// A numbered place for a saved FMU state. An instance keeps its states on
 /// its own side (in its host process, for an isolated one); the master names
@@ -146,9 +150,9 @@ pub trait FmuInstance: Debug + Send {
     /// Set Real values.
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()>;
     /// Integer (and Enumeration) values into `out`.
-    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()>;
+    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()>;
     /// Set Integer (and Enumeration) values.
-    fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()>;
+    fn set_integers(&mut self, vrs: &[ValueReference], values: &[Int]) -> Result<()>;
     /// Boolean values into `out`.
     fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()>;
     /// Set Boolean values.
@@ -294,11 +298,38 @@ impl FmuInstance for LocalInstance {
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
         self.instance.set_real(vrs, values)
     }
-    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
-        self.instance.get_integer(vrs, out)
+    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()> {
+        let mut narrow = vec![0; out.len()];
+        self.instance.get_integer(vrs, &mut narrow)?;
+        for (o, x) in out.iter_mut().zip(narrow) {
+            *o = Int::from(x);
+        }
+        Ok(())
     }
-    fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
-        self.instance.set_integer(vrs, values)
+    fn set_integers(&mut self, vrs: &[ValueReference], values: &[Int]) -> Result<()> {
+        let mut narrow = Vec::with_capacity(values.len());
+        for (&x, vr) in values.iter().zip(vrs) {
+            let Ok(x) = i32::try_from(x) else {
+                let md = self.instance.model_description();
+                let name = md
+                    .model_variables
+                    .iter()
+                    .find(|v| {
+                        v.value_reference == *vr
+                            && matches!(v.base_type(), BaseType::Integer | BaseType::Enumeration)
+                    })
+                    .map_or_else(|| vr.to_string(), |v| v.name.clone());
+                return Err(Error::InvalidArgument {
+                    function: "fmi2SetInteger",
+                    instance: self.instance.name().to_owned(),
+                    message: format!(
+                        "the value {x} of '{name}' is outside the 32-bit range of an FMI 2.0 Integer"
+                    ),
+                });
+            };
+            narrow.push(x);
+        }
+        self.instance.set_integer(vrs, &narrow)
     }
     fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
         self.instance.get_boolean(vrs, out)

@@ -78,7 +78,7 @@ pub use error::{Error, FmuMessages, Result};
 pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};
 pub use instance3::Fmi3Instance;
-pub use interface::{FmuInstance, Inputs, LocalInstance, RunRequest, Slot, SLOTS};
+pub use interface::{FmuInstance, Inputs, Int, LocalInstance, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
 pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIMIT};
 pub use model_description::{

@@ -29,10 +29,11 @@
 //! ```
 
 use tether_fmi::{
-    BaseType, Causality, FmiStandard, Fmu, FmuInstance, ModelDescription, Placement,
+    BaseType, Causality, FmiStandard, Fmu, FmuInstance, Int, ModelDescription, Placement,
     ScalarVariable, ValueReference, ValueType,
 };
 
+use crate::observer::integer_value;
 use crate::{apply_start_values, Arrays, MasterError, Observer, Sample, StartValue};
 
 /// The time grid of a single-FMU simulation: `start + n·step`, n = 0 … `steps`.
@@ -323,7 +324,9 @@ struct Recorder<'a> {
     fmi3: bool,
     row: Vec<f64>,
     reals: Vec<f64>,
-    ints: Vec<i32>,
+    ints: Vec<Int>,
+    /// The integers of the row that a float rounds, exactly (by column).
+    exact: Vec<(usize, Int)>,
     bools: Vec<bool>,
 }
 
@@ -335,6 +338,7 @@ impl<'a> Recorder<'a> {
             row: vec![0.0; outputs.columns.len()],
             reals: vec![0.0; outputs.real.columns.len()],
             ints: vec![0; outputs.int.columns.len()],
+            exact: Vec::new(),
             bools: vec![false; outputs.boolean.columns.len()],
         }
     }
@@ -375,9 +379,15 @@ impl<'a> Recorder<'a> {
         for (k, &slot) in o.real.columns.iter().enumerate() {
             self.row[slot] = self.reals[k];
         }
+        self.exact.clear();
         for (k, &slot) in o.int.columns.iter().enumerate() {
-            self.row[slot] = f64::from(self.ints[k]);
+            let (v, exact) = integer_value(self.ints[k]);
+            self.row[slot] = v;
+            if !exact {
+                self.exact.push((slot, self.ints[k]));
+            }
         }
+        self.exact.sort_unstable_by_key(|&(slot, _)| slot);
         for (k, &slot) in o.boolean.columns.iter().enumerate() {
             self.row[slot] = if self.bools[k] { 1.0 } else { 0.0 };
         }
@@ -385,6 +395,7 @@ impl<'a> Recorder<'a> {
             step: n,
             time,
             values: &self.row,
+            exact: &self.exact,
         })?;
         Ok(())
     }

@@ -2,12 +2,13 @@
 //! polynomials, coupled outputs read after each run, a saved state to roll back
 //! to, and the outputs recorded at accepted steps.
 
-use tether_fmi::{BaseType, Causality, Fmu, FmuInstance, Inputs, Placement, RunRequest, Slot};
+use tether_fmi::{BaseType, Causality, Fmu, FmuInstance, Inputs, Int, Placement, RunRequest, Slot};
 
 use crate::spec::Isolation;
 
+use crate::observer::integer_value;
 use crate::polynomial::Taylor;
-use crate::spec::InstanceSpec;
+use crate::spec::{InstanceSpec, StartValue};
 use crate::stats::InstanceCounters;
 use crate::MasterError;
 
@@ -131,10 +132,8 @@ pub struct Slave {
     /// The place of each coupled input's value among the values set (the
     /// elements of an array input are set together).
     input_positions: Vec<usize>,
-    /// Signal connections: an array output read whole (its values), and the
-    /// array inputs they set, whole, by value reference.
+    /// Signal connections: an array output read whole (its values).
     pub(crate) signal_buf: Vec<f64>,
-    signal_inputs: Vec<(u32, Vec<f64>)>,
     /// The output derivatives read, `(variable, order)`.
     derivative_reads: Vec<(u32, i32)>,
     /// The slot in the coupled outputs of each value of `value_buf`.
@@ -148,12 +147,14 @@ pub struct Slave {
     recorded_reals: usize,
     /// Integer and Enumeration outputs, recorded after the Real ones.
     recorded_ints: Vec<u32>,
-    int_buf: Vec<i32>,
+    int_buf: Vec<Int>,
     /// Boolean outputs, recorded after the Integer ones (as 0 and 1).
     recorded_bools: Vec<u32>,
     bool_buf: Vec<bool>,
     /// Recorded outputs after the latest read.
     pub(crate) recorded_values: Vec<f64>,
+    /// The integers among them that a float rounds, exactly (by index).
+    recorded_exact: Vec<(usize, Int)>,
     pub(crate) counters: InstanceCounters,
     pub(crate) can_interpolate_inputs: bool,
     pub(crate) max_output_derivative_order: u32,
@@ -301,6 +302,7 @@ impl Slave {
         self.backend.restore(SNAPSHOT)?;
         self.backend.free(SNAPSHOT)?;
         self.recorded_values.copy_from_slice(recorded);
+        self.recorded_exact.clear();
         Ok(())
     }
 
@@ -357,11 +359,11 @@ impl Slave {
             arrays: Default::default(),
             input_positions: Vec::new(),
             signal_buf: Vec::new(),
-            signal_inputs: Vec::new(),
             derivative_reads: Vec::new(),
             slots: Vec::new(),
             value_buf: Vec::new(),
             recorded_values: Vec::new(),
+            recorded_exact: Vec::new(),
             recorded_names: Vec::new(),
             recorded_vrs: Vec::new(),
             recorded_reals: 0,
@@ -433,32 +435,32 @@ impl Slave {
         Ok(())
     }
 
-    /// Set element `e` of Real array input `vr` to `value` (a signal
-    /// connection's receiver): the array is set whole, its other elements at
-    /// the values set so far (at first their start values).
+    /// Set element `e` of array input `vr` to `value` (a signal connection's
+    /// receiver): the array is set whole, its other elements at their values
+    /// as last set.
     pub(crate) fn set_array_element(
         &mut self,
         vr: u32,
         e: crate::spec::names::Element,
-        value: f64,
+        value: StartValue,
     ) -> Result<(), MasterError> {
-        let k = match self.signal_inputs.iter().position(|(v, _)| *v == vr) {
-            Some(k) => k,
-            None => {
-                let md = self.fmu.model_description();
-                let values = match md.variable_by_vr(vr) {
-                    Some(var) => self.arrays.real_values(md, var)?,
-                    None => vec![0.0; e.count],
-                };
-                self.signal_inputs.push((vr, values));
-                self.signal_inputs.len() - 1
-            }
+        let md = self.fmu.model_description();
+        let Some(var) = md.variable_by_vr(vr) else {
+            return Err(MasterError::StartValue {
+                instance: self.name.clone(),
+                variable: format!("#{vr}"),
+                value: value.to_string(),
+                reason: "no variable has this value reference".into(),
+            });
         };
-        let values = &mut self.signal_inputs[k].1;
-        values.resize(e.count, 0.0);
-        values[e.index] = value;
-        self.backend.set_reals(&[vr], values)?;
-        Ok(())
+        let fail = |reason: String| MasterError::StartValue {
+            instance: self.name.clone(),
+            variable: format!("{}[{}]", var.name, e.index + 1),
+            value: value.to_string(),
+            reason,
+        };
+        self.arrays
+            .set_element(self.backend.as_mut(), md, var, e.index, value.clone(), fail)
     }
 
     /// Register a coupled Real input (an array's `element`, if any) driven by
@@ -1129,8 +1131,13 @@ impl Slave {
             self.backend
                 .get_integers(&self.recorded_ints, &mut self.int_buf)?;
             self.counters.get_integers += 1;
-            for (slot, &v) in self.recorded_values[reals..].iter_mut().zip(&self.int_buf) {
-                *slot = f64::from(v);
+            self.recorded_exact.clear();
+            for (k, &x) in self.int_buf.iter().enumerate() {
+                let (v, exact) = integer_value(x);
+                self.recorded_values[reals + k] = v;
+                if !exact {
+                    self.recorded_exact.push((reals + k, x));
+                }
             }
         }
         if !self.recorded_bools.is_empty() {
@@ -1164,6 +1171,12 @@ impl Slave {
     /// Recorded outputs after the latest read.
     pub fn recorded_values(&self) -> &[f64] {
         &self.recorded_values
+    }
+
+    /// The integers among the recorded outputs that a float rounds, exactly,
+    /// by index in [`recorded_values`](Self::recorded_values).
+    pub fn recorded_exact(&self) -> &[(usize, Int)] {
+        &self.recorded_exact
     }
 
     /// Call counters, with the round trips to the instance's host process.

@@ -5,10 +5,11 @@
 use std::collections::HashMap;
 
 use tether_fmi::{
-    BaseType, Causality, FmuInstance, ModelDescription, ScalarVariable, Values, Variability,
+    BaseType, Causality, FmuInstance, Int, ModelDescription, ScalarVariable, Values, Variability,
     VariableKind,
 };
 
+use crate::observer::integer_value;
 use crate::spec::names::{describe, Element};
 use crate::spec::StartValue;
 use crate::MasterError;
@@ -21,6 +22,8 @@ pub struct Arrays {
     structural: HashMap<u32, u64>,
     /// Real arrays set, by value reference: all their values.
     reals: HashMap<u32, Vec<f64>>,
+    /// Every array set, by value reference: all its values as last set.
+    set: HashMap<u32, Vec<StartValue>>,
 }
 
 impl Arrays {
@@ -45,6 +48,69 @@ impl Arrays {
         v: &ScalarVariable,
     ) -> Result<Vec<String>, MasterError> {
         Ok(tether_fmi::element_names(&v.name, &self.sizes(md, v)?))
+    }
+
+    /// Set element `index` of array `var` to `value`, its other elements at
+    /// their values as last set (else their start values): the array is set
+    /// whole. The value's type is checked, not its range (as for a scalar a
+    /// connection sets).
+    pub(crate) fn set_element(
+        &mut self,
+        instance: &mut dyn FmuInstance,
+        md: &ModelDescription,
+        var: &ScalarVariable,
+        index: usize,
+        value: StartValue,
+        fail: impl Fn(String) -> MasterError,
+    ) -> Result<(), MasterError> {
+        let n = self.count(md, var)?;
+        let list = self
+            .set
+            .entry(var.value_reference)
+            .or_insert_with(|| start_list(var, n));
+        if list.len() != n {
+            *list = start_list(var, n);
+        }
+        if list.len() != n {
+            return Err(fail(format!(
+                "array '{}' has {n} elements but no start value for each: set it whole first",
+                var.name
+            )));
+        }
+        list[index] = value;
+        if let Some(reals) = write_array(instance, var, list, fail)? {
+            self.reals.insert(var.value_reference, reals);
+        }
+        Ok(())
+    }
+
+    /// Set array `var` whole to `list` (row-major), checked as in `parameters`.
+    pub(crate) fn set_whole(
+        &mut self,
+        instance: &mut dyn FmuInstance,
+        md: &ModelDescription,
+        var: &ScalarVariable,
+        value: &StartValue,
+        fail: impl Fn(String) -> MasterError,
+    ) -> Result<(), MasterError> {
+        let sizes = self.sizes(md, var)?;
+        let n = sizes.iter().product::<u64>() as usize;
+        let mut list = Vec::new();
+        value.flatten_into(&mut list);
+        if list.len() != n {
+            let shown: Vec<String> = sizes.iter().map(u64::to_string).collect();
+            return Err(fail(format!(
+                "array '{}' is {} = {n} elements (row-major), the value has {}",
+                var.name,
+                shown.join("×"),
+                list.len()
+            )));
+        }
+        if let Some(reals) = set_array(instance, var, &list, fail)? {
+            self.reals.insert(var.value_reference, reals);
+        }
+        self.set.insert(var.value_reference, list);
+        Ok(())
     }
 
     /// The values of Real array `v` as set, else its start values (one start
@@ -168,6 +234,7 @@ pub fn apply_start_values<'v>(
         if let Some(reals) = reals {
             arrays.reals.insert(var.value_reference, reals);
         }
+        arrays.set.insert(var.value_reference, list);
     }
     Ok(arrays)
 }
@@ -220,11 +287,22 @@ fn set_array(
     list: &[StartValue],
     fail: impl Fn(String) -> MasterError,
 ) -> Result<Option<Vec<f64>>, MasterError> {
+    for (k, x) in list.iter().enumerate() {
+        check_range(&var.kind, x)
+            .map_err(|r| fail(format!("element {} (row-major): {r}", k + 1)))?;
+    }
+    write_array(instance, var, list, fail)
+}
+
+/// Set all values of array `var`, checked against its type only.
+fn write_array(
+    instance: &mut dyn FmuInstance,
+    var: &ScalarVariable,
+    list: &[StartValue],
+    fail: impl Fn(String) -> MasterError,
+) -> Result<Option<Vec<f64>>, MasterError> {
     let vr = [var.value_reference];
     let at = |k: usize, reason: String| fail(format!("element {} (row-major): {reason}", k + 1));
-    for (k, x) in list.iter().enumerate() {
-        check_range(&var.kind, x).map_err(|r| at(k, r))?;
-    }
     let wrong = |k: usize| at(k, format!("the variable is {}", describe(var)));
     match var.base_type() {
         BaseType::Real => {
@@ -232,7 +310,7 @@ fn set_array(
             for (k, x) in list.iter().enumerate() {
                 reals.push(match x {
                     StartValue::Real(x) => *x,
-                    StartValue::Integer(i) => *i as f64,
+                    StartValue::Integer(i) => as_real(*i).map_err(|r| at(k, r))?,
                     _ => return Err(wrong(k)),
                 });
             }
@@ -245,10 +323,7 @@ fn set_array(
                 let StartValue::Integer(i) = x else {
                     return Err(wrong(k));
                 };
-                ints.push(
-                    i32::try_from(*i)
-                        .map_err(|_| at(k, "out of the 32-bit integer range".into()))?,
-                );
+                ints.push(Int::from(*i));
             }
             instance.set_integers(&vr, &ints)?;
         }
@@ -312,6 +387,7 @@ pub fn apply_start_value(
 pub(crate) fn set_between_steps(
     instance: &mut dyn FmuInstance,
     md: &ModelDescription,
+    arrays: &mut Arrays,
     name: &str,
     value: &StartValue,
     coupled: &[u32],
@@ -323,8 +399,9 @@ pub(crate) fn set_between_steps(
         value: value.to_string(),
         reason: format!("{reason} (between steps)"),
     };
-    let var = crate::spec::names::variable(
+    let (var, element) = crate::spec::names::element(
         md,
+        arrays,
         "set_parameter",
         &owner,
         || format!("model '{}'", md.model_name),
@@ -350,7 +427,15 @@ pub(crate) fn set_between_steps(
             "it is an input the coupling drives; the master sets it at every step".into(),
         ));
     }
-    set_value(instance, var, value, fail)?;
+    match element {
+        Some(Element { index, .. }) if !matches!(value, StartValue::Array(_)) => {
+            check_range(&var.kind, value).map_err(&fail)?;
+            arrays.set_element(instance, md, var, index, value.clone(), fail)?
+        }
+        Some(_) => return Err(fail("an element takes one value, not an array".into())),
+        None if var.is_array() => arrays.set_whole(instance, md, var, value, fail)?,
+        None => set_value(instance, var, value, fail)?,
+    }
     Ok(var.base_type())
 }
 
@@ -365,11 +450,11 @@ fn set_value(
     check_range(&var.kind, value).map_err(&fail)?;
     match (var.base_type(), value) {
         (BaseType::Real, StartValue::Real(x)) => instance.set_reals(&vr, &[*x])?,
-        (BaseType::Real, StartValue::Integer(i)) => instance.set_reals(&vr, &[*i as f64])?,
+        (BaseType::Real, StartValue::Integer(i)) => {
+            instance.set_reals(&vr, &[as_real(*i).map_err(&fail)?])?
+        }
         (BaseType::Integer | BaseType::Enumeration, StartValue::Integer(i)) => {
-            let i =
-                i32::try_from(*i).map_err(|_| fail("out of the 32-bit integer range".into()))?;
-            instance.set_integers(&vr, &[i])?
+            instance.set_integers(&vr, &[Int::from(*i)])?
         }
         (BaseType::Boolean, StartValue::Boolean(b)) => instance.set_booleans(&vr, &[*b])?,
         (BaseType::String, StartValue::String(s)) => instance.set_strings(&vr, &[s.as_str()])?,
@@ -380,6 +465,17 @@ fn set_value(
 
 /// Refuses NaN/infinite Reals and values outside the variable's declared `min`/`max`
 /// before the FMU sees them (FMUs are not required to check, and many do not).
+/// An integer literal given for a Real variable, refused where the float
+/// would round it.
+fn as_real(i: i64) -> Result<f64, String> {
+    match integer_value(Int::from(i)) {
+        (x, true) => Ok(x),
+        (x, false) => Err(format!(
+            "the integer {i} has no exact Real value (the nearest is {x}); write it as a float"
+        )),
+    }
+}
+
 fn check_range(kind: &VariableKind, value: &StartValue) -> Result<(), String> {
     let (min, max, x) = match (kind, value) {
         (VariableKind::Real(r), StartValue::Real(x)) => (r.attributes.min, r.attributes.max, *x),

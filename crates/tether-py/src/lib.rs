@@ -108,6 +108,8 @@ fn override_failure(e: &OverrideError) -> PyErr {
 struct Rows {
     columns: Vec<String>,
     bytes: Vec<u8>,
+    /// Columns that held an integer a float rounds (beyond ±2^53).
+    rounded: Vec<usize>,
 }
 
 impl Rows {
@@ -118,8 +120,19 @@ impl Rows {
         }
     }
 
-    /// `(columns, data, stats)` for the Python `Result`.
+    /// `(columns, data, stats)` for the Python `Result`; a `UserWarning`
+    /// names the columns whose integers the floats rounded.
     fn into_py(self, py: Python<'_>, stats: Py<PyAny>) -> PyResult<Py<PyAny>> {
+        if !self.rounded.is_empty() {
+            let names: Vec<&str> = self.rounded.iter().map(|&k| self.columns[k].as_str()).collect();
+            let text = format!(
+                "integers beyond ±2^53 in column(s) {} are rounded in the result's floats \
+                 (tether run's CSV writes them exactly)",
+                names.join(", ")
+            );
+            let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+            PyErr::warn(py, &category, &std::ffi::CString::new(text)?, 1)?;
+        }
         let data = PyBytes::new(py, &self.bytes);
         let tuple = (self.columns, data, stats).into_pyobject(py)?;
         Ok(tuple.into_any().unbind())
@@ -134,6 +147,11 @@ impl Observer for Rows {
 
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
         self.push(sample.time, sample.values);
+        for &(k, _) in sample.exact {
+            if !self.rounded.contains(&k) {
+                self.rounded.push(k);
+            }
+        }
         Ok(())
     }
 
@@ -613,6 +631,7 @@ impl PySimulation {
         let mut rows = Rows {
             columns: sim.columns().to_vec(),
             bytes: Vec::new(),
+            rounded: Vec::new(),
         };
         rows.push(sim.time(), sim.values());
         let notes = sim.notes().to_vec();
@@ -700,6 +719,7 @@ impl PySimulation {
         let rows = Rows {
             columns: self.rows.columns.clone(),
             bytes: self.rows.bytes.clone(),
+            rounded: Vec::new(),
         };
         rows.into_py(py, stats)
     }
@@ -1099,6 +1119,7 @@ fn simulate_one(
                 .saturating_mul((outputs.columns().len() + 1) * 8)
                 .min(1 << 30),
         ),
+        rounded: Vec::new(),
     };
     let mut signals = Signals::new(None);
     let run = single.run(&outputs, &mut rows, &mut || signals.interrupt());

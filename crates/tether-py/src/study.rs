@@ -490,6 +490,7 @@ fn series_result(py: Python<'_>, run: &RunResult) -> PyResult<Py<PyAny>> {
     let mut rows = Rows {
         columns: t.columns.clone(),
         bytes: Vec::with_capacity(t.times.len() * (t.columns.len() + 1) * 8),
+        rounded: Vec::new(),
     };
     let mut row = vec![0.0; t.columns.len()];
     for (i, &time) in t.times.iter().enumerate() {

@@ -58,3 +58,16 @@ def test_a_stepped_simulation_of_fmi3_instances_equals_a_whole_fmi2_run(oscillat
     assert result.complete
     assert same_bits(table(result), table(whole))
 
+
+
+def test_integers_beyond_2_to_the_53_are_named_where_the_floats_round_them(fmi3_reference):
+    """The results are floats: an Int64 output beyond 2^53 (the Reference
+    Feedthrough passes its input through) is rounded there, and a UserWarning
+    names the column (`tether run`'s CSV writes it exactly)."""
+    fmu = fmi3_reference("Feedthrough")
+    big = 2**53 + 1
+    with pytest.warns(UserWarning, match=r"Int64_output.*rounded"):
+        result = tether.simulate(fmu, stop=0.1, step=0.1, parameters={"Int64_input": big})
+    assert result["Int64_output"][0] == float(big)
+    small = tether.simulate(fmu, stop=0.1, step=0.1, parameters={"Int64_input": 2**53})
+    assert small["Int64_output"][0] == 2.0**53

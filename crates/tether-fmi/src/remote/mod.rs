@@ -30,6 +30,7 @@ use std::time::Duration;
 
 use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
+use crate::interface::Int;
 use crate::model_description::{ModelDescription, ValueReference};
 use protocol::{op, In, Out};
 
@@ -694,11 +695,11 @@ impl RemoteInstance {
     }
 
     /// `fmi2GetInteger` into `out`.
-    pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+    pub fn get_integer(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()> {
         self.queue(op::GET_INTEGER).u32s(vrs).u32(count(out.len()));
         self.send()?;
         let mut values = Vec::with_capacity(out.len());
-        let read = In::new(&self.reply[1..]).i32s(&mut values);
+        let read = In::new(&self.reply[1..]).ints(&mut values);
         self.copy_reply(read, &values, out)
     }
 
@@ -712,8 +713,8 @@ impl RemoteInstance {
     }
 
     /// `fmi2SetInteger`.
-    pub fn set_integer(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
-        self.queue(op::SET_INTEGER).u32s(vrs).i32s(values);
+    pub fn set_integer(&mut self, vrs: &[ValueReference], values: &[Int]) -> Result<()> {
+        self.queue(op::SET_INTEGER).u32s(vrs).ints(values);
         self.send()
     }
 
@@ -930,11 +931,11 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.queue(op::SET_REAL).u32s(vrs).f64s(values);
         Ok(())
     }
-    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [i32]) -> Result<()> {
+    fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()> {
         self.get_integer(vrs, out)
     }
-    fn set_integers(&mut self, vrs: &[ValueReference], values: &[i32]) -> Result<()> {
-        self.queue(op::SET_INTEGER).u32s(vrs).i32s(values);
+    fn set_integers(&mut self, vrs: &[ValueReference], values: &[Int]) -> Result<()> {
+        self.queue(op::SET_INTEGER).u32s(vrs).ints(values);
         Ok(())
     }
     fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {

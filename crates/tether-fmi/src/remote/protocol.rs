@@ -12,10 +12,11 @@
 use std::io::{self, Read, Write};
 
 use crate::error::{Error, FmuMessages};
+use crate::interface::Int;
 use crate::model_description::FmiStandard;
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -273,6 +274,14 @@ impl Out {
         });
         self
     }
+    /// Integer values of any FMI type, 16 bytes each.
+    pub fn ints(&mut self, v: &[Int]) -> &mut Out {
+        self.len(v.len());
+        v.iter().for_each(|x| {
+            self.0.extend_from_slice(&x.to_le_bytes());
+        });
+        self
+    }
     /// Reals.
     pub fn f64s(&mut self, v: &[f64]) -> &mut Out {
         self.len(v.len());
@@ -516,6 +525,17 @@ impl<'a> In<'a> {
         out.clear();
         for _ in 0..n {
             out.push(self.i32()?);
+        }
+        Ok(())
+    }
+    /// Integer values of any FMI type.
+    pub fn ints(&mut self, out: &mut Vec<Int>) -> io::Result<()> {
+        let n = self.len(16)?;
+        out.clear();
+        for _ in 0..n {
+            out.push(Int::from_le_bytes(
+                self.take(16)?.try_into().expect("16 bytes"),
+            ));
         }
         Ok(())
     }

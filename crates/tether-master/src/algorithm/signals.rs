@@ -18,10 +18,12 @@ use crate::linalg::solve::Solver;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::names::{describe, find_instance, Element};
-use crate::spec::{ConnectionSpec, SignalScheme, SignalSolver, SystemSpec};
+use crate::spec::{ConnectionSpec, SignalScheme, SignalSolver, StartValue, SystemSpec};
 use crate::stats::{Lap, RunStats, SignalStats};
 use crate::MasterError;
-use tether_fmi::Inputs;
+use tether_fmi::{Inputs, Int};
+
+use crate::observer::integer_value;
 
 /// The FMI type a connection carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,12 +42,12 @@ struct Link {
     variable: String,
     from: usize,
     from_vr: u32,
-    /// An element of a Real array output: its index and the array's size
-    /// (the array is read whole, the element picked).
+    /// An element of an array output: its index and the array's size (the
+    /// array is read whole, the element picked).
     from_element: Option<Element>,
     to: usize,
     to_vr: u32,
-    /// An element of a Real array input (the array is set whole, its other
+    /// An element of an array input (the array is set whole, its other
     /// elements at their values so far).
     to_element: Option<Element>,
     kind: Kind,
@@ -625,12 +627,40 @@ impl Signals {
             },
             Kind::Integer => {
                 let mut v = [0];
-                slave.backend.get_integers(&[link.from_vr], &mut v)?;
-                f64::from(v[0])
+                match link.from_element {
+                    Some(e) => {
+                        let mut all = vec![0; e.count];
+                        slave.backend.get_integers(&[link.from_vr], &mut all)?;
+                        v[0] = all[e.index];
+                    }
+                    None => slave.backend.get_integers(&[link.from_vr], &mut v)?,
+                }
+                match integer_value(v[0]) {
+                    (x, true) => x,
+                    (_, false) => {
+                        return Err(MasterError::Connection {
+                            connection: link.name.clone(),
+                            reason: format!(
+                                "'{}' = {} at t = {} has no exact Real value (beyond ±2^53), \
+                                 and a connection carries Reals",
+                                link.variable,
+                                v[0],
+                                slave.backend.time()
+                            ),
+                        })
+                    }
+                }
             }
             Kind::Boolean => {
                 let mut v = [false];
-                slave.backend.get_booleans(&[link.from_vr], &mut v)?;
+                match link.from_element {
+                    Some(e) => {
+                        let mut all = vec![false; e.count];
+                        slave.backend.get_booleans(&[link.from_vr], &mut all)?;
+                        v[0] = all[e.index];
+                    }
+                    None => slave.backend.get_booleans(&[link.from_vr], &mut v)?,
+                }
                 f64::from(u8::from(v[0]))
             }
         };
@@ -648,9 +678,14 @@ impl Signals {
         let slave = &mut slaves[link.to];
         let vr = [link.to_vr];
         match link.kind {
-            Kind::Real if link.to_element.is_some() => {
+            _ if link.to_element.is_some() => {
                 let e = link.to_element.expect("an element");
-                let value = link.gain * p.value + link.offset;
+                let value = match link.kind {
+                    Kind::Real => StartValue::Real(link.gain * p.value + link.offset),
+                    // Values read from an Integer output: exact in f64 (checked by `read`).
+                    Kind::Integer => StartValue::Integer(p.value as i64),
+                    Kind::Boolean => StartValue::Boolean(p.value != 0.0),
+                };
                 slave.set_array_element(link.to_vr, e, value)?;
             }
             Kind::Real => {
@@ -673,8 +708,8 @@ impl Signals {
                     slave.counters.set_input_derivatives += 1;
                 }
             }
-            // Values read from an Integer output: exact in f64.
-            Kind::Integer => slave.backend.set_integers(&vr, &[p.value as i32])?,
+            // Values read from an Integer output: exact in f64 (checked by `read`).
+            Kind::Integer => slave.backend.set_integers(&vr, &[p.value as Int])?,
             Kind::Boolean => slave.backend.set_booleans(&vr, &[p.value != 0.0])?,
         }
         slave.counters.set_reals += 1;
@@ -841,11 +876,6 @@ fn resolve(
         if element.is_none() && var.is_array() {
             return Err(refuse(
                 "it is an array; a signal connection joins one value: name an element",
-            ));
-        }
-        if element.is_some() && var.base_type() != BaseType::Real {
-            return Err(refuse(
-                "a signal connection takes elements of Real arrays only",
             ));
         }
         let var = var.clone();

@@ -9,6 +9,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use crate::observer::{Observer, Sample};
+use tether_fmi::Int;
 
 /// Writes CSV: a `time` column, then one column per value. Numbers are written
 /// in the shortest form that parses back to the same `f64` (through the `zmij`
@@ -67,7 +68,7 @@ impl<W: Write + Send + 'static> CsvRecorder<W> {
             state: Mutex::new(Exchange {
                 header: None,
                 header_written: false,
-                filling: Vec::new(),
+                filling: Block::default(),
                 full: VecDeque::with_capacity(BLOCKS),
                 empty: Vec::with_capacity(BLOCKS),
                 width: 1,
@@ -227,7 +228,7 @@ impl<W: Write> Observer for CsvRecorder<W> {
 
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
         match &mut self.mode {
-            Mode::Direct(text) => text.row(sample.time, sample.values),
+            Mode::Direct(text) => text.row(sample.time, sample.values, sample.exact),
             Mode::Background(bg) => bg.sample(sample),
         }
     }
@@ -282,14 +283,27 @@ impl<W: Write> CsvText<W> {
         self.out.write_all(b"\n")
     }
 
+    /// One row: `values` in the shortest text that reads back bit for bit,
+    /// except the integers in `exact` (by index in `values`), written exactly.
     #[inline]
-    fn row(&mut self, time: f64, values: &[f64]) -> std::io::Result<()> {
+    fn row(&mut self, time: f64, values: &[f64], exact: &[(usize, Int)]) -> std::io::Result<()> {
         let line = &mut self.line;
         line.clear();
         line.extend_from_slice(self.number.format(time).as_bytes());
-        for &v in values {
-            line.push(b',');
-            line.extend_from_slice(self.number.format(v).as_bytes());
+        if exact.is_empty() {
+            for &v in values {
+                line.push(b',');
+                line.extend_from_slice(self.number.format(v).as_bytes());
+            }
+        } else {
+            let mut exact = exact.iter().peekable();
+            for (i, &v) in values.iter().enumerate() {
+                line.push(b',');
+                match exact.next_if(|(k, _)| *k == i) {
+                    Some((_, x)) => write!(line, "{x}")?,
+                    None => line.extend_from_slice(self.number.format(v).as_bytes()),
+                }
+            }
         }
         line.push(b'\n');
         self.out.write_all(line)
@@ -376,11 +390,11 @@ struct Exchange {
     /// The block the master fills, row by row (here, not on the master's
     /// side, so that the writer can take the rows of a slow run every
     /// [`FLUSH_INTERVAL`] and an [`Emergency`] can take the last ones).
-    filling: Vec<f64>,
+    filling: Block,
     /// Blocks to write, oldest first (capacity `BLOCKS`, never exceeded).
-    full: VecDeque<Vec<f64>>,
+    full: VecDeque<Block>,
     /// Written blocks, for the master to fill again (capacity `BLOCKS`).
-    empty: Vec<Vec<f64>>,
+    empty: Vec<Block>,
     /// Numbers per row (time first).
     width: usize,
     /// Set by `finish` (with the failure, if any) or on drop: write the rest
@@ -390,6 +404,54 @@ struct Exchange {
     stopped: bool,
     /// Why the writer stopped early.
     error: Option<std::io::Error>,
+}
+
+/// Rows of numbers, time first, and the integers among them that a float
+/// rounds, exactly, by position in `values` (rarely any).
+#[derive(Default)]
+struct Block {
+    values: Vec<f64>,
+    exact: Vec<(usize, Int)>,
+}
+
+impl Block {
+    fn with_capacity(capacity: usize) -> Block {
+        Block {
+            values: Vec::with_capacity(capacity),
+            exact: Vec::new(),
+        }
+    }
+
+    fn clear(&mut self) {
+        self.values.clear();
+        self.exact.clear();
+    }
+
+    fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// Writes the rows of `width` numbers.
+    fn write<W: Write>(&self, width: usize, text: &mut CsvText<W>) -> std::io::Result<()> {
+        let mut exact = &self.exact[..];
+        for (r, row) in self.values.chunks_exact(width).enumerate() {
+            // Positions of this row's values: after its time.
+            let first = r * width + 1;
+            let n = exact
+                .iter()
+                .take_while(|(k, _)| *k < first + width - 1)
+                .count();
+            if n == 0 {
+                text.row(row[0], &row[1..], &[])?;
+            } else {
+                let here: Vec<(usize, Int)> =
+                    exact[..n].iter().map(|&(k, x)| (k - first, x)).collect();
+                text.row(row[0], &row[1..], &here)?;
+            }
+            exact = &exact[n..];
+        }
+        Ok(())
+    }
 }
 
 struct Shared {
@@ -420,9 +482,7 @@ fn write_blocks<W: Write>(shared: &Shared, text: &mut CsvText<W>) -> std::io::Re
         } else if let Some(block) = state.full.pop_front() {
             let width = state.width;
             drop(state);
-            let written = block
-                .chunks_exact(width)
-                .try_for_each(|row| text.row(row[0], &row[1..]));
+            let written = block.write(width, text);
             state = lock(shared);
             state.empty.push(block);
             shared.wake_master.notify_all();
@@ -478,11 +538,11 @@ impl Background {
             return Err(stopped(&state));
         }
         state.width = self.width;
-        state.filling = Vec::with_capacity(capacity);
+        state.filling = Block::with_capacity(capacity);
         state.empty.clear();
         state
             .empty
-            .extend((1..BLOCKS).map(|_| Vec::with_capacity(capacity)));
+            .extend((1..BLOCKS).map(|_| Block::with_capacity(capacity)));
         state.header = Some(columns.to_vec());
         state.header_written = false;
         self.shared.wake_writer.notify_one();
@@ -502,13 +562,16 @@ impl Background {
     #[inline]
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
         let mut state = lock(&self.shared);
-        if state.filling.len() + self.width > state.filling.capacity() {
+        if state.filling.values.len() + self.width > state.filling.values.capacity() {
             state = self.hand_over(state)?;
         } else if state.stopped {
             return Err(stopped(&state));
         }
-        state.filling.push(sample.time);
-        state.filling.extend_from_slice(sample.values);
+        let first = state.filling.values.len() + 1;
+        state.filling.values.push(sample.time);
+        state.filling.values.extend_from_slice(sample.values);
+        let exact = sample.exact.iter().map(|&(k, x)| (first + k, x));
+        state.filling.exact.extend(exact);
         Ok(())
     }
 
@@ -520,7 +583,7 @@ impl Background {
         &self,
         mut state: MutexGuard<'a, Exchange>,
     ) -> std::io::Result<MutexGuard<'a, Exchange>> {
-        if state.filling.capacity() == 0 {
+        if state.filling.values.capacity() == 0 {
             return Err(std::io::Error::other("CsvRecorder: a sample before start"));
         }
         if state.stopped {
@@ -695,22 +758,46 @@ mod tests {
             .collect();
         rec.start(&columns)?;
         let mut values = [0.0; 8];
+        let mut exact = Vec::new();
         for n in 0..rows {
             for (i, v) in values.iter_mut().enumerate() {
                 *v = (n as f64 + 1.0) / (i as f64 + 3.0) * 1e3 - 1e-7 * n as f64;
+            }
+            // Every seventh row, two integers a float rounds (Int64, UInt64).
+            exact.clear();
+            if n % 7 == 3 {
+                exact.push((2, (1 << 53) + 1 + Int::from(n)));
+                exact.push((5, Int::from(u64::MAX) - Int::from(n)));
+                for &(k, x) in &exact {
+                    values[k] = x as f64;
+                }
             }
             rec.sample(Sample {
                 step: n,
                 time: n as f64 * 1e-3,
                 values: &values,
+                exact: &exact,
             })?;
         }
         rec.finish(failure)
     }
 
+    /// Integers a float rounds are written exactly, the other values of their
+    /// row as floats.
+    #[test]
+    fn integers_beyond_two_to_the_53_are_written_exactly() {
+        let mut text = Vec::new();
+        record(&mut CsvRecorder::new(&mut text), 4, None).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        let row: Vec<&str> = text.lines().nth(4).unwrap().split(',').collect();
+        assert_eq!(row[3], "9007199254740996", "{text}");
+        assert_eq!(row[6], "18446744073709551612", "{text}");
+        assert_eq!(row[1], "1333.3333330333332", "{text}");
+    }
+
     /// The writer thread writes the same bytes as the caller's thread: no
     /// rows, one, exactly one block (910 rows of 9 numbers), and several
-    /// blocks with a failure at the end.
+    /// blocks with a failure at the end; exact integers among them.
     #[test]
     fn background_writes_the_same_bytes() {
         for (rows, failure) in [
@@ -757,6 +844,7 @@ mod tests {
                     step: n,
                     time: n as f64,
                     values: &[0.5],
+                    exact: &[],
                 })
                 .unwrap();
             }
@@ -791,6 +879,7 @@ mod tests {
                 step: n,
                 time: n as f64,
                 values: &[0.5],
+                exact: &[],
             })
             .unwrap();
         }
@@ -801,6 +890,7 @@ mod tests {
             step: 3,
             time: 3.0,
             values: &[0.25],
+            exact: &[],
         })
         .unwrap();
         let text = eventually(&shared, |t| t.lines().count() == 5);
@@ -821,6 +911,7 @@ mod tests {
                 step: n,
                 time: n as f64,
                 values: &[0.5],
+                exact: &[],
             })
             .unwrap();
         }
@@ -881,6 +972,7 @@ mod tests {
                 step: 0,
                 time: 0.0,
                 values: &[1.0],
+                exact: &[],
             })
             .unwrap();
             std::fs::remove_file(&path).unwrap();
@@ -915,6 +1007,7 @@ mod tests {
                 step: 0,
                 time: 0.0,
                 values: &[0.1, 1.0 / 3.0, 0.5],
+                exact: &[],
             })
             .unwrap();
             rec.finish(Some("coupling diverged at t = 1")).unwrap();
@@ -961,12 +1054,14 @@ mod tests {
                 step: 0,
                 time: 0.001,
                 values: &values,
+                exact: &[],
             })
             .unwrap();
             rec.sample(Sample {
                 step: 1,
                 time: 0.002,
                 values: &[f64::NAN, f64::INFINITY, f64::NEG_INFINITY],
+                exact: &[],
             })
             .unwrap();
             rec.finish(None).unwrap();

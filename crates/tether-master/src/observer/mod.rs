@@ -6,6 +6,8 @@ mod memory;
 pub use csv::{CsvRecorder, Emergency, FLUSH_INTERVAL};
 pub use memory::MemoryRecorder;
 
+use tether_fmi::Int;
+
 /// The values at one accepted macro point, in column order.
 #[derive(Debug, Clone, Copy)]
 pub struct Sample<'a> {
@@ -15,6 +17,16 @@ pub struct Sample<'a> {
     pub time: f64,
     /// All values after `time`, in the order of [`crate::Simulation::columns`].
     pub values: &'a [f64],
+    /// The integer values among them that a float rounds (beyond ±2⁵³, an
+    /// FMI 3.0 `Int64` or `UInt64`), exactly, by index in `values`, in
+    /// increasing order; `values` holds them rounded. Usually empty.
+    pub exact: &'a [(usize, Int)],
+}
+
+/// `x` as a float, and whether the float is exact.
+pub fn integer_value(x: Int) -> (f64, bool) {
+    let v = x as f64;
+    (v, v as Int == x && v.abs() <= 9_007_199_254_740_992.0)
 }
 
 /// Receives the results of a run as they are produced.

@@ -2,6 +2,8 @@
 //! columns the observers receive (`[output] variables`), and the last
 //! accepted point held back when it is off the output grid.
 
+use tether_fmi::Int;
+
 use crate::build::system::System;
 use crate::observer::{Observer, Sample};
 use crate::MasterError;
@@ -12,17 +14,30 @@ pub(crate) struct Row {
     all_columns: Vec<String>,
     /// The values of every column at the current point.
     values: Vec<f64>,
+    /// The integers among them that a float rounds, exactly (by index).
+    exact: Vec<(usize, Int)>,
     /// The columns the observers receive …
     columns: Vec<String>,
     /// … their indices in `values`, when not all of them …
     keep: Option<Vec<usize>>,
-    /// … and their values at the current point.
+    /// … and their values at the current point …
     selected: Vec<f64>,
+    /// … and exact integers (by index in `selected`).
+    selected_exact: Vec<(usize, Int)>,
     /// The last accepted point when it was not recorded (off the output
-    /// grid): its step, time and values, written at the end of the run.
-    held: Option<(u64, f64, Vec<f64>)>,
+    /// grid): its step, time, values and exact integers, written at the end
+    /// of the run.
+    held: Option<Held>,
     /// Time of the last point handed to the observers.
     last_recorded: Option<f64>,
+}
+
+/// A point kept back from the observers.
+struct Held {
+    step: u64,
+    time: f64,
+    values: Vec<f64>,
+    exact: Vec<(usize, Int)>,
 }
 
 impl Row {
@@ -35,7 +50,9 @@ impl Row {
         };
         Row {
             values: vec![0.0; columns.len()],
+            exact: Vec::new(),
             selected: vec![0.0; selected.len()],
+            selected_exact: Vec::new(),
             columns: selected,
             all_columns: columns,
             keep,
@@ -67,6 +84,14 @@ impl Row {
         }
     }
 
+    /// The exact integers among the recorded values (by index).
+    fn exact(&self) -> &[(usize, Int)] {
+        match self.keep {
+            Some(_) => &self.selected_exact,
+            None => &self.exact,
+        }
+    }
+
     /// The time of the last point handed to the observers.
     pub(crate) fn last_recorded(&self) -> Option<f64> {
         self.last_recorded
@@ -76,9 +101,12 @@ impl Row {
     /// unknowns, the residuals (the values from `first_residual` on).
     pub(crate) fn fill(&mut self, system: &System) {
         let mut i = 0;
+        self.exact.clear();
         for slave in &system.slaves {
             let values = slave.recorded_values();
             self.values[i..i + values.len()].copy_from_slice(values);
+            let exact = slave.recorded_exact().iter().map(|&(k, x)| (i + k, x));
+            self.exact.extend(exact);
             i += values.len();
         }
         for h in &system.history {
@@ -93,6 +121,14 @@ impl Row {
             for (value, &k) in self.selected.iter_mut().zip(keep) {
                 *value = self.values[k];
             }
+            self.selected_exact.clear();
+            if !self.exact.is_empty() {
+                for (j, &k) in keep.iter().enumerate() {
+                    if let Some(&(_, x)) = self.exact.iter().find(|(i, _)| *i == k) {
+                        self.selected_exact.push((j, x));
+                    }
+                }
+            }
         }
     }
 
@@ -106,10 +142,8 @@ impl Row {
         let sample = Sample {
             step,
             time,
-            values: match self.keep {
-                Some(_) => &self.selected,
-                None => &self.values,
-            },
+            values: self.values(),
+            exact: self.exact(),
         };
         for o in observers.iter_mut() {
             o.sample(sample)?;
@@ -121,13 +155,19 @@ impl Row {
 
     /// Keep the current point, not on the output grid, for the end.
     pub(crate) fn hold(&mut self, step: u64, time: f64) {
-        let mut held = match self.held.take() {
-            Some((_, _, values)) => values,
-            None => Vec::with_capacity(self.columns.len()),
-        };
-        held.clear();
-        held.extend_from_slice(self.values());
-        self.held = Some((step, time, held));
+        let mut held = self.held.take().unwrap_or_else(|| Held {
+            step,
+            time,
+            values: Vec::with_capacity(self.columns.len()),
+            exact: Vec::new(),
+        });
+        held.step = step;
+        held.time = time;
+        held.values.clear();
+        held.values.extend_from_slice(self.values());
+        held.exact.clear();
+        held.exact.extend_from_slice(self.exact());
+        self.held = Some(held);
     }
 
     /// Record the held point, if it is the last accepted one not yet recorded.
@@ -135,18 +175,19 @@ impl Row {
         &mut self,
         observers: &mut [&mut dyn Observer],
     ) -> Result<(), MasterError> {
-        let Some((step, time, values)) = self.held.take() else {
+        let Some(held) = self.held.take() else {
             return Ok(());
         };
         let sample = Sample {
-            step,
-            time,
-            values: &values,
+            step: held.step,
+            time: held.time,
+            values: &held.values,
+            exact: &held.exact,
         };
         for o in observers.iter_mut() {
             o.sample(sample)?;
         }
-        self.last_recorded = Some(time);
+        self.last_recorded = Some(held.time);
         Ok(())
     }
 }

@@ -51,6 +51,7 @@ impl Simulation {
         let kind = set_between_steps(
             slave.backend.as_mut(),
             slave.fmu.model_description(),
+            &mut slave.arrays,
             variable,
             value,
             &coupled,
