@@ -834,20 +834,29 @@ impl Slave {
             self.backend
                 .get_output_derivatives(&[vr], &[order], std::slice::from_mut(value))?;
         }
-        self.take_coupled(out, run)
+        let values = std::mem::take(&mut self.value_buf);
+        let taken = self.take_coupled(&values, out, run);
+        self.value_buf = values;
+        taken
     }
 
-    /// The coupled outputs of the last read (`value_buf`) into their slots
-    /// of `out`, counted, and checked to be finite.
-    #[inline]
-    fn take_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
+    /// The coupled outputs as read (`values`: the values of `value_vrs`,
+    /// then the output derivatives) into their slots of `out`, counted, and
+    /// checked to be finite and within their divergence limits.
+    #[inline(always)]
+    fn take_coupled(
+        &mut self,
+        values: &[f64],
+        out: &mut [f64],
+        run: Run,
+    ) -> Result<(), MasterError> {
         if !self.value_vrs.is_empty() {
             self.counters.get_reals += 1;
         }
         self.counters.get_output_derivatives += self.derivative_reads.len() as u64;
         // Every slot of `out` is written: when every value is finite, `out` is.
         let mut finite = true;
-        for (&value, &slot) in self.value_buf.iter().zip(&self.slots) {
+        for (&value, &slot) in values.iter().zip(&self.slots) {
             if slot == UNUSED {
                 continue;
             }
@@ -858,8 +867,8 @@ impl Slave {
             return Err(self.first_non_finite(out, run));
         }
         let beyond = |(v, limit): (&f64, &f64)| v.abs() > *limit;
-        if let Some(k) = self.value_buf.iter().zip(&self.limits).position(beyond) {
-            self.note_beyond(k, run);
+        if let Some(k) = values.iter().zip(&self.limits).position(beyond) {
+            self.note_beyond(k, values[k], run);
         }
         Ok(())
     }
@@ -875,17 +884,16 @@ impl Slave {
         self.non_finite(self.coupled_name(slot), out[slot], run)
     }
 
-    /// Divergence limits `factor`·max(|v|, 1) around the coupled values of
-    /// the last read (the initial point's), for crate::culprit; the output
-    /// derivatives are not limited.
-    pub(crate) fn set_divergence_limits(&mut self, factor: f64) {
+    /// Divergence limits `factor`·max(|v|, 1) around the coupled outputs
+    /// `out` of the last read (the initial point's), for crate::culprit; the
+    /// output derivatives are not limited.
+    pub(crate) fn set_divergence_limits(&mut self, factor: f64, out: &[f64]) {
         let nv = self.values_len();
-        self.limits = self.value_buf[..nv]
+        self.limits = self.slots[..nv]
             .iter()
-            .zip(&self.slots)
-            .map(|(v, &slot)| match slot {
+            .map(|&slot| match slot {
                 UNUSED => f64::INFINITY,
-                _ => (factor * v.abs().max(1.0)).min(f64::MAX),
+                _ => (factor * out[slot].abs().max(1.0)).min(f64::MAX),
             })
             .collect();
     }
@@ -899,14 +907,14 @@ impl Slave {
     /// a value of this step (a read at the same time or later) already is.
     #[cold]
     #[inline(never)]
-    fn note_beyond(&mut self, k: usize, run: Run) {
+    fn note_beyond(&mut self, k: usize, value: f64, run: Run) {
         let time = self.backend.time();
         if self.beyond.as_ref().is_some_and(|b| b.time >= time) {
             return;
         }
         self.beyond = Some(crate::culprit::Beyond::new(
             self.coupled_name(self.slots[k]),
-            self.value_buf[k],
+            value,
             self.limits[k],
             run.describe(),
             time,
@@ -1042,19 +1050,31 @@ impl Slave {
         if self.run_inputs.len() < planned.len() {
             self.run_inputs.resize(planned.len(), self.input.clone());
         }
+        // The runs' inputs, the length of their outputs, and the calls
+        // counted (whether or not the runs succeed).
         let mut len = 0;
         for (p, input) in planned.iter().zip(&mut self.run_inputs) {
-            if let (Some((polys, _, _)), true) = (p.step, driven) {
-                combine_inputs(
-                    &self.inputs,
-                    &self.input_positions,
-                    polys,
-                    &mut input.values,
-                    &mut input.derivatives,
-                );
+            if p.restore {
+                self.counters.state_sets += 1;
+            }
+            if let Some((polys, _, _)) = p.step {
+                self.counters.do_steps += 1;
+                if driven {
+                    combine_inputs(
+                        &self.inputs,
+                        &self.input_positions,
+                        polys,
+                        &mut input.values,
+                        &mut input.derivatives,
+                    );
+                    self.counters.set_reals += 1;
+                    if !self.input.derivative_vrs.is_empty() {
+                        self.counters.set_input_derivatives += 1;
+                    }
+                }
             }
             if p.out.is_some() {
-                len += self.value_buf.len();
+                len += self.slots.len();
             }
             if p.record {
                 len += self.recorded_reals;
@@ -1088,26 +1108,14 @@ impl Slave {
         );
         let ran = self.backend.run_batch(&requests, &mut self.batch_buf);
         self.request_buf = recycle(requests);
-        for p in planned.iter() {
-            if p.restore {
-                self.counters.state_sets += 1;
-            }
-            if p.step.is_some() {
-                if driven {
-                    self.count_inputs();
-                }
-                self.counters.do_steps += 1;
-            }
-        }
         ran?;
         let batch = std::mem::take(&mut self.batch_buf);
         let mut values = batch.as_slice();
         let taken = planned.iter_mut().try_for_each(|p| {
             if let Some(out) = p.out.as_deref_mut() {
-                let (coupled, rest) = values.split_at(self.value_buf.len());
-                self.value_buf.copy_from_slice(coupled);
+                let (coupled, rest) = values.split_at(self.slots.len());
                 values = rest;
-                self.take_coupled(out, p.run)?;
+                self.take_coupled(coupled, out, p.run)?;
             }
             if p.record {
                 let (recorded, rest) = values.split_at(self.recorded_reals);

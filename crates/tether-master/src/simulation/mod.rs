@@ -179,8 +179,8 @@ impl Simulation {
         Feedthrough::new(&system).initial(&mut system, initial_level, exp.start, &mut stats)?;
         signals.initialize(&mut system.slaves)?;
         system.read_accepted(Run::Initial)?;
-        for slave in &mut system.slaves {
-            slave.set_divergence_limits(settings.divergence_factor);
+        for (slave, out) in system.slaves.iter_mut().zip(&system.outputs) {
+            slave.set_divergence_limits(settings.divergence_factor, out);
         }
         if method.needs_rollback() && settings.check_rollback != CheckRollback::Off {
             system.check_rollback(exp.start, exp.step)?;
