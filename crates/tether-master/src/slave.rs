@@ -463,9 +463,10 @@ impl Slave {
                 reason: "no variable has this value reference".into(),
             });
         };
+        // The reason names the element (`element 5 (row-major): …`).
         let fail = |reason: String| MasterError::StartValue {
             instance: self.name.clone(),
-            variable: format!("{}[{}]", var.name, e.index + 1),
+            variable: var.name.clone(),
             value: value.to_string(),
             reason,
         };

@@ -77,9 +77,17 @@ impl Arrays {
                 var.name
             )));
         }
-        list[index] = value;
-        if let Some(reals) = write_array(instance, var, list, fail)? {
-            self.reals.insert(var.value_reference, reals);
+        // The record follows the FMU: a refused value leaves both as they were.
+        let before = std::mem::replace(&mut list[index], value);
+        match write_array(instance, var, list, fail) {
+            Ok(Some(reals)) => {
+                self.reals.insert(var.value_reference, reals);
+            }
+            Ok(None) => {}
+            Err(e) => {
+                list[index] = before;
+                return Err(e);
+            }
         }
         Ok(())
     }
