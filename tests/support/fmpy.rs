@@ -211,3 +211,30 @@ pub fn pythonfmu3(name: &str) -> Result<PythonFmu, String> {
         site_packages: PathBuf::from(site_packages),
     })
 }
+
+/// [`pythonfmu3`] built once per process for a test: `None` (skip, with the reason
+/// printed) without Python or pythonfmu3, unless `CI` is set: then it panics.
+pub fn pythonfmu3_for_test(name: &str) -> Option<PythonFmu> {
+    static BUILT: std::sync::Mutex<Vec<(String, Result<PythonFmu, String>)>> =
+        std::sync::Mutex::new(Vec::new());
+    let mut built = BUILT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let k = match built.iter().position(|(n, _)| n == name) {
+        Some(k) => k,
+        None => {
+            built.push((name.to_string(), pythonfmu3(name)));
+            built.len() - 1
+        }
+    };
+    match &built[k].1 {
+        Ok(fmu) => Some(fmu.clone()),
+        Err(reason) if std::env::var_os("CI").is_some() => {
+            panic!("the pythonfmu3 FMU {name} is needed on CI: {reason}")
+        }
+        Err(reason) => {
+            eprintln!("skipped: no pythonfmu3 FMU {name} ({reason})");
+            None
+        }
+    }
+}

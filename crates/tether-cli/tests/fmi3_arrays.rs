@@ -509,21 +509,7 @@ fmu = "{fmu}"
             fmu = fmu.display()
         )
     };
-    let file = dir.path().join("plain.toml");
-    std::fs::write(&file, system("")).unwrap();
-    let csv = dir.path().join("plain.csv");
-    let out = tether(&[
-        "run",
-        file.to_str().unwrap(),
-        "--out",
-        csv.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = std::fs::read_to_string(&csv).unwrap();
+    let text = run(&system(""), dir.path());
     let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
     let col = header.iter().position(|h| *h == "a.Int64_output").unwrap();
     assert_eq!(text.lines().count(), 5, "{text}");
@@ -531,16 +517,8 @@ fmu = "{fmu}"
         assert_eq!(row.split(',').nth(col), Some("9007199254740993"), "{text}");
     }
     // The same through host processes (the integers cross the protocol whole).
-    let isolated = dir.path().join("isolated.csv");
-    let out = tether(&[
-        "run",
-        file.to_str().unwrap(),
-        "--isolate",
-        "--out",
-        isolated.to_str().unwrap(),
-    ]);
-    assert!(out.status.success());
-    assert_eq!(std::fs::read_to_string(&isolated).unwrap(), text);
+    let isolated = system("").replace("fmu = ", "isolation = \"process\"\nfmu = ");
+    assert_eq!(run(&isolated, dir.path()), text);
     let file = dir.path().join("connected.toml");
     let connect = "\n[[connection]]\nfrom = \"a.Int64_output\"\nto = \"b.Int64_input\"\n";
     std::fs::write(&file, system(connect)).unwrap();
@@ -560,19 +538,8 @@ fmu = "{fmu}"
 
 /// The pythonfmu3 FMU of tests/fixtures/pythonfmu3/Decays.py, built once; `None`
 /// (skip) without Python or pythonfmu3 outside CI.
-fn decays() -> Option<&'static tether_tests::fmpy::PythonFmu> {
-    static BUILT: std::sync::OnceLock<Result<tether_tests::fmpy::PythonFmu, String>> =
-        std::sync::OnceLock::new();
-    match BUILT.get_or_init(|| tether_tests::fmpy::pythonfmu3("Decays")) {
-        Ok(built) => Some(built),
-        Err(reason) if std::env::var_os("CI").is_some() => {
-            panic!("the pythonfmu3 FMU is needed on CI: {reason}")
-        }
-        Err(reason) => {
-            eprintln!("skipped: no pythonfmu3 FMU ({reason})");
-            None
-        }
-    }
+fn decays() -> Option<tether_tests::fmpy::PythonFmu> {
+    tether_tests::fmpy::pythonfmu3_for_test("Decays")
 }
 
 /// Structural parameters end to end on a third-party FMU: the pythonfmu3 FMU
