@@ -41,7 +41,6 @@ usage: exported_fmu.py FMU OUT.csv
 Prints one line per check; exit 1 on the first that fails.
 """
 
-import math
 import shutil
 import sys
 
@@ -49,6 +48,8 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
+
+from closed_form import ramp_closed_form  # tests/fmpy/closed_form.py
 
 
 def fail(message):
@@ -320,18 +321,6 @@ print(f"feedthrough: a and lambda follow F at once (|Δa - ΔF/(m1+m2)| = {devia
 
 
 # 11. Input interpolation: a ramp force through fmi2SetRealInputDerivatives.
-def ramp_closed_form(t, m, c, d, v0, a0, b0):
-    """x(t) of m x'' + d x' + c x = a0 + b0 t, x(0) = 0, x'(0) = v0."""
-    p1 = b0 / c
-    p0 = (a0 - d * p1) / c
-    y0, dy0 = -p0, v0 - p1
-    sigma = d / (2 * m)
-    omega = math.sqrt(c / m - sigma * sigma)
-    y = math.exp(-sigma * t) * (y0 * math.cos(omega * t) + (dy0 + sigma * y0) / omega
-                                * math.sin(omega * t))
-    return p0 + p1 * t + y
-
-
 RAMP_A, RAMP_B = 100.0, 2000.0
 
 

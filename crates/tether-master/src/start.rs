@@ -101,19 +101,7 @@ impl Arrays {
         value: &StartValue,
         fail: impl Fn(String) -> MasterError,
     ) -> Result<(), MasterError> {
-        let sizes = self.sizes(md, var)?;
-        let n = sizes.iter().product::<u64>() as usize;
-        let mut list = Vec::new();
-        value.flatten_into(&mut list);
-        if list.len() != n {
-            let shown: Vec<String> = sizes.iter().map(u64::to_string).collect();
-            return Err(fail(format!(
-                "array '{}' is {} = {n} elements (row-major), the value has {}",
-                var.name,
-                shown.join("×"),
-                list.len()
-            )));
-        }
+        let list = whole(var, &self.sizes(md, var)?, value).map_err(&fail)?;
         if let Some(reals) = set_array(instance, var, &list, fail)? {
             self.reals.insert(var.value_reference, reals);
         }
@@ -212,20 +200,7 @@ pub fn apply_start_values<'v>(
                 }
                 pending[slot].1[index] = value.clone();
             }
-            None => {
-                let mut flat = Vec::new();
-                value.flatten_into(&mut flat);
-                if flat.len() != n {
-                    let shown: Vec<String> = sizes.iter().map(u64::to_string).collect();
-                    return Err(fail(format!(
-                        "array '{}' is {} = {n} elements (row-major), the value has {}",
-                        var.name,
-                        shown.join("×"),
-                        flat.len()
-                    )));
-                }
-                pending[slot].1 = flat;
-            }
+            None => pending[slot].1 = whole(var, &sizes, value).map_err(&fail)?,
         }
         pending[slot].2 = name;
         pending[slot].3 = value;
@@ -245,6 +220,28 @@ pub fn apply_start_values<'v>(
         arrays.set.insert(var.value_reference, list);
     }
     Ok(arrays)
+}
+
+/// `value` as all the values of array `var` of `sizes`, row-major (a TOML
+/// array flat or nested), or why it does not fit.
+fn whole(
+    var: &ScalarVariable,
+    sizes: &[u64],
+    value: &StartValue,
+) -> Result<Vec<StartValue>, String> {
+    let n = sizes.iter().product::<u64>() as usize;
+    let mut list = Vec::new();
+    value.flatten_into(&mut list);
+    if list.len() != n {
+        let shown: Vec<String> = sizes.iter().map(u64::to_string).collect();
+        return Err(format!(
+            "array '{}' is {} = {n} elements (row-major), the value has {}",
+            var.name,
+            shown.join("×"),
+            list.len()
+        ));
+    }
+    Ok(list)
 }
 
 /// Whether a start value may be given for `var`, or why not.
