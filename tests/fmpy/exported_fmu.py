@@ -44,34 +44,14 @@ Prints one line per check; exit 1 on the first that fails.
 import shutil
 import sys
 
-from fmpy import extract, read_model_description, simulate_fmu
+from fmpy import extract
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
-from fmpy.validation import validate_fmu
 
-from closed_form import ramp_closed_form  # tests/fmpy/closed_form.py
-
-
-def fail(message):
-    print(message)
-    sys.exit(1)
-
+from exported_common import fail, ramp_closed_form, validate_and_simulate
 
 fmu, out = sys.argv[1], sys.argv[2]
-problems = validate_fmu(fmu)
-if problems:
-    fail("validate: " + "; ".join(problems))
-print("validate: no problems")
-
-md = read_model_description(fmu)
-H = float(md.defaultExperiment.stepSize)
-names = [v.name for v in md.modelVariables if v.causality == "output"]
-result = simulate_fmu(fmu, output_interval=H, output=names)
-with open(out, "w") as f:
-    f.write(",".join(["time"] + names) + "\n")
-    for row in result:
-        f.write(",".join(repr(float(x)) for x in row) + "\n")
-print(f"simulate_fmu: {len(result)} rows")
+md, H, names = validate_and_simulate(fmu, out)
 
 vr = {v.name: v.valueReference for v in md.modelVariables}
 outs = [vr[n] for n in names]

@@ -32,31 +32,25 @@ fn the_exported_rigid_pair_runs_in_fmpy_bit_for_bit_as_tether_run() {
     let ours_arg = ours.to_str().unwrap();
     success(&tether(&["run", system, "--out", ours_arg], &root()));
     let args = [fmu.as_os_str(), theirs.as_os_str()];
-    let out = tether_tests::fmpy::run_script("exported_fmu.py", &args).expect("run fmpy");
-    let report = String::from_utf8_lossy(&out.stdout);
-    eprintln!("{report}");
-    assert!(
-        out.status.success(),
-        "{report}{}",
-        String::from_utf8_lossy(&out.stderr)
+    fmpy_checks(
+        "exported_fmu.py",
+        &args,
+        &[
+            "validate: no problems",
+            "state: repeated step identical",
+            "doStep of 1.5 H: fmi2Error",
+            "two instances: independent",
+            "wrong GUID: NULL, logged",
+            "member error: fmi2Error, forwarded",
+            "repeated step identical in a fresh instance",
+            "serialized state cut short: fmi2Error",
+            "serialized state one byte changed: fmi2Error",
+            "serialized state empty: fmi2Error",
+            "dependencies: a and lambda on F, x and v on none",
+            "feedthrough: a and lambda follow F at once",
+            "interpolation: ramp within",
+        ],
     );
-    for check in [
-        "validate: no problems",
-        "state: repeated step identical",
-        "doStep of 1.5 H: fmi2Error",
-        "two instances: independent",
-        "wrong GUID: NULL, logged",
-        "member error: fmi2Error, forwarded",
-        "repeated step identical in a fresh instance",
-        "serialized state cut short: fmi2Error",
-        "serialized state one byte changed: fmi2Error",
-        "serialized state empty: fmi2Error",
-        "dependencies: a and lambda on F, x and v on none",
-        "feedthrough: a and lambda follow F at once",
-        "interpolation: ramp within",
-    ] {
-        assert!(report.contains(check), "{check}: {report}");
-    }
     same_columns(&ours, &theirs, &PAIR_COLUMNS, 1001);
 }
 
@@ -91,15 +85,10 @@ fn the_fmi3_export_runs_in_fmpy_as_tether_run_and_nests_as_the_fmi2_export() {
     ));
     let args = [fmu("3").into_os_string(), theirs.clone().into_os_string()];
     let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
-    let out = tether_tests::fmpy::run_script("exported_fmu3.py", &args).expect("run fmpy");
-    let report = String::from_utf8_lossy(&out.stdout);
-    eprintln!("{report}");
-    assert!(
-        out.status.success(),
-        "{report}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    for check in [
+    fmpy_checks(
+        "exported_fmu3.py",
+        &args,
+        &[
         "validate: no problems",
         "state: repeated step identical",
         "repeated step identical in a fresh instance",
@@ -108,9 +97,8 @@ fn the_fmi3_export_runs_in_fmpy_as_tether_run_and_nests_as_the_fmi2_export() {
         "unsupported function: fmi3Error, logged: fmi3GetInt32: not supported",
         "wrong token: NULL, logged: fmi3InstantiateCoSimulation:",
         "intermediate update: 1000 callbacks at the inner steps' starts",
-    ] {
-        assert!(report.contains(check), "{check}: {report}");
-    }
+        ],
+    );
     same_columns(&ours, &theirs, &PAIR_COLUMNS, 1001);
     let nested = std::fs::read_to_string(root().join("examples/nested_three_masses.toml")).unwrap();
     let mut csvs = Vec::new();
@@ -141,6 +129,22 @@ fn the_fmi3_export_runs_in_fmpy_as_tether_run_and_nests_as_the_fmi2_export() {
 }
 
 /// Zips `dir` as the archive `out` (an `.ssp`).
+/// Runs the fmpy script `script` (tests/fmpy) with `args`: it must succeed and
+/// report every one of `checks`.
+fn fmpy_checks(script: &str, args: &[&std::ffi::OsStr], checks: &[&str]) {
+    let out = tether_tests::fmpy::run_script(script, args).expect("run fmpy");
+    let report = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{report}");
+    assert!(
+        out.status.success(),
+        "{report}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for check in checks {
+        assert!(report.contains(check), "{check}: {report}");
+    }
+}
+
 fn zip_dir(dir: &Path, out: &Path) {
     let mut zip = zip::ZipWriter::new(std::fs::File::create(out).unwrap());
     let options = zip::write::SimpleFileOptions::default();
@@ -188,15 +192,7 @@ fn an_ssp_exports_with_its_root_connectors_as_the_interface() {
         dir.path(),
     ));
     let args = [fmu.as_os_str(), theirs.as_os_str()];
-    let out = tether_tests::fmpy::run_script("exported_fmu.py", &args).expect("run fmpy");
-    let report = String::from_utf8_lossy(&out.stdout);
-    eprintln!("{report}");
-    assert!(
-        out.status.success(),
-        "{report}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(report.contains("validate: no problems"), "{report}");
+    fmpy_checks("exported_fmu.py", &args, &["validate: no problems"]);
     // `tether ssp import` writes the same interface as an [export] table.
     let imported = dir.path().join("imported/system.toml");
     let import = [

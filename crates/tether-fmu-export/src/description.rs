@@ -33,7 +33,6 @@ pub fn model_description(
 ) -> String {
     let export = spec.export.as_ref();
     let name = export.map_or("system", |e| e.model_name.as_str());
-    let e = &spec.experiment;
     let yes = |b: bool| if b { "true" } else { "false" };
     let mut x = String::new();
     let _ = writeln!(x, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
@@ -50,17 +49,7 @@ pub fn model_description(
         yes(capabilities.state),
         yes(capabilities.state),
     );
-    let mut units: Vec<&str> = variables.iter().filter_map(|v| v.unit.as_deref()).collect();
-    units.sort_unstable();
-    units.dedup();
-    units_and_log_categories(&mut x, &units);
-    let _ = writeln!(
-        x,
-        r#"  <DefaultExperiment startTime="{:?}" stopTime="{:?}" stepSize="{:?}"/>"#,
-        e.start,
-        spec.end_time(),
-        e.step
-    );
+    units_and_experiment(&mut x, spec, variables);
     let _ = writeln!(x, "  <ModelVariables>");
     for (vr, v) in variables.iter().enumerate() {
         let (causality, variability, initial) = match v.kind {
@@ -134,6 +123,23 @@ fn description_attribute(v: &ExportVariable) -> String {
 
 /// The `<fmiModelDescription …>` attributes both versions share besides
 /// the version and the GUID: the model name, the description and the tool.
+/// The units the variables use, the log categories and the DefaultExperiment
+/// (the same elements in FMI 2.0 and 3.0).
+fn units_and_experiment(x: &mut String, spec: &SystemSpec, variables: &[ExportVariable]) {
+    let mut units: Vec<&str> = variables.iter().filter_map(|v| v.unit.as_deref()).collect();
+    units.sort_unstable();
+    units.dedup();
+    units_and_log_categories(x, &units);
+    let e = &spec.experiment;
+    let _ = writeln!(
+        x,
+        r#"  <DefaultExperiment startTime="{:?}" stopTime="{:?}" stepSize="{:?}"/>"#,
+        e.start,
+        spec.end_time(),
+        e.step
+    );
+}
+
 fn header(spec: &SystemSpec) -> String {
     let export = spec.export.as_ref();
     let name = export.map_or("system", |e| e.model_name.as_str());
@@ -165,7 +171,6 @@ pub fn model_description_fmi3(
         .export
         .as_ref()
         .map_or("system", |e| e.model_name.as_str());
-    let e = &spec.experiment;
     let yes = |b: bool| if b { "true" } else { "false" };
     let mut x = String::new();
     let _ = writeln!(x, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
@@ -182,17 +187,7 @@ pub fn model_description_fmi3(
         yes(capabilities.state),
         yes(capabilities.state),
     );
-    let mut units: Vec<&str> = variables.iter().filter_map(|v| v.unit.as_deref()).collect();
-    units.sort_unstable();
-    units.dedup();
-    units_and_log_categories(&mut x, &units);
-    let _ = writeln!(
-        x,
-        r#"  <DefaultExperiment startTime="{:?}" stopTime="{:?}" stepSize="{:?}"/>"#,
-        e.start,
-        spec.end_time(),
-        e.step
-    );
+    units_and_experiment(&mut x, spec, variables);
     let _ = writeln!(x, "  <ModelVariables>");
     for (vr, v) in variables.iter().enumerate() {
         let kind = match v.kind {

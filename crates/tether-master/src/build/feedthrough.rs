@@ -100,14 +100,7 @@ impl Feedthrough {
         time: f64,
         stats: &mut RunStats,
     ) -> Result<(), MasterError> {
-        self.unknowns.clear();
-        self.unknowns.extend(0..system.coupling.len());
-        if !self.unknowns.is_empty() {
-            for _ in 0..2 {
-                self.newton(system, level, time, stats)?;
-            }
-        }
-        self.hold_inputs(system)
+        self.newton_all(system, level, time, stats, 2)
     }
 
     /// One Newton step for every unknown on `level` = 0, then the unknowns
@@ -119,10 +112,25 @@ impl Feedthrough {
         time: f64,
         stats: &mut RunStats,
     ) -> Result<(), MasterError> {
+        self.newton_all(system, level, time, stats, 1)
+    }
+
+    /// `steps` Newton steps for every unknown on `level` = 0, then the
+    /// unknowns set as constant inputs.
+    fn newton_all(
+        &mut self,
+        system: &mut System,
+        level: RowLevel,
+        time: f64,
+        stats: &mut RunStats,
+        steps: usize,
+    ) -> Result<(), MasterError> {
         self.unknowns.clear();
         self.unknowns.extend(0..system.coupling.len());
         if !self.unknowns.is_empty() {
-            self.newton(system, level, time, stats)?;
+            for _ in 0..steps {
+                self.newton(system, level, time, stats)?;
+            }
         }
         self.hold_inputs(system)
     }
