@@ -33,7 +33,7 @@ use crate::interface::{FmuInstance, Inputs, Int, Slot, SLOTS};
 use crate::model_description::{
     hex_decode, hex_encode, Causality, ModelDescription, ScalarVariable, ValueReference, ValueType,
 };
-use crate::raw::fmi3::component::{InstantiateArgs3, RawInstance3, RawState3};
+use crate::raw::fmi3::component::{InstantiateArgs3, RawInstance3, RawState3, StepAnswers};
 use crate::shared::{FmuShared, OnceGuard};
 
 /// Where an instance is in the FMI 3.0 life cycle (as far as the safe layer cares).
@@ -75,6 +75,57 @@ pub struct Fmi3Instance {
 }
 
 impl Fmi3Instance {
+    /// The outcome of an `fmi3DoStep` to `end` that failed or reported
+    /// something besides its status (termination, an early return, an event).
+    #[cold]
+    #[inline(never)]
+    fn step_answered(&mut self, end: f64, result: Result<()>, answers: StepAnswers) -> Result<()> {
+        let terminated = |time: f64, this: &mut Self| {
+            this.raw.time = time;
+            Error::TerminationRequested {
+                instance: this.raw.name().to_owned(),
+                time,
+                how: Some("fmi3DoStep returned terminateSimulation = true".into()),
+            }
+        };
+        match result {
+            Ok(()) => {
+                if answers.terminate_simulation {
+                    let time = if answers.early_return {
+                        answers.last_successful_time
+                    } else {
+                        end
+                    };
+                    return Err(terminated(time, self));
+                }
+                if answers.early_return && answers.last_successful_time < end {
+                    return Err(self.invalid(
+                        "fmi3DoStep",
+                        format!(
+                            "the FMU returned early at t = {} (the step was to end at t = {end}), which earlyReturnAllowed = false forbids",
+                            answers.last_successful_time
+                        ),
+                    ));
+                }
+                // Without event mode the FMU handles its events itself: the standard
+                // has the importer ignore eventHandlingNeeded.
+                if answers.event_handling_needed {
+                    log::trace!(
+                        target: "tether_fmi::call",
+                        "fmi3DoStep({}): eventHandlingNeeded ignored (no event mode) at t={end}",
+                        self.raw.name()
+                    );
+                }
+                self.raw.time = end;
+                Ok(())
+            }
+            Err(Error::Discard { .. }) if answers.terminate_simulation => {
+                Err(terminated(answers.last_successful_time, self))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
     /// Instantiates `fmu` (an FMI 3.0 co-simulation FMU) as `name`.
     pub fn new(fmu: &Fmu, name: &str, options: InstanceOptions) -> Result<Fmi3Instance> {
         let shared = Arc::clone(fmu.shared());
@@ -669,56 +720,16 @@ impl FmuInstance for Fmi3Instance {
     }
 
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
-        let end = t + h;
         let no_set_prior = self.states.iter().all(Option::is_none);
         if self.raw.intermediate_update {
             self.raw.env.begin_step(t);
         }
         let (result, answers) = self.raw.fmi3DoStep(t, h, no_set_prior);
-        let terminated = |time: f64, this: &mut Self| {
-            this.raw.time = time;
-            Error::TerminationRequested {
-                instance: this.raw.name().to_owned(),
-                time,
-                how: Some("fmi3DoStep returned terminateSimulation = true".into()),
-            }
-        };
-        match result {
-            Ok(()) => {
-                if answers.terminate_simulation {
-                    let time = if answers.early_return {
-                        answers.last_successful_time
-                    } else {
-                        end
-                    };
-                    return Err(terminated(time, self));
-                }
-                if answers.early_return && answers.last_successful_time < end {
-                    return Err(self.invalid(
-                        "fmi3DoStep",
-                        format!(
-                            "the FMU returned early at t = {} (the step was to end at t = {end}), which earlyReturnAllowed = false forbids",
-                            answers.last_successful_time
-                        ),
-                    ));
-                }
-                // Without event mode the FMU handles its events itself: the standard
-                // has the importer ignore eventHandlingNeeded.
-                if answers.event_handling_needed {
-                    log::trace!(
-                        target: "tether_fmi::call",
-                        "fmi3DoStep({}): eventHandlingNeeded ignored (no event mode) at t={end}",
-                        self.raw.name()
-                    );
-                }
-                self.raw.time = end;
-                Ok(())
-            }
-            Err(Error::Discard { .. }) if answers.terminate_simulation => {
-                Err(terminated(answers.last_successful_time, self))
-            }
-            Err(e) => Err(e),
+        if result.is_ok() && answers.plain() {
+            self.raw.time = t + h;
+            return Ok(());
         }
+        self.step_answered(t + h, result, answers)
     }
 
     fn save(&mut self, slot: Slot) -> Result<()> {

@@ -127,6 +127,11 @@ pub struct Slave {
     /// The number of values `value_vrs` reads, when arrays make it differ
     /// from their number.
     value_count: Option<usize>,
+    /// `value_vrs`, then `recorded_vrs`: the read at an accepted point, one
+    /// call when no output derivative is read (`finalize`).
+    accepted_vrs: Vec<u32>,
+    /// The number of values `accepted_vrs` reads, as `value_count`.
+    accepted_count: Option<usize>,
     /// The start values' effect on the FMI 3.0 arrays: sizes, values.
     pub(crate) arrays: crate::start::Arrays,
     /// The place of each coupled input's value among the values set (the
@@ -366,6 +371,8 @@ impl Slave {
             coupled_outputs: Vec::new(),
             value_vrs: Vec::new(),
             value_count: None,
+            accepted_vrs: Vec::new(),
+            accepted_count: None,
             arrays: Default::default(),
             input_positions: Vec::new(),
             signal_buf: Vec::new(),
@@ -577,6 +584,9 @@ impl Slave {
         }
         let values = self.slots.len();
         self.value_count = (values != self.value_vrs.len()).then_some(values);
+        self.accepted_vrs = [&self.value_vrs[..], &self.recorded_vrs[..]].concat();
+        let accepted = values + self.recorded_reals;
+        self.accepted_count = (accepted != self.accepted_vrs.len()).then_some(accepted);
         self.slots.extend(derivative_slots);
         self.value_buf = vec![0.0; self.slots.len()];
         self.run_inputs.clear();
@@ -827,9 +837,10 @@ impl Slave {
     /// the output, the call `run` and the time.
     pub(crate) fn read_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
         let nv = self.values_len();
-        if nv > 0 {
+        if !self.value_vrs.is_empty() {
             self.backend
                 .get_reals(&self.value_vrs, &mut self.value_buf[..nv])?;
+            self.counters.get_reals += 1;
         }
         for (&(vr, order), value) in self.derivative_reads.iter().zip(&mut self.value_buf[nv..]) {
             self.backend
@@ -851,9 +862,6 @@ impl Slave {
         out: &mut [f64],
         run: Run,
     ) -> Result<(), MasterError> {
-        if !self.value_vrs.is_empty() {
-            self.counters.get_reals += 1;
-        }
         self.counters.get_output_derivatives += self.derivative_reads.len() as u64;
         // Every slot of `out` is written: when every value is finite, `out` is.
         let mut finite = true;
@@ -1083,33 +1091,42 @@ impl Slave {
         }
         self.batch_buf.resize(len, 0.0);
         let mut requests = recycle(std::mem::take(&mut self.request_buf));
-        requests.extend(
-            planned
-                .iter()
-                .zip(&self.run_inputs)
-                .map(|(p, input)| RunRequest {
-                    restore: p.restore.then_some(SAVED),
-                    inputs: (driven && p.step.is_some()).then(|| input.as_inputs()),
-                    step: p.step.map(|(_, t, h)| (t, h)),
-                    outputs: if p.out.is_some() {
-                        &self.value_vrs
-                    } else {
-                        &[]
-                    },
-                    output_values: p.out.as_ref().and(self.value_count),
-                    output_derivatives: if p.out.is_some() {
-                        &self.derivative_reads
-                    } else {
-                        &[]
-                    },
-                    recorded: if p.record { &self.recorded_vrs } else { &[] },
-                    recorded_values: p.record.then_some(self.recorded_reals),
-                    save: None,
-                }),
-        );
+        // At an accepted point one call reads the coupled and the recorded
+        // outputs, unless output derivatives are read between them.
+        let joined = self.derivative_reads.is_empty();
+        requests.extend(planned.iter().zip(&self.run_inputs).map(|(p, input)| {
+            let out = p.out.is_some();
+            let (outputs, output_values, recorded, recorded_values) = match p.record {
+                true if out && joined => {
+                    (&self.accepted_vrs[..], self.accepted_count, &[][..], None)
+                }
+                record => (
+                    if out { &self.value_vrs[..] } else { &[] },
+                    if out { self.value_count } else { None },
+                    if record { &self.recorded_vrs[..] } else { &[] },
+                    record.then_some(self.recorded_reals),
+                ),
+            };
+            RunRequest {
+                restore: p.restore.then_some(SAVED),
+                inputs: (driven && p.step.is_some()).then(|| input.as_inputs()),
+                step: p.step.map(|(_, t, h)| (t, h)),
+                outputs,
+                output_values,
+                output_derivatives: if out { &self.derivative_reads } else { &[] },
+                recorded,
+                recorded_values,
+                save: None,
+            }
+        }));
+        let reads: u64 = requests
+            .iter()
+            .map(|r| u64::from(!r.outputs.is_empty()) + u64::from(!r.recorded.is_empty()))
+            .sum();
         let ran = self.backend.run_batch(&requests, &mut self.batch_buf);
         self.request_buf = recycle(requests);
         ran?;
+        self.counters.get_reals += reads;
         let batch = std::mem::take(&mut self.batch_buf);
         let mut values = batch.as_slice();
         let taken = planned.iter_mut().try_for_each(|p| {
@@ -1135,9 +1152,6 @@ impl Slave {
     fn take_recorded(&mut self, reals: &[f64], run: Run) -> Result<(), MasterError> {
         self.recorded_values[..reals.len()].copy_from_slice(reals);
         let reals = reals.len();
-        if reals > 0 {
-            self.counters.get_reals += 1;
-        }
         if !self.recorded_ints.is_empty() {
             self.backend
                 .get_integers(&self.recorded_ints, &mut self.int_buf)?;

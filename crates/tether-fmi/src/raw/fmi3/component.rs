@@ -36,6 +36,15 @@ pub(crate) struct StepAnswers {
     pub last_successful_time: f64,
 }
 
+impl StepAnswers {
+    /// The step ended at its end with nothing to report: no event, no
+    /// request to terminate, no early return.
+    #[inline]
+    pub(crate) fn plain(&self) -> bool {
+        !(self.event_handling_needed || self.terminate_simulation || self.early_return)
+    }
+}
+
 /// One live `fmi3Instance`, freed with `fmi3FreeInstance` on drop.
 pub(crate) struct RawInstance3 {
     instance: fmi3Instance,
