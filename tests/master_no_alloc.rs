@@ -55,6 +55,11 @@ static GLOBAL: Counting = Counting;
 /// The oscillator pair of examples/oscillator.toml with `method` and order `k`.
 fn system(method: &str, order: usize, pairs: usize) -> SystemSpec {
     let fmu = tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU");
+    pairs_of(&fmu, method, order, pairs)
+}
+
+/// `pairs` oscillator pairs of the oscillator FMU at `fmu`.
+fn pairs_of(fmu: &std::path::Path, method: &str, order: usize, pairs: usize) -> SystemSpec {
     let mut text = format!(
         r#"
         [experiment]
@@ -159,6 +164,20 @@ fn macro_steps_do_not_allocate_for_any_method() {
         }
     }
     assert!(failures.is_empty(), "allocations per run: {failures:?}");
+}
+
+/// The FMI 3.0 builds take the inputs' polynomial (k > 0) through the
+/// intermediate update callback: a new polynomial replaces the last one in
+/// place, and the master's side of the callback allocates nothing either.
+#[test]
+fn fmi3_macro_steps_do_not_allocate() {
+    let fmu =
+        tether_fmu_build::workspace_fmu3("oscillator").expect("package the FMI 3.0 oscillator");
+    let method = "kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6";
+    for k in [0, 1, 2] {
+        let n = steady_state_allocations(&pairs_of(&fmu, method, k, 1), false);
+        assert_eq!(n, 0, "FMI 3.0 builds, k = {k}: {n} allocations in 90 steps");
+    }
 }
 
 /// With the CSV written from a writer thread (`CsvRecorder::background`, what

@@ -75,6 +75,26 @@ pub struct Fmi3Instance {
 }
 
 impl Fmi3Instance {
+    /// `fmi3SetFloat64` (and `fmi3SetFloat32`) of Real values, with no effect on
+    /// the inputs' polynomials.
+    fn write_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
+        const F: &str = "fmi3SetFloat64";
+        if self.plain_reals && vrs.len() == values.len() {
+            return self.raw.fmi3SetFloat64(vrs, values);
+        }
+        for g in self.groups(F, "Float64 or Float32", vrs, values.len(), is_float)? {
+            if g.ty == ValueType::Float64 {
+                self.raw
+                    .fmi3SetFloat64(&vrs[g.vrs.clone()], &values[g.values.clone()])?;
+            } else {
+                // Rounded to the nearest Float32, as the FMU would store it.
+                let narrow: Vec<f32> = values[g.values].iter().map(|&x| x as f32).collect();
+                self.raw.fmi3SetFloat32(&vrs[g.vrs.clone()], &narrow)?;
+            }
+        }
+        Ok(())
+    }
+
     /// The outcome of an `fmi3DoStep` to `end` that failed or reported
     /// something besides its status (termination, an early return, an event).
     #[cold]
@@ -505,25 +525,11 @@ impl FmuInstance for Fmi3Instance {
     }
 
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        const F: &str = "fmi3SetFloat64";
         // A value set on an input ends its polynomial.
         if self.raw.intermediate_update {
             self.raw.env.hold(vrs);
         }
-        if self.plain_reals && vrs.len() == values.len() {
-            return self.raw.fmi3SetFloat64(vrs, values);
-        }
-        for g in self.groups(F, "Float64 or Float32", vrs, values.len(), is_float)? {
-            if g.ty == ValueType::Float64 {
-                self.raw
-                    .fmi3SetFloat64(&vrs[g.vrs.clone()], &values[g.values.clone()])?;
-            } else {
-                // Rounded to the nearest Float32, as the FMU would store it.
-                let narrow: Vec<f32> = values[g.values].iter().map(|&x| x as f32).collect();
-                self.raw.fmi3SetFloat32(&vrs[g.vrs.clone()], &narrow)?;
-            }
-        }
-        Ok(())
+        self.write_reals(vrs, values)
     }
 
     fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()> {
@@ -677,8 +683,10 @@ impl FmuInstance for Fmi3Instance {
                 ),
             ));
         }
-        self.set_reals(inputs.vrs, inputs.values)?;
-        if inputs.derivative_vrs.is_empty() {
+        // Each input's polynomial is replaced in place, or ended (held) when it
+        // has no derivatives: no allocation once every input has had one.
+        self.write_reals(inputs.vrs, inputs.values)?;
+        if !self.raw.intermediate_update {
             return Ok(());
         }
         let k = inputs.orders.iter().copied().max().unwrap_or(0).max(0) as usize;
@@ -698,12 +706,13 @@ impl FmuInstance for Fmi3Instance {
                     given = true;
                 }
             }
-            if given {
-                // Around the start of the coming step (`step`).
-                self.raw
-                    .env
-                    .set_polynomial(vr, f64::NAN, &self.coefficients);
+            if !given {
+                self.coefficients.truncate(1);
             }
+            // Around the start of the coming step (`step`).
+            self.raw
+                .env
+                .set_polynomial(vr, f64::NAN, &self.coefficients);
         }
         Ok(())
     }

@@ -88,6 +88,9 @@ pub struct Instance<M: Model> {
     /// FMI 3.0 intermediate update mode (during the importer's callback): the input
     /// values set there, by input.
     pub(crate) intermediate: Option<Vec<Option<f64>>>,
+    /// FMI 3.0: the inputs set at the step's two intermediate times `t_c + s`,
+    /// `(s, values by input)` (`ffi::fmi3::do_step`); their buffers are reused.
+    pub(crate) samples: [(f64, Vec<Option<f64>>); 2],
 }
 
 /// Per-instance work buffers (see [`Instance::scratch`]), borrowed next to the
@@ -115,6 +118,7 @@ impl<M: Model> Instance<M> {
             terminated: false,
             fmi3: false,
             intermediate: None,
+            samples: Default::default(),
         }
     }
 
@@ -342,14 +346,14 @@ impl<M: Model> Instance<M> {
     }
 
     /// FMI 3.0 intermediate update: the inputs as the importer set them at the
-    /// intermediate times `t_c + s` of `samples` (the kit asks at s = h/2 and s = h,
+    /// intermediate times `t_c + s` of [`samples`](Self::samples) (the kit asks at s = h/2 and s = h,
     /// see `ffi::fmi3::do_step`) become, with the value at t_c, the quadratic through
     /// these points: the same Taylor polynomial around t_c as the FMI 2.0 build takes
     /// from `fmi2SetRealInputDerivatives`, to rounding. An input set in none of the
     /// callbacks keeps its polynomial; one not set at an intermediate time keeps the
     /// last value set, as the standard says.
-    pub(crate) fn take_intermediate_inputs(&mut self, samples: &[(f64, Vec<Option<f64>>); 2]) {
-        let [(sa, at_a), (sb, at_b)] = samples;
+    pub(crate) fn take_intermediate_inputs(&mut self) {
+        let [(sa, at_a), (sb, at_b)] = &self.samples;
         for (i, jet) in self.data.inputs.iter_mut().enumerate() {
             let (a, b) = (
                 at_a.get(i).copied().flatten(),

@@ -390,15 +390,15 @@ pub unsafe fn do_step<M: Model>(
     terminate[0] = 0;
     early[0] = 0;
     // SAFETY: this module's contract.
-    let samples = match unsafe { intermediate_inputs::<M>(c, t, h) } {
-        Ok(samples) => samples,
+    let sampled = match unsafe { intermediate_inputs::<M>(c, t, h) } {
+        Ok(sampled) => sampled,
         Err(status) => return status,
     };
     // SAFETY: this module's contract.
     unsafe {
         simple::<M>(c, Call::DoStep, |i| {
-            if let Some(samples) = &samples {
-                i.take_intermediate_inputs(samples);
+            if sampled {
+                i.take_intermediate_inputs();
             }
             let result = i.do_step(t, h);
             terminate[0] = Fmi3Boolean::from(i.terminated);
@@ -409,32 +409,34 @@ pub unsafe fn do_step<M: Model>(
 }
 
 /// The inputs the importer sets in intermediate update mode at `t + h/2` and `t + h`
-/// (see [`do_step`]): `None` without a callback, inputs or a valid step.
+/// (see [`do_step`]) into the instance's [`samples`](Instance::samples): `false`
+/// without a callback, inputs or a valid step.
 ///
 /// # Safety
 /// This module's contract.
-#[allow(clippy::type_complexity)]
 unsafe fn intermediate_inputs<M: Model>(
     c: Fmi3Instance,
     t: f64,
     h: f64,
-) -> Result<Option<[(f64, Vec<Option<f64>>); 2]>, Fmi3Status> {
+) -> Result<bool, Fmi3Status> {
     let n = M::DECLARATION.inputs.len();
     let provided = xml::intermediate_update(&M::DECLARATION);
     if c.is_null() || !provided || !(h > 0.0 && h.is_finite() && t.is_finite()) {
-        return Ok(None);
+        return Ok(false);
     }
     // SAFETY: c is a live instance of M (this module's contract); the borrow ends
     // with this statement.
     let hook = unsafe { (*c.cast::<Component<M>>()).intermediate_update };
     let Some((callback, environment)) = hook else {
-        return Ok(None);
+        return Ok(false);
     };
-    let mut samples = [(0.0, Vec::new()), (0.0, Vec::new())];
-    for (sample, time) in samples.iter_mut().zip([t + 0.5 * h, t + h]) {
+    for (k, time) in [t + 0.5 * h, t + h].into_iter().enumerate() {
         let enter = |i: &mut Instance<M>| {
             i.log_event(|| format!("intermediate update at t = {time} (step {t} + {h})"));
-            i.intermediate = Some(vec![None; n]);
+            let mut set = std::mem::take(&mut i.samples[k].1);
+            set.clear();
+            set.resize(n, None);
+            i.intermediate = Some(set);
             Ok(())
         };
         // SAFETY: this module's contract.
@@ -459,7 +461,7 @@ unsafe fn intermediate_inputs<M: Model>(
             )
         };
         let leave = |i: &mut Instance<M>| {
-            *sample = (time - t, i.intermediate.take().unwrap_or_default());
+            i.samples[k] = (time - t, i.intermediate.take().unwrap_or_default());
             Ok(())
         };
         // SAFETY: this module's contract.
@@ -468,7 +470,7 @@ unsafe fn intermediate_inputs<M: Model>(
             return Err(status);
         }
     }
-    Ok(Some(samples))
+    Ok(true)
 }
 
 /// fmi3EnterStepMode: only for FMUs with event mode, which this is not.

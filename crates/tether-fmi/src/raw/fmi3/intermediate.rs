@@ -12,6 +12,7 @@
 
 use std::ffi::c_void;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 use super::*;
@@ -34,6 +35,9 @@ pub(crate) struct Env3 {
     /// The inputs' polynomials, read by the intermediate update callback during
     /// `fmi3DoStep` and written between calls.
     polynomials: Mutex<Polynomials>,
+    /// Whether `polynomials.failure` holds a failure: read after every step
+    /// without taking the lock.
+    failed: AtomicBool,
 }
 
 /// The inputs that take a polynomial, each its Taylor coefficients around the time
@@ -58,6 +62,7 @@ impl Env3 {
         Box::new(Env3 {
             log: LogEnv::plain(instance),
             polynomials: Mutex::new(Polynomials::default()),
+            failed: AtomicBool::new(false),
         })
     }
 
@@ -121,6 +126,9 @@ impl Env3 {
     /// The failure of an `fmi3SetFloat64` made in the callback since the last
     /// call, if any: its status and the intermediate time.
     pub(crate) fn take_failure(&self) -> Option<(fmi3Status, f64)> {
+        if !self.failed.swap(false, Ordering::Acquire) {
+            return None;
+        }
         self.lock().failure.take()
     }
 
@@ -154,6 +162,7 @@ impl Env3 {
         };
         if status != fmi3OK && status != fmi3Warning {
             p.failure = Some((status, time));
+            self.failed.store(true, Ordering::Release);
         }
     }
 }
