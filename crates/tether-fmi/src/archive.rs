@@ -13,6 +13,7 @@ use std::path::{Component, Path, PathBuf};
 
 use zip::CompressionMethod;
 
+pub use crate::error::ArchiveKind;
 use crate::error::{Error, Result};
 
 /// `S_IFMT` / `S_IFLNK` from `<sys/stat.h>`, as stored in the upper half of a zip
@@ -48,16 +49,6 @@ impl Default for ExtractLimits {
     }
 }
 
-/// What an archive holds: named in errors, and it names the extraction folder
-/// (`$TMPDIR/tether-fmu-*` or `$TMPDIR/tether-ssp-*`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ArchiveKind {
-    /// An FMU (`.fmu`).
-    Fmu,
-    /// An SSP system (`.ssp`).
-    Ssp,
-}
-
 impl ArchiveKind {
     const ALL: [ArchiveKind; 2] = [ArchiveKind::Fmu, ArchiveKind::Ssp];
 
@@ -67,15 +58,6 @@ impl ArchiveKind {
             ArchiveKind::Fmu => "tether-fmu-",
             ArchiveKind::Ssp => "tether-ssp-",
         }
-    }
-}
-
-impl std::fmt::Display for ArchiveKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            ArchiveKind::Fmu => "FMU",
-            ArchiveKind::Ssp => "SSP",
-        })
     }
 }
 

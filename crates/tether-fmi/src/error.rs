@@ -3,8 +3,24 @@
 use std::fmt;
 use std::path::PathBuf;
 
-use crate::archive::ArchiveKind;
-use crate::xml::{XmlError, XmlErrorKind};
+/// What an archive holds: named in errors, and it names the extraction folder
+/// (`$TMPDIR/tether-fmu-*` or `$TMPDIR/tether-ssp-*`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ArchiveKind {
+    /// An FMU (`.fmu`).
+    Fmu,
+    /// An SSP system (`.ssp`).
+    Ssp,
+}
+
+impl std::fmt::Display for ArchiveKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ArchiveKind::Fmu => "FMU",
+            ArchiveKind::Ssp => "SSP",
+        })
+    }
+}
 
 /// Result alias used throughout the crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -502,32 +518,6 @@ impl Error {
 
 /// Collapses whitespace runs (including newlines) so messages from other libraries stay
 /// on one line.
-impl From<XmlError> for Error {
-    fn from(e: XmlError) -> Error {
-        let XmlError {
-            file,
-            line,
-            column,
-            message,
-            kind,
-        } = e;
-        match kind {
-            XmlErrorKind::Malformed => Error::MalformedXml {
-                file,
-                line,
-                column,
-                message,
-            },
-            XmlErrorKind::Limit => Error::XmlLimit {
-                file,
-                line,
-                column,
-                message,
-            },
-        }
-    }
-}
-
 pub(crate) fn one_line(message: &str) -> String {
     message.split_whitespace().collect::<Vec<_>>().join(" ")
 }
@@ -571,7 +561,7 @@ fn platform_of(path: &std::path::Path) -> String {
     path.parent()
         .and_then(|p| p.file_name())
         .map(|p| p.to_string_lossy().into_owned())
-        .unwrap_or_else(|| crate::library::PLATFORM.to_owned())
+        .unwrap_or_else(|| "this platform's".to_owned())
 }
 
 /// What an FMI 2.0 instance says after a step returned fmi2Discard: whether
@@ -582,18 +572,6 @@ pub(crate) trait StepStatus {
     fn name(&self) -> &str;
     fn terminated(&mut self) -> Result<bool>;
     fn last_successful_time(&mut self) -> Result<f64>;
-}
-
-impl StepStatus for crate::Instance {
-    fn name(&self) -> &str {
-        crate::Instance::name(self)
-    }
-    fn terminated(&mut self) -> Result<bool> {
-        crate::Instance::terminated(self)
-    }
-    fn last_successful_time(&mut self) -> Result<f64> {
-        crate::Instance::last_successful_time(self)
-    }
 }
 
 /// The error of a failed FMI 2.0 step of `instance` to `end`: a request to end

@@ -430,3 +430,15 @@ const _: () = {
     assert_send::<crate::FmuState>();
     assert_send::<crate::Fmu>();
 };
+
+impl crate::error::StepStatus for Instance {
+    fn name(&self) -> &str {
+        Instance::name(self)
+    }
+    fn terminated(&mut self) -> Result<bool> {
+        Instance::terminated(self)
+    }
+    fn last_successful_time(&mut self) -> Result<f64> {
+        Instance::last_successful_time(self)
+    }
+}

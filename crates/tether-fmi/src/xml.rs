@@ -110,6 +110,32 @@ pub struct XmlError {
     pub kind: XmlErrorKind,
 }
 
+impl From<XmlError> for crate::error::Error {
+    fn from(e: XmlError) -> crate::error::Error {
+        let XmlError {
+            file,
+            line,
+            column,
+            message,
+            kind,
+        } = e;
+        match kind {
+            XmlErrorKind::Malformed => crate::error::Error::MalformedXml {
+                file,
+                line,
+                column,
+                message,
+            },
+            XmlErrorKind::Limit => crate::error::Error::XmlLimit {
+                file,
+                line,
+                column,
+                message,
+            },
+        }
+    }
+}
+
 /// Reads an XML file, refusing one of more than [`MAX_BYTES`] bytes without reading
 /// past the limit (the error is an I/O error of kind `FileTooLarge` saying so).
 pub fn read(path: &Path) -> std::io::Result<Vec<u8>> {
