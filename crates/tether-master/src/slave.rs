@@ -837,7 +837,7 @@ impl Slave {
     /// the output, the call `run` and the time.
     pub(crate) fn read_coupled(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
         let nv = self.values_len();
-        if !self.value_vrs.is_empty() {
+        if nv > 0 {
             self.backend
                 .get_reals(&self.value_vrs, &mut self.value_buf[..nv])?;
             self.counters.get_reals += 1;
