@@ -43,3 +43,14 @@ def ramp_closed_form(t, m, c, d, v0, a0, b0):
     y = math.exp(-sigma * t) * (y0 * math.cos(omega * t) + (dy0 + sigma * y0) / omega
                                 * math.sin(omega * t))
     return p0 + p1 * t + y
+
+
+# The ramp force F(t) = RAMP_A + RAMP_B t on the exported rigid pair (m = 1 + 2, c = 1000 + 1000,
+# d = 10 + 10, v0 = 100).
+RAMP_A, RAMP_B = 100.0, 2000.0
+
+
+def ramp_error(samples):
+    """The largest distance of the (t, x) samples from the pair's closed form under the ramp."""
+    return max(abs(x - ramp_closed_form(t, 3.0, 2000.0, 20.0, 100.0, RAMP_A, RAMP_B))
+               for t, x in samples)

@@ -128,23 +128,29 @@ fn the_fmi3_export_runs_in_fmpy_as_tether_run_and_nests_as_the_fmi2_export() {
     );
 }
 
-/// Zips `dir` as the archive `out` (an `.ssp`).
 /// Runs the fmpy script `script` (tests/fmpy) with `args`: it must succeed and
 /// report every one of `checks`.
 fn fmpy_checks(script: &str, args: &[&std::ffi::OsStr], checks: &[&str]) {
     let out = tether_tests::fmpy::run_script(script, args).expect("run fmpy");
-    let report = String::from_utf8_lossy(&out.stdout);
+    let report = script_report(&out);
+    for check in checks {
+        assert!(report.contains(check), "{check}: {report}");
+    }
+}
+
+/// The report (stdout) of an fmpy script that must have succeeded, shown.
+fn script_report(out: &std::process::Output) -> String {
+    let report = String::from_utf8_lossy(&out.stdout).into_owned();
     eprintln!("{report}");
     assert!(
         out.status.success(),
         "{report}{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    for check in checks {
-        assert!(report.contains(check), "{check}: {report}");
-    }
+    report
 }
 
+/// Zips `dir` as the archive `out` (an `.ssp`).
 fn zip_dir(dir: &Path, out: &Path) {
     let mut zip = zip::ZipWriter::new(std::fs::File::create(out).unwrap());
     let options = zip::write::SimpleFileOptions::default();
@@ -275,13 +281,7 @@ fn an_exported_system_with_an_isolated_member_runs_from_the_fmu_alone() {
         .args([&copy, &theirs])
         .output()
         .unwrap();
-    let report = String::from_utf8_lossy(&out.stdout);
-    eprintln!("{report}");
-    assert!(
-        out.status.success(),
-        "{report}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    script_report(&out);
     same_columns(&ours, &theirs, &PAIR_COLUMNS, 1001);
 }
 
