@@ -347,11 +347,11 @@ impl<M: Model> Instance<M> {
 
     /// FMI 3.0 intermediate update: the inputs as the importer set them at the
     /// intermediate times `t_c + s` of [`samples`](Self::samples) (the kit asks at
-    /// s = h/2 and s = h, see `ffi::fmi3::do_step`) become, with the value at t_c, the
-    /// quadratic through these points: the same Taylor polynomial around t_c as the FMI 2.0 build takes
-    /// from `fmi2SetRealInputDerivatives`, to rounding. An input set in none of the
-    /// callbacks keeps its polynomial; one not set at an intermediate time keeps the
-    /// last value set, as the standard says.
+    /// s = h/2 and s = h, see `ffi::fmi3::do_step`) become, with the value at t_c,
+    /// the quadratic through these points: the same Taylor polynomial around t_c as
+    /// the FMI 2.0 build takes from `fmi2SetRealInputDerivatives`, to rounding. An
+    /// input set in none of the callbacks keeps its polynomial; one not set at an
+    /// intermediate time keeps the last value set, as the standard says.
     pub(crate) fn take_intermediate_inputs(&mut self) {
         let [(sa, at_a), (sb, at_b)] = &self.samples;
         for (i, jet) in self.data.inputs.iter_mut().enumerate() {
