@@ -70,8 +70,6 @@ pub struct Fmi3Instance {
     plain_reals: bool,
     /// The inputs that take a polynomial over a step (intermediate update).
     polynomial_inputs: Vec<ValueReference>,
-    /// The coefficients of one input's polynomial (reused).
-    coefficients: Vec<f64>,
 }
 
 impl Fmi3Instance {
@@ -236,7 +234,6 @@ impl Fmi3Instance {
             structural: HashMap::new(),
             plain_reals,
             polynomial_inputs,
-            coefficients: Vec::new(),
         };
         if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
             let declared = &md.log_categories;
@@ -689,31 +686,14 @@ impl FmuInstance for Fmi3Instance {
         if !self.raw.intermediate_update {
             return Ok(());
         }
-        let k = inputs.orders.iter().copied().max().unwrap_or(0).max(0) as usize;
-        for (&vr, &value) in inputs.vrs.iter().zip(inputs.values) {
-            self.coefficients.clear();
-            self.coefficients.push(value);
-            self.coefficients.resize(k + 1, 0.0);
-            let mut given = false;
-            for ((&dvr, &order), &d) in inputs
-                .derivative_vrs
-                .iter()
-                .zip(inputs.orders)
-                .zip(inputs.derivatives)
-            {
-                if dvr == vr && order >= 1 {
-                    self.coefficients[order as usize] = d;
-                    given = true;
-                }
-            }
-            if !given {
-                self.coefficients.truncate(1);
-            }
-            // Around the start of the coming step (`step`).
-            self.raw
-                .env
-                .set_polynomial(vr, f64::NAN, &self.coefficients);
-        }
+        // Around the start of the coming step (`step`).
+        self.raw.env.set_polynomials(
+            inputs.vrs,
+            inputs.values,
+            inputs.derivative_vrs,
+            inputs.orders,
+            inputs.derivatives,
+        );
         Ok(())
     }
 

@@ -136,7 +136,8 @@ impl<M: Model> Instance<M> {
         for (&vr, &value) in vrs.iter().zip(values) {
             self.check_real(vr, value)?;
         }
-        if let Some(set) = &mut self.intermediate {
+        if let Some(k) = self.intermediate {
+            let set = &mut self.samples[k].1;
             // FMI 3.0 intermediate update mode: only inputs, taken as the values at
             // the intermediate time.
             for (&vr, &value) in vrs.iter().zip(values) {

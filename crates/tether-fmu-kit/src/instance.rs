@@ -85,9 +85,9 @@ pub struct Instance<M: Model> {
     /// Made by `fmi3InstantiateCoSimulation`: log messages name the fmi3 functions,
     /// and `time` is a variable (value reference after the declared ones).
     pub fmi3: bool,
-    /// FMI 3.0 intermediate update mode (during the importer's callback): the input
-    /// values set there, by input.
-    pub(crate) intermediate: Option<Vec<Option<f64>>>,
+    /// FMI 3.0 intermediate update mode (during the importer's callback): which
+    /// of [`samples`](Self::samples) takes the input values set there.
+    pub(crate) intermediate: Option<usize>,
     /// FMI 3.0: the inputs set at the step's two intermediate times `t_c + s`,
     /// `(s, values by input)` (`ffi::fmi3::do_step`); their buffers are reused.
     pub(crate) samples: [(f64, Vec<Option<f64>>); 2],

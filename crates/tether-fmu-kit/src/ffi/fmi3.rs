@@ -390,10 +390,7 @@ pub unsafe fn do_step<M: Model>(
     terminate[0] = 0;
     early[0] = 0;
     // SAFETY: this module's contract.
-    let sampled = match unsafe { intermediate_inputs::<M>(c, t, h) } {
-        Ok(sampled) => sampled,
-        Err(status) => return status,
-    };
+    let sampled = unsafe { intermediate_inputs::<M>(c, t, h) };
     // SAFETY: this module's contract.
     unsafe {
         simple::<M>(c, Call::DoStep, |i| {
@@ -410,39 +407,41 @@ pub unsafe fn do_step<M: Model>(
 
 /// The inputs the importer sets in intermediate update mode at `t + h/2` and `t + h`
 /// (see [`do_step`]) into the instance's [`samples`](Instance::samples): `false`
-/// without a callback, inputs or a valid step.
+/// without a callback, inputs or a valid step, or when the instance may not step
+/// (the step then reports why).
 ///
 /// # Safety
 /// This module's contract.
-unsafe fn intermediate_inputs<M: Model>(
-    c: Fmi3Instance,
-    t: f64,
-    h: f64,
-) -> Result<bool, Fmi3Status> {
+unsafe fn intermediate_inputs<M: Model>(c: Fmi3Instance, t: f64, h: f64) -> bool {
     let n = M::DECLARATION.inputs.len();
     let provided = xml::intermediate_update(&M::DECLARATION);
     if c.is_null() || !provided || !(h > 0.0 && h.is_finite() && t.is_finite()) {
-        return Ok(false);
+        return false;
     }
+    let component = c.cast::<Component<M>>();
     // SAFETY: c is a live instance of M (this module's contract); the borrow ends
     // with this statement.
-    let hook = unsafe { (*c.cast::<Component<M>>()).intermediate_update };
+    let hook = unsafe { (*component).intermediate_update };
     let Some((callback, environment)) = hook else {
-        return Ok(false);
+        return false;
     };
     for (k, time) in [t + 0.5 * h, t + h].into_iter().enumerate() {
-        let enter = |i: &mut Instance<M>| {
+        {
+            // SAFETY: c is a live instance of M; this borrow ends with the block,
+            // before the importer's callback, which borrows the instance itself
+            // (fmi3SetFloat64).
+            let i = unsafe { &mut (*component).instance };
+            if !Call::DoStep.allowed_in(i.data.machine) {
+                // Not allowed now (or an input set in the callback failed): the
+                // step itself reports it.
+                return false;
+            }
             i.log_event(|| format!("intermediate update at t = {time} (step {t} + {h})"));
-            let mut set = std::mem::take(&mut i.samples[k].1);
+            let (s, set) = &mut i.samples[k];
+            *s = time - t;
             set.clear();
             set.resize(n, None);
-            i.intermediate = Some(set);
-            Ok(())
-        };
-        // SAFETY: this module's contract.
-        let status = unsafe { simple::<M>(c, Call::DoStep, enter) };
-        if status != Status::Ok as Fmi3Status {
-            return Err(status);
+            i.intermediate = Some(k);
         }
         let (mut early, mut early_time) = (FALSE, time);
         // SAFETY: the importer's callback with the environment it gave to
@@ -460,17 +459,10 @@ unsafe fn intermediate_inputs<M: Model>(
                 &mut early_time,
             )
         };
-        let leave = |i: &mut Instance<M>| {
-            i.samples[k] = (time - t, i.intermediate.take().unwrap_or_default());
-            Ok(())
-        };
-        // SAFETY: this module's contract.
-        let status = unsafe { simple::<M>(c, Call::DoStep, leave) };
-        if status != Status::Ok as Fmi3Status {
-            return Err(status);
-        }
+        // SAFETY: as above; the callback has returned.
+        unsafe { (*component).instance.intermediate = None };
     }
-    Ok(true)
+    true
 }
 
 /// fmi3EnterStepMode: only for FMUs with event mode, which this is not.

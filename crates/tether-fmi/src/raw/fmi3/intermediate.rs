@@ -46,14 +46,24 @@ pub(crate) struct Env3 {
 struct Polynomials {
     /// The FMU's instance and its `fmi3SetFloat64` (set once instantiated).
     target: Option<(fmi3Instance, SetFloat64)>,
-    /// Per input: its value reference, the time `t0` of its value, and its value and
+    /// The inputs with a polynomial: their value references, as one callback sets
+    /// them.
+    vrs: Vec<fmi3ValueReference>,
+    /// Per input of `vrs`: the time `t0` of its value, and its value and
     /// derivatives there (`coefficients[0]` the value, `[j]` the j-th derivative).
-    inputs: Vec<(fmi3ValueReference, f64, Vec<f64>)>,
+    polynomials: Vec<(f64, Vec<f64>)>,
     /// The values set in a callback (reused).
     values: Vec<f64>,
-    vrs: Vec<fmi3ValueReference>,
     /// The first failed `fmi3SetFloat64` of the callback: its status and time.
     failure: Option<(fmi3Status, f64)>,
+}
+
+impl Polynomials {
+    /// Input `i` of `vrs` is held: it has no polynomial any more.
+    fn remove(&mut self, i: usize) {
+        self.vrs.swap_remove(i);
+        self.polynomials.swap_remove(i);
+    }
 }
 
 impl Env3 {
@@ -83,43 +93,65 @@ impl Env3 {
         self.lock().target = Some((instance, set));
     }
 
-    /// Input `vr` takes u(t) = Σ_j c_j (t − t0)^j / j! from now on, `coefficients`
-    /// being its value and derivatives at `t0` (NaN: the start of the coming step,
-    /// [`begin_step`](Self::begin_step)); with no derivatives it is held (no
-    /// polynomial).
-    pub(crate) fn set_polynomial(&self, vr: fmi3ValueReference, t0: f64, coefficients: &[f64]) {
+    /// The inputs `vrs` take the values `values` and, each input with derivatives
+    /// of order ≥ 1 in `derivative_vrs`, the polynomial u(t) = Σ_j c_j (t − t0)^j / j!
+    /// from the coming step on ([`begin_step`](Self::begin_step) sets t0), c_0
+    /// its value and c_j the derivative of order j given (`orders`,
+    /// `derivatives`; those not given are 0). An input without derivatives is
+    /// held (no polynomial). No allocation once every input has had one.
+    pub(crate) fn set_polynomials(
+        &self,
+        vrs: &[fmi3ValueReference],
+        values: &[f64],
+        derivative_vrs: &[fmi3ValueReference],
+        orders: &[i32],
+        derivatives: &[f64],
+    ) {
+        let degree = orders.iter().copied().max().unwrap_or(0).max(0) as usize;
         let mut p = self.lock();
-        let found = p.inputs.iter().position(|(v, _, _)| *v == vr);
-        match (found, coefficients.len() > 1) {
-            (Some(i), true) => {
-                let (_, t, c) = &mut p.inputs[i];
-                *t = t0;
-                c.clear();
-                c.extend_from_slice(coefficients);
+        for (&vr, &value) in vrs.iter().zip(values) {
+            let found = p.vrs.iter().position(|&v| v == vr);
+            let given = derivative_vrs.iter().zip(orders).zip(derivatives);
+            let mut given = given.filter(|((&v, &o), _)| v == vr && o >= 1).peekable();
+            if given.peek().is_none() {
+                if let Some(i) = found {
+                    p.remove(i);
+                }
+                continue;
             }
-            (None, true) => p.inputs.push((vr, t0, coefficients.to_vec())),
-            (Some(i), false) => {
-                p.inputs.swap_remove(i);
+            let i = found.unwrap_or_else(|| {
+                p.vrs.push(vr);
+                p.polynomials.push((f64::NAN, Vec::new()));
+                p.vrs.len() - 1
+            });
+            let (t0, c) = &mut p.polynomials[i];
+            *t0 = f64::NAN;
+            c.clear();
+            c.push(value);
+            c.resize(degree + 1, 0.0);
+            for ((_, &order), &d) in given {
+                c[order as usize] = d;
             }
-            (None, false) => {}
         }
     }
 
     /// The polynomials given for the coming step start at `t`.
     pub(crate) fn begin_step(&self, t: f64) {
         let mut p = self.lock();
-        for (_, t0, _) in &mut p.inputs {
+        for (t0, _) in &mut p.polynomials {
             if t0.is_nan() {
                 *t0 = t;
             }
         }
     }
 
-    /// Input `vr` is held from now on (a value was set on it).
+    /// The inputs `vrs` are held from now on (a value was set on them).
     pub(crate) fn hold(&self, vrs: &[fmi3ValueReference]) {
         let mut p = self.lock();
-        if !p.inputs.is_empty() {
-            p.inputs.retain(|(v, _, _)| !vrs.contains(v));
+        for vr in vrs {
+            if let Some(i) = p.vrs.iter().position(|v| v == vr) {
+                p.remove(i);
+            }
         }
     }
 
@@ -139,15 +171,12 @@ impl Env3 {
         let Some((instance, set)) = p.target else {
             return;
         };
-        if p.inputs.is_empty() || p.failure.is_some() {
+        if p.vrs.is_empty() || p.failure.is_some() {
             return;
         }
-        p.vrs.clear();
         p.values.clear();
-        for (vr, t0, c) in &p.inputs {
-            p.vrs.push(*vr);
-            p.values.push(evaluate(c, time - t0));
-        }
+        let values = p.polynomials.iter().map(|(t0, c)| evaluate(c, time - t0));
+        p.values.extend(values);
         // SAFETY: `instance` is the live instance that is calling back (the callback
         // runs inside its fmi3DoStep), `set` its fmi3SetFloat64; `vrs` and `values`
         // hold `vrs.len()` items each, valid across the call.
