@@ -432,8 +432,8 @@ unsafe fn intermediate_inputs<M: Model>(c: Fmi3Instance, t: f64, h: f64) -> bool
             // (fmi3SetFloat64).
             let i = unsafe { &mut (*component).instance };
             if !Call::DoStep.allowed_in(i.data.machine) {
-                // Not allowed now (or an input set in the callback failed): the
-                // step itself reports it.
+                // Not allowed now (e.g. a call in the previous callback ended
+                // fatally): the step itself reports it.
                 return false;
             }
             i.log_event(|| format!("intermediate update at t = {time} (step {t} + {h})"));

@@ -93,12 +93,12 @@ impl Env3 {
         self.lock().target = Some((instance, set));
     }
 
-    /// The inputs `vrs` take the values `values` and, each input with derivatives
-    /// of order ≥ 1 in `derivative_vrs`, the polynomial u(t) = Σ_j c_j (t − t0)^j / j!
-    /// from the coming step on ([`begin_step`](Self::begin_step) sets t0), c_0
-    /// its value and c_j the derivative of order j given (`orders`,
-    /// `derivatives`; those not given are 0). An input without derivatives is
-    /// held (no polynomial). No allocation once every input has had one.
+    /// Each input of `vrs` with derivatives of order ≥ 1 in `derivative_vrs` takes
+    /// the polynomial u(t) = Σ_j c_j (t − t0)^j / j! from the coming step on
+    /// ([`begin_step`](Self::begin_step) sets t0): c_0 its value in `values`, c_j
+    /// its derivative of order j (`orders`, `derivatives`; 0 where none is given).
+    /// An input without derivatives is held (no polynomial). No allocation once
+    /// every input has had one.
     pub(crate) fn set_polynomials(
         &self,
         vrs: &[fmi3ValueReference],
