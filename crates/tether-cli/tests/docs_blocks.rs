@@ -9,8 +9,7 @@
 //! tests/test_docs.py.
 //!
 //! The commands run in a scratch folder where `examples`, `target`, `tests`
-//! and `tools` are links to the repository's (and `reference-fmus` to
-//! `../shared/reference-fmus`), so that what they write lands
+//! and `tools` are links to the repository's, so that what they write lands
 //! where the docs say (`target/…`) or in the scratch folder. It also holds
 //! `host.token`, the token file docs/remote.md makes; a `tether host` line
 //! starts a host that serves the blocks after it and ends with the test.
@@ -80,19 +79,13 @@ fn blocks() -> Vec<Block> {
     out
 }
 
-/// A scratch folder with links to the repository's folders, and
-/// `reference-fmus` to the Reference FMUs beside the repository
-/// (`../shared/reference-fmus`), where the docs' FMI 3.0 examples find them.
+/// A scratch folder with links to the repository's folders (the docs' FMI 3.0
+/// examples find the Reference FMUs in `tests/fixtures/reference-fmus`).
 fn scratch() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     for name in ["examples", "target", "tests", "tools"] {
         std::os::unix::fs::symlink(root().join(name), dir.path().join(name)).unwrap();
     }
-    std::os::unix::fs::symlink(
-        root().join("../shared/reference-fmus"),
-        dir.path().join("reference-fmus"),
-    )
-    .unwrap();
     dir
 }
 

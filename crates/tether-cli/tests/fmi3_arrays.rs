@@ -1,5 +1,5 @@
 //! FMI 3.0 arrays wherever a variable is named, on the Reference FMU `StateSpace`
-//! (third-party, `../shared/reference-fmus/fmi3`): whole arrays and elements set as
+//! (third-party, vendored in `tests/fixtures/reference-fmus/fmi3`): whole arrays and elements set as
 //! start values (`tether simulate --set`, a system file's `parameters`), elements in a
 //! constraint's expressions and `drives`, element columns in `tether run`, and one
 //! clear line for every name that does not fit.
@@ -13,14 +13,15 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn statespace() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/reference-fmus/fmi3/StateSpace.fmu")
+/// The Reference FMU `StateSpace`; `None` where its binary does not run (the test
+/// skips, see `tether_fmu_build::fixture_fmu`).
+fn statespace() -> Option<PathBuf> {
+    tether_fmu_build::fixture_fmu("reference-fmus/fmi3/StateSpace.fmu")
 }
 
-fn feedthrough() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/reference-fmus/fmi3/Feedthrough.fmu")
+/// The Reference FMU `Feedthrough`, as [`statespace`].
+fn feedthrough() -> Option<PathBuf> {
+    tether_fmu_build::fixture_fmu("reference-fmus/fmi3/Feedthrough.fmu")
 }
 
 fn oscillator() -> PathBuf {
@@ -80,7 +81,7 @@ const D: f64 = 1.0;
 const F0: f64 = 10.0;
 
 /// The system file: the method and the macro step.
-fn joined(method: &str, step: f64) -> String {
+fn joined(method: &str, step: f64, ss: &Path) -> String {
     let (k, d) = (C / M2, D / M2);
     let b = 1.0 / M2;
     format!(
@@ -120,7 +121,7 @@ acceleration = "ss.y[3] - mass1.a"
 drives = "mass1.F - ss.u[1]"
 "#,
         osc = oscillator().display(),
-        ss = statespace().display(),
+        ss = ss.display(),
     )
 }
 
@@ -194,15 +195,18 @@ const BAUMGARTE_1: &str = "kind = \"baumgarte\"\nbeta = 2e-3\ngamma = 1e-6";
 /// (|λ| ≈ 5.4), the constraint held to 1e-6.
 #[test]
 fn statespace_joined_to_the_oscillator_follows_the_closed_form_of_the_joined_masses() {
+    let Some(ss) = statespace() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     for method in [WEIGHTED_2, BAUMGARTE_1] {
-        let csv = run(&joined(method, 1e-3), dir.path());
+        let csv = run(&joined(method, 1e-3, &ss), dir.path());
         let (header, _) = read_csv(&csv);
         for column in ["ss.y[1]", "ss.y[2]", "ss.y[3]"] {
             assert!(header.iter().any(|h| h == column), "{column} in {header:?}");
         }
         let fine = errors(&csv);
-        let coarse = errors(&run(&joined(method, 2e-3), dir.path()));
+        let coarse = errors(&run(&joined(method, 2e-3, &ss), dir.path()));
         eprintln!(
             "{method:?}: errors (x, v, λ after 0.1 s, |g|) H = 1e-3 {fine:?}, H = 2e-3 {coarse:?}"
         );
@@ -231,7 +235,9 @@ fn statespace_with_arrays_set_equals_fmpy() {
     let dir = tempfile::tempdir().unwrap();
     let ours = dir.path().join("tether.csv");
     let theirs = dir.path().join("fmpy.csv");
-    let fmu = statespace();
+    let Some(fmu) = statespace() else {
+        return;
+    };
     let out = tether(&[
         "simulate",
         fmu.to_str().unwrap(),
@@ -308,8 +314,11 @@ fn statespace_with_arrays_set_equals_fmpy() {
 /// appears and the valid range.
 #[test]
 fn array_names_that_do_not_fit_are_refused_in_one_line() {
+    let Some(ss) = statespace() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
-    let base = joined(WEIGHTED_2, 1e-3);
+    let base = joined(WEIGHTED_2, 1e-3, &ss);
     let case = |from: &str, to: &str| {
         assert!(base.contains(from), "{from}");
         let file = dir.path().join("bad.toml");
@@ -368,7 +377,7 @@ fn array_names_that_do_not_fit_are_refused_in_one_line() {
         "{line}"
     );
     // tether simulate --set: the same checks.
-    let fmu = statespace();
+    let fmu = &ss;
     let line = one_line(&tether(&[
         "simulate",
         fmu.to_str().unwrap(),
@@ -391,7 +400,9 @@ fn array_names_that_do_not_fit_are_refused_in_one_line() {
 #[test]
 fn the_reference_statespace_refuses_its_structural_parameters() {
     let dir = tempfile::tempdir().unwrap();
-    let fmu = statespace();
+    let Some(fmu) = statespace() else {
+        return;
+    };
     let out = tether(&[
         "simulate",
         fmu.to_str().unwrap(),
@@ -418,7 +429,9 @@ fn the_reference_statespace_refuses_its_structural_parameters() {
 #[test]
 fn feedthrough_takes_typed_values_and_64_bit_integers_exactly() {
     let dir = tempfile::tempdir().unwrap();
-    let fmu = feedthrough();
+    let Some(fmu) = feedthrough() else {
+        return;
+    };
     let csv = dir.path().join("out.csv");
     let simulate = |sets: &[&str]| {
         let mut args = vec![
@@ -488,7 +501,9 @@ fn feedthrough_takes_typed_values_and_64_bit_integers_exactly() {
 #[test]
 fn a_system_records_64_bit_integers_exactly_and_a_connection_refuses_what_a_float_rounds() {
     let dir = tempfile::tempdir().unwrap();
-    let fmu = feedthrough();
+    let Some(fmu) = feedthrough() else {
+        return;
+    };
     let system = |connect: &str| {
         format!(
             r#"
@@ -789,6 +804,9 @@ isolation = "process"
 /// previous macro point: y[2](T_n) = 2·x(T_{n−1}), bit for bit.
 #[test]
 fn signal_connections_take_array_elements() {
+    let Some(ss) = statespace() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let zeros = "[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]";
     let toml = format!(
@@ -821,7 +839,7 @@ from = "ss.y[2]"
 to = "mass2.F_ext"
 "#,
         osc = oscillator().display(),
-        ss = statespace().display(),
+        ss = ss.display(),
     );
     let (header, rows) = read_csv(&run(&toml, dir.path()));
     let col = |name: &str| header.iter().position(|h| h == name).unwrap();

@@ -264,6 +264,40 @@ pub fn workspace_root() -> Result<PathBuf, Error> {
         .ok_or(Error::NoWorkspace { start })
 }
 
+/// Whether this host runs the binaries of the vendored third-party test FMUs
+/// (`tests/fixtures/`): they are built for x86_64 Linux only.
+pub const FIXTURE_BINARIES_RUN: bool = cfg!(all(target_os = "linux", target_arch = "x86_64"));
+
+/// A vendored third-party test FMU, `<root>/tests/fixtures/<relative>` (for example
+/// `reference-fmus/fmi3/StateSpace.fmu`), for a test that loads its binary.
+///
+/// On a host where the binaries do not run ([`FIXTURE_BINARIES_RUN`]) it prints one
+/// line naming the test's FMU and returns `None`, so the test skips; with `CI` set it
+/// panics instead, so that CI cannot pass by skipping.
+pub fn fixture_fmu(relative: &str) -> Option<PathBuf> {
+    let path = fixture_path(relative);
+    if FIXTURE_BINARIES_RUN {
+        return Some(path);
+    }
+    let why = format!(
+        "{relative}: skipped, its binaries are built for x86_64 Linux and this host is {} {}",
+        std::env::consts::ARCH,
+        std::env::consts::OS
+    );
+    assert!(std::env::var_os("CI").is_none(), "{why} (CI is set)");
+    eprintln!("{why}");
+    None
+}
+
+/// The path of a vendored test file, `<root>/tests/fixtures/<relative>`, for reading it
+/// (its model description) on any host. Panics when the workspace root cannot be found.
+pub fn fixture_path(relative: &str) -> PathBuf {
+    workspace_root()
+        .expect("the workspace root (a Cargo.toml with [workspace])")
+        .join("tests/fixtures")
+        .join(relative)
+}
+
 /// Builds the workspace crate `name` in release mode and packages it as FMI 2.0
 /// into `<root>/target/fmus/<name>.fmu`. Cached per process; a file lock serializes
 /// concurrent processes (parallel test binaries).

@@ -510,11 +510,11 @@ fn check_range(kind: &VariableKind, value: &StartValue) -> Result<(), String> {
 mod tests {
     use super::*;
 
-    /// The Reference FMU `StateSpace` (beside the repository): `y` has `r`
+    /// The Reference FMU `StateSpace` (tests/fixtures/reference-fmus): `y` has `r`
     /// elements, `C` is `r`×`n`.
     fn state_space() -> tether_fmi::Fmu {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../../shared/reference-fmus/fmi3/StateSpace.fmu");
+            .join("../../tests/fixtures/reference-fmus/fmi3/StateSpace.fmu");
         tether_fmi::Fmu::open_unloaded(&path, &Default::default()).unwrap()
     }
 

@@ -236,15 +236,15 @@ fn a_deeply_nested_description_is_one_error() {
     );
 }
 
-/// `modelDescription.xml` of an FMI 3.0 Reference FMU (`../shared/reference-fmus/fmi3`
-/// from the repository root).
+/// `modelDescription.xml` of an FMI 3.0 Reference FMU (`tests/fixtures/reference-fmus/fmi3`
+/// in the repository).
 fn reference_fmi3(model: &str) -> ModelDescription {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/reference-fmus/fmi3")
+        .join("../../tests/fixtures/reference-fmus/fmi3")
         .join(format!("{model}.fmu"));
     let file = std::fs::File::open(&path).unwrap_or_else(|e| {
         panic!(
-            "{}: {e} (the Reference FMUs are beside the repository)",
+            "{}: {e} (the Reference FMUs vendored in tests/fixtures)",
             path.display()
         )
     });
@@ -387,7 +387,7 @@ fn fmi3_units_types_and_every_reference_model_parse() {
 #[test]
 fn fmi3_without_co_simulation_is_refused_in_one_line() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/reference-fmus/fmi3/Clocks.fmu");
+        .join("../../tests/fixtures/reference-fmus/fmi3/Clocks.fmu");
     let file = std::fs::File::open(&path).unwrap();
     let mut archive = zip::ZipArchive::new(file).unwrap();
     let mut entry = archive.by_name("modelDescription.xml").unwrap();
