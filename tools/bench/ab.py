@@ -9,7 +9,7 @@ old, new, new, old, old, new, ... so that a drift of the machine's load hits
 both alike. Prints every run's time per macro step, the two medians and the
 median gain of NEW over OLD in % (positive: NEW is faster).
 
-    cargo build --release -p tether-bench --example steps
+    cargo build --profile bench -p tether-bench --example steps
     cp target/release/examples/steps /tmp/steps-new
     tools/bench/ab.py /tmp/steps-old /tmp/steps-new examples/double_pendulum.toml
     tools/bench/ab.py OLD NEW examples/3d_revolute.toml --count 20 --steps 2000 -- --order 0

@@ -5,7 +5,7 @@
 //! floor instead of Tether.
 //!
 //! ```sh
-//! cargo build --release -p tether-bench --example steps
+//! cargo build --profile bench -p tether-bench --example steps
 //! target/release/examples/steps 20000 --system examples/double_pendulum.toml
 //! valgrind --tool=callgrind target/release/examples/steps 10000 [--floor]
 //! valgrind --tool=callgrind target/release/examples/steps 30000 [--floor]

@@ -1,9 +1,11 @@
 //! Build workspace FMU crates and package them as `.fmu` archives.
 //!
 //! - [`package`]: a built FMU cdylib → `<out_dir>/<modelIdentifier>.fmu`.
-//! - [`workspace_fmu`]: `cargo build --release -p <name>` into a separate target dir
+//! - [`workspace_fmu`]: `cargo build --profile fmu -p <name>` into a separate target dir
 //!   (`target/fmu-build`, so it works from inside `cargo test`), then [`package`] into
 //!   `target/fmus/`. Cached per process, serialized across processes by a file lock.
+//!   The `fmu` profile (the workspace's Cargo.toml) builds the same code wherever the
+//!   FMUs are used: the README's run, the tests and the bench.
 //! - [`workspace_fmus`]: the same for every crate under `fmus/`.
 //!
 //! Every kit-built library is both an FMI 2.0 and an FMI 3.0 FMU (one model, two C
@@ -298,7 +300,10 @@ pub fn fixture_path(relative: &str) -> PathBuf {
         .join(relative)
 }
 
-/// Builds the workspace crate `name` in release mode and packages it as FMI 2.0
+/// The cargo profile of the workspace FMUs (`[profile.fmu]` in the workspace's Cargo.toml).
+pub const FMU_PROFILE: &str = "fmu";
+
+/// Builds the workspace crate `name` with the [`FMU_PROFILE`] and packages it as FMI 2.0
 /// into `<root>/target/fmus/<name>.fmu`. Cached per process; a file lock serializes
 /// concurrent processes (parallel test binaries).
 pub fn workspace_fmu(name: &str) -> Result<PathBuf, Error> {
@@ -334,13 +339,27 @@ pub fn workspace_fmu_as(name: &str, version: FmiVersion) -> Result<PathBuf, Erro
     Ok(path)
 }
 
+/// Builds `name` and packages it. The first build of a process builds every crate under
+/// `fmus/` with it, in one cargo run: cargo then compiles them side by side on every
+/// core, and a later call finds them built.
 fn build_and_package(root: &Path, name: &str, version: FmiVersion) -> Result<PathBuf, Error> {
+    static ALL_BUILT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
     let build_dir = root.join("target").join("fmu-build");
+    let mut names = vec![name.to_string()];
+    if !ALL_BUILT.load(std::sync::atomic::Ordering::Relaxed) {
+        names.extend(workspace_fmu_names()?.into_iter().filter(|n| n != name));
+    }
+    let packages: Vec<String> = names
+        .iter()
+        .flat_map(|n| ["-p".into(), n.clone()])
+        .collect();
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let mut command = Command::new(&cargo);
     command
         .current_dir(root)
-        .args(["build", "--release", "-p", name, "--target-dir"])
+        .args(["build", "--profile", FMU_PROFILE])
+        .args(&packages)
+        .arg("--target-dir")
         .arg(&build_dir);
     // The outer cargo (e.g. `cargo test`) may have set these for itself.
     for var in [
@@ -354,8 +373,9 @@ fn build_and_package(root: &Path, name: &str, version: FmiVersion) -> Result<Pat
         command.env_remove(var);
     }
     let shown = format!(
-        "{} build --release -p {name} --target-dir {}",
+        "{} build --profile {FMU_PROFILE} {} --target-dir {}",
         cargo.to_string_lossy(),
+        packages.join(" "),
         build_dir.display()
     );
     let output = command.output().map_err(|source| Error::Spawn {
@@ -373,10 +393,11 @@ fn build_and_package(root: &Path, name: &str, version: FmiVersion) -> Result<Pat
             stderr_tail,
         });
     }
+    ALL_BUILT.store(true, std::sync::atomic::Ordering::Relaxed);
     let (_, suffix) = PLATFORM;
     let prefix = if cfg!(windows) { "" } else { "lib" };
     let library = build_dir
-        .join("release")
+        .join(FMU_PROFILE)
         .join(format!("{prefix}{}.{suffix}", name.replace('-', "_")));
     if !library.is_file() {
         return Err(Error::MissingLibrary {
