@@ -3,7 +3,7 @@
 //! (`crates/tether-py/bench/overhead.py`).
 //!
 //! ```sh
-//! cargo run --profile wheel -p tether-master --example run_in_memory -- SYSTEM.toml [STOP [PARALLEL]]
+//! cargo run --release -p tether-master --example run_in_memory -- SYSTEM.toml [STOP [PARALLEL]]
 //! ```
 //!
 //! Prints the in-process wall seconds of setup and run (`Simulation::new`

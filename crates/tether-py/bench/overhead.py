@@ -3,7 +3,7 @@ oscillator with `tether.run` against the same run through the Rust library
 (`crates/tether-master/examples/run_in_memory.rs`, built with the wheel's
 profile), alternated, each timed inside its own process.
 
-    cargo build --profile wheel -p tether-master --example run_in_memory
+    cargo build --release -p tether-master --example run_in_memory
     python crates/tether-py/bench/overhead.py [--runs 10] [--stop 100] [--parallel off]
 
 Both time the setup (FMUs loaded, initialised) and the run with its results
@@ -33,10 +33,10 @@ def main() -> None:
     p.add_argument("--stop", type=float, default=100.0, help="stop time (H = 1e-3)")
     p.add_argument("--parallel", default="off", help="auto, on or off (both sides)")
     p.add_argument("--system", default=str(ROOT / "examples" / "oscillator.toml"))
-    p.add_argument("--rust", default=str(ROOT / "target" / "wheel" / "examples" / "run_in_memory"))
+    p.add_argument("--rust", default=str(ROOT / "target" / "release" / "examples" / "run_in_memory"))
     a = p.parse_args()
     if not os.path.exists(a.rust):
-        sys.exit(f"{a.rust} is missing: cargo build --profile wheel -p tether-master --example run_in_memory")
+        sys.exit(f"{a.rust} is missing: cargo build --release -p tether-master --example run_in_memory")
     times = {"rust wall": [], "python wall": [], "rust cpu": [], "python cpu": []}
     rows = None
     for i in range(a.runs):
