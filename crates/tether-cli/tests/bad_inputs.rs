@@ -738,6 +738,31 @@ fn array_counts_are_bounded() {
     assert!(!dir.path().join("system.csv").exists());
 }
 
+/// A placeholder nested 20 000 deep (a 40 KB system file; the parser recurses once a
+/// level) is one error line naming the file, the block and the limit, with the text
+/// cut short: not a stack overflow.
+#[test]
+fn a_placeholder_nested_beyond_the_limit_is_one_error_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let deep = format!("\"{{{}1{}}}\"", "(".repeat(20_000), ")".repeat(20_000));
+    let sys = system(dir.path(), |t| {
+        swap(
+            swap(t, "name = \"mass2\"\n", "name = \"mass2_{i}\"\ncount = 1\n"),
+            "parameters = { m = 2.0",
+            &format!("parameters = {{ x0 = {deep}, m = 2.0"),
+        )
+    });
+    let line = run_error(
+        &sys,
+        &[
+            &shown(&sys),
+            "[[instance]] block 2 (count = 1), i = 0: nested more than 64 deep (the limit) at 65",
+            "(40001 characters)",
+        ],
+    );
+    assert!(line.len() < 600, "{line}");
+}
+
 /// 100 000 constraints between the same two masses are within the block limits, but
 /// each couples every other: an interface Jacobian of 10¹⁰ entries. One error naming
 /// the file, before the matrices are allocated (docs/system-file.md, "Limits").

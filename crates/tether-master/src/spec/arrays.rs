@@ -176,6 +176,11 @@ impl std::fmt::Display for Number {
     }
 }
 
+/// How deep parentheses, `log2(` and signs may nest in a placeholder: the parser
+/// recurses once a level, and a hostile system file must get an error, not a stack
+/// overflow.
+const MAX_NESTING: usize = 64;
+
 /// The value of `expr` at `i`.
 fn evaluate(expr: &str, i: i64) -> Result<Number, String> {
     let mut parser = Parser {
@@ -183,6 +188,7 @@ fn evaluate(expr: &str, i: i64) -> Result<Number, String> {
         bytes: expr.as_bytes(),
         pos: 0,
         i,
+        depth: 0,
     };
     let value = parser.sum()?;
     parser.skip_spaces();
@@ -197,15 +203,29 @@ struct Parser<'a> {
     bytes: &'a [u8],
     pos: usize,
     i: i64,
+    /// The nesting level of the factor being read.
+    depth: usize,
 }
 
 impl Parser<'_> {
     fn error(&self, expected: &str) -> String {
         format!(
-            "expected {expected} at {} in \"{{{}}}\"",
+            "expected {expected} at {} in {}",
             self.pos + 1,
-            self.text
+            self.quoted()
         )
+    }
+
+    /// The placeholder as the user wrote it, cut after 200 characters.
+    fn quoted(&self) -> String {
+        match self.text.char_indices().nth(200) {
+            Some((cut, _)) => format!(
+                "\"{{{}…\" ({} characters)",
+                &self.text[..cut],
+                self.text.chars().count()
+            ),
+            None => format!("\"{{{}}}\"", self.text),
+        }
     }
 
     fn skip_spaces(&mut self) {
@@ -243,7 +263,22 @@ impl Parser<'_> {
         Ok(left)
     }
 
+    /// A factor, at most [`MAX_NESTING`] levels deep.
     fn factor(&mut self) -> Result<Number, String> {
+        if self.depth == MAX_NESTING {
+            return Err(format!(
+                "nested more than {MAX_NESTING} deep (the limit) at {} in {}",
+                self.pos + 1,
+                self.quoted()
+            ));
+        }
+        self.depth += 1;
+        let value = self.nested_factor();
+        self.depth -= 1;
+        value
+    }
+
+    fn nested_factor(&mut self) -> Result<Number, String> {
         match self.peek() {
             Some(b'-') => {
                 self.pos += 1;
@@ -301,7 +336,7 @@ impl Parser<'_> {
                 self.pos += 1;
                 let x = argument.real();
                 if x.is_nan() || x < 1.0 {
-                    return Err(format!("log2 of {x} in \"{{{}}}\" (needs ≥ 1)", self.text));
+                    return Err(format!("log2 of {x} in {} (needs ≥ 1)", self.quoted()));
                 }
                 Ok(Number::Integer(x.log2().floor() as i64))
             }
@@ -352,6 +387,28 @@ mod tests {
         assert_eq!(at("-i * 1.5", 2), Number::Real(-3.0));
         for bad in ["i +", "j", "(i", "i / 0", "log2(0)", "1.2.3"] {
             assert!(evaluate(bad, 1).is_err(), "{bad}");
+        }
+    }
+
+    /// Parentheses, `log2(` and signs nested 10⁵ deep are one error naming the
+    /// limit, the position and the start of the text, not a stack overflow; 63
+    /// parentheses or signs around a number (64 levels) evaluate.
+    #[test]
+    fn nesting_beyond_the_limit_is_an_error() {
+        let deep =
+            |n: usize, open: &str, close: &str| format!("{}1{}", open.repeat(n), close.repeat(n));
+        for (open, close) in [("(", ")"), ("log2(", ")"), ("-", "")] {
+            let error = evaluate(&deep(100_000, open, close), 0).unwrap_err();
+            assert!(
+                error.starts_with("nested more than 64 deep (the limit) at ")
+                    && error.ends_with(" characters)")
+                    && error.len() < 400,
+                "{error}"
+            );
+        }
+        for (open, close) in [("(", ")"), ("-", "")] {
+            let at_limit = deep(MAX_NESTING - 1, open, close);
+            assert!(evaluate(&at_limit, 0).is_ok(), "{open}");
         }
     }
 
