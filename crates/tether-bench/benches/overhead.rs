@@ -780,7 +780,47 @@ fn main() -> std::process::ExitCode {
     if run("export") {
         bench_export();
     }
+    if run("decay") {
+        bench_decay();
+    }
     std::process::ExitCode::SUCCESS
+}
+
+/// A long run of a system at rest: examples/oscillator.toml (Dop853 FMUs) to t = 800,
+/// where its states and multiplier have decayed below the smallest normal number
+/// (from about t = 207 on). The wall time of 1000 macro steps just before t = 10 and
+/// just before t = 800, in the same run, repeated; goal ≤ 1.5× (docs/fmu-kit.md:
+/// the kit's step sets subnormal numbers to zero).
+fn bench_decay() {
+    println!("\n== decay: the oscillator example at t = 10 and at t = 800 ==");
+    let reps = reps().min(5);
+    let mut spec = Case::example(false, 0).spec();
+    spec.experiment.stop = 800.0;
+    let h = spec.experiment.step;
+    let (mut early, mut late) = (Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let mut sim = Simulation::new(&spec).expect("simulation");
+        // The wall time a step of the 1000 macro steps that end at `until`.
+        let mut timed = |until: f64| {
+            while sim.time() < until - 1000.5 * h {
+                sim.step().expect("macro step");
+            }
+            let clock = Instant::now();
+            while sim.time() < until - 0.5 * h {
+                sim.step().expect("macro step");
+            }
+            clock.elapsed().as_secs_f64() / 1000.0
+        };
+        early.push(timed(10.0));
+        late.push(timed(800.0));
+    }
+    let ratio = median(late.clone()) / median(early.clone());
+    println!(
+        "  a step before t = 10 {}, before t = 800 {}: t = 800 / t = 10 {ratio:.2}x (goal <= 1.5x: {})",
+        us2(&early),
+        us2(&late),
+        if ratio <= 1.5 { "PASS" } else { "FAIL" }
+    );
 }
 
 /// The exported FMU's own cost: the rigid pair with exact FMUs, 10⁵

@@ -5,6 +5,7 @@
 use crate::declaration::{Slot, VarType};
 use crate::input::{eval_all, InputJet};
 use crate::instance::{Failure, Instance, Outcome};
+use crate::integrate;
 use crate::machine::MachineState;
 use crate::model::Model;
 
@@ -159,7 +160,9 @@ impl<M: Model> Instance<M> {
                     self.data.reals[i] = value;
                     self.model = None;
                 }
-                Slot::Input(i) => self.data.inputs[i] = InputJet::constant(value),
+                Slot::Input(i) => {
+                    self.data.inputs[i] = InputJet::constant(integrate::settled(value))
+                }
                 _ => {}
             }
         }
@@ -256,9 +259,9 @@ impl<M: Model> Instance<M> {
             if let Slot::Input(i) = self.slots[vr as usize] {
                 let jet = &mut self.data.inputs[i];
                 if order == 1 {
-                    jet.d1 = value
+                    jet.d1 = integrate::settled(value)
                 } else {
-                    jet.d2 = value
+                    jet.d2 = integrate::settled(value)
                 }
             }
         }

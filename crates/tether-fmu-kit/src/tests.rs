@@ -320,6 +320,51 @@ fn dop853_meets_the_tolerance_on_exponential_decay() {
     assert!((get(&mut inst, Z) - (-3.0f64).exp()).abs() < 1e-10);
 }
 
+/// An input value or derivative set as a subnormal number is stored as 0, and a
+/// state that is subnormal at the end of a step is 0: arithmetic on subnormals
+/// would slow every later step (docs/fmu-kit.md). Normal values are left as they are.
+#[test]
+fn subnormal_states_and_inputs_are_zero_in_a_step() {
+    let tiny = f64::MIN_POSITIVE / 8.0;
+    assert!(tiny.is_subnormal());
+    let mut inst = initialized(0.0);
+    inst.data.states[0] = tiny;
+    assert_eq!(
+        inst.call(Call::SetReal, |i| i.set_real(&[U], &[tiny])),
+        Status::Ok
+    );
+    let set = inst.call(Call::SetRealInputDerivatives, |i| {
+        i.set_real_input_derivatives(&[U, U], &[1, 2], &[-tiny, 1.0])
+    });
+    assert_eq!(set, Status::Ok);
+    let jet = inst.data.inputs[0];
+    assert_eq!(
+        [jet.value, jet.d1, jet.d2].map(f64::to_bits),
+        [0.0, -0.0, 1.0].map(f64::to_bits)
+    );
+    assert_eq!(
+        inst.call(Call::SetReal, |i| i.set_real(&[U], &[0.0])),
+        Status::Ok
+    );
+    assert_eq!(step(&mut inst, 0.0, 0.1), Status::Ok);
+    assert_eq!(get(&mut inst, Z).to_bits(), 0.0f64.to_bits());
+    // x' = -1e3 x decays through every normal magnitude, never subnormal, to 0.
+    let mut inst = initialized(1e3);
+    let mut smallest = 1.0f64;
+    let mut n = 0;
+    while get(&mut inst, Z) != 0.0 && n < 10_000 {
+        assert_eq!(step(&mut inst, n as f64 * 0.01, 0.01), Status::Ok);
+        let x = get(&mut inst, Z);
+        assert!(x == 0.0 || x.is_normal(), "{x:e} after {n} steps");
+        if x != 0.0 {
+            smallest = smallest.min(x.abs());
+        }
+        n += 1;
+    }
+    assert_eq!(get(&mut inst, Z), 0.0, "after {n} steps");
+    assert!(smallest < 1e-300, "{smallest:e}");
+}
+
 #[test]
 fn communication_points_are_start_plus_n_h_and_checked() {
     let mut inst = initialized(1.0);
