@@ -53,6 +53,8 @@ for step in "${steps[@]}"; do
       # The README installs into python3's pip; here into a virtualenv of the clone.
       python3 -m venv "$work/venv"
       timed python env PYTHON="$work/venv/bin/python" bash -c "$python_cmd --quiet"
+      # The check below runs the oscillator example, whose FMUs `run` and `test` package.
+      [ -f target/fmus/oscillator.fmu ] || cargo xtask fmus >/dev/null
       (cd "$work" && "$work/venv/bin/python" -c \
         'import tether; r = tether.run("tether/examples/oscillator.toml"); print("python: rows", len(r["time"]))') ;;
     *) echo "unknown step '$step' (run, test, python)" >&2; exit 2 ;;

@@ -787,10 +787,10 @@ fn main() -> std::process::ExitCode {
 }
 
 /// A long run of a system at rest: examples/oscillator.toml (Dop853 FMUs) to t = 800,
-/// where its states and multiplier have decayed below the smallest normal number
-/// (from about t = 207 on). The wall time of 1000 macro steps just before t = 10 and
-/// just before t = 800, in the same run, repeated; goal ≤ 1.5× (docs/fmu-kit.md:
-/// the kit's step sets subnormal numbers to zero).
+/// whose values decay below the smallest normal number from about t = 207 on. The
+/// wall time of 1000 macro steps just before t = 10 and just before t = 800, in the
+/// same run, repeated; goal ≤ 1.5× (docs/fmu-kit.md: the kit sets subnormal states
+/// and inputs to zero).
 fn bench_decay() {
     println!("\n== decay: the oscillator example at t = 10 and at t = 800 ==");
     let reps = reps().min(5);
