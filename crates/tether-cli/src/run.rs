@@ -186,7 +186,7 @@ pub fn main(args: Args) -> Result<()> {
     drop(guard);
     // The last recorded row's time: after a failure the failing step's own
     // time may be one step later.
-    let last = sim.last_recorded_time().unwrap_or(spec.experiment.start);
+    let last = tether_master::Time(sim.last_recorded_time().unwrap_or(spec.experiment.start));
     progress.finish();
     let stats = sim.stats();
     if let Some(path) = &args.summary_json {
@@ -233,7 +233,7 @@ pub fn main(args: Args) -> Result<()> {
         Err(e @ tether_master::MasterError::Recording(_)) => {
             Err(anyhow::Error::new(e).context(format!(
                 "run stopped at t = {}: cannot write {}",
-                sim.time(),
+                tether_master::Time(sim.time()),
                 out.display()
             )))
         }

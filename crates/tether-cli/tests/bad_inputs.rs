@@ -738,13 +738,13 @@ fn array_counts_are_bounded() {
     assert!(!dir.path().join("system.csv").exists());
 }
 
-/// A placeholder nested 20 000 deep (a 40 KB system file; the parser recurses once a
-/// level) is one error line naming the file, the block and the limit, with the text
-/// cut short: not a stack overflow.
+/// A placeholder nested 10⁵ deep (a 200 KB system file; the parser recurses once a
+/// level) is one error line naming the file, the block's line, the block and the
+/// limit, with the text cut short around the error: not a stack overflow.
 #[test]
 fn a_placeholder_nested_beyond_the_limit_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
-    let deep = format!("\"{{{}1{}}}\"", "(".repeat(20_000), ")".repeat(20_000));
+    let deep = format!("\"{{{}1{}}}\"", "(".repeat(100_000), ")".repeat(100_000));
     let sys = system(dir.path(), |t| {
         swap(
             swap(t, "name = \"mass2\"\n", "name = \"mass2_{i}\"\ncount = 1\n"),
@@ -755,12 +755,90 @@ fn a_placeholder_nested_beyond_the_limit_is_one_error_line() {
     let line = run_error(
         &sys,
         &[
-            &shown(&sys),
-            "[[instance]] block 2 (count = 1), i = 0: nested more than 64 deep (the limit) at 65",
-            "(40001 characters)",
+            &format!(
+                "system file {}: line 22: [[instance]] block 2 (count = 1), i = 0: nested more \
+                 than 64 deep (the limit) at 65",
+                shown(&sys)
+            ),
+            "(200003 characters, » marks the column)",
         ],
     );
     assert!(line.len() < 600, "{line}");
+}
+
+/// TOML arrays and inline tables nested 10⁵ deep: the TOML reader's own limit, one
+/// line naming the file, the line and the limit.
+#[test]
+fn toml_nested_beyond_the_limit_is_one_error_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 100_000;
+    for (deep, column) in [
+        (format!("{}{}", "[".repeat(n), "]".repeat(n)), 88),
+        (format!("{}1{}", "{ a = ".repeat(n), "}".repeat(n)), 488),
+    ] {
+        let sys = system(dir.path(), |t| {
+            swap(t, "[experiment]", &format!("deep = {deep}\n[experiment]"))
+        });
+        let line = run_error(
+            &sys,
+            &[&format!(
+                "system file {}: line 4, column {column}: arrays and inline tables nested \
+                 more than 80 deep (the limit)",
+                shown(&sys)
+            )],
+        );
+        assert!(line.len() < 300, "{line}");
+    }
+}
+
+/// A constraint expression of 10⁵ parentheses (a linear expression has none): one
+/// line, the expression cut to 200 characters around the error, which » marks.
+#[test]
+fn a_deeply_parenthesised_constraint_is_one_short_error_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 100_000;
+    let deep = format!("{}mass2.x{} - mass1.x", "(".repeat(n), ")".repeat(n));
+    let sys = system(dir.path(), |t| {
+        swap(
+            t,
+            "position = \"mass2.x - mass1.x\"",
+            &format!("position = \"{deep}\""),
+        )
+    });
+    let line = run_error(
+        &sys,
+        &[
+            "constraint 'link', position: cannot read expression '»(((",
+            "(200017 characters, » marks the column): expected an instance name at column 1",
+        ],
+    );
+    assert!(line.len() < 600, "{line}");
+}
+
+/// A `count` beyond TOML's 64-bit integers, or below zero: its block, its line
+/// and the range.
+#[test]
+fn a_count_out_of_range_names_its_block_and_the_range() {
+    let dir = tempfile::tempdir().unwrap();
+    // The line of the number the TOML reader refuses, else the block's.
+    for (count, line) in [("99999999999999999999", 24), ("-5", 22)] {
+        let sys = system(dir.path(), |t| {
+            swap(
+                t,
+                "name = \"mass2\"\n",
+                &format!("name = \"mass2_{{i}}\"\ncount = {count}\n"),
+            )
+        });
+        let line = run_error(
+            &sys,
+            &[&format!(
+                "system file {}: line {line}: [[instance]] block 2 (count = {count}): count \
+                 must be an integer from 0 to 10000",
+                shown(&sys)
+            )],
+        );
+        assert!(line.len() < 300, "{line}");
+    }
 }
 
 /// 100 000 constraints between the same two masses are within the block limits, but
@@ -1213,14 +1291,14 @@ fn check_results(csv_path: &Path, line: &str, tmp: &Path) -> Csv {
     // The CLI line is "error: run stopped; results up to t = T kept in … : <reason>".
     let reason = &trailer["# incomplete: ".len()..];
     assert!(line.ends_with(reason), "{line:?} vs trailer {reason:?}");
-    let t: f64 = line
+    // The time as messages print it: as the grid gives it.
+    let t = line
         .split("results up to t = ")
         .nth(1)
         .and_then(|rest| rest.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
         .unwrap_or_else(|| panic!("no time in {line:?}"));
     assert_eq!(
-        rows.last().unwrap()[0],
+        tether_master::Time(rows.last().unwrap()[0]).to_string(),
         t,
         "last row is the last accepted step"
     );

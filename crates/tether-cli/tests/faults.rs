@@ -720,19 +720,25 @@ fn a_fifo_as_an_fmu_is_refused() {
     }
 }
 
-/// A signal while the inputs are being opened (here a FIFO as the system
-/// file, which no one writes: the open waits for ever) ends the process at
-/// once with exit code 130 and one line, for SIGINT and SIGTERM alike.
+/// A signal while the inputs are being opened (here the opening of a remote
+/// instance on a host that accepts the connection and never answers: the
+/// master waits up to its 30 s opening time-out) ends the process at once with
+/// exit code 130 and one line, for SIGINT and SIGTERM alike.
 #[test]
 fn a_signal_during_the_open_ends_the_run() {
+    use std::os::unix::fs::PermissionsExt;
     let s = Scratch::new();
-    let fifo = s.path().join("system.toml");
-    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
-    // SAFETY: a NUL-terminated path; creates a FIFO in the test's folder.
-    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let sys = system(s.path(), 0, "");
+    let token = s.path().join("host.token");
+    std::fs::write(&token, "3f9a6c1e0b7d4a2f8e5c9b1d7a3f6e2c\n").unwrap();
+    std::fs::set_permissions(&token, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let silent = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let host = format!("tcp://{}", silent.local_addr().unwrap());
+    let held = std::thread::spawn(move || silent.incoming().take(2).collect::<Vec<_>>());
     for signal in [libc::SIGINT, libc::SIGTERM] {
         let child = s
-            .command(&["run", "system.toml", "--out", "out.csv"])
+            .command(&["run", sys.to_str().unwrap(), "--out", "out.csv"])
+            .args(["--host", &host, "--token-file", "host.token"])
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
@@ -740,7 +746,7 @@ fn a_signal_during_the_open_ends_the_run() {
         std::thread::sleep(std::time::Duration::from_secs(1));
         // SAFETY: a signal to the child this test started and has not reaped.
         unsafe { libc::kill(child.id() as i32, signal) };
-        let out = wait_within(child, 30);
+        let out = wait_within(child, 20);
         assert_eq!(
             out.status.code(),
             Some(130),
@@ -754,6 +760,43 @@ fn a_signal_during_the_open_ends_the_run() {
         assert!(!s.path().join("out.csv").exists());
         assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
     }
+    drop(held);
+}
+
+/// A FIFO (or another special file) as the system file or the SSP is refused
+/// at once, by `run` and `ssp import`: opening it would wait for a writer that
+/// may never come.
+#[test]
+fn a_fifo_as_the_system_file_is_refused_at_once() {
+    let s = Scratch::new();
+    for name in ["system.toml", "system.ssp"] {
+        let fifo = s.path().join(name);
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a NUL-terminated path; creates a FIFO in the test's folder.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let what = if name.ends_with(".ssp") {
+            format!("error: {name}: is a FIFO, not an SSP archive, an SSD file or a folder\n")
+        } else {
+            format!("error: system file {name}: is a FIFO, not a regular file\n")
+        };
+        for args in [
+            &["run", name, "--out", "out.csv"][..],
+            &["ssp", "import", name, "--out", "imported.toml"][..],
+        ] {
+            if args[0] == "ssp" && !name.ends_with(".ssp") {
+                continue;
+            }
+            let child = s
+                .command(args)
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap();
+            let out = wait_within(child, 20);
+            assert_eq!(out.status.code(), Some(1), "{args:?}: {}", stderr(&out));
+            assert_eq!(stderr(&out), what, "{args:?}");
+        }
+    }
+    assert!(!s.path().join("out.csv").exists());
 }
 
 /// A run of the faults FMU in `mode` with `extra` parameters and `coupling`
@@ -855,6 +898,66 @@ fn a_rollback_that_breaks_mid_run_fails_the_run() {
             assert_eq!(failure["message"], reason.as_str());
             assert_eq!(summary["end_time"], 0.5);
         }
+    }
+}
+
+/// The rollback breaks at t = 0.55, between two periodic checks: the check at
+/// t = 0.6 fails, and the rows written since the one that passed (t = 0.5)
+/// were computed with broken restores (the residual limit, off here, would
+/// catch this drift itself at t = 0.584). They stay in the CSV, and the
+/// trailer, the error line and the summary's `failure.unverified_after` name
+/// them; the rows up to t = 0.5 are those of a clean run, bit for bit. In
+/// process and isolated.
+#[test]
+fn rows_written_before_a_failed_rollback_check_are_named() {
+    let s = Scratch::new();
+    let clean = system(s.path(), 0, "");
+    assert!(s.run(&clean, "clean.csv", &["--quiet"]).status.success());
+    let clean = read_csv(&s.path().join("clean.csv"));
+    for isolate in [false, true] {
+        let off = "residual_limit = \"off\"";
+        let (s, out, csv, summary) = broken_rollback_run((12, ", at = 0.55"), off, isolate);
+        let reason = failed_with(&s, &out, &csv, 0.6);
+        assert!(
+            reason.ends_with(
+                "; the rows after t = 0.5 were written before this check failed and are not \
+                 verified"
+            ),
+            "{reason}"
+        );
+        let failure = &summary["failure"];
+        assert_eq!(failure["kind"], "rollback_check", "{failure}");
+        assert_eq!(failure["unverified_after"], 0.5);
+        assert_eq!(failure["message"], reason.as_str());
+        assert_eq!(csv.rows[..=500], clean.rows[..=500], "verified rows");
+        // The rows after it are wrong: the link drifts with the broken restores.
+        let g = csv.rows[0].len() - 1;
+        let drift = csv.rows[501..]
+            .iter()
+            .map(|r| r[g].abs())
+            .fold(0.0, f64::max);
+        let clean_g = clean.rows[501..=600]
+            .iter()
+            .map(|r| r[g].abs())
+            .fold(0.0, f64::max);
+        assert!(drift > 10.0 * clean_g, "{drift} against {clean_g}");
+    }
+}
+
+/// Outputs that change from one read to the next with no step between them
+/// (mode 14, from t = 0.5) are named as such by the periodic check, not blamed
+/// on the restore; in process and isolated.
+#[test]
+fn outputs_that_change_without_a_step_are_named() {
+    for isolate in [false, true] {
+        let off = "residual_limit = \"off\"";
+        let (s, out, csv, summary) = broken_rollback_run((14, ", noise = 1e-9"), off, isolate);
+        let reason = failed_with(&s, &out, &csv, 0.5);
+        let head = "rollback self-check failed for instance 'mass2': output 'x' changes without \
+                    a step: read twice at t = 0.5 with no fmi2DoStep between, it gives ";
+        assert!(reason.starts_with(head), "{reason}");
+        assert!(!reason.contains("not restored"), "{reason}");
+        assert_eq!(summary["failure"]["variable"], "x");
     }
 }
 

@@ -84,6 +84,26 @@ fn isolated_exit_3_is_an_error() {
     );
 }
 
+/// Times in messages read as the grid gives them: the step from the grid point
+/// 9·H = 0.009000000000000001 is "t=0.009" in the error line and the trailer,
+/// while the CSV's time column keeps the value itself.
+#[test]
+fn times_in_messages_read_as_the_grid_gives_them() {
+    assert_eq!(format!("{}", 9.0 * 1e-3), "0.009000000000000001");
+    let s = Scratch::new();
+    let sys = system(s.path(), 4, ", at = 0.009");
+    let out = s.run(&sys, "out.csv", &["--isolate", "--quiet"]);
+    let reason =
+        "instance 'mass2': its host process exited with code 3 during fmi2DoStep at t=0.009";
+    assert_eq!(
+        stderr(&out).lines().last().unwrap_or_default(),
+        format!("error: run stopped; results up to t = 0.009 kept in out.csv (marked incomplete): {reason}")
+    );
+    let csv = read_csv(&s.path().join("out.csv"));
+    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+    assert_eq!(last_time(&csv), 9.0 * 1e-3);
+}
+
 /// An endless loop in `fmi2DoStep` with `--call-timeout`: the host is killed.
 #[test]
 fn isolated_endless_loop_is_ended_by_the_call_timeout() {

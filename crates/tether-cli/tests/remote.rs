@@ -768,6 +768,32 @@ fn bad_remote_keys_are_one_line_errors() {
     }
 }
 
+/// A host that accepts the connection and never answers: after the opening
+/// time-out (30 s) one line names the host and the time-out, exit code 1.
+#[test]
+fn a_silent_host_ends_with_its_time_out_named() {
+    let dir = tempfile::tempdir().unwrap();
+    token(dir.path(), "token", TOKEN, 0o600);
+    let silent = TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = silent.local_addr().unwrap();
+    let held = std::thread::spawn(move || silent.incoming().take(1).collect::<Vec<_>>());
+    let keys = format!("host = \"tcp://{address}\"\ntoken_file = \"token\"\n");
+    let sys = system(dir.path(), "oscillator", &keys);
+    let start = Instant::now();
+    let out = run(dir.path(), &sys, "out.csv", &[]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert_eq!(stderr(&out).lines().count(), 1, "{}", stderr(&out));
+    let line = last_line(&out);
+    assert!(
+        line.ends_with(&format!(
+            "no answer from host {address} within 30 s (read time-out)"
+        )),
+        "{line}"
+    );
+    assert!(start.elapsed() >= Duration::from_secs(30));
+    drop(held);
+}
+
 /// `resources` (placement on Dask workers from Python): `tether run` runs the
 /// instances here, bit for bit as without the key, and says so in one note;
 /// a value that is not a table of positive numbers is one line naming it.

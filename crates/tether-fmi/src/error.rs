@@ -298,7 +298,7 @@ pub enum Error {
     #[error(
         "{function} returned {}Discard on instance '{instance}' at t={time}{messages}",
         api(function)
-    )]
+    , time = crate::Time(*time))]
     Discard {
         /// The FMI function.
         function: &'static str,
@@ -312,7 +312,7 @@ pub enum Error {
 
     /// The FMU asked to end the simulation: its step returned Discard and it
     /// reports that it terminated (FMI 2.0: `fmi2GetBooleanStatus(fmi2Terminated)`).
-    #[error("instance '{instance}' requested the end of the simulation at t = {time} ({})", how.as_deref().unwrap_or("fmi2DoStep returned fmi2Discard with fmi2Terminated = true"))]
+    #[error("instance '{instance}' requested the end of the simulation at t = {time} ({})", how.as_deref().unwrap_or("fmi2DoStep returned fmi2Discard with fmi2Terminated = true"), time = crate::Time(*time))]
     TerminationRequested {
         /// The instance name.
         instance: String,
@@ -328,7 +328,7 @@ pub enum Error {
     #[error(
         "{function} returned {}Error on instance '{instance}' at t={time}{messages}",
         api(function)
-    )]
+    , time = crate::Time(*time))]
     Failed {
         /// The FMI function.
         function: &'static str,
@@ -344,7 +344,7 @@ pub enum Error {
     #[error(
         "{function} returned {}Fatal on instance '{instance}' at t={time}{messages}",
         api(function)
-    )]
+    , time = crate::Time(*time))]
     Fatal {
         /// The FMI function.
         function: &'static str,
@@ -357,7 +357,7 @@ pub enum Error {
     },
 
     /// A function returned `fmi2Pending` (asynchronous stepping is not supported).
-    #[error("{function} returned fmi2Pending on instance '{instance}' at t={time}")]
+    #[error("{function} returned fmi2Pending on instance '{instance}' at t={time}", time = crate::Time(*time))]
     Pending {
         /// The FMI function.
         function: &'static str,
@@ -370,7 +370,7 @@ pub enum Error {
     /// A function returned a status code outside the FMI 2.0 range.
     #[error(
         "{function} returned the unknown status code {code} on instance '{instance}' at t={time}"
-    )]
+    , time = crate::Time(*time))]
     UnknownStatus {
         /// The FMI function.
         function: &'static str,
@@ -383,7 +383,7 @@ pub enum Error {
     },
 
     /// A call was refused because an earlier call of this FMU returned `fmi2Fatal`.
-    #[error("{function} refused on instance '{instance}' at t={time}: the FMU returned {}Fatal earlier{messages}", api(function))]
+    #[error("{function} refused on instance '{instance}' at t={time}: the FMU returned {}Fatal earlier{messages}", api(function), time = crate::Time(*time))]
     FmuDead {
         /// The FMI function that was not called.
         function: &'static str,
@@ -441,7 +441,7 @@ pub enum Error {
 
     /// The host process of an isolated instance ended (crashed, exited, was
     /// killed) during a call.
-    #[error("instance '{instance}': its host process {how} during {function} at t={time}")]
+    #[error("instance '{instance}': its host process {how} during {function} at t={time}", time = crate::Time(*time))]
     HostEnded {
         /// The instance name.
         instance: String,
@@ -455,7 +455,7 @@ pub enum Error {
 
     /// A call of an isolated instance exceeded the call time-out; its host
     /// process was killed.
-    #[error("instance '{instance}': {function} at t={time} did not return within the call time-out of {seconds} s; its host process was killed")]
+    #[error("instance '{instance}': {function} at t={time} did not return within the call time-out of {seconds} s; its host process was killed", time = crate::Time(*time))]
     CallTimeout {
         /// The instance name.
         instance: String,

@@ -113,11 +113,8 @@ impl Fmu {
         })?;
         let dir = if metadata.is_dir() {
             FmuDir::existing(&origin)?
-        } else if !metadata.is_file() {
-            return Err(Error::NotAFile {
-                path: origin,
-                kind: file_kind(&metadata),
-            });
+        } else if let Some(kind) = special_file_kind(&metadata) {
+            return Err(Error::NotAFile { path: origin, kind });
         } else {
             archive::extract(&origin, &options.limits)?
         };
@@ -260,25 +257,30 @@ impl Fmu {
     }
 }
 
-/// What a path that is neither a regular file nor a folder is, for errors.
-fn file_kind(metadata: &std::fs::Metadata) -> &'static str {
+/// What a path that is neither a regular file nor a folder is (`FIFO`,
+/// `character device`, `block device`, `socket`, `special file`), for the one
+/// line that refuses it before it is opened: opening a FIFO waits for a writer
+/// that may never come. `None` for a regular file or a folder.
+pub fn special_file_kind(metadata: &std::fs::Metadata) -> Option<&'static str> {
+    if metadata.is_file() || metadata.is_dir() {
+        return None;
+    }
     #[cfg(unix)]
     {
         use std::os::unix::fs::FileTypeExt;
         let t = metadata.file_type();
         if t.is_fifo() {
-            return "FIFO";
+            return Some("FIFO");
         }
         if t.is_char_device() {
-            return "character device";
+            return Some("character device");
         }
         if t.is_block_device() {
-            return "block device";
+            return Some("block device");
         }
         if t.is_socket() {
-            return "socket";
+            return Some("socket");
         }
     }
-    let _ = metadata;
-    "special file"
+    Some("special file")
 }

@@ -120,8 +120,9 @@ impl Fmi3Instance {
                     return Err(self.invalid(
                         "fmi3DoStep",
                         format!(
-                            "the FMU returned early at t = {} (the step was to end at t = {end}), which earlyReturnAllowed = false forbids",
-                            answers.last_successful_time
+                            "the FMU returned early at t = {} (the step was to end at t = {}), which earlyReturnAllowed = false forbids",
+                            crate::Time(answers.last_successful_time),
+                            crate::Time(end)
                         ),
                     ));
                 }

@@ -69,13 +69,14 @@ pub mod raw;
 pub mod remote;
 mod shared;
 mod state;
+mod time;
 mod uri;
 pub mod xml;
 
 pub use archive::{remove_extractions_now, sweep_leftovers, ArchiveKind, ExtractLimits};
 pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
-pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};
+pub use fmu::{set_debug_logging, special_file_kind, Fmu, InstanceOptions, OpenOptions};
 pub use instance::{Instance, StatusKind};
 pub use instance3::Fmi3Instance;
 pub use interface::{FmuInstance, Inputs, Int, LocalInstance, RunRequest, Slot, SLOTS};
@@ -91,3 +92,4 @@ pub use model_description::{
 pub use placement::{instantiate, Placement};
 pub use raw::Status;
 pub use state::FmuState;
+pub use time::Time;

@@ -151,7 +151,10 @@ pub enum MasterError {
         needed_by: String,
     },
     /// A start value cannot be applied to its variable.
-    #[error("instance '{instance}': cannot set {variable} = {value}: {reason}")]
+    #[error(
+        "instance '{instance}': cannot set {variable} = {}: {reason}",
+        crate::expr::quote(value, None, "", "")
+    )]
     StartValue {
         /// Instance name.
         instance: String,
@@ -163,7 +166,7 @@ pub enum MasterError {
         reason: String,
     },
     /// The interface Jacobian cannot be solved reliably.
-    #[error("singular interface Jacobian ({level} level) at t = {time}{}: condition estimate {condition:.3e} exceeds {limit:.1e}", step.map(|h| format!(" (macro step H = {h:e})")).unwrap_or_default())]
+    #[error("singular interface Jacobian ({level} level) at t = {time}{}: condition estimate {condition:.3e} exceeds {limit:.1e}", step.map(|h| format!(" (macro step H = {h:e})")).unwrap_or_default(), time = crate::Time(*time))]
     SingularJacobian {
         /// Time of the macro point T_{N+1} being solved for.
         time: f64,
@@ -180,7 +183,7 @@ pub enum MasterError {
         step: Option<f64>,
     },
     /// A state, output or multiplier became non-finite or exploded.
-    #[error("coupling diverged at t = {time}: {quantity} = {value:e} (limit {limit:.1e})")]
+    #[error("coupling diverged at t = {time}: {quantity} = {value:e} (limit {limit:.1e})", time = crate::Time(*time))]
     Diverged {
         /// Time of the accepted step.
         time: f64,
@@ -193,7 +196,7 @@ pub enum MasterError {
     },
     /// A constraint or joint condition is broken: its |g| at an accepted point
     /// exceeds `[coupling] residual_limit`.
-    #[error("constraint broken at t = {time}: |{condition}| = {value:e} exceeds residual_limit = {limit:e} (in the condition's units); the coupling does not hold it: a smaller step, another index or method (docs/paper-reproduction.md), check_rollback = \"every_step\" to test the FMUs' rollback at every restore, or residual_limit = \"off\" to run anyway")]
+    #[error("constraint broken at t = {time}: |{condition}| = {value:e} exceeds residual_limit = {limit:e} (in the condition's units); the coupling does not hold it: a smaller step, another index or method (docs/paper-reproduction.md), check_rollback = \"every_step\" to test the FMUs' rollback at every restore, or residual_limit = \"off\" to run anyway", time = crate::Time(*time))]
     ResidualLimit {
         /// Time of the accepted point.
         time: f64,
@@ -206,7 +209,7 @@ pub enum MasterError {
     },
     /// Adaptive steps: a step at the smallest allowed size still misses the
     /// tolerances.
-    #[error("adaptive macro steps: at t = {time} the local error estimate is {error:.2} times the tolerance even at h_min = {h_min:e}; loosen [step_control] rtol/atol or lower h_min, or, if smaller steps do not lower the estimate, choose a method, index and k stable for this system (docs/paper-reproduction.md)")]
+    #[error("adaptive macro steps: at t = {time} the local error estimate is {error:.2} times the tolerance even at h_min = {h_min:e}; loosen [step_control] rtol/atol or lower h_min, or, if smaller steps do not lower the estimate, choose a method, index and k stable for this system (docs/paper-reproduction.md)", time = crate::Time(*time))]
     StepSizeTooSmall {
         /// Start of the step.
         time: f64,
@@ -216,7 +219,7 @@ pub enum MasterError {
         h_min: f64,
     },
     /// An observer asked the run to stop (e.g. the user pressed Ctrl-C).
-    #[error("interrupted ({reason}) at t = {time}")]
+    #[error("interrupted ({reason}) at t = {time}", time = crate::Time(*time))]
     Interrupted {
         /// The last accepted macro time.
         time: f64,
@@ -226,7 +229,7 @@ pub enum MasterError {
     /// An instance asked to end the simulation: `fmi2DoStep` returned
     /// fmi2Discard and `fmi2GetBooleanStatus(fmi2Terminated)` is true.
     /// [`crate::Simulation::run`] ends normally on it (docs/fmi-import.md).
-    #[error("instance '{instance}' requested the end of the simulation at t = {time} (fmi2DoStep returned fmi2Discard with fmi2Terminated = true)")]
+    #[error("instance '{instance}' requested the end of the simulation at t = {time} (fmi2DoStep returned fmi2Discard with fmi2Terminated = true)", time = crate::Time(*time))]
     TerminationRequested {
         /// Instance name.
         instance: String,
@@ -236,7 +239,7 @@ pub enum MasterError {
     },
     /// `fmi2SetFMUstate` does not restore an instance exactly (the rollback
     /// self-check, `[coupling] check_rollback`).
-    #[error("rollback self-check failed for instance '{instance}': {reason}; the predictor/corrector method repeats every macro step from a saved state and needs an exact rollback: use --method explicit (no rollback), or check_rollback = \"off\" to run anyway")]
+    #[error("rollback self-check failed for instance '{instance}': {reason}; the predictor/corrector method repeats every macro step from a saved state and needs an exact rollback: use --method explicit (no rollback), or check_rollback = \"off\" to run anyway{}", unverified_rows(*unverified_after))]
     RollbackCheck {
         /// Instance name.
         instance: String,
@@ -244,11 +247,15 @@ pub enum MasterError {
         variable: String,
         /// What differed, naming the variable, the values and the time.
         reason: String,
+        /// The time of the last rollback check that passed, when rows after
+        /// it were written before this check failed (docs/reliability.md):
+        /// those rows are not verified.
+        unverified_after: Option<f64>,
     },
     /// An instance's coupled output went beyond its divergence limit where it
     /// was read, and the step then failed (crate::culprit): the instance
     /// that produced the value is named, then the failure.
-    #[error("instance '{instance}': output '{variable}' = {value:e} {call} at t = {time} is beyond its divergence limit {limit:.1e} (divergence_factor × its initial size); then: {then}")]
+    #[error("instance '{instance}': output '{variable}' = {value:e} {call} at t = {time} is beyond its divergence limit {limit:.1e} (divergence_factor × its initial size); then: {then}", time = crate::Time(*time))]
     DivergedOutput {
         /// Instance name.
         instance: String,
@@ -266,7 +273,7 @@ pub enum MasterError {
         then: String,
     },
     /// An instance's output is NaN or infinite right after one of its calls.
-    #[error("instance '{instance}': output '{variable}' = {value} {call} at t = {time} (the FMU computed a non-finite value)")]
+    #[error("instance '{instance}': output '{variable}' = {value} {call} at t = {time} (the FMU computed a non-finite value)", time = crate::Time(*time))]
     NonFiniteOutput {
         /// Instance name.
         instance: String,
@@ -321,7 +328,7 @@ pub enum MasterError {
     Worker,
     /// `[signals] strict = true`: an iterated macro step whose exchanged
     /// values did not converge within `[signals] iterations`.
-    #[error("[signals] strict: the macro step from t = {time} did not converge in {iterations} iterations: |Δv| of connection {connection} is {residual:.1e} times the tolerance {tolerance:e} (raise iterations, loosen tolerance, or try solver = \"newton\")")]
+    #[error("[signals] strict: the macro step from t = {time} did not converge in {iterations} iterations: |Δv| of connection {connection} is {residual:.1e} times the tolerance {tolerance:e} (raise iterations, loosen tolerance, or try solver = \"newton\")", time = crate::Time(*time))]
     SignalsNotConverged {
         /// T_N, the step's start.
         time: f64,
@@ -377,6 +384,19 @@ impl MasterError {
         }
     }
 
+    /// A failed rollback check after rows were written since the last one
+    /// that passed, at `verified`: the message names them. Other errors pass
+    /// unchanged.
+    pub(crate) fn after_check_at(mut self, verified: f64) -> MasterError {
+        if let MasterError::RollbackCheck {
+            unverified_after, ..
+        } = &mut self
+        {
+            *unverified_after = Some(verified);
+        }
+        self
+    }
+
     /// A singular Jacobian met while correcting a macro step of size `h`
     /// names H in its message; other errors pass unchanged.
     pub(crate) fn in_step(mut self, h: f64) -> MasterError {
@@ -404,6 +424,17 @@ impl From<tether_fmi::Error> for MasterError {
             error => MasterError::Fmi(error),
         }
     }
+}
+
+/// The clause of a failed periodic rollback check that names the rows
+/// written since the last check that passed.
+fn unverified_rows(after: Option<f64>) -> String {
+    after.map_or(String::new(), |t| {
+        format!(
+            "; the rows after t = {} were written before this check failed and are not verified",
+            crate::Time(t)
+        )
+    })
 }
 
 /// A variable name its instance's FMU does not have, and where it appears.

@@ -36,14 +36,54 @@ pub struct LinearExpr {
 
 /// Why a linear expression could not be read.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("cannot read expression '{text}': {reason} at column {column}")]
+#[error("cannot read expression {}: {reason} at column {column}", quote(text, Some(*column), "'", "'"))]
 pub struct ExprError {
-    /// The whole expression.
+    /// The whole expression (quoted in the message as [`quote`] cuts it).
     pub text: String,
     /// 1-based column of the offending character.
     pub column: usize,
     /// What was expected there.
     pub reason: String,
+}
+
+/// The most characters of a user's text (an expression, a value) that a
+/// message quotes.
+pub const QUOTE_LIMIT: usize = 200;
+
+/// `text` between `open` and `close`, as a message quotes it: whole up to
+/// [`QUOTE_LIMIT`] characters. A longer text is cut to the [`QUOTE_LIMIT`]
+/// characters around `column` (1-based; the start without one), with `…` where
+/// it is cut, `»` before the character at `column`, and its length after.
+pub fn quote(text: &str, column: Option<usize>, open: &str, close: &str) -> String {
+    let n = text.chars().count();
+    if n <= QUOTE_LIMIT {
+        return format!("{open}{text}{close}");
+    }
+    let at = column.map(|c| c.saturating_sub(1).min(n));
+    let start = at.map_or(0, |a| a.saturating_sub(QUOTE_LIMIT * 3 / 4));
+    let end = (start + QUOTE_LIMIT).min(n);
+    let mut shown = String::with_capacity(QUOTE_LIMIT * 4 + 8);
+    if start > 0 {
+        shown.push('…');
+    }
+    for (i, c) in text.chars().enumerate().take(end).skip(start) {
+        if Some(i) == at {
+            shown.push('»');
+        }
+        shown.push(c);
+    }
+    if at == Some(n) {
+        shown.push('»');
+    }
+    if end < n {
+        shown.push('…');
+    }
+    let marked = if at.is_some() {
+        ", » marks the column"
+    } else {
+        ""
+    };
+    format!("{open}{shown}{close} ({n} characters{marked})")
 }
 
 impl LinearExpr {
@@ -322,6 +362,27 @@ mod tests {
             e.terms,
             vec![t(1.0, "ss", "A[2, 3]", 0), t(-1.0, "ss", "y[1]", 2)]
         );
+    }
+
+    #[test]
+    fn long_text_is_quoted_around_the_column() {
+        let short = "mass2.x - mass1.x";
+        assert_eq!(quote(short, Some(3), "'", "'"), "'mass2.x - mass1.x'");
+        let long = format!("{}$", "a".repeat(1000));
+        let q = quote(&long, Some(1001), "'", "'");
+        assert_eq!(
+            q,
+            format!(
+                "'…{}»$' (1001 characters, » marks the column)",
+                "a".repeat(150)
+            )
+        );
+        let q = quote(&long, None, "", "");
+        assert_eq!(q, format!("{}… (1001 characters)", "a".repeat(200)));
+        let q = quote(&long, Some(500), "", "");
+        let shown = q.split(" (").next().unwrap();
+        assert_eq!(shown.chars().filter(|&c| c == 'a').count(), 200);
+        assert!(q.starts_with('…') && q.contains("a»a"), "{q}");
     }
 
     #[test]

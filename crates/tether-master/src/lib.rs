@@ -59,6 +59,7 @@ pub use stats::{
     Termination, SUMMARY_SCHEMA,
 };
 pub use step_control::StepControl;
+pub use tether_fmi::Time;
 
 /// Timings for the benchmarks (not a stable interface).
 #[doc(hidden)]

@@ -5,6 +5,7 @@
 use tether_fmi::{BaseType, Causality, Fmu, FmuInstance, Inputs, Int, Placement, RunRequest, Slot};
 
 use crate::spec::Isolation;
+use crate::Time;
 
 use crate::observer::integer_value;
 use crate::polynomial::Taylor;
@@ -671,12 +672,14 @@ impl Slave {
         self.counters.state_sets += 1;
         if self.verify_restore {
             let mut readback = std::mem::take(&mut self.readback);
+            let at_save = std::mem::take(&mut self.at_save);
             let read = self.read_coupled(&mut readback, Run::Rollback);
             let compared = read.and_then(|()| {
                 let time = self.backend.time();
-                self.compare_restored(&self.at_save, &readback, time)
+                self.compare_restored(&at_save, &readback, time)
             });
             self.readback = readback;
+            self.at_save = at_save;
             compared?;
         }
         Ok(())
@@ -723,14 +726,16 @@ impl Slave {
             return Err(MasterError::RollbackCheck {
                 instance: self.name.clone(),
                 reason: format!(
-                    "the step from t = {t} to {} repeated after fmi2SetFMUstate with the same \
+                    "the step from t = {} to {} repeated after fmi2SetFMUstate with the same \
                      inputs gives output '{variable}' = {}, not {} as the first time (not \
                      bit-identical)",
-                    t + h,
+                    Time(t),
+                    Time(t + h),
                     second[i],
                     first[i]
                 ),
                 variable,
+                unverified_after: None,
             });
         }
         self.check_buf = buf;
@@ -744,23 +749,51 @@ impl Slave {
     }
 
     /// An error naming the first coupled output whose value read back after a
-    /// restore (`back`) differs from the one at the save (`saved`).
-    fn compare_restored(&self, saved: &[f64], back: &[f64], time: f64) -> Result<(), MasterError> {
-        match first_difference(saved, back) {
-            None => Ok(()),
-            Some(i) => {
-                let variable = self.coupled_name(i);
-                Err(MasterError::RollbackCheck {
-                    instance: self.name.clone(),
-                    reason: format!(
-                        "after fmi2SetFMUstate back to t = {time}, output '{variable}' reads {}, \
-                         not {} as at fmi2GetFMUstate (the state was not restored)",
-                        back[i], saved[i]
-                    ),
-                    variable,
-                })
-            }
+    /// restore (`back`) differs from the one at the save (`saved`). Before it
+    /// blames the restore, the outputs are read once more: an output that
+    /// changes between two reads with no step between them is named as such.
+    fn compare_restored(
+        &mut self,
+        saved: &[f64],
+        back: &[f64],
+        time: f64,
+    ) -> Result<(), MasterError> {
+        let Some(i) = first_difference(saved, back) else {
+            return Ok(());
+        };
+        let mut again = vec![0.0; back.len()];
+        self.read_coupled(&mut again, Run::Rollback)?;
+        let fail = |variable: String, reason: String| MasterError::RollbackCheck {
+            instance: self.name.clone(),
+            variable,
+            reason,
+            unverified_after: None,
+        };
+        if let Some(j) = first_difference(back, &again) {
+            let variable = self.coupled_name(j);
+            return Err(fail(
+                variable.clone(),
+                format!(
+                    "output '{variable}' changes without a step: read twice at t = {} with no \
+                     fmi2DoStep between, it gives {}, then {} (an output must depend only on \
+                     the state and the inputs, or no restore can be checked)",
+                    Time(time),
+                    back[j],
+                    again[j]
+                ),
+            ));
         }
+        let variable = self.coupled_name(i);
+        Err(fail(
+            variable.clone(),
+            format!(
+                "after fmi2SetFMUstate back to t = {}, output '{variable}' reads {}, \
+                 not {} as at fmi2GetFMUstate (the state was not restored)",
+                Time(time),
+                back[i],
+                saved[i]
+            ),
+        ))
     }
 
     /// The name of coupled output `slot`: the variable, or `der(x, order)`.

@@ -160,6 +160,11 @@ pub struct Failure {
     /// `rollback_check`, `diverged_output`, `non_finite_output`: its output.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub variable: Option<String>,
+    /// `rollback_check` of a periodic check: the time of the last check that
+    /// passed; the rows after it were written before this one failed and
+    /// are not verified (they stay in the results, named by the trailer).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unverified_after: Option<f64>,
 }
 
 impl From<&crate::MasterError> for Failure {
@@ -174,6 +179,7 @@ impl From<&crate::MasterError> for Failure {
             limit: None,
             instance: None,
             variable: None,
+            unverified_after: None,
         };
         match error {
             E::ResidualLimit {
@@ -194,9 +200,16 @@ impl From<&crate::MasterError> for Failure {
                 failure.limit = Some(*limit);
             }
             E::RollbackCheck {
-                instance, variable, ..
+                instance,
+                variable,
+                unverified_after,
+                ..
+            } => {
+                failure.instance = Some(instance.clone());
+                failure.variable = Some(variable.clone());
+                failure.unverified_after = *unverified_after;
             }
-            | E::DivergedOutput {
+            E::DivergedOutput {
                 instance, variable, ..
             }
             | E::NonFiniteOutput {
@@ -298,8 +311,9 @@ impl fmt::Display for RunStats {
                 writeln!(
                     f,
                     "  warning: {} macro steps did not converge within [signals] iterations \
-                     (the first at t = {t}): their last run stands",
-                    i.not_converged
+                     (the first at t = {}): their last run stands",
+                    i.not_converged,
+                    crate::Time(t)
                 )?;
             }
         }
@@ -398,7 +412,9 @@ impl fmt::Display for RunStats {
                 f,
                 "  note: instance '{}' requested the end of the simulation at t = {} \
                  (fmi2Discard, fmi2Terminated); the run ended normally at t = {}, the last accepted point",
-                end.instance, end.requested_at, end.ended_at
+                end.instance,
+                crate::Time(end.requested_at),
+                crate::Time(end.ended_at)
             )?;
         }
         let p = &self.parallel;

@@ -39,6 +39,18 @@ def test_a_malformed_system_file_raises_the_clis_error_line(tmp_path, tether_bin
         tether.System.from_file(path)
 
 
+def test_a_fifo_as_the_system_file_or_ssp_is_refused_at_once(tmp_path, tether_bin):
+    # Opening a FIFO would wait for a writer that never comes: refused before.
+    for name in ("system.toml", "system.ssp"):
+        path = tmp_path / name
+        os.mkfifo(path)
+        proc = cli(tether_bin, "run", str(path), "--quiet")
+        assert "is a FIFO" in error_line(proc)
+        with pytest.raises(tether.SystemFileError) as err:
+            tether.run(path)
+        assert str(err.value) == error_line(proc)
+
+
 def test_a_missing_fmu_raises_the_clis_error_line(tmp_path, tether_bin, oscillator_toml):
     text = oscillator_toml.read_text().replace("../target/fmus/oscillator.fmu", str(tmp_path / "gone.fmu"))
     path = tmp_path / "system.toml"

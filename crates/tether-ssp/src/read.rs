@@ -72,7 +72,16 @@ fn parse_file(path: &Path, shown: &str) -> Result<Node, SspError> {
 /// The SSD of `path`, extracting an archive into a temporary folder under the
 /// budget of FMU archives.
 fn locate(path: &Path) -> Result<(PathBuf, Option<FmuDir>), SspError> {
-    if path.is_dir() {
+    // A FIFO or a device is refused before it is opened: the open of a FIFO
+    // waits for a writer that may never come.
+    let metadata = std::fs::metadata(path).map_err(|e| SspError::file(path, e))?;
+    if let Some(kind) = tether_fmi::special_file_kind(&metadata) {
+        return Err(SspError::file(
+            path,
+            format!("is a {kind}, not an SSP archive, an SSD file or a folder"),
+        ));
+    }
+    if metadata.is_dir() {
         let ssd = path.join("SystemStructure.ssd");
         if !ssd.is_file() {
             return Err(SspError::file(
@@ -351,7 +360,7 @@ impl Reader {
                     a,
                     format!(
                         "the {ANNOTATION_TYPE} annotation: {}",
-                        e.to_string().replace('\n', " ").trim()
+                        tether_master::spec::toml_error(&text, &e)
                     ),
                 )
             })?;

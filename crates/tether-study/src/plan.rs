@@ -204,8 +204,12 @@ impl Plan {
 
     /// Read a plan written by [`Plan::to_toml`].
     pub fn from_toml(text: &str) -> Result<Plan, StudyError> {
-        toml::from_str(text)
-            .map_err(|e| StudyError::Invalid(format!("plan: {}", e.to_string().replace('\n', " "))))
+        toml::from_str(text).map_err(|e| {
+            StudyError::Invalid(format!(
+                "plan: {}",
+                tether_master::spec::toml_error(text, &e)
+            ))
+        })
     }
 }
 

@@ -111,7 +111,7 @@ impl Study {
         };
         let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
         let file: StudyFile =
-            toml::from_str(&text).map_err(|e| bad(e.to_string().replace('\n', " ")))?;
+            toml::from_str(&text).map_err(|e| bad(tether_master::spec::toml_error(&text, &e)))?;
         let kind = match (file.series, file.convergence, file.stability) {
             (Some(s), None, None) => Kind::Series(s),
             (None, Some(c), None) => Kind::Convergence(c),
@@ -369,6 +369,23 @@ mod tests {
         assert_eq!(v.set.method, Method::Weighted { a: 1.0, b: 0.0 }.into());
         assert_eq!(v.set.order, Some(1));
         assert_eq!(v.set.parameters["mass1.c"], StartValue::Integer(5));
+    }
+
+    /// A study file nested 10⁵ deep: one line with the line, the column and
+    /// the TOML reader's limit, not a stack overflow.
+    #[test]
+    fn a_deeply_nested_study_file_is_one_error_line() {
+        let n = 100_000;
+        let e = study_file(&format!("deep = {}{}", "[".repeat(n), "]".repeat(n)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.ends_with(
+                "study.toml: line 5, column 88: arrays and inline tables nested more than 80 \
+                 deep (the limit)"
+            ),
+            "{e}"
+        );
     }
 
     #[test]

@@ -22,6 +22,7 @@ pub enum Mode {
     Helper,
     RestoreIgnored,
     RestoreNoisy,
+    OutputsDrift,
 }
 
 impl Mode {
@@ -42,6 +43,7 @@ impl Mode {
             11 => Mode::Helper,
             12 => Mode::RestoreIgnored,
             13 => Mode::RestoreNoisy,
+            14 => Mode::OutputsDrift,
             _ => return None,
         })
     }
@@ -64,6 +66,8 @@ pub struct Fault {
     /// integrates (0 when no restore came before it): state that
     /// `fmi2SetFMUstate` leaves behind, invisible in the outputs until then.
     pub pending: Cell<f64>,
+    /// Mode 14: how many times the outputs were evaluated from `at` on.
+    pub reads: Cell<u64>,
 }
 
 impl Fault {
@@ -104,7 +108,7 @@ impl Fault {
                 crate::crash()
             }
             Mode::Helper if t < self.at + 0.5 * h => crate::start_helper(),
-            Mode::Helper | Mode::RestoreIgnored | Mode::RestoreNoisy => {}
+            Mode::Helper | Mode::RestoreIgnored | Mode::RestoreNoisy | Mode::OutputsDrift => {}
         }
     }
 
@@ -131,6 +135,18 @@ impl Fault {
                 Restore::Exact
             }
             _ => Restore::Exact,
+        }
+    }
+
+    /// Runs on the outputs at every evaluation (every `fmi2GetReal` of an
+    /// output) at time `t`: mode 14 adds `noise` times the count of earlier
+    /// evaluations from `at` on to the first output, so that two reads with no
+    /// step between them differ.
+    pub fn drift(&self, t: f64, y: &mut [f64]) {
+        if self.mode == Mode::OutputsDrift && t >= self.at {
+            let n = self.reads.get();
+            self.reads.set(n + 1);
+            y[0] += self.noise * n as f64;
         }
     }
 

@@ -37,11 +37,11 @@ impl Model for Faults {
             Real::new("noise", 0.01)
                 .min(0.0)
                 .unit("m")
-                .description("Mode 13: the largest offset the fmi2DoStep after each fmi2SetFMUstate from `at` on adds to the states"),
+                .description("Mode 13: the largest offset the fmi2DoStep after each fmi2SetFMUstate from `at` on adds to the states; mode 14: the drift of the position output per read"),
         ],
         integer_parameters: &[
-            Integer::new("mode", 0).min(0).max(13).description(
-                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise",
+            Integer::new("mode", 0).min(0).max(14).description(
+                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise, 14 every read of the outputs adds noise (they change without a step)",
             ),
             Integer::new("flood", 2000)
                 .min(0)
@@ -79,6 +79,7 @@ impl Model for Faults {
                 noise: p.real("noise")?,
                 seed: std::cell::Cell::new(0x9E37_79B9_7F4A_7C15),
                 pending: std::cell::Cell::new(0.0),
+                reads: std::cell::Cell::new(0),
             },
         })
     }
@@ -91,8 +92,9 @@ impl Model for Faults {
         self.oscillator.derivatives_under(x, u[0], dx);
     }
 
-    fn outputs(&self, _t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
+    fn outputs(&self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
         self.oscillator.outputs_under(x, u[0], y);
+        self.fault.drift(t, y);
     }
 
     fn output_derivatives(

@@ -180,11 +180,20 @@ pub fn connect(host: &RemoteHost, fmu: &Path) -> Result<(TcpStream, String), Str
             Err(e) => last = Some(e),
         }
     }
+    let within = OPENING_TIMEOUT.as_secs();
     let stream = stream.ok_or_else(|| match last {
+        Some(e) if e.kind() == io::ErrorKind::TimedOut => {
+            format!("no answer from host {address} within {within} s (connect time-out)")
+        }
         Some(e) => format!("cannot connect to host {address}: {e}"),
         None => format!("host {address} has no address"),
     })?;
-    let io_error = |e: io::Error| format!("host {address}: the connection failed ({e})");
+    let io_error = |e: io::Error| match e.kind() {
+        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut => {
+            format!("no answer from host {address} within {within} s (read time-out)")
+        }
+        _ => format!("host {address}: the connection failed ({e})"),
+    };
     stream.set_nodelay(true).map_err(io_error)?;
     stream
         .set_read_timeout(Some(OPENING_TIMEOUT))

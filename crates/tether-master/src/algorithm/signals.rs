@@ -492,7 +492,7 @@ impl Signals {
                     "[signals] the macro step from t = {} did not converge in {max} iterations \
                      (|Δv| of connection {} is {:.1e} times the tolerance); its last run stands \
                      (the run summary counts such steps; strict = true fails the run)",
-                    at.t,
+                    crate::Time(at.t),
                     self.links[worst].name,
                     solved.residual
                 );
@@ -645,7 +645,7 @@ impl Signals {
                                  and a connection carries Reals",
                                 link.variable,
                                 v[0],
-                                slave.backend.time()
+                                crate::Time(slave.backend.time())
                             ),
                         })
                     }

@@ -58,6 +58,9 @@ pub struct Simulation {
     /// the rollback self-check repeated every [`RECHECK_EVERY`] accepted macro
     /// steps and after every rejected step.
     recheck: Option<f64>,
+    /// The time of the last rollback self-check that passed: rows after it
+    /// are named in the error of a check that fails (docs/reliability.md).
+    verified: f64,
     /// The level the multipliers are consistent on at a point (g̈ = 0, or
     /// the explicit method's stabilised condition).
     level: RowLevel,
@@ -259,6 +262,7 @@ impl Simulation {
                     CheckRollback::Periodic | CheckRollback::EveryStep
                 ))
             .then_some(exp.step),
+            verified: exp.start,
             level: initial_level,
         })
     }
@@ -365,7 +369,8 @@ impl Simulation {
             (Some(e), _) => e.message.clone(),
             (None, Some(end)) => format!(
                 "instance '{}' requested the end of the simulation at t = {}",
-                end.instance, end.requested_at
+                end.instance,
+                crate::Time(end.requested_at)
             ),
             (None, None) if stats.completed => "completed".into(),
             (None, None) => "running".into(),
@@ -403,14 +408,18 @@ impl Simulation {
         {
             // The rollback self-check again, from the accepted point: a
             // restore that stopped being exact after the first check.
+            let (now, verified) = (self.grid.time(), self.verified);
             self.system
-                .check_rollback(self.grid.time(), h)
+                .check_rollback(now, h)
+                .map_err(|e| e.after_check_at(verified))
                 .inspect_err(|e| self.health.fail(e))?;
+            self.verified = now;
         }
         let mut lap = Lap::start(self.timing.on);
         let (signals, method, system) = (&mut self.signals, &mut self.method, &mut self.system);
         let stats = &mut self.stats;
         let recheck = self.recheck.is_some();
+        let verified = &mut self.verified;
         let stepped = self.grid.advance(limit, |at| {
             let error = step_at(
                 (&mut *signals, &mut *method, &mut *system),
@@ -421,7 +430,15 @@ impl Simulation {
             if recheck && error.is_some_and(|e| e.is_nan() || e > 1.0) {
                 // A rejected step rolled every instance back: the rollback
                 // self-check from there, before the smaller step.
-                system.check_rollback(at.t, at.h)?;
+                let since = *verified;
+                system.check_rollback(at.t, at.h).map_err(|e| {
+                    if at.t > since {
+                        e.after_check_at(since)
+                    } else {
+                        e
+                    }
+                })?;
+                *verified = at.t;
             }
             Ok(error)
         });

@@ -44,58 +44,104 @@ pub(crate) fn has_arrays(table: &Table) -> bool {
     })
 }
 
+/// Why an array block cannot be expanded: the message names the block and the
+/// text; `section` and `block` (0-based) let the reader add the block's line.
+#[derive(Debug)]
+pub(crate) struct BlockError {
+    pub section: &'static str,
+    pub block: usize,
+    pub message: String,
+}
+
 /// Expand every array block in place. Errors name the block and the text.
 /// The counts are checked against the section's [`limit`] before anything
 /// is expanded.
-pub(crate) fn expand(table: &mut Table) -> Result<(), String> {
+pub(crate) fn expand(table: &mut Table) -> Result<(), BlockError> {
     for section in SECTIONS {
-        let Some(Value::Array(blocks)) = table.get_mut(section) else {
+        expand_section(table, section).map_err(|(block, message)| BlockError {
+            section,
+            block,
+            message,
+        })?;
+    }
+    Ok(())
+}
+
+/// The line (1-based) of the header `[[section]]` of block `block` (0-based)
+/// in `text`, if the blocks are written with headers.
+pub(crate) fn block_line(text: &str, section: &str, block: usize) -> Option<usize> {
+    let header = format!("[[{section}]]");
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| {
+            let bare: String = line.chars().filter(|c| !c.is_whitespace()).collect();
+            bare == header || bare.starts_with(&format!("{header}#"))
+        })
+        .nth(block)
+        .map(|(n, _)| n + 1)
+}
+
+/// [`expand`] for one section; errors with the block's index.
+fn expand_section(table: &mut Table, section: &'static str) -> Result<(), (usize, String)> {
+    let Some(Value::Array(blocks)) = table.get_mut(section) else {
+        return Ok(());
+    };
+    let limit = limit(section);
+    let mut total = 0usize;
+    for (b, block) in blocks.iter().enumerate() {
+        let (where_, count) = match block.get("count") {
+            None => (format!("[[{section}]] block {}", b + 1), 1),
+            Some(count) => {
+                let where_ = format!("[[{section}]] block {} (count = {count})", b + 1);
+                let count = count
+                    .as_integer()
+                    .and_then(|c| usize::try_from(c).ok())
+                    .ok_or_else(|| {
+                        (
+                            b,
+                            format!("{where_}: count must be an integer from 0 to {limit}"),
+                        )
+                    })?;
+                (where_, count)
+            }
+        };
+        total = total.saturating_add(count);
+        if total > limit {
+            return Err((
+                    b,
+                    format!(
+                        "{where_}: makes {total} [[{section}]] blocks, above the limit of {limit} (docs/system-file.md, \"Limits\")"
+                    ),
+                ));
+        }
+    }
+    let mut expanded = Vec::with_capacity(total);
+    for (b, block) in std::mem::take(blocks).into_iter().enumerate() {
+        let Value::Table(mut block) = block else {
+            expanded.push(block);
             continue;
         };
-        let limit = limit(section);
-        let mut total = 0usize;
-        for (b, block) in blocks.iter().enumerate() {
-            let (where_, count) = match block.get("count") {
-                None => (format!("[[{section}]] block {}", b + 1), 1),
-                Some(count) => {
-                    let where_ = format!("[[{section}]] block {} (count = {count})", b + 1);
-                    let count = count
-                        .as_integer()
-                        .and_then(|c| usize::try_from(c).ok())
-                        .ok_or_else(|| format!("{where_}: count must be an integer ≥ 0"))?;
-                    (where_, count)
-                }
-            };
-            total = total.saturating_add(count);
-            if total > limit {
-                return Err(format!(
-                    "{where_}: makes {total} [[{section}]] blocks, above the limit of {limit} (docs/system-file.md, \"Limits\")"
-                ));
-            }
+        let Some(count) = block.remove("count") else {
+            expanded.push(Value::Table(block));
+            continue;
+        };
+        let where_ = format!("[[{section}]] block {} (count = {count})", b + 1);
+        let count = count
+            .as_integer()
+            .and_then(|c| usize::try_from(c).ok())
+            .ok_or_else(|| {
+                (
+                    b,
+                    format!("{where_}: count must be an integer from 0 to {limit}"),
+                )
+            })?;
+        for i in 0..count {
+            let mut copy = Value::Table(block.clone());
+            substitute(&mut copy, i as i64).map_err(|e| (b, format!("{where_}, i = {i}: {e}")))?;
+            expanded.push(copy);
         }
-        let mut expanded = Vec::with_capacity(total);
-        for (b, block) in std::mem::take(blocks).into_iter().enumerate() {
-            let Value::Table(mut block) = block else {
-                expanded.push(block);
-                continue;
-            };
-            let Some(count) = block.remove("count") else {
-                expanded.push(Value::Table(block));
-                continue;
-            };
-            let where_ = format!("[[{section}]] block {} (count = {count})", b + 1);
-            let count = count
-                .as_integer()
-                .and_then(|c| usize::try_from(c).ok())
-                .ok_or_else(|| format!("{where_}: count must be an integer ≥ 0"))?;
-            for i in 0..count {
-                let mut copy = Value::Table(block.clone());
-                substitute(&mut copy, i as i64).map_err(|e| format!("{where_}, i = {i}: {e}"))?;
-                expanded.push(copy);
-            }
-        }
-        *blocks = expanded;
     }
+    *blocks = expanded;
     Ok(())
 }
 
@@ -216,16 +262,14 @@ impl Parser<'_> {
         )
     }
 
-    /// The placeholder as the user wrote it, cut after 200 characters.
+    /// The placeholder as the user wrote it, cut around the position read
+    /// ([`crate::expr::quote`]).
     fn quoted(&self) -> String {
-        match self.text.char_indices().nth(200) {
-            Some((cut, _)) => format!(
-                "\"{{{}…\" ({} characters)",
-                &self.text[..cut],
-                self.text.chars().count()
-            ),
-            None => format!("\"{{{}}}\"", self.text),
-        }
+        let column = self
+            .text
+            .get(..self.pos)
+            .map(|read| read.chars().count() + 2);
+        crate::expr::quote(&format!("{{{}}}", self.text), column, "\"", "\"")
     }
 
     fn skip_spaces(&mut self) {
@@ -401,8 +445,8 @@ mod tests {
             let error = evaluate(&deep(100_000, open, close), 0).unwrap_err();
             assert!(
                 error.starts_with("nested more than 64 deep (the limit) at ")
-                    && error.ends_with(" characters)")
-                    && error.len() < 400,
+                    && error.ends_with(" characters, » marks the column)")
+                    && error.len() < 1000,
                 "{error}"
             );
         }
@@ -418,7 +462,7 @@ mod tests {
     fn counts_above_the_limits_are_refused() {
         let table = |text: &str| -> Table { toml::from_str(text).unwrap() };
         let mut huge = table("[[instance]]\nname = \"m{i}\"\ncount = 100000000");
-        let error = expand(&mut huge).unwrap_err();
+        let error = expand(&mut huge).unwrap_err().message;
         assert_eq!(
             error,
             "[[instance]] block 1 (count = 100000000): makes 100000000 [[instance]] blocks, above the limit of 10000 (docs/system-file.md, \"Limits\")"
@@ -426,7 +470,7 @@ mod tests {
         let mut total = table(
             "[[joint]]\nname = \"a{i}\"\ncount = 99999\n[[joint]]\nname = \"b\"\n[[joint]]\nname = \"c\"",
         );
-        let error = expand(&mut total).unwrap_err();
+        let error = expand(&mut total).unwrap_err().message;
         assert!(
             error.starts_with(
                 "[[joint]] block 3: makes 100001 [[joint]] blocks, above the limit of 100000"
@@ -473,9 +517,15 @@ mod tests {
         assert_eq!(constraints[1]["position"].as_str(), Some("m2.x - m1.x"));
         let mut bad: Table = toml::from_str("[[joint]]\nname = \"j{i\"\ncount = 1").unwrap();
         let err = expand(&mut bad).unwrap_err();
+        assert_eq!((err.section, err.block), ("joint", 0));
+        let err = err.message;
         assert!(
             err.contains("[[joint]] block 1") && err.contains("unclosed"),
             "{err}"
         );
+        let text = "[experiment]\n\n[[joint]]\nname = 'a'\n[[ joint ]] # b\nname = 'b'";
+        assert_eq!(block_line(text, "joint", 0), Some(3));
+        assert_eq!(block_line(text, "joint", 1), Some(5));
+        assert_eq!(block_line(text, "joint", 2), None);
     }
 }

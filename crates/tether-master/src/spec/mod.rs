@@ -73,10 +73,21 @@ pub struct SystemSpec {
     pub source: Option<PathBuf>,
 }
 
+/// How deep arrays and inline tables may nest in a TOML file: the TOML
+/// reader's own limit (deeper is refused with this number in the message).
+pub const TOML_MAX_NESTING: usize = 80;
+
 /// A TOML error on one line: `line L, column C: message`. For an unknown
-/// key the position is the key's own (toml reports the table's).
-pub(crate) fn toml_error(text: &str, e: &toml::de::Error) -> String {
-    let message = e.message().replace('\n', " ").trim().to_string();
+/// key the position is the key's own (toml reports the table's). Used for
+/// every TOML file Tether reads (system, study and plan files, SSP's TOML
+/// annotation).
+pub fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let mut message = e.message().replace('\n', " ").trim().to_string();
+    if message.starts_with("cannot recurse further") {
+        message = format!(
+            "arrays and inline tables nested more than {TOML_MAX_NESTING} deep (the limit)"
+        );
+    }
     let Some(span) = e.span() else {
         return message;
     };
@@ -749,6 +760,25 @@ impl std::str::FromStr for JacobianMode {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The limit the message states is the TOML reader's: 80 levels of arrays
+    /// or inline tables are read, 81 are refused with it.
+    #[test]
+    fn toml_nesting_is_read_up_to_the_stated_limit() {
+        let nested = |n: usize| format!("a = {}1{}", "[".repeat(n), "]".repeat(n));
+        let tables = |n: usize| format!("a = {}1{}", "{ b = ".repeat(n), "}".repeat(n));
+        for text in [nested, tables] {
+            assert!(text(TOML_MAX_NESTING).parse::<toml::Table>().is_ok());
+            let deeper = text(TOML_MAX_NESTING + 1);
+            let e = toml::from_str::<toml::Table>(&deeper).unwrap_err();
+            assert!(
+                toml_error(&deeper, &e)
+                    .ends_with("arrays and inline tables nested more than 80 deep (the limit)"),
+                "{}",
+                toml_error(&deeper, &e)
+            );
+        }
+    }
 
     #[test]
     fn cli_values_read_arrays_flat_or_nested() {

@@ -11,10 +11,17 @@ use crate::{MasterError, Method};
 impl SystemSpec {
     /// Read a system file; relative FMU paths are resolved against its folder.
     pub fn from_file(path: &Path) -> Result<SystemSpec, MasterError> {
-        let text = std::fs::read_to_string(path).map_err(|e| MasterError::SystemFile {
+        let fail = |reason: String| MasterError::SystemFile {
             path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
+            reason,
+        };
+        // A FIFO or a device is refused before it is opened: the open of a
+        // FIFO waits for a writer that may never come.
+        let metadata = std::fs::metadata(path).map_err(|e| fail(e.to_string()))?;
+        if let Some(kind) = tether_fmi::special_file_kind(&metadata) {
+            return Err(fail(format!("is a {kind}, not a regular file")));
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
         let mut spec = SystemSpec::from_toml(&text).map_err(|e| match e {
             MasterError::SystemFile { reason, .. } => MasterError::SystemFile {
                 path: path.to_path_buf(),
@@ -42,11 +49,22 @@ impl SystemSpec {
             reason: reason.replace('\n', " ").trim().to_string(),
         };
         // Array blocks (`count = N`) are expanded first (crate::spec::arrays).
-        if let Ok(mut table) = text.parse::<toml::Table>() {
-            if crate::spec::arrays::has_arrays(&table) {
-                crate::spec::arrays::expand(&mut table).map_err(error)?;
+        match text.parse::<toml::Table>() {
+            Ok(mut table) if crate::spec::arrays::has_arrays(&table) => {
+                crate::spec::arrays::expand(&mut table).map_err(|e| {
+                    match crate::spec::arrays::block_line(text, e.section, e.block) {
+                        Some(line) => error(format!("line {line}: {}", e.message)),
+                        None => error(e.message),
+                    }
+                })?;
                 return SystemSpec::deserialize(table).map_err(|e| error(e.to_string()));
             }
+            Err(e) => {
+                if let Some(reason) = count_out_of_range(text, &e) {
+                    return Err(error(reason));
+                }
+            }
+            Ok(_) => {}
         }
         toml::from_str(text).map_err(|e| error(crate::spec::toml_error(text, &e)))
     }
@@ -408,4 +426,34 @@ impl SystemSpec {
 /// for messages: twelve significant digits.
 pub(crate) fn tidy(x: f64) -> f64 {
     format!("{x:.11e}").parse().unwrap_or(x)
+}
+
+/// A `count = N` beyond what TOML's integers hold (the reader refuses the
+/// number, before any block is known): the line, the block and the range.
+fn count_out_of_range(text: &str, e: &toml::de::Error) -> Option<String> {
+    let at = e.span()?.start.min(text.len());
+    let line = text[..at].matches('\n').count();
+    let lines: Vec<&str> = text.lines().collect();
+    let (key, value) = lines.get(line)?.split_once('=')?;
+    if key.trim() != "count" {
+        return None;
+    }
+    // The block: the last `[[section]]` header above, and how many before it.
+    let bare = |l: &str| l.chars().filter(|c| !c.is_whitespace()).collect::<String>();
+    let header = lines[..line]
+        .iter()
+        .rev()
+        .map(|l| bare(l))
+        .find(|l| l.starts_with('['))?;
+    let section = header.strip_prefix("[[")?.split("]]").next()?.to_string();
+    let block = lines[..line]
+        .iter()
+        .filter(|l| bare(l).starts_with(&format!("[[{section}]]")))
+        .count();
+    let limit = crate::spec::arrays::limit(&section);
+    Some(format!(
+        "line {}: [[{section}]] block {block} (count = {}): count must be an integer from 0 to {limit}",
+        line + 1,
+        value.split('#').next().unwrap_or("").trim()
+    ))
 }
