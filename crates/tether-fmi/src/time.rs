@@ -2,16 +2,20 @@
 
 use std::fmt;
 
-/// A time as a message prints it: the shortest decimal within four units in
-/// the last place of the value, so that a grid point computed as `t₀ + n·H`
-/// reads as the grid gives it (`t = 107.338`, not `107.33800000000001`).
-/// Values that are not near a short decimal print in full (shortest
-/// round-trip form), as do the non-finite ones.
+/// A time as a message prints it: a decimal of at most 12 significant digits
+/// within four units in the last place of the value, so that a grid point
+/// computed as `t₀ + n·H` reads as the grid gives it (`t = 107.338`, not
+/// `107.33800000000001`). Other values (the times of adaptive steps) print in
+/// full, the shortest decimal that reads back as the value, as do the
+/// non-finite ones.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Time(pub f64);
 
 /// How many units in the last place a time may be from the decimal printed.
 const ULPS: f64 = 4.0;
+
+/// The most significant digits of a decimal printed in place of the value.
+const DIGITS: usize = 12;
 
 impl fmt::Display for Time {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -20,7 +24,7 @@ impl fmt::Display for Time {
             return write!(f, "{t}");
         }
         let ulp = f64::from_bits(t.abs().to_bits() + 1) - t.abs();
-        for digits in 1..17 {
+        for digits in 0..DIGITS {
             let near: f64 = format!("{t:.digits$e}")
                 .parse()
                 .expect("Rust's exponent form reads back");
@@ -56,7 +60,12 @@ mod tests {
 
     #[test]
     fn times_far_from_a_short_decimal_print_in_full() {
-        for t in [0.4870000000000123, 1.0 / 3.0, std::f64::consts::PI] {
+        for t in [
+            0.4870000000000123,
+            0.49890883943400904,
+            1.0 / 3.0,
+            std::f64::consts::PI,
+        ] {
             assert_eq!(Time(t).to_string(), t.to_string(), "{t:?}");
         }
     }
