@@ -20,7 +20,6 @@
 //! The algorithm as implemented is described in `docs/algorithm.md`.
 
 mod algorithm;
-mod build;
 mod coupling;
 mod culprit;
 mod error;
@@ -29,6 +28,7 @@ mod linalg;
 mod method;
 mod observer;
 pub mod polynomial;
+mod signals;
 mod simulation;
 mod single;
 mod slave;
@@ -37,6 +37,7 @@ mod start;
 mod state_bytes;
 mod stats;
 mod step_control;
+mod system;
 
 pub use error::{MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};

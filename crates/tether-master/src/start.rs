@@ -10,7 +10,7 @@ use tether_fmi::{
 };
 
 use crate::observer::integer_value;
-use crate::spec::names::{describe, Element};
+use crate::spec::names::{describe, ArraySizes, Element};
 use crate::spec::StartValue;
 use crate::MasterError;
 
@@ -26,6 +26,12 @@ pub struct Arrays {
     set: HashMap<u32, Vec<StartValue>>,
 }
 
+impl ArraySizes for Arrays {
+    fn sizes(&self, md: &ModelDescription, v: &ScalarVariable) -> Result<Vec<u64>, MasterError> {
+        Ok(md.array_sizes_with(v, &|vr| self.structural.get(&vr).copied())?)
+    }
+}
+
 impl Arrays {
     /// The sizes of `v`'s dimensions (empty for a scalar).
     pub fn sizes(
@@ -33,7 +39,7 @@ impl Arrays {
         md: &ModelDescription,
         v: &ScalarVariable,
     ) -> Result<Vec<u64>, MasterError> {
-        Ok(md.array_sizes_with(v, &|vr| self.structural.get(&vr).copied())?)
+        ArraySizes::sizes(self, md, v)
     }
 
     /// The number of values of `v` (1 for a scalar).

@@ -29,9 +29,9 @@
 //! times the corrected run's local error, mostly the predicted run's error
 //! (docs/algorithm.md).
 
-use crate::build::system::System;
 use crate::coupling::rows::{RowLevel, View};
 use crate::step_control::StepControl;
+use crate::system::System;
 
 /// C_k/(1 + C_k) for k = 0, 1, 2 (module documentation).
 const MILNE: [f64; 3] = [1.0 / 2.0, 1.0 / 6.0, 1.0 / 10.0];

@@ -3,11 +3,12 @@
 //! constant over each macro step, then u_{N+1} is chosen from the states at
 //! T_{N+1} so that μ² g̈ + 2μ ġ + g = 0 there. No step is repeated.
 
-use crate::build::feedthrough::Feedthrough;
-use crate::build::system::{MacroStep, StepAt, System};
+use crate::algorithm::step::{MacroStep, StepAt};
 use crate::coupling::rows::RowLevel;
 use crate::slave::Run;
 use crate::stats::{Lap, RunStats};
+use crate::system::feedthrough::Feedthrough;
+use crate::system::System;
 use crate::MasterError;
 
 pub(crate) struct Explicit {

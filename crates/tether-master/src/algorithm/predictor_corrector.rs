@@ -6,7 +6,7 @@
 use crate::algorithm::error_estimate::ErrorEstimate;
 use crate::algorithm::jacobian_reuse::Reuse;
 use crate::algorithm::runs::PerturbedRuns;
-use crate::build::system::{MacroStep, MethodState, StepAt, System};
+use crate::algorithm::step::{MacroStep, MethodState, StepAt};
 use crate::coupling::rows::{Column, RowLevel, View};
 use crate::linalg::solve::{Jacobians, Solver};
 use crate::polynomial::{extrapolate, interpolate, Taylor};
@@ -16,6 +16,7 @@ use crate::spec::JacobianMode;
 use crate::state_bytes::{Pass, Passed};
 use crate::stats::{Lap, RunStats};
 use crate::step_control::StepControl;
+use crate::system::System;
 use crate::{MasterError, Method};
 
 /// The method's own state ([`MacroStep::save`]): the Jacobians, their reuse,

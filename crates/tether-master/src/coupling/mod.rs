@@ -1,7 +1,7 @@
 //! The coupling conditions as the master evaluates them: the unknowns (one per
 //! row), and the rows — linear constraints between outputs, joint conditions
 //! between marker ports, additional coupling variables and force-port rows.
-//! [`crate::build::resolve`] builds them from the system file.
+//! [`crate::system::resolve`] builds them from the system file.
 
 pub(crate) mod joints;
 pub(crate) mod rows;

@@ -5,7 +5,7 @@
 use tether_fmi::{Causality, Variability};
 
 use super::Simulation;
-use crate::algorithm::signals::feeds_through;
+use crate::signals::feeds_through;
 use crate::spec::names::{describe, find_instance, fmu_file, suggest, variable};
 use crate::MasterError;
 

@@ -4,7 +4,7 @@
 //! with a given try of the method and reports the step it took, as
 //! libcosim's `algorithm::do_step` does.
 
-use crate::build::system::{Degree, StepAt};
+use crate::algorithm::step::{Degree, StepAt};
 use crate::state_bytes::{Pass, Passed};
 use crate::stats::AdaptiveStats;
 use crate::step_control::Controller;

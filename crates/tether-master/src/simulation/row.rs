@@ -4,8 +4,8 @@
 
 use tether_fmi::Int;
 
-use crate::build::system::System;
 use crate::observer::{Observer, Sample};
+use crate::system::System;
 use crate::MasterError;
 
 /// The values of the current point and what is recorded of them.

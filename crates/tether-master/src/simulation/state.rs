@@ -9,7 +9,7 @@ use tether_fmi::remote::protocol::{In, Out};
 
 use super::{grid::Grid, health::Health, Simulation};
 use crate::algorithm::predictor_corrector::pass_saved;
-use crate::build::system::MethodState;
+use crate::algorithm::step::MethodState;
 use crate::state_bytes::{Pass, Passed};
 use crate::MasterError;
 

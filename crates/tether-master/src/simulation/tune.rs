@@ -4,11 +4,11 @@
 use tether_fmi::{BaseType, Inputs};
 
 use super::Simulation;
-use crate::build::feedthrough::Feedthrough;
 use crate::slave::Run;
 use crate::spec::names::find_instance;
 use crate::spec::StartValue;
 use crate::start::set_between_steps;
+use crate::system::feedthrough::Feedthrough;
 use crate::MasterError;
 
 impl Simulation {

@@ -29,6 +29,13 @@ pub(crate) fn variable<'a>(
     })
 }
 
+/// The sizes of an FMI 3.0 array variable's dimensions as the structural
+/// parameters set make them ([`crate::Arrays`] knows them).
+pub(crate) trait ArraySizes {
+    /// The sizes of `v`'s dimensions (empty for a scalar).
+    fn sizes(&self, md: &ModelDescription, v: &ScalarVariable) -> Result<Vec<u64>, MasterError>;
+}
+
 /// An element of an FMI 3.0 array variable: its place among the array's
 /// values (row-major, 0-based) and their number.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,7 +54,7 @@ pub(crate) struct Element {
 /// Errors say where the name appears, as [`variable`]'s.
 pub(crate) fn element<'a>(
     md: &'a ModelDescription,
-    arrays: &crate::start::Arrays,
+    arrays: &impl ArraySizes,
     place: &str,
     instance: &str,
     fmu: impl FnOnce() -> String,

@@ -13,13 +13,14 @@
 
 use tether_fmi::{BaseType, Causality, ScalarVariable};
 
-use crate::build::system::{MacroStep, StepAt, System};
+use crate::algorithm::step::{MacroStep, StepAt};
 use crate::linalg::solve::Solver;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
 use crate::slave::{Run, Slave};
 use crate::spec::names::{describe, find_instance, Element};
 use crate::spec::{ConnectionSpec, SignalScheme, SignalSolver, StartValue, SystemSpec};
 use crate::stats::{Lap, RunStats, SignalStats};
+use crate::system::System;
 use crate::MasterError;
 use tether_fmi::{Inputs, Int};
 

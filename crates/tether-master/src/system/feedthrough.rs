@@ -5,13 +5,13 @@
 //! multipliers (`g̈ = 0` at T_0, eq. 3 for the oscillator) and by the explicit
 //! method (`μ² g̈ + 2μ ġ + g = 0` at T_{N+1}).
 
-use crate::build::system::System;
 use crate::coupling::rows::{Column, RowLevel, View};
 use crate::linalg::solve::{Jacobians, Solver};
 use crate::polynomial::Taylor;
 use crate::slave::Run;
 use crate::spec::InitialMultiplier;
 use crate::stats::RunStats;
+use crate::system::System;
 use crate::MasterError;
 
 /// Buffers of the feedthrough Newton step, sized for one system and reused.
