@@ -54,12 +54,12 @@
 //! ```
 
 pub mod archive;
+mod component;
 mod current;
 mod error;
 pub mod exit_hook;
 mod fmu;
 mod instance;
-mod instance3;
 mod interface;
 mod library;
 mod logger;
@@ -68,7 +68,6 @@ mod placement;
 pub mod raw;
 pub mod remote;
 mod shared;
-mod state;
 mod time;
 mod uri;
 pub mod xml;
@@ -77,9 +76,8 @@ pub use archive::{remove_extractions_now, sweep_leftovers, ArchiveKind, ExtractL
 pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
 pub use fmu::{set_debug_logging, special_file_kind, Fmu, InstanceOptions, OpenOptions};
-pub use instance::{Instance, StatusKind};
-pub use instance3::Fmi3Instance;
-pub use interface::{FmuInstance, Inputs, Int, LocalInstance, RunRequest, Slot, SLOTS};
+pub use instance::{Fmi3Instance, FmuState, Instance, LocalInstance, StatusKind};
+pub use interface::{FmuInstance, Inputs, Int, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
 pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIMIT};
 pub use model_description::{
@@ -91,5 +89,4 @@ pub use model_description::{
 };
 pub use placement::{instantiate, Placement};
 pub use raw::Status;
-pub use state::FmuState;
 pub use time::Time;

@@ -5,7 +5,8 @@ use std::time::Duration;
 
 use crate::error::Result;
 use crate::fmu::{Fmu, InstanceOptions};
-use crate::interface::{FmuInstance, LocalInstance};
+use crate::instance::LocalInstance;
+use crate::interface::FmuInstance;
 
 /// Where an instance runs.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -38,7 +39,7 @@ pub fn instantiate(
     let fmi3 = fmu.model_description().standard == crate::model_description::FmiStandard::Fmi3;
     Ok(match placement {
         Placement::InProcess if fmi3 => {
-            Box::new(crate::instance3::Fmi3Instance::new(fmu, name, options)?)
+            Box::new(crate::instance::Fmi3Instance::new(fmu, name, options)?)
         }
         Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
         // The host makes its instance with this function, in its process.

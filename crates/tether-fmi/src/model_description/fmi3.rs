@@ -9,7 +9,7 @@
 use std::collections::HashMap;
 
 use super::attrs::Attrs;
-use super::parse::{dependency_kind, unit};
+use super::fmi2::{dependency_kind, unit};
 use super::type_attrs::real_type;
 use super::types::*;
 use super::variables::{declared, initial_case, InitialCase, CAUSALITIES, INITIALS, VARIABILITIES};

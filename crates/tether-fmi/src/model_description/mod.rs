@@ -2,9 +2,9 @@
 //! or FMI 3.0) with the standard's defaults applied, and variable look-up by name.
 
 mod attrs;
+mod fmi2;
 mod fmi3;
 mod lookup;
-mod parse;
 mod type_attrs;
 mod types;
 mod variables;
@@ -205,7 +205,7 @@ pub(crate) fn parse_bytes(bytes: &[u8], file: &Path, origin: &Path) -> Result<Mo
         });
     }
     match standard {
-        FmiStandard::Fmi2 => parse::model_description(attrs::Attrs { file }, &root),
+        FmiStandard::Fmi2 => fmi2::model_description(attrs::Attrs { file }, &root),
         FmiStandard::Fmi3 => fmi3::model_description(attrs::Attrs { file }, &root),
     }
 }

@@ -8,7 +8,6 @@
 
 #![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
 
-pub(crate) mod component;
 pub mod fmi3;
 mod functions;
 

@@ -3,14 +3,12 @@
 //! one `fmi3Instance` whose methods are named after the C functions and go through the
 //! same status check as the FMI 2.0 calls ([`check`](super::check)).
 //!
-//! Like [`raw`](super), one of the crate's FFI modules: the `unsafe` calls into an FMI
-//! 3.0 FMU live in `component` (crate-private).
+//! The calls themselves are in the crate-private `component::fmi3`, one of the
+//! crate's FFI modules.
 
 #![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
 
-pub(crate) mod component;
 mod functions;
-pub(crate) mod intermediate;
 
 use std::ffi::{c_char, c_int, c_void};
 
@@ -83,7 +81,7 @@ pub type fmi3LogMessageCallback = Option<
     ),
 >;
 
-/// `fmi3IntermediateUpdateCallback` (Tether's: [`intermediate::intermediate_update`]).
+/// `fmi3IntermediateUpdateCallback` (Tether's: `intermediate_update` in the crate-private `component::fmi3`).
 pub type fmi3IntermediateUpdateCallback = Option<
     unsafe extern "C" fn(
         instanceEnvironment: fmi3InstanceEnvironment,

@@ -15,8 +15,8 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 
-use super::*;
 use crate::logger::LogEnv;
+use crate::raw::fmi3::*;
 
 /// `fmi3SetFloat64`, as the callback calls it.
 type SetFloat64 = unsafe extern "C" fn(

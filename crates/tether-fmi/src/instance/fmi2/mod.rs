@@ -4,11 +4,19 @@ use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
+use crate::component::fmi2::InstantiateArgs;
+use crate::component::fmi2::{RawComponent, RawState};
 use crate::error::{Error, Result};
+use crate::fmu::{debug_logging, Fmu, InstanceOptions};
 use crate::model_description::{ModelDescription, ScalarVariable, ValueReference};
-use crate::raw::component::{RawComponent, RawState};
 use crate::raw::{self, Status};
-use crate::shared::FmuShared;
+use crate::shared::{FmuShared, OnceGuard};
+
+mod local;
+mod state;
+
+pub use local::LocalInstance;
+pub use state::FmuState;
 
 /// What an instance shares with its [`FmuState`](crate::FmuState)s.
 ///
@@ -130,6 +138,70 @@ pub struct Instance {
     pub(crate) shared: Arc<Shared>,
     pub(crate) fmu: Arc<FmuShared>,
     name: Arc<str>,
+}
+
+impl Fmu {
+    /// Creates a co-simulation instance (`fmi2Instantiate` with the model description's
+    /// GUID). The instance is in the *instantiated* state; call
+    /// [`Instance::setup_experiment`] and the initialization-mode functions next.
+    ///
+    /// A model that declares `canBeInstantiatedOnlyOncePerProcess="true"` gets at most one
+    /// live instance per process, counted by GUID over every opened copy of it
+    /// ([`Error::OnlyOncePerProcess`] otherwise).
+    pub fn instantiate(&self, instance_name: &str, options: InstanceOptions) -> Result<Instance> {
+        let md = &self.shared().model_description;
+        if md.standard != crate::model_description::FmiStandard::Fmi2 {
+            return Err(Error::InvalidArgument {
+                function: "fmi2Instantiate",
+                instance: instance_name.to_owned(),
+                message: format!(
+                    "model '{}' is an FMI {} FMU: instantiate it with tether_fmi::instantiate",
+                    md.model_name, md.fmi_version
+                ),
+            });
+        }
+        let once = if md.co_simulation.can_be_instantiated_only_once_per_process {
+            Some(OnceGuard::acquire(&md.guid, &md.model_name, instance_name)?)
+        } else {
+            None
+        };
+        let debug = debug_logging();
+        let mut raw = RawComponent::fmi2Instantiate(
+            self.shared().library()?,
+            Arc::clone(&self.shared().dir),
+            &InstantiateArgs {
+                model: &md.model_name,
+                instance_name,
+                guid: &md.guid,
+                resource_location: &self.resource_location(),
+                visible: options.visible,
+                logging_on: options.logging_on || debug.is_some(),
+            },
+        )?;
+        raw.once = once;
+        let mut instance = Instance::new(raw, Arc::clone(self.shared()));
+        if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
+            let declared = &md.log_categories;
+            let mut categories = Vec::new();
+            for category in &wanted {
+                if declared.is_empty() || declared.iter().any(|c| c.name == *category) {
+                    categories.push(category.as_str());
+                } else {
+                    let names: Vec<&str> = declared.iter().map(|c| c.name.as_str()).collect();
+                    log::warn!(
+                        "model '{}' declares no log category '{category}' (it declares: {}); \
+                         not asked of instance '{instance_name}'",
+                        md.model_name,
+                        names.join(", ")
+                    );
+                }
+            }
+            if !categories.is_empty() {
+                instance.set_debug_logging(true, &categories)?;
+            }
+        }
+        Ok(instance)
+    }
 }
 
 impl Instance {

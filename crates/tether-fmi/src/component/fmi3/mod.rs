@@ -8,13 +8,15 @@
 use std::ffi::{c_char, CStr, CString};
 use std::sync::Arc;
 
-use super::intermediate::{intermediate_update, Env3};
-use super::*;
+mod intermediate;
+
 use crate::archive::FmuDir;
 use crate::error::{Error, Result};
 use crate::library::Library;
 use crate::logger::fmi3_log_message;
+use crate::raw::fmi3::*;
 use crate::raw::{check, CallSite};
+use intermediate::{intermediate_update, Env3};
 
 /// An FMU state pointer of an FMI 3.0 instance, freed by its owner
 /// ([`RawInstance3::fmi3FreeFMUState`]) before the instance.

@@ -13,7 +13,7 @@
 //! no callback (the FMU makes none). Such an input takes a polynomial over a step
 //! ([`FmuInstance::set_inputs`] with derivatives), set to the polynomial's value at
 //! every intermediate time at which the FMU asks for inputs
-//! (`raw::fmi3::intermediate`). Other inputs take values only (k = 0).
+//! (`component::fmi3`'s intermediate update). Other inputs take values only (k = 0).
 //!
 //! Values go through the [`FmuInstance`] methods by kind: `get_reals`/`set_reals` for
 //! `Float64` and `Float32`, `get_integers`/`set_integers` for every integer type and
@@ -27,13 +27,13 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
+use crate::component::fmi3::{InstantiateArgs3, RawInstance3, RawState3, StepAnswers};
 use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
 use crate::interface::{FmuInstance, Inputs, Int, Slot, SLOTS};
 use crate::model_description::{
     hex_decode, hex_encode, Causality, ModelDescription, ScalarVariable, ValueReference, ValueType,
 };
-use crate::raw::fmi3::component::{InstantiateArgs3, RawInstance3, RawState3, StepAnswers};
 use crate::shared::{FmuShared, OnceGuard};
 
 /// Where an instance is in the FMI 3.0 life cycle (as far as the safe layer cares).

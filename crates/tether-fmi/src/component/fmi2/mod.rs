@@ -8,11 +8,11 @@ use std::sync::Arc;
 mod state;
 mod values;
 
-use super::*;
 use crate::archive::FmuDir;
 use crate::error::{Error, Result};
 use crate::library::Library;
 use crate::logger::LogEnv;
+use crate::raw::*;
 
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
@@ -453,7 +453,7 @@ impl Drop for RawComponent {
         log::trace!(target: "tether_fmi::call", "fmi2FreeInstance({})", self.name);
         let _entered = crate::current::Entered::new("fmi2FreeInstance", &self.name, self.time);
         // SAFETY: the component is live and freed exactly once, here; it is dropped
-        // only after every state of it was freed (see `instance::Orphans`).
+        // only after every state of it was freed (see `instance::fmi2::Orphans`).
         unsafe { (self.library.functions().fmi2FreeInstance)(self.component) };
     }
 }

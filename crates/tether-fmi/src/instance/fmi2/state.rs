@@ -2,9 +2,9 @@
 
 use std::sync::Arc;
 
+use super::{Instance, Shared};
+use crate::component::fmi2::RawState;
 use crate::error::Result;
-use crate::instance::{Instance, Shared};
-use crate::raw::component::RawState;
 
 /// A saved FMU state, tied to the instance that created it.
 ///
