@@ -7,3 +7,21 @@
 
 pub(crate) mod fmi2;
 pub(crate) mod fmi3;
+
+use std::ffi::CString;
+
+use crate::error::{Error, Result};
+
+/// The log categories of `fmi2SetDebugLogging` / `fmi3SetDebugLogging` as C
+/// strings; one with a NUL byte is an error naming `function` and the instance.
+fn categories(categories: &[&str], function: &'static str, instance: &str) -> Result<Vec<CString>> {
+    categories
+        .iter()
+        .map(|c| CString::new(*c))
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| Error::InvalidArgument {
+            function,
+            instance: instance.to_string(),
+            message: "a category name contains a NUL byte".into(),
+        })
+}

@@ -1,8 +1,7 @@
 //! Maps the element tree of modelDescription.xml onto [`ModelDescription`].
 
-use std::collections::HashMap;
-
 use super::attrs::Attrs;
+use super::common;
 use super::type_attrs::{integer_type, real_type};
 use super::types::*;
 use super::variables::parse_variables;
@@ -11,31 +10,12 @@ use crate::xml::Element;
 
 /// Builds the model description from the parsed root element.
 pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDescription> {
-    if root.name != "fmiModelDescription" {
-        return Err(at.invalid(
-            root,
-            format!(
-                "root element is <{}>, expected <fmiModelDescription>",
-                root.name
-            ),
-        ));
-    }
+    common::check_root(at, root)?;
     let co_simulation = match root.child("CoSimulation") {
         Some(cs) => co_simulation(at, cs)?,
         None => {
             return Err(at.invalid(root, "no <CoSimulation> element"));
         }
-    };
-    let model_exchange = match root.child("ModelExchange") {
-        Some(me) => Some(at.required(me, "modelIdentifier")?),
-        None => None,
-    };
-    let unit_definitions = match root.child("UnitDefinitions") {
-        Some(units) => units
-            .children_named("Unit")
-            .map(|u| unit(at, u))
-            .collect::<Result<_>>()?,
-        None => Vec::new(),
     };
     let type_definitions: Vec<SimpleType> = match root.child("TypeDefinitions") {
         Some(types) => types
@@ -44,62 +24,44 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
             .collect::<Result<_>>()?,
         None => Vec::new(),
     };
-    let log_categories = match root.child("LogCategories") {
-        Some(cats) => cats
-            .children_named("Category")
-            .map(|c| {
-                Ok(LogCategory {
-                    name: at.required(c, "name")?,
-                    description: at.string(c, "description"),
-                })
-            })
-            .collect::<Result<_>>()?,
-        None => Vec::new(),
-    };
-    let default_experiment = match root.child("DefaultExperiment") {
-        Some(d) => Some(DefaultExperiment {
-            start_time: at.parsed(d, "startTime")?,
-            stop_time: at.parsed(d, "stopTime")?,
-            tolerance: at.parsed(d, "tolerance")?,
-            step_size: at.parsed(d, "stepSize")?,
-        }),
-        None => None,
-    };
+    let common::Header {
+        fmi_version,
+        model_name,
+        description,
+        author,
+        version,
+        copyright,
+        license,
+        generation_tool,
+        generation_date_and_time,
+        variable_naming_convention,
+        model_exchange,
+        unit_definitions,
+        log_categories,
+        default_experiment,
+    } = common::header(at, root)?;
     let Some(variables_element) = root.child("ModelVariables") else {
         return Err(at.invalid(root, "no <ModelVariables> element"));
     };
     let model_variables = parse_variables(at, variables_element, &type_definitions)?;
-    let mut by_name = HashMap::with_capacity(model_variables.len());
-    for (i, v) in model_variables.iter().enumerate() {
-        if by_name.insert(v.name.clone(), i).is_some() {
-            return Err(at.invalid_at(v.line, format!("duplicate variable name '{}'", v.name)));
-        }
-    }
+    let by_name = common::by_name(at, &model_variables)?;
     let model_structure = match root.child("ModelStructure") {
         Some(s) => model_structure(at, s, &model_variables)?,
         None => return Err(at.invalid(root, "no <ModelStructure> element")),
     };
-    let naming = at.choice(
-        root,
-        "variableNamingConvention",
-        &[
-            ("flat", VariableNamingConvention::Flat),
-            ("structured", VariableNamingConvention::Structured),
-        ],
-    )?;
     Ok(ModelDescription {
-        fmi_version: at.required(root, "fmiVersion")?,
+        fmi_version,
         standard: FmiStandard::Fmi2,
-        model_name: at.required(root, "modelName")?,
+        model_name,
         guid: at.required(root, "guid")?,
-        description: at.string(root, "description"),
-        author: at.string(root, "author"),
-        version: at.string(root, "version"),
-        copyright: at.string(root, "copyright"),
-        license: at.string(root, "license"),
-        generation_tool: at.string(root, "generationTool"),
-        generation_date_and_time: at.string(root, "generationDateAndTime"),
-        variable_naming_convention: naming.unwrap_or_default(),
+        description,
+        author,
+        version,
+        copyright,
+        license,
+        generation_tool,
+        generation_date_and_time,
+        variable_naming_convention,
         number_of_event_indicators: at.parsed(root, "numberOfEventIndicators")?,
         co_simulation,
         model_exchange,
@@ -139,43 +101,6 @@ fn co_simulation(at: Attrs<'_>, cs: &Element) -> Result<CoSimulation> {
         can_serialize_fmu_state: at.flag(cs, "canSerializeFMUstate", false)?,
         provides_directional_derivative: at.flag(cs, "providesDirectionalDerivative", false)?,
         ..CoSimulation::default()
-    })
-}
-
-pub(super) fn unit(at: Attrs<'_>, u: &Element) -> Result<Unit> {
-    let base_unit = match u.child("BaseUnit") {
-        Some(b) => {
-            let exp = |key| -> Result<i32> { Ok(at.parsed(b, key)?.unwrap_or(0)) };
-            Some(BaseUnit {
-                kg: exp("kg")?,
-                m: exp("m")?,
-                s: exp("s")?,
-                A: exp("A")?,
-                K: exp("K")?,
-                mol: exp("mol")?,
-                cd: exp("cd")?,
-                rad: exp("rad")?,
-                factor: at.parsed(b, "factor")?.unwrap_or(1.0),
-                offset: at.parsed(b, "offset")?.unwrap_or(0.0),
-            })
-        }
-        None => None,
-    };
-    let display_units = u
-        .children_named("DisplayUnit")
-        .map(|d| {
-            Ok(DisplayUnit {
-                name: at.required(d, "name")?,
-                factor: at.parsed(d, "factor")?.unwrap_or(1.0),
-                offset: at.parsed(d, "offset")?.unwrap_or(0.0),
-                inverse: at.flag(d, "inverse", false)?,
-            })
-        })
-        .collect::<Result<_>>()?;
-    Ok(Unit {
-        name: at.required(u, "name")?,
-        base_unit,
-        display_units,
     })
 }
 
@@ -261,17 +186,6 @@ fn model_structure(
         }
     }
     Ok(structure)
-}
-
-pub(super) fn dependency_kind(at: Attrs<'_>, u: &Element, k: &str) -> Result<DependencyKind> {
-    Ok(match k {
-        "dependent" => DependencyKind::Dependent,
-        "constant" => DependencyKind::Constant,
-        "fixed" => DependencyKind::Fixed,
-        "tunable" => DependencyKind::Tunable,
-        "discrete" => DependencyKind::Discrete,
-        other => return Err(at.invalid(u, format!("unknown dependenciesKind \"{other}\""))),
-    })
 }
 
 fn unknown(at: Attrs<'_>, u: &Element, variables: &[ScalarVariable]) -> Result<Unknown> {

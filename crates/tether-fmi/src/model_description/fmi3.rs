@@ -9,7 +9,7 @@
 use std::collections::HashMap;
 
 use super::attrs::Attrs;
-use super::fmi2::{dependency_kind, unit};
+use super::common::{self, dependency_kind};
 use super::type_attrs::real_type;
 use super::types::*;
 use super::variables::{declared, initial_case, InitialCase, CAUSALITIES, INITIALS, VARIABILITIES};
@@ -18,30 +18,11 @@ use crate::xml::Element;
 
 /// Builds the model description from the parsed root element of an FMI 3.0 file.
 pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDescription> {
-    if root.name != "fmiModelDescription" {
-        return Err(at.invalid(
-            root,
-            format!(
-                "root element is <{}>, expected <fmiModelDescription>",
-                root.name
-            ),
-        ));
-    }
+    common::check_root(at, root)?;
     let Some(cs) = root.child("CoSimulation") else {
         return Err(at.invalid(root, "no <CoSimulation> element"));
     };
     let co_simulation = co_simulation(at, cs)?;
-    let model_exchange = match root.child("ModelExchange") {
-        Some(me) => Some(at.required(me, "modelIdentifier")?),
-        None => None,
-    };
-    let unit_definitions = match root.child("UnitDefinitions") {
-        Some(units) => units
-            .children_named("Unit")
-            .map(|u| unit(at, u))
-            .collect::<Result<_>>()?,
-        None => Vec::new(),
-    };
     let type_definitions: Vec<SimpleType> = match root.child("TypeDefinitions") {
         Some(types) => types
             .children
@@ -50,27 +31,22 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
             .collect::<Result<_>>()?,
         None => Vec::new(),
     };
-    let log_categories = match root.child("LogCategories") {
-        Some(cats) => cats
-            .children_named("Category")
-            .map(|c| {
-                Ok(LogCategory {
-                    name: at.required(c, "name")?,
-                    description: at.string(c, "description"),
-                })
-            })
-            .collect::<Result<_>>()?,
-        None => Vec::new(),
-    };
-    let default_experiment = match root.child("DefaultExperiment") {
-        Some(d) => Some(DefaultExperiment {
-            start_time: at.parsed(d, "startTime")?,
-            stop_time: at.parsed(d, "stopTime")?,
-            tolerance: at.parsed(d, "tolerance")?,
-            step_size: at.parsed(d, "stepSize")?,
-        }),
-        None => None,
-    };
+    let common::Header {
+        fmi_version,
+        model_name,
+        description,
+        author,
+        version,
+        copyright,
+        license,
+        generation_tool,
+        generation_date_and_time,
+        variable_naming_convention,
+        model_exchange,
+        unit_definitions,
+        log_categories,
+        default_experiment,
+    } = common::header(at, root)?;
     let Some(variables_element) = root.child("ModelVariables") else {
         return Err(at.invalid(root, "no <ModelVariables> element"));
     };
@@ -105,12 +81,7 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
             derivatives.push((derivative, e));
         }
     }
-    let mut by_name = HashMap::with_capacity(model_variables.len());
-    for (i, v) in model_variables.iter().enumerate() {
-        if by_name.insert(v.name.clone(), i).is_some() {
-            return Err(at.invalid_at(v.line, format!("duplicate variable name '{}'", v.name)));
-        }
-    }
+    let by_name = common::by_name(at, &model_variables)?;
     // FMI 3.0 aliases share a value reference: the first variable stands for it.
     let mut by_vr: HashMap<ValueReference, usize> = HashMap::with_capacity(model_variables.len());
     for (i, v) in model_variables.iter().enumerate() {
@@ -163,27 +134,19 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
         Some(s) => model_structure(at, s, &index_of)?,
         None => ModelStructure::default(),
     };
-    let naming = at.choice(
-        root,
-        "variableNamingConvention",
-        &[
-            ("flat", VariableNamingConvention::Flat),
-            ("structured", VariableNamingConvention::Structured),
-        ],
-    )?;
     Ok(ModelDescription {
-        fmi_version: at.required(root, "fmiVersion")?,
+        fmi_version,
         standard: FmiStandard::Fmi3,
-        model_name: at.required(root, "modelName")?,
+        model_name,
         guid: at.required(root, "instantiationToken")?,
-        description: at.string(root, "description"),
-        author: at.string(root, "author"),
-        version: at.string(root, "version"),
-        copyright: at.string(root, "copyright"),
-        license: at.string(root, "license"),
-        generation_tool: at.string(root, "generationTool"),
-        generation_date_and_time: at.string(root, "generationDateAndTime"),
-        variable_naming_convention: naming.unwrap_or_default(),
+        description,
+        author,
+        version,
+        copyright,
+        license,
+        generation_tool,
+        generation_date_and_time,
+        variable_naming_convention,
         number_of_event_indicators: None,
         co_simulation,
         model_exchange,

@@ -2,6 +2,7 @@
 //! or FMI 3.0) with the standard's defaults applied, and variable look-up by name.
 
 mod attrs;
+mod common;
 mod fmi2;
 mod fmi3;
 mod lookup;

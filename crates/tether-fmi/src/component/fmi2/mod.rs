@@ -297,15 +297,7 @@ impl RawComponent {
         categories: &[&str],
     ) -> Result<()> {
         const F: &str = "fmi2SetDebugLogging";
-        let owned: Vec<CString> = categories
-            .iter()
-            .map(|c| CString::new(*c))
-            .collect::<std::result::Result<_, _>>()
-            .map_err(|_| Error::InvalidArgument {
-                function: F,
-                instance: self.name.to_string(),
-                message: "a category name contains a NUL byte".into(),
-            })?;
+        let owned = super::categories(categories, F, &self.name.to_string())?;
         let ptrs: Vec<fmi2String> = owned.iter().map(|c| c.as_ptr()).collect();
         // SAFETY: `ptrs` holds `ptrs.len()` valid C strings that outlive the call.
         self.call(F, |f, c| unsafe {
