@@ -58,7 +58,7 @@ pub fn model_description(declaration: &Declaration) -> Result<String, String> {
 
 /// The GUID of model `M`, rendered and hashed once per process: instantiating
 /// checks it and every instance keeps a fingerprint of it, and rendering a
-/// large declaration costs milliseconds (body3d: ~2.5 million instructions).
+/// large declaration (body3d's) is too slow to repeat per instance.
 pub fn model_guid<M: crate::Model>() -> &'static str {
     use std::any::TypeId;
     use std::sync::{Mutex, PoisonError};

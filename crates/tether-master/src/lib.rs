@@ -3,8 +3,9 @@
 //! The constraint-coupling co-simulation master of Tether: the semi-implicit
 //! predictor/corrector methods of Schweizer & Lu (ZAMM 2015) — Method 1
 //! (Baumgarte stabilisation) and Method 2 (weighted multipliers) on index 1, 2
-//! or 3 level — plus an explicit baseline, coupling FMI 2.0 co-simulation FMUs
-//! through algebraic constraints between their outputs.
+//! or 3 level — plus an explicit baseline, coupling FMI 2.0 and FMI 3.0
+//! co-simulation FMUs through algebraic constraints between their outputs, and
+//! through signal connections.
 //!
 //! ```no_run
 //! use tether_master::{MemoryRecorder, Simulation, SystemSpec};

@@ -172,8 +172,8 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 /// yet freed.
 ///
 /// Inlined into each entry point, as are the value and step functions it runs: the
-/// FMI 2.0 and 3.0 layers share them, and out of line they cost the oscillator pair
-/// about 270 instructions a macro step (callgrind, docs/performance.md "Profiling").
+/// FMI 2.0 and 3.0 layers share them, and a call out of line is a measurable part of
+/// a cheap FMU's step (callgrind, docs/performance.md "Profiling").
 #[inline(always)]
 unsafe fn with_instance<M: Model>(
     c: Fmi2Component,

@@ -173,10 +173,9 @@ impl Jacobians {
 }
 
 /// Largest number of unknowns always solved densely. The sparse LU is the
-/// faster from about 16 unknowns on chain and tree patterns (the `scale`
-/// benchmark's crossover table: at 16, 2 µs against 4 µs; at 32, 3 µs
-/// against 19 µs), where the dense inverse's O(n³) starts to dominate; 20
-/// keeps every system of the fmpy cross-check (at most 17 unknowns) on the
+/// faster from about 16 unknowns on chain and tree patterns, where the dense
+/// inverse's O(n³) starts to dominate (the `scale` benchmark, docs/performance.md);
+/// 20 keeps every system of the fmpy cross-check (at most 17 unknowns) on the
 /// dense path's arithmetic, bit for bit.
 pub(crate) const DENSE_MAX: usize = 20;
 
