@@ -139,7 +139,7 @@ mod oscillator {
         }
     }
 
-    /// "The tolerance is honoured": the global error against the closed form
+    /// docs/validation.md, "The tolerance is honoured": the global error against the closed form
     /// over atol + rtol·max|y|, for x1 and v1, with atol = rtol. (Index 2 with
     /// k = 1 is unstable at every H, docs/paper-reproduction.md: the controller
     /// shrinks the step to h_min and stops the run, so it is not among these;
@@ -299,7 +299,7 @@ mod mechanisms {
     use tether_tests::planar::*;
     use tether_tests::reference::{double_pendulum, slider_crank};
 
-    /// "The tolerance is honoured" on the double pendulum: the error of the link
+    /// docs/validation.md, "The tolerance is honoured", on the double pendulum: the error of the link
     /// angles, angular velocities and the free end's position and velocity
     /// against the monolithic reference over atol + rtol·max|y| (atol = rtol),
     /// the largest over these columns.
