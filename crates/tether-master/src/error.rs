@@ -426,6 +426,20 @@ impl From<tether_fmi::Error> for MasterError {
     }
 }
 
+/// An error and its causes on one line, `error: cause: cause`, as the CLI
+/// prints it (newlines become spaces): the one formatter of error chains for
+/// the library's users (tether-py, the single-FMU runs' trailers).
+pub fn error_line(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(cause) = source {
+        text.push_str(": ");
+        text.push_str(&cause.to_string());
+        source = cause.source();
+    }
+    text.replace('\n', " ")
+}
+
 /// The clause of a failed periodic rollback check that names the rows
 /// written since the last check that passed.
 fn unverified_rows(after: Option<f64>) -> String {

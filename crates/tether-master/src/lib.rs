@@ -40,7 +40,7 @@ mod stats;
 mod step_control;
 mod system;
 
-pub use error::{MasterError, UnknownName};
+pub use error::{error_line, MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};
 pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
 pub use simulation::{

@@ -303,7 +303,7 @@ impl SingleFmu {
                 made = n;
             }
         }
-        let failure = outcome.as_ref().err().map(|e| chain(e));
+        let failure = outcome.as_ref().err().map(|e| crate::error_line(e));
         let finished = observer.finish(failure.as_deref());
         SingleRun {
             steps: made,
@@ -399,17 +399,4 @@ impl<'a> Recorder<'a> {
         })?;
         Ok(())
     }
-}
-
-/// An error and its causes on one line, `error: cause: cause` (as the CLI
-/// prints it).
-fn chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(cause) = source {
-        text.push_str(": ");
-        text.push_str(&cause.to_string());
-        source = cause.source();
-    }
-    text
 }

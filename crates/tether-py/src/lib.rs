@@ -77,16 +77,7 @@ fn kind_of(e: &MasterError) -> &'static str {
 
 /// The one-line message of an error and its causes, as the CLI prints it
 /// (`outer: cause: cause`).
-fn message(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(cause) = source {
-        text.push_str(": ");
-        text.push_str(&cause.to_string());
-        source = cause.source();
-    }
-    text.replace('\n', " ")
-}
+use tether_master::error_line as message;
 
 fn failure(kind: &str, message: String, partial: Option<Py<PyAny>>) -> PyErr {
     Failure::new_err((kind.to_string(), message, partial))
