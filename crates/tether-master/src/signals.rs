@@ -124,7 +124,12 @@ impl Signals {
                     ),
                 });
             }
-            if slaves[link.to].inputs.iter().any(|i| i.vr == link.to_vr) {
+            if slaves[link.to]
+                .coupled
+                .inputs
+                .iter()
+                .any(|i| i.vr == link.to_vr)
+            {
                 return Err(MasterError::Connection {
                     connection: link.name,
                     reason: format!(
@@ -189,7 +194,7 @@ impl Signals {
         if !self.iterated() {
             return Ok(());
         }
-        match slaves.iter().find(|s| !s.can_get_and_set_state) {
+        match slaves.iter().find(|s| !s.caps.can_get_and_set_state) {
             None => Ok(()),
             Some(slave) => Err(MasterError::MissingCapability {
                 instance: slave.name.clone(),

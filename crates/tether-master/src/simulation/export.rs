@@ -109,7 +109,11 @@ impl Simulation {
                         format!("'{target}' is {}, not an input", describe(v)),
                     ));
                 }
-                let coupled = slave.inputs.iter().any(|i| i.vr == v.value_reference);
+                let coupled = slave
+                    .coupled
+                    .inputs
+                    .iter()
+                    .any(|i| i.vr == v.value_reference);
                 let signal = spec.connections.iter().any(|c| c.to == target);
                 if coupled || signal {
                     let by = if coupled {
@@ -223,7 +227,7 @@ impl Simulation {
                     }
                     r.outputs[s].push(o);
                     changed = true;
-                    if slave.coupled_outputs.iter().any(|c| c.vr == o) {
+                    if slave.coupled.outputs.iter().any(|c| c.vr == o) {
                         r.coupling = true;
                     }
                     for &(_, _, to, to_vr) in links.iter().filter(|l| (l.0, l.1) == (s, o)) {
@@ -233,7 +237,7 @@ impl Simulation {
                     }
                 }
                 if r.coupling {
-                    for c in &slave.inputs {
+                    for c in &slave.coupled.inputs {
                         if !r.inputs[s].contains(&c.vr) {
                             r.inputs[s].push(c.vr);
                             changed = true;
@@ -252,7 +256,7 @@ impl Simulation {
         let slaves = &self.system.slaves;
         let owner = slaves
             .iter()
-            .position(|s| s.recorded_names.iter().any(|n| n == column));
+            .position(|s| s.recorded_names().iter().any(|n| n == column));
         match owner {
             Some(s) => {
                 let var = &column[slaves[s].name.len() + 1..];

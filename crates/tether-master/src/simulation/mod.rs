@@ -446,7 +446,7 @@ impl Simulation {
         if let Err(e) = stepped {
             // The instance whose output diverged first in the step, if any.
             let noted = (self.system.slaves.iter())
-                .filter_map(|s| s.beyond.as_ref().map(|b| (s.name.as_str(), b)));
+                .filter_map(|s| s.coupled.beyond.as_ref().map(|b| (s.name.as_str(), b)));
             let e = crate::culprit::blame(e, noted, self.grid.time());
             if !matches!(e, MasterError::TerminationRequested { .. }) {
                 self.health.fail(&e);

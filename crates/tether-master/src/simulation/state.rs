@@ -69,7 +69,7 @@ impl Simulation {
         system.history.clone_from(&state.history);
         system.outputs.clone_from(&state.outputs);
         for (slave, recorded) in system.slaves.iter_mut().zip(&state.recorded) {
-            slave.recorded_values.copy_from_slice(recorded);
+            slave.set_recorded_values(recorded);
         }
         self.grid.clone_from(&state.grid);
         self.health.clone_from(&state.health);

@@ -47,7 +47,7 @@ impl Simulation {
         let names = self.system.slaves.iter().map(|s| s.name.as_str());
         let s = find_instance(&format!("set_parameter('{target}')"), instance, names)?;
         let slave = &mut self.system.slaves[s];
-        let coupled: Vec<u32> = slave.inputs.iter().map(|i| i.vr).collect();
+        let coupled: Vec<u32> = slave.coupled.inputs.iter().map(|i| i.vr).collect();
         let kind = set_between_steps(
             slave.backend.as_mut(),
             slave.fmu.model_description(),
@@ -78,7 +78,7 @@ impl Simulation {
         let Some(slave) = self.system.slaves.iter_mut().find(|s| s.name == instance) else {
             return Ok(());
         };
-        if derivatives.is_empty() || !slave.can_interpolate_inputs {
+        if derivatives.is_empty() || !slave.caps.can_interpolate_inputs {
             return Ok(());
         }
         let Ok(var) = slave.fmu.model_description().variable(variable) else {

@@ -55,7 +55,7 @@ impl System {
         let coupling = Coupling::build(spec, &mut slaves, method, order)?;
         let mut owners: Vec<Vec<usize>> = vec![Vec::new(); coupling.len()];
         for (s, slave) in slaves.iter().enumerate() {
-            for input in &slave.inputs {
+            for input in &slave.coupled.inputs {
                 for &(m, _) in &input.terms {
                     // Instances come in order: a repeat is the last one.
                     if owners[m].last() != Some(&s) {
@@ -92,7 +92,8 @@ impl System {
         let every_step = spec.coupling.check_rollback == CheckRollback::EveryStep;
         for slave in &mut slaves {
             slave.enter_initialization(exp.start, stop, exp.tolerance)?;
-            slave.verify_restore = every_step && method.needs_rollback() && slave.is_coupled();
+            slave.check.verify_restore =
+                every_step && method.needs_rollback() && slave.is_coupled();
         }
         let history = coupling
             .unknowns

@@ -470,7 +470,7 @@ fn check_driven_starts(spec: &SystemSpec, slaves: &[Slave]) -> Result<(), Master
             let Ok((var, element)) = named else { continue };
             // A whole array whose elements are partly driven gives the others
             // their values; an element or a scalar the coupling drives is refused.
-            let driven = slave.inputs.iter().any(|i| {
+            let driven = slave.coupled.inputs.iter().any(|i| {
                 i.vr == var.value_reference
                     && match element {
                         Some(e) => i.element == e.index,
@@ -508,13 +508,13 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
         if order > 0 && fmi3 {
             // FMI 3.0 has no input derivatives: a polynomial input goes through
             // intermediate update, for inputs that may be set there.
-            if !slave.can_interpolate_inputs {
+            if !slave.caps.can_interpolate_inputs {
                 return Err(capability(
                     "providesIntermediateUpdate (FMI 3.0 has no input derivatives: a polynomial input goes through intermediate update)",
                     format!("coupling polynomials of degree k = {order} (use order = 0)"),
                 ));
             }
-            if let Some(input) = slave.inputs.iter().find(|i| i.count > 1) {
+            if let Some(input) = slave.coupled.inputs.iter().find(|i| i.count > 1) {
                 let name = md
                     .variable_by_vr(input.vr)
                     .map_or_else(|| input.vr.to_string(), |v| v.name.clone());
@@ -525,7 +525,12 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                     ),
                 ));
             }
-            if let Some(input) = slave.inputs.iter().find(|i| !slave.interpolates(i.vr)) {
+            if let Some(input) = slave
+                .coupled
+                .inputs
+                .iter()
+                .find(|i| !slave.interpolates(i.vr))
+            {
                 let name = md
                     .model_variables
                     .iter()
@@ -539,13 +544,13 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                 ));
             }
         }
-        if order > 0 && !slave.can_interpolate_inputs {
+        if order > 0 && !slave.caps.can_interpolate_inputs {
             return Err(capability(
                 "canInterpolateInputs",
                 format!("coupling polynomials of degree k = {order} (use order = 0)"),
             ));
         }
-        if method.needs_rollback() && !slave.can_get_and_set_state {
+        if method.needs_rollback() && !slave.caps.can_get_and_set_state {
             return Err(capability(
                 "canGetAndSetFMUstate",
                 format!(
@@ -579,7 +584,7 @@ fn output_level(
                 expected: "a Real output".into(),
             });
         }
-        if term.derivative_order > slave.max_output_derivative_order {
+        if term.derivative_order > slave.caps.max_output_derivative_order {
             return Err(MasterError::MissingCapability {
                 instance: slave.name.clone(),
                 model: slave.model_name.clone(),

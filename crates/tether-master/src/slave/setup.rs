@@ -1,0 +1,368 @@
+//! Setting an instance up: instantiation where the system file places it,
+//! the start values, the coupling's buffers once the coupling is known, and
+//! initialization; what the FMU declares it can do.
+
+use tether_fmi::{Fmu, ModelDescription, Placement};
+
+use super::coupled::UNUSED;
+use super::Slave;
+use crate::spec::{InstanceSpec, Isolation, StartValue};
+use crate::stats::InstanceCounters;
+use crate::MasterError;
+
+/// What an instance's FMU declares it can do, as the coupling needs it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Capabilities {
+    /// Inputs take polynomials over a step: FMI 2.0 `canInterpolateInputs`,
+    /// FMI 3.0 intermediate update (for the inputs declared
+    /// `intermediateUpdate="true"`, [`Slave::interpolates`]).
+    pub can_interpolate_inputs: bool,
+    /// `maxOutputDerivativeOrder`.
+    pub max_output_derivative_order: u32,
+    /// `canGetAndSetFMUstate`.
+    pub can_get_and_set_state: bool,
+}
+
+impl Capabilities {
+    /// The capabilities `md` declares.
+    pub(crate) fn of(md: &ModelDescription) -> Capabilities {
+        let cs = &md.co_simulation;
+        Capabilities {
+            can_interpolate_inputs: cs.can_interpolate_inputs || cs.provides_intermediate_update,
+            max_output_derivative_order: cs.max_output_derivative_order,
+            can_get_and_set_state: cs.can_get_and_set_fmu_state,
+        }
+    }
+}
+
+impl Slave {
+    /// Instantiate the FMU of `spec` and apply the start values. Instances of
+    /// the same `.fmu` file share one opened FMU in `opened` (one extraction,
+    /// one loaded library), as the C floor of docs/performance.md does.
+    /// `order` is the system's degree k: at k > 0 the inputs take polynomials
+    /// (an FMI 3.0 instance gets the intermediate update callback), at k = 0
+    /// values only.
+    pub(crate) fn instantiate(
+        spec: &InstanceSpec,
+        opened: &mut Vec<(std::path::PathBuf, Fmu)>,
+        order: usize,
+    ) -> Result<Slave, MasterError> {
+        let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
+            Some((_, fmu)) => fmu.clone(),
+            None => {
+                // An isolated instance's library is loaded by its host only.
+                let fmu = match spec.isolation {
+                    Isolation::Process => Fmu::open_unloaded(&spec.fmu, &Default::default()),
+                    Isolation::None => Fmu::open(&spec.fmu),
+                }
+                .map_err(|error| MasterError::InstanceFmu {
+                    instance: spec.name.clone(),
+                    error,
+                })?;
+                opened.push((spec.fmu.clone(), fmu.clone()));
+                fmu
+            }
+        };
+        Slave::instantiate_as(fmu, spec, &spec.name, order)
+    }
+
+    /// Another instance of this slave's FMU with the same start values and the
+    /// same coupled inputs and outputs, initialised like the original (for
+    /// perturbed runs on another thread; its state is later copied over).
+    pub(crate) fn duplicate(
+        &self,
+        spec: &InstanceSpec,
+        copy: usize,
+        experiment: (f64, f64, Option<f64>),
+    ) -> Result<Slave, MasterError> {
+        let name = format!("{}#{copy}", spec.name);
+        let mut extra = Slave::instantiate_as(self.fmu.clone(), spec, &name, self.coupled.order)?;
+        extra.coupled.inputs = self.coupled.inputs.clone();
+        extra.coupled.outputs = self.coupled.outputs.clone();
+        extra.finalize(self.coupled.order);
+        let (start, stop, tolerance) = experiment;
+        extra.initialize(start, stop, tolerance)?;
+        Ok(extra)
+    }
+
+    pub(super) fn instantiate_as(
+        fmu: Fmu,
+        spec: &InstanceSpec,
+        name: &str,
+        order: usize,
+    ) -> Result<Slave, MasterError> {
+        let md = fmu.model_description();
+        let caps = Capabilities::of(md);
+        let model_name = md.model_name.clone();
+        let counters = InstanceCounters {
+            name: name.to_string(),
+            model: model_name.clone(),
+            ..Default::default()
+        };
+        let timeout = spec.call_timeout.map(std::time::Duration::from_secs_f64);
+        let placement = match (&spec.host, &spec.token_file, spec.isolation) {
+            (Some(host), Some(token_file), _) => Placement::Remote {
+                timeout,
+                host: tether_fmi::remote::tcp::RemoteHost {
+                    address: tether_fmi::remote::tcp::RemoteHost::parse_address(host).map_err(
+                        |reason| tether_fmi::Error::HostStart {
+                            instance: name.to_string(),
+                            reason,
+                        },
+                    )?,
+                    token_file: token_file.clone(),
+                    fmu_on_host: spec.fmu_on_host.clone(),
+                },
+            },
+            (_, _, Isolation::Process) => Placement::Process { timeout },
+            (_, _, Isolation::None) => Placement::InProcess,
+        };
+        let options = tether_fmi::InstanceOptions::default().with_polynomial_inputs(order > 0);
+        let backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
+        let mut slave = Slave {
+            name: name.to_string(),
+            model_name,
+            backend,
+            fmu,
+            caps,
+            saved: false,
+            coupled: Default::default(),
+            runs: Default::default(),
+            recorded: Default::default(),
+            check: Default::default(),
+            arrays: Default::default(),
+            signal_buf: Vec::new(),
+            counters,
+            stepped_ahead: false,
+        };
+        slave.arrays = crate::start::apply_start_values(
+            slave.backend.as_mut(),
+            slave.fmu.model_description(),
+            spec.parameters.iter().map(|(n, v)| (n.as_str(), v)),
+        )?;
+        slave.record_columns(&spec.name)?;
+        Ok(slave)
+    }
+
+    /// Set element `e` of array input `vr` to `value` (a signal connection's
+    /// receiver): the array is set whole, its other elements at their values
+    /// as last set.
+    pub(crate) fn set_array_element(
+        &mut self,
+        vr: u32,
+        e: crate::spec::names::Element,
+        value: StartValue,
+    ) -> Result<(), MasterError> {
+        let md = self.fmu.model_description();
+        let Some(var) = md.variable_by_vr(vr) else {
+            return Err(MasterError::StartValue {
+                instance: self.name.clone(),
+                variable: format!("#{vr}"),
+                value: value.to_string(),
+                reason: "no variable has this value reference".into(),
+            });
+        };
+        // The reason names the element (`element 5 (row-major): …`).
+        let fail = |reason: String| MasterError::StartValue {
+            instance: self.name.clone(),
+            variable: var.name.clone(),
+            value: value.to_string(),
+            reason,
+        };
+        self.arrays
+            .set_element(self.backend.as_mut(), md, var, e.index, value.clone(), fail)
+    }
+
+    /// Size the buffers once the coupling is known (no allocation afterwards);
+    /// `order` is the degree k of the unknowns' polynomials: the inputs'
+    /// derivatives up to order min(k, 2) go to the FMU.
+    pub(crate) fn finalize(&mut self, order: usize) {
+        self.coupled.order = order;
+        // The inputs' values as set: an array whole (its elements no
+        // unknown drives at their start values), each other input alone.
+        self.coupled.input.vrs.clear();
+        self.coupled.input.values.clear();
+        self.coupled.input_positions.clear();
+        for (k, i) in self.coupled.inputs.iter().enumerate() {
+            let first = self.coupled.inputs[..k].iter().position(|j| j.vr == i.vr);
+            let position = match first {
+                Some(j) => {
+                    self.coupled.input_positions[j] - self.coupled.inputs[j].element + i.element
+                }
+                None => {
+                    let start = self.coupled.input.values.len();
+                    self.coupled.input.vrs.push(i.vr);
+                    if i.count == 1 {
+                        self.coupled.input.values.push(0.0);
+                    } else {
+                        let md = self.fmu.model_description();
+                        let starts = md
+                            .variable_by_vr(i.vr)
+                            .and_then(|v| self.arrays.real_values(md, v).ok())
+                            .filter(|x| x.len() == i.count)
+                            .unwrap_or_else(|| vec![0.0; i.count]);
+                        self.coupled.input.values.extend(starts);
+                    }
+                    start + i.element
+                }
+            };
+            self.coupled.input_positions.push(position);
+        }
+        self.coupled.input.derivative_vrs.clear();
+        self.coupled.input.orders.clear();
+        for d in 1..=order.min(2) as i32 {
+            for i in &self.coupled.inputs {
+                self.coupled.input.derivative_vrs.push(i.vr);
+                self.coupled.input.orders.push(d);
+            }
+        }
+        self.coupled.input.derivatives = vec![0.0; self.coupled.input.derivative_vrs.len()];
+        self.coupled.value_vrs.clear();
+        self.coupled.derivative_reads.clear();
+        let mut derivative_slots = Vec::new();
+        self.coupled.slots.clear();
+        // Each variable read once: an array's values all, the elements
+        // nobody couples unused.
+        let mut firsts: Vec<usize> = Vec::new();
+        for (slot, o) in self.coupled.outputs.iter().enumerate() {
+            if o.order != 0 {
+                self.coupled.derivative_reads.push((o.vr, o.order as i32));
+                derivative_slots.push(slot);
+                continue;
+            }
+            let first = match self.coupled.value_vrs.iter().position(|&vr| vr == o.vr) {
+                Some(k) => firsts[k],
+                None => {
+                    self.coupled.value_vrs.push(o.vr);
+                    firsts.push(self.coupled.slots.len());
+                    self.coupled
+                        .slots
+                        .resize(self.coupled.slots.len() + o.count, UNUSED);
+                    *firsts.last().expect("pushed")
+                }
+            };
+            self.coupled.slots[first + o.element] = slot;
+        }
+        let values = self.coupled.slots.len();
+        self.coupled.value_count = (values != self.coupled.value_vrs.len()).then_some(values);
+        self.coupled.accepted_vrs = [&self.coupled.value_vrs[..], &self.recorded.vrs[..]].concat();
+        let accepted = values + self.recorded.reals;
+        self.coupled.accepted_count =
+            (accepted != self.coupled.accepted_vrs.len()).then_some(accepted);
+        self.coupled.slots.extend(derivative_slots);
+        self.coupled.value_buf = vec![0.0; self.coupled.slots.len()];
+        self.runs.inputs.clear();
+        self.check.at_save = vec![0.0; self.coupled.outputs.len()];
+        self.check.readback = vec![0.0; self.coupled.outputs.len()];
+    }
+
+    /// Initialise: setup experiment, initialization mode.
+    pub(crate) fn initialize(
+        &mut self,
+        start: f64,
+        stop: f64,
+        tolerance: Option<f64>,
+    ) -> Result<(), MasterError> {
+        self.enter_initialization(start, stop, tolerance)?;
+        self.exit_initialization()
+    }
+
+    /// Setup experiment and enter initialization mode, where inputs can be
+    /// set and outputs read before the first step (a loop's values at T_0).
+    pub(crate) fn enter_initialization(
+        &mut self,
+        start: f64,
+        stop: f64,
+        tolerance: Option<f64>,
+    ) -> Result<(), MasterError> {
+        self.backend.setup(tolerance, start, Some(stop))?;
+        self.backend.enter_initialization()?;
+        Ok(())
+    }
+
+    /// Leave initialization mode.
+    pub(crate) fn exit_initialization(&mut self) -> Result<(), MasterError> {
+        self.backend.exit_initialization()?;
+        Ok(())
+    }
+
+    /// The capability adaptive macro steps need that the FMU does not
+    /// declare: rollback of a rejected step, and steps of varying size.
+    pub(crate) fn cannot_vary_steps(&self) -> Option<&'static str> {
+        let cs = &self.fmu.model_description().co_simulation;
+        if !cs.can_get_and_set_fmu_state {
+            Some("canGetAndSetFMUstate")
+        } else if !cs.can_handle_variable_communication_step_size {
+            Some("canHandleVariableCommunicationStepSize")
+        } else {
+            None
+        }
+    }
+
+    /// Whether perturbed runs may go to other instances of the FMU: its state
+    /// can be serialised and it may be instantiated more than once.
+    pub(crate) fn can_run_in_parallel(&self) -> bool {
+        let cs = &self.fmu.model_description().co_simulation;
+        cs.can_get_and_set_fmu_state
+            && cs.can_serialize_fmu_state
+            && !cs.can_be_instantiated_only_once_per_process
+    }
+
+    /// Whether any unknown drives this instance.
+    /// Whether the input `vr` takes a polynomial over a step: FMI 2.0
+    /// `canInterpolateInputs`, FMI 3.0 `providesIntermediateUpdate` and the input's
+    /// `intermediateUpdate="true"`.
+    pub(crate) fn interpolates(&self, vr: u32) -> bool {
+        let md = self.fmu.model_description();
+        self.caps.can_interpolate_inputs
+            && (md.standard != tether_fmi::FmiStandard::Fmi3
+                || md.model_variables.iter().any(|v| {
+                    v.value_reference == vr
+                        && v.causality == tether_fmi::Causality::Input
+                        && v.intermediate_update
+                }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn capabilities(version: &str, cs: &str) -> Capabilities {
+        let token = if version == "2.0" {
+            "guid"
+        } else {
+            "instantiationToken"
+        };
+        let xml = format!(
+            r#"<?xml version="1.0"?>
+<fmiModelDescription fmiVersion="{version}" modelName="m" {token}="{{g}}">
+  <CoSimulation modelIdentifier="m" {cs}/>
+  <ModelVariables/>
+  <ModelStructure/>
+</fmiModelDescription>"#
+        );
+        Capabilities::of(&ModelDescription::from_xml(&xml).unwrap())
+    }
+
+    /// FMI 2.0 interpolates inputs with canInterpolateInputs, FMI 3.0 with
+    /// intermediate update; the standard's defaults are false and 0.
+    #[test]
+    fn capabilities_are_what_the_fmu_declares() {
+        assert_eq!(capabilities("2.0", ""), Capabilities::default());
+        let declared = capabilities(
+            "2.0",
+            r#"canInterpolateInputs="true" maxOutputDerivativeOrder="2" canGetAndSetFMUstate="true""#,
+        );
+        assert_eq!(
+            declared,
+            Capabilities {
+                can_interpolate_inputs: true,
+                max_output_derivative_order: 2,
+                can_get_and_set_state: true,
+            }
+        );
+        let fmi3 = capabilities("3.0", r#"providesIntermediateUpdate="true""#);
+        assert!(fmi3.can_interpolate_inputs && !fmi3.can_get_and_set_state);
+    }
+}
