@@ -24,10 +24,9 @@
 //! (`<constraint>.g`) are differences of nearly equal outputs and have a tiny
 //! scale of their own; `--atol` bounds them in absolute terms.
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 
 /// The default relative tolerance: a millionth of each column's magnitude,
 /// far above the rounding by which two correct runs of one method differ
@@ -70,56 +69,14 @@ struct Table {
 }
 
 fn read_table(path: &Path) -> Result<Table> {
-    let shown = path.display();
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {shown}"))?;
-    let incomplete = text
-        .lines()
-        .find_map(|l| l.strip_prefix("# incomplete:"))
-        .map(|r| r.trim().to_string());
-    let mut reader = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .from_reader(text.as_bytes());
-    let header = reader
-        .headers()
-        .with_context(|| format!("{shown}: cannot read the header"))?
-        .clone();
-    if header.get(0) != Some("time") {
-        bail!("{shown}: the first column must be `time`");
-    }
-    let names: Vec<String> = header.iter().skip(1).map(str::to_string).collect();
-    let mut seen = HashMap::new();
-    for name in &names {
-        if seen.insert(name.as_str(), ()).is_some() {
-            bail!("{shown}: column '{name}' appears twice");
-        }
-    }
-    let (mut times, mut rows) = (Vec::new(), Vec::new());
-    for record in reader.records() {
-        let record = record.map_err(|e| anyhow::anyhow!("{shown}: {e}"))?;
-        let line = record.position().map_or(0, |p| p.line());
-        let mut values = Vec::with_capacity(names.len());
-        for (j, field) in record.iter().enumerate() {
-            let value: f64 = field.trim().parse().map_err(|_| {
-                let column = if j == 0 { "time" } else { &names[j - 1] };
-                anyhow::anyhow!(
-                    "{shown}, line {line}, column '{column}': '{field}' is not a number"
-                )
-            })?;
-            values.push(value);
-        }
-        times.push(values[0]);
-        values.remove(0);
-        rows.push(values);
-    }
-    if rows.is_empty() {
-        bail!("{shown}: no rows");
-    }
+    let results = tether_master::Results::read(path)
+        .map_err(|reason| anyhow::anyhow!("{}: {reason}", path.display()))?;
     Ok(Table {
         path: path.to_path_buf(),
-        names,
-        times,
-        rows,
-        incomplete,
+        names: results.columns,
+        times: results.times,
+        rows: results.rows,
+        incomplete: results.incomplete,
     })
 }
 

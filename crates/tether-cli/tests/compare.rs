@@ -240,7 +240,7 @@ fn unreadable_input_names_the_file_line_and_column() {
     std::fs::write(&bad, format!("{HEADER}\n0,1,2,abc,4\n")).unwrap();
     let err = one_error_line(&compare(&a, &bad, &[]));
     assert!(
-        err.contains("bad.csv, line 2, column 'link.lambda': 'abc' is not a number"),
+        err.contains("bad.csv: line 2, column 'link.lambda': 'abc' is not a number"),
         "{err}"
     );
     let ragged = dir.path().join("ragged.csv");

@@ -42,7 +42,9 @@ mod system;
 
 pub use error::{error_line, MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};
-pub use observer::{CsvRecorder, Emergency, MemoryRecorder, Observer, Sample, FLUSH_INTERVAL};
+pub use observer::{
+    CsvRecorder, Emergency, MemoryRecorder, Observer, Results, Sample, FLUSH_INTERVAL,
+};
 pub use simulation::{
     ExportKind, ExportVariable, MasterState, Simulation, SystemState, RECHECK_EVERY,
 };

@@ -37,70 +37,22 @@ impl Table {
         }
     }
 
-    /// Read a CSV with a `time` column first; `# …` lines are comments, and
-    /// `# incomplete: …` marks a run that stopped early.
+    /// Read a results CSV ([`tether_master::Results`]): a `time` column
+    /// first; `# incomplete: …` marks a run that stopped early.
     pub fn read_csv(path: &Path) -> Result<Table, StudyError> {
-        let err = |reason: String| StudyError::Csv {
+        let results = tether_master::Results::read(path).map_err(|reason| StudyError::Csv {
             path: path.to_path_buf(),
             reason,
-        };
-        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-        let incomplete = text
-            .lines()
-            .find_map(|l| l.strip_prefix("# incomplete:"))
-            .map(|r| r.trim().to_string());
-        let mut reader = csv::ReaderBuilder::new()
-            .comment(Some(b'#'))
-            .trim(csv::Trim::All)
-            .from_reader(text.as_bytes());
-        let header: Vec<String> = reader
-            .headers()
-            .map_err(|e| err(e.to_string()))?
-            .iter()
-            .map(str::to_string)
+        })?;
+        let values = (0..results.columns.len())
+            .map(|c| results.rows.iter().map(|row| row[c]).collect())
             .collect();
-        if header.first().map(String::as_str) != Some("time") {
-            return Err(err("the first column must be 'time'".into()));
-        }
-        let columns = header[1..].to_vec();
-        let mut times = Vec::new();
-        let mut values = vec![Vec::new(); columns.len()];
-        for (row, record) in reader.records().enumerate() {
-            let record = record.map_err(|e| err(e.to_string()))?;
-            let line = row + 2;
-            if record.len() != header.len() {
-                return Err(err(format!(
-                    "line {line} has {} fields, the header {}",
-                    record.len(),
-                    header.len()
-                )));
-            }
-            let number = |i: usize| {
-                record[i].parse::<f64>().map_err(|_| {
-                    err(format!(
-                        "line {line}, column '{}': '{}' is not a number",
-                        header[i], &record[i]
-                    ))
-                })
-            };
-            let t = number(0)?;
-            if times.last().is_some_and(|&last| t <= last) {
-                return Err(err(format!("line {line}: time {t} does not increase")));
-            }
-            times.push(t);
-            for (c, col) in values.iter_mut().enumerate() {
-                col.push(number(c + 1)?);
-            }
-        }
-        if times.is_empty() {
-            return Err(err("no rows".into()));
-        }
         Ok(Table {
             source: path.display().to_string(),
-            columns,
-            times,
+            columns: results.columns,
+            times: results.times,
             values,
-            incomplete,
+            incomplete: results.incomplete,
         })
     }
 

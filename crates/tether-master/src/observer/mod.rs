@@ -3,7 +3,7 @@
 mod csv;
 mod memory;
 
-pub use csv::{CsvRecorder, Emergency, FLUSH_INTERVAL};
+pub use csv::{CsvRecorder, Emergency, Results, FLUSH_INTERVAL};
 pub use memory::MemoryRecorder;
 
 use tether_fmi::Int;

@@ -2,6 +2,10 @@
 //! writer thread, and [`Emergency`], which ends a background recording from
 //! outside the run.
 
+mod read;
+
+pub use read::Results;
+
 use std::collections::VecDeque;
 use std::io::Write;
 use std::panic::{catch_unwind, AssertUnwindSafe};
