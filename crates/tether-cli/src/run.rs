@@ -151,6 +151,9 @@ pub fn main(args: Args) -> Result<()> {
     for note in sim.notes() {
         crate::say!("note: {note}");
     }
+    for warning in sim.warnings() {
+        crate::say!("warning: {warning}");
+    }
     // The plot's columns are checked now, not after the run.
     let plot_columns = crate::columns::split(&args.columns);
     for name in &plot_columns {

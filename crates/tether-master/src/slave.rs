@@ -182,7 +182,13 @@ pub struct Slave {
     /// Requests to an isolated instance's host made by the rollback checks,
     /// which the counts leave out as they leave out the checks' calls.
     check_trips: u64,
+    /// The start values set on parameters with `initial="exact"`, read back
+    /// after initialization ([`Slave::changed_parameters`]).
+    exact_parameters: Vec<crate::start::ExactParameter>,
 }
+
+/// The experiment an instance is set up for: start, stop and tolerance.
+pub(crate) type Experiment = (f64, f64, Option<f64>);
 
 impl Slave {
     /// Instantiate the FMU of `spec` and apply the start values. Instances of
@@ -195,6 +201,7 @@ impl Slave {
         spec: &InstanceSpec,
         opened: &mut Vec<(std::path::PathBuf, Fmu)>,
         order: usize,
+        experiment: Experiment,
     ) -> Result<Slave, MasterError> {
         let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
             Some((_, fmu)) => fmu.clone(),
@@ -212,7 +219,7 @@ impl Slave {
                 fmu
             }
         };
-        Slave::instantiate_as(fmu, spec, &spec.name, order)
+        Slave::instantiate_as(fmu, spec, &spec.name, order, experiment)
     }
 
     /// Another instance of this slave's FMU with the same start values and the
@@ -222,15 +229,15 @@ impl Slave {
         &self,
         spec: &InstanceSpec,
         copy: usize,
-        experiment: (f64, f64, Option<f64>),
+        experiment: Experiment,
     ) -> Result<Slave, MasterError> {
         let name = format!("{}#{copy}", spec.name);
-        let mut extra = Slave::instantiate_as(self.fmu.clone(), spec, &name, self.order)?;
+        let mut extra =
+            Slave::instantiate_as(self.fmu.clone(), spec, &name, self.order, experiment)?;
         extra.inputs = self.inputs.clone();
         extra.coupled_outputs = self.coupled_outputs.clone();
         extra.finalize(self.order);
-        let (start, stop, tolerance) = experiment;
-        extra.initialize(start, stop, tolerance)?;
+        extra.initialize()?;
         Ok(extra)
     }
 
@@ -315,11 +322,16 @@ impl Slave {
         Ok(())
     }
 
+    /// FMI 2.0: `fmi2SetupExperiment` right after `fmi2Instantiate` (FMI 3.0
+    /// keeps the experiment for `fmi3EnterInitializationMode`), then the start
+    /// values, as FMPy and libcosim set them: FMUs of some modelling tools
+    /// reset their parameters in `fmi2SetupExperiment`.
     fn instantiate_as(
         fmu: Fmu,
         spec: &InstanceSpec,
         name: &str,
         order: usize,
+        experiment: Experiment,
     ) -> Result<Slave, MasterError> {
         let md = fmu.model_description();
         let cs = &md.co_simulation;
@@ -353,7 +365,13 @@ impl Slave {
             (_, _, Isolation::None) => Placement::InProcess,
         };
         let options = tether_fmi::InstanceOptions::default().with_polynomial_inputs(order > 0);
-        let backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
+        let mut backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
+        let (start, stop, tolerance) = experiment;
+        backend.setup(tolerance, start, Some(stop))?;
+        let exact_parameters = crate::start::exact_parameters(
+            fmu.model_description(),
+            spec.parameters.iter().map(|(n, v)| (n.as_str(), v)),
+        );
         let mut slave = Slave {
             name: name.to_string(),
             model_name,
@@ -399,6 +417,7 @@ impl Slave {
             limits: Vec::new(),
             beyond: None,
             check_trips: 0,
+            exact_parameters,
         };
         slave.arrays = crate::start::apply_start_values(
             slave.backend.as_mut(),
@@ -618,28 +637,35 @@ impl Slave {
         !self.inputs.is_empty()
     }
 
-    /// Initialise: setup experiment, initialization mode.
-    pub(crate) fn initialize(
-        &mut self,
-        start: f64,
-        stop: f64,
-        tolerance: Option<f64>,
-    ) -> Result<(), MasterError> {
-        self.enter_initialization(start, stop, tolerance)?;
+    /// Initialise: initialization mode, entered and left (the experiment
+    /// was set up at instantiation).
+    pub(crate) fn initialize(&mut self) -> Result<(), MasterError> {
+        self.enter_initialization()?;
         self.exit_initialization()
     }
 
-    /// Setup experiment and enter initialization mode, where inputs can be
-    /// set and outputs read before the first step (a loop's values at T_0).
-    pub(crate) fn enter_initialization(
-        &mut self,
-        start: f64,
-        stop: f64,
-        tolerance: Option<f64>,
-    ) -> Result<(), MasterError> {
-        self.backend.setup(tolerance, start, Some(stop))?;
+    /// Enter initialization mode, where inputs can be set and outputs read
+    /// before the first step (a loop's values at T_0).
+    pub(crate) fn enter_initialization(&mut self) -> Result<(), MasterError> {
         self.backend.enter_initialization()?;
         Ok(())
+    }
+
+    /// After initialization: the parameters set with `initial="exact"` that
+    /// the FMU changed, one line each (the signal connections' receivers,
+    /// `receivers`, left out). The reads are not counted.
+    pub(crate) fn changed_parameters(
+        &mut self,
+        receivers: &[u32],
+    ) -> Result<Vec<String>, MasterError> {
+        if self.exact_parameters.is_empty() {
+            return Ok(Vec::new());
+        }
+        let trips = self.backend.round_trips();
+        let lines =
+            crate::start::changed_parameters(self.backend.as_mut(), &self.exact_parameters, receivers);
+        self.check_trips += self.backend.round_trips() - trips;
+        lines
     }
 
     /// Leave initialization mode.

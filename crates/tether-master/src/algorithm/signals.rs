@@ -92,6 +92,15 @@ pub(crate) struct Signals {
 }
 
 impl Signals {
+    /// The value references the connections set on instance `slave`.
+    pub fn receivers(&self, slave: usize) -> Vec<u32> {
+        self.links
+            .iter()
+            .filter(|l| l.to == slave)
+            .map(|l| l.to_vr)
+            .collect()
+    }
+
     /// The signal values carried between steps: each link's sender values
     /// `[y_N, y_{N-1}, y_{N-2}]` and its value at T_{N+1} once read.
     pub fn values(&self) -> (Vec<[f64; 3]>, Vec<f64>) {

@@ -97,6 +97,10 @@ class Note(UserWarning):
 def _notes(stats: Dict[str, Any]) -> None:
     for note in stats.get("notes", []):
         warnings.warn(note, Note, stacklevel=3)
+    # What the command prints as ``warning:``: a parameter an FMU changed in
+    # its initialization (docs/fmi-import.md).
+    for warning in stats.get("warnings", []):
+        warnings.warn(warning, UserWarning, stacklevel=3)
 
 
 class TetherError(Exception):
@@ -868,6 +872,7 @@ def simulate(
         )
     except _tether.Failure as f:
         raise _error(f) from None
+    _notes(raw[2])
     return Result(*raw)
 
 
