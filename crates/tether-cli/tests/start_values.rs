@@ -239,5 +239,8 @@ fn a_tolerance_the_user_sets_wins_over_the_experiments() {
     let default = csv("default.csv", &[]);
     let strict = csv("strict.csv", &["tolerance=1e-10"]);
     assert_eq!(strict, default, "1e-10 is the experiment's tolerance");
-    assert_ne!(loose, default, "the user's tolerance 1e-3 is the integrator's");
+    assert_ne!(
+        loose, default,
+        "the user's tolerance 1e-3 is the integrator's"
+    );
 }

@@ -662,8 +662,11 @@ impl Slave {
             return Ok(Vec::new());
         }
         let trips = self.backend.round_trips();
-        let lines =
-            crate::start::changed_parameters(self.backend.as_mut(), &self.exact_parameters, receivers);
+        let lines = crate::start::changed_parameters(
+            self.backend.as_mut(),
+            &self.exact_parameters,
+            receivers,
+        );
         self.check_trips += self.backend.round_trips() - trips;
         lines
     }

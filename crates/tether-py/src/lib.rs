@@ -554,12 +554,16 @@ fn run(
 ) -> PyResult<Py<PyAny>> {
     // `_ssp` keeps an extracted archive's FMUs until the run ends.
     let (spec, _ssp) = load_spec(path, text, kwargs)?;
+    let ssp_notes = _ssp.as_ref().map(|l| l.notes.clone()).unwrap_or_default();
     // A divergence of a formulation known to be unstable says so again, as the CLI does.
     let unstable = spec.method.stability_warning(spec.coupling.order);
     let outcome = py.detach(move || -> Result<_, MasterError> {
         spec.check_grid()?;
         let mut sim = Simulation::new(&spec).map_err(|e| e.located(&spec, |_, _| None))?;
-        let notes = (sim.notes().to_vec(), sim.warnings().to_vec());
+        let notes = (
+            [ssp_notes, sim.notes().to_vec()].concat(),
+            sim.warnings().to_vec(),
+        );
         let mut rows = Rows::default();
         let width = sim.columns().len() + 1;
         let points = usize::try_from(sim.total_steps()).unwrap_or(usize::MAX);
@@ -657,7 +661,8 @@ impl PySimulation {
             rounded: Vec::new(),
         };
         rows.push(sim.time(), sim.values());
-        let notes = sim.notes().to_vec();
+        let ssp_notes = ssp.as_ref().map(|l| l.notes.clone()).unwrap_or_default();
+        let notes = [ssp_notes, sim.notes().to_vec()].concat();
         let warnings = sim.warnings().to_vec();
         Ok(PySimulation {
             sim: Some(sim),

@@ -18,6 +18,9 @@ pub struct Loaded {
     pub spec: SystemSpec,
     /// Other tools' annotations, skipped: `type (file:line)`.
     pub skipped: Vec<String>,
+    /// Lines for the user (the CLI prints them as `note: …`): OSP's
+    /// annotations Tether does not use, a `StepSizeHint` that is not n·H.
+    pub notes: Vec<String>,
     /// The `SystemStructure.ssd` read.
     pub ssd: PathBuf,
     /// The extracted archive, removed when the system is dropped.
@@ -54,6 +57,7 @@ pub fn read(path: &Path, step: Option<f64>, stop: Option<f64>) -> Result<Loaded,
     }
     Ok(Loaded {
         spec,
+        notes: reader.notes,
         skipped: reader.skipped,
         ssd,
         _extracted: extracted,
@@ -168,6 +172,52 @@ struct Reader {
     /// System-level bindings: system path, parameter path, value, line.
     bindings: Vec<(Vec<String>, String, StartValue, usize)>,
     annotation: Option<Annotation>,
+    /// OSP's `FixedStepAlgorithm baseStepSize` (libcosim's macro step).
+    osp_step: Option<f64>,
+    /// OSP's `StepSizeHint` of each component: instance, hint, line.
+    osp_hints: Vec<(String, f64, usize)>,
+    /// OSP's annotation elements Tether does not use: `<osp:X> (line N)`.
+    osp_ignored: Vec<String>,
+    notes: Vec<String>,
+}
+
+/// Where an `ssd:Annotations` is: OSP's annotation means something on the
+/// default experiment (the algorithm) and on a component (its step hint).
+#[derive(Clone, Copy)]
+enum Place<'a> {
+    /// The root `ssd:System`, where Tether's own annotation goes.
+    RootSystem,
+    /// `ssd:DefaultExperiment`.
+    Experiment,
+    /// An `ssd:Component`, by instance name.
+    Component(&'a str),
+    /// Anywhere else.
+    Other,
+}
+
+/// OSP's annotation type, as libcosim reads it.
+pub(crate) const OSP_TYPE: &str = "com.opensimulationplatform";
+
+/// An element's local name (OSP's elements are matched by it, as libcosim
+/// matches `osp:` names whatever namespace the prefix is bound to).
+fn local(name: &str) -> &str {
+    let name = name.rsplit('}').next().unwrap_or(name);
+    name.rsplit(':').next().unwrap_or(name)
+}
+
+/// Seconds as libcosim's integer nanoseconds (truncated, as its
+/// `to_duration` does).
+fn nanoseconds(seconds: f64) -> i64 {
+    (seconds * 1e9) as i64
+}
+
+/// libcosim's decimation factor of a `StepSizeHint`: n = max(1, ⌈hint/H⌉),
+/// both in integer nanoseconds.
+pub(crate) fn decimation(hint: f64, h: f64) -> u64 {
+    let (hint, h) = (nanoseconds(hint), nanoseconds(h).max(1));
+    u64::try_from(hint.div_euclid(h) + i64::from(hint.rem_euclid(h) != 0))
+        .unwrap_or(0)
+        .max(1)
 }
 
 impl Reader {
@@ -229,7 +279,7 @@ impl Reader {
                 "ssd:System" => system = Some(child),
                 "ssd:DefaultExperiment" => experiment = Some(child),
                 "ssd:Units" => self.unit_definitions(child)?,
-                "ssd:Annotations" => self.annotations(child, false)?,
+                "ssd:Annotations" => self.annotations(child, Place::Other)?,
                 "ssd:MetaData" | "ssd:Signature" => {}
                 "ssd:Enumerations" => return Err(self.unsupported(child, "(enumeration types)")),
                 _ => return Err(self.unsupported(child, "in <ssd:SystemStructureDescription>")),
@@ -246,7 +296,7 @@ impl Reader {
             stop_time = self.number(e, "stopTime")?;
             for child in &e.children {
                 match child.name.as_str() {
-                    "ssd:Annotations" => self.annotations(child, false)?,
+                    "ssd:Annotations" => self.annotations(child, Place::Experiment)?,
                     _ => return Err(self.unsupported(child, "in <ssd:DefaultExperiment>")),
                 }
             }
@@ -257,13 +307,21 @@ impl Reader {
                 self.file
             ))
         })?;
-        let step = step.or(annotation.step).ok_or_else(|| {
+        let step = step.or(annotation.step).or(self.osp_step).ok_or_else(|| {
             SspError::Other(format!(
                 "{}: no macro-step size: SSP's DefaultExperiment has none; give --step, or \
-                 step in the Tether annotation (docs/ssp.md)",
+                 step in the Tether annotation, or OSP's FixedStepAlgorithm baseStepSize (docs/ssp.md)",
                 self.file
             ))
         })?;
+        self.step_hints(step)?;
+        if !self.osp_ignored.is_empty() {
+            self.notes.push(format!(
+                "{}: OSP annotations Tether does not use, ignored: {}",
+                self.file,
+                self.osp_ignored.join(", ")
+            ));
+        }
         let spec = SystemSpec {
             name: Some(system.attr("name").unwrap_or("ssp").to_string()),
             experiment: Experiment {
@@ -323,12 +381,17 @@ impl Reader {
     }
 
     /// `ssd:Annotations`: Tether's on the root system, others skipped.
-    fn annotations(&mut self, node: &Node, root_system: bool) -> Result<(), SspError> {
+    fn annotations(&mut self, node: &Node, place: Place<'_>) -> Result<(), SspError> {
+        let root_system = matches!(place, Place::RootSystem);
         for a in &node.children {
             if a.name != "ssc:Annotation" {
                 return Err(self.unsupported(a, "in <ssd:Annotations>"));
             }
             let kind = self.required(a, "type")?;
+            if kind == OSP_TYPE {
+                self.osp(a, place)?;
+                continue;
+            }
             if kind != ANNOTATION_TYPE {
                 self.skipped
                     .push(format!("{kind} ({}:{})", self.file, a.line));
@@ -356,6 +419,74 @@ impl Reader {
                 )
             })?;
             self.annotation = Some(parsed);
+        }
+        Ok(())
+    }
+
+    /// OSP's annotation (`com.opensimulationplatform`), as libcosim reads
+    /// it: `osp:Algorithm/osp:FixedStepAlgorithm baseStepSize` on the default
+    /// experiment, `osp:StepSizeHint value` on a component; every other
+    /// element is noted as ignored.
+    fn osp(&mut self, a: &Node, place: Place<'_>) -> Result<(), SspError> {
+        let positive = |this: &Self, node: &Node, key: &str| -> Result<f64, SspError> {
+            let value = this.number(node, key)?.ok_or_else(|| {
+                this.at(node, format!("<{}> needs the attribute '{key}'", node.name))
+            })?;
+            if !(value.is_finite() && value > 0.0) {
+                return Err(this.at(
+                    node,
+                    format!("<{}> {key}=\"{value}\": expected a time > 0", node.name),
+                ));
+            }
+            Ok(value)
+        };
+        for child in &a.children {
+            match (local(&child.name), place) {
+                ("Algorithm", Place::Experiment) => {
+                    for algorithm in &child.children {
+                        if local(&algorithm.name) == "FixedStepAlgorithm" {
+                            self.osp_step = Some(positive(self, algorithm, "baseStepSize")?);
+                        } else {
+                            self.osp_ignored
+                                .push(format!("<{}> (line {})", algorithm.name, algorithm.line));
+                        }
+                    }
+                }
+                ("StepSizeHint", Place::Component(name)) => {
+                    let hint = positive(self, child, "value")?;
+                    self.osp_hints.push((name.to_string(), hint, child.line));
+                }
+                _ => self
+                    .osp_ignored
+                    .push(format!("<{}> (line {})", child.name, child.line)),
+            }
+        }
+        Ok(())
+    }
+
+    /// Each component's OSP `StepSizeHint` against the macro step H: n =
+    /// max(1, ⌈hint/H⌉) as libcosim computes it. n = 1 steps at H (a note
+    /// when the hint is not H); n > 1 is refused: every instance steps at H.
+    fn step_hints(&mut self, h: f64) -> Result<(), SspError> {
+        for (instance, hint, line) in std::mem::take(&mut self.osp_hints) {
+            let n = decimation(hint, h);
+            if n > 1 {
+                return Err(SspError::xml(
+                    &self.file,
+                    line,
+                    format!(
+                        "component '{instance}': OSP's StepSizeHint {hint} asks for a communication step of \
+                         {n}·H (H = {h}); Tether steps every instance at H: per-instance steps are not supported"
+                    ),
+                ));
+            }
+            if nanoseconds(hint) != nanoseconds(h) {
+                self.notes.push(format!(
+                    "{}:{line}: component '{instance}': OSP's StepSizeHint {hint} is below H = {h}: \
+                     it steps at H, as libcosim does",
+                    self.file
+                ));
+            }
         }
         Ok(())
     }
@@ -392,7 +523,14 @@ impl Reader {
                         self.connection(c, path)?;
                     }
                 }
-                "ssd:Annotations" => self.annotations(child, root)?,
+                "ssd:Annotations" => {
+                    let place = if root {
+                        Place::RootSystem
+                    } else {
+                        Place::Other
+                    };
+                    self.annotations(child, place)?
+                }
                 // Graphical information only.
                 "ssd:SystemGeometry" | "ssd:GraphicalElements" | "ssd:ElementGeometry" => {}
                 _ => return Err(self.unsupported(child, "in <ssd:System>")),
@@ -439,7 +577,7 @@ impl Reader {
                         parameters.insert(var, value);
                     }
                 }
-                "ssd:Annotations" => self.annotations(child, false)?,
+                "ssd:Annotations" => self.annotations(child, Place::Component(&name))?,
                 "ssd:ElementGeometry" => {}
                 _ => return Err(self.unsupported(child, "in <ssd:Component>")),
             }
@@ -564,7 +702,7 @@ impl Reader {
                         return Err(self.unsupported(t, "(connector type)"))
                     }
                     "ssd:ConnectorGeometry" => {}
-                    "ssd:Annotations" => self.annotations(t, false)?,
+                    "ssd:Annotations" => self.annotations(t, Place::Other)?,
                     _ => return Err(self.unsupported(t, "in <ssd:Connector>")),
                 }
             }
@@ -616,7 +754,7 @@ impl Reader {
                     edge.transformed = true;
                 }
                 "ssd:ConnectionGeometry" => {}
-                "ssd:Annotations" => self.annotations(t, false)?,
+                "ssd:Annotations" => self.annotations(t, Place::Other)?,
                 _ => return Err(self.unsupported(t, "in <ssd:Connection>")),
             }
         }
@@ -666,7 +804,7 @@ impl Reader {
                     "ssd:ParameterMapping" => {
                         return Err(self.unsupported(child, "(parameter mappings)"))
                     }
-                    "ssd:Annotations" => self.annotations(child, false)?,
+                    "ssd:Annotations" => self.annotations(child, Place::Other)?,
                     _ => return Err(self.unsupported(child, "in <ssd:ParameterBinding>")),
                 }
             }
