@@ -198,6 +198,10 @@ enum Place<'a> {
 /// OSP's annotation type, as libcosim reads it.
 pub(crate) const OSP_TYPE: &str = "com.opensimulationplatform";
 
+/// The namespace of OSP's annotation elements (`osp:`), as OSP's SSP files
+/// declare it (libcosim matches the prefix only).
+pub(crate) const OSP_NAMESPACE: &str = "http://opensimulationplatform.com/SSP/OSPAnnotations";
+
 /// An element's local name (OSP's elements are matched by it, as libcosim
 /// matches `osp:` names whatever namespace the prefix is bound to).
 fn local(name: &str) -> &str {
@@ -429,16 +433,17 @@ impl Reader {
     /// element is noted as ignored.
     fn osp(&mut self, a: &Node, place: Place<'_>) -> Result<(), SspError> {
         let positive = |this: &Self, node: &Node, key: &str| -> Result<f64, SspError> {
-            let value = this.number(node, key)?.ok_or_else(|| {
-                this.at(node, format!("<{}> needs the attribute '{key}'", node.name))
-            })?;
-            if !(value.is_finite() && value > 0.0) {
-                return Err(this.at(
+            let name = format!("osp:{}", local(&node.name));
+            let value = node
+                .attr(key)
+                .ok_or_else(|| this.at(node, format!("<{name}> needs the attribute '{key}'")))?;
+            match value.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+                _ => Err(this.at(
                     node,
-                    format!("<{}> {key}=\"{value}\": expected a time > 0", node.name),
-                ));
+                    format!("<{name}> {key}=\"{value}\": expected a time > 0"),
+                )),
             }
-            Ok(value)
         };
         for child in &a.children {
             match (local(&child.name), place) {
@@ -447,8 +452,11 @@ impl Reader {
                         if local(&algorithm.name) == "FixedStepAlgorithm" {
                             self.osp_step = Some(positive(self, algorithm, "baseStepSize")?);
                         } else {
-                            self.osp_ignored
-                                .push(format!("<{}> (line {})", algorithm.name, algorithm.line));
+                            self.osp_ignored.push(format!(
+                                "<osp:{}> (line {})",
+                                local(&algorithm.name),
+                                algorithm.line
+                            ));
                         }
                     }
                 }
@@ -456,9 +464,11 @@ impl Reader {
                     let hint = positive(self, child, "value")?;
                     self.osp_hints.push((name.to_string(), hint, child.line));
                 }
-                _ => self
-                    .osp_ignored
-                    .push(format!("<{}> (line {})", child.name, child.line)),
+                _ => self.osp_ignored.push(format!(
+                    "<osp:{}> (line {})",
+                    local(&child.name),
+                    child.line
+                )),
             }
         }
         Ok(())
