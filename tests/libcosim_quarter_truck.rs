@@ -220,3 +220,68 @@ fn at_a_step_exact_in_both_masters_libcosim_and_tether_agree_to_1e_12() {
         "{worst:e} first at {first:?}"
     );
 }
+
+/// Per-instance steps against libcosim's decimation: the wheel with OSP's
+/// `StepSizeHint` of n·H (n = 2 and 3; H = 2^-9 s, the same time arguments
+/// in both masters) steps every n-th macro step in both, its inputs taken
+/// at its own communication points and its outputs held for the chassis in
+/// between: the same results (docs/system-file.md "Per-instance steps").
+#[test]
+fn the_wheel_at_its_own_step_agrees_with_libcosims_decimation() {
+    let Some(py) = tether_tests::tools::libcosimpy() else {
+        return;
+    };
+    let h = 1.0 / 512.0;
+    for n in [2u32, 3] {
+        let dir = tempfile::tempdir().unwrap();
+        let Some(ssp) = unpacked(dir.path()) else {
+            return;
+        };
+        let ssd = ssp.join("SystemStructure.ssd");
+        let hint = f64::from(n) * h;
+        let text = std::fs::read_to_string(&ssd).unwrap().replacen(
+            r#"</ssd:ParameterBindings>
+      </ssd:Component>
+    </ssd:Elements>"#,
+            &format!(
+                r#"</ssd:ParameterBindings>
+        <ssd:Annotations>
+          <ssc:Annotation type="com.opensimulationplatform">
+            <osp:StepSizeHint value="{hint:?}"/>
+          </ssc:Annotation>
+        </ssd:Annotations>
+      </ssd:Component>
+    </ssd:Elements>"#
+            ),
+            1,
+        );
+        std::fs::write(&ssd, text).unwrap();
+        let read = tether_ssp::read(&ssp, Some(h), None).unwrap();
+        let wheel = read
+            .spec
+            .instances
+            .iter()
+            .find(|i| i.name == "wheel")
+            .unwrap();
+        assert_eq!(wheel.step, Some(hint));
+        let theirs = libcosim(&py, &ssp, &h.to_string());
+        let ours = tether(&ssp, Some(h));
+        let (worst, first) = compare(&ours, &theirs);
+        println!(
+            "quarter truck, wheel at {n}·H, H = 2^-9: largest |a - b| / max(1, |b|) = {worst:.1e}"
+        );
+        assert!(
+            worst <= 1e-12 && first.is_none(),
+            "n = {n}: {worst:e} first at {first:?}"
+        );
+        // Held between its communication points: the wheel's outputs change
+        // only at multiples of n·H.
+        let column = 1 + COLUMNS.iter().position(|c| *c == "wheel.position").unwrap();
+        for (j, pair) in ours.windows(2).enumerate() {
+            let step = j as u32 + 2; // the second row's index on the grid
+            if step % n != 0 {
+                assert_eq!(pair[0][column], pair[1][column], "row {step}");
+            }
+        }
+    }
+}

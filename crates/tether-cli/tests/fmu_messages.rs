@@ -28,12 +28,10 @@ fn quirky(dir: &Path) -> PathBuf {
         let mut bytes = Vec::new();
         entry.read_to_end(&mut bytes).unwrap();
         if name == "modelDescription.xml" {
-            let text = String::from_utf8(bytes)
-                .unwrap()
-                .replace(
-                    r#"causality="input" variability="continuous">"#,
-                    r#"causality="input" variability="continuous" initial="exact">"#,
-                );
+            let text = String::from_utf8(bytes).unwrap().replace(
+                r#"causality="input" variability="continuous">"#,
+                r#"causality="input" variability="continuous" initial="exact">"#,
+            );
             bytes = text.into_bytes();
         }
         if name.ends_with('/') {
@@ -54,7 +52,11 @@ const LINE: &str = "warning: quirky.fmu: modelDescription.xml:52: variable 'F' d
                     using the default (and 1 more variable)";
 
 fn warnings(out: &Output) -> Vec<String> {
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8_lossy(&out.stderr)
         .lines()
         .filter(|l| l.contains("initial=") || l.contains("tether_"))

@@ -182,6 +182,9 @@ pub struct Slave {
     /// Requests to an isolated instance's host made by the rollback checks,
     /// which the counts leave out as they leave out the checks' calls.
     check_trips: u64,
+    /// The instance's own communication step as a multiple n of H (1: H):
+    /// with n > 1 the signals step it every n-th macro step.
+    pub(crate) decimation: u64,
     /// The start values set on parameters with `initial="exact"`, read back
     /// after initialization ([`Slave::changed_parameters`]).
     exact_parameters: Vec<crate::start::ExactParameter>,
@@ -417,6 +420,7 @@ impl Slave {
             limits: Vec::new(),
             beyond: None,
             check_trips: 0,
+            decimation: 1,
             exact_parameters,
         };
         slave.arrays = crate::start::apply_start_values(

@@ -475,26 +475,23 @@ impl Reader {
     }
 
     /// Each component's OSP `StepSizeHint` against the macro step H: n =
-    /// max(1, ⌈hint/H⌉) as libcosim computes it. n = 1 steps at H (a note
-    /// when the hint is not H); n > 1 is refused: every instance steps at H.
+    /// max(1, ⌈hint/H⌉) as libcosim computes it, the instance's `step` n·H
+    /// (docs/system-file.md "Per-instance steps"); a note when n·H is not
+    /// the hint.
     fn step_hints(&mut self, h: f64) -> Result<(), SspError> {
         for (instance, hint, line) in std::mem::take(&mut self.osp_hints) {
             let n = decimation(hint, h);
             if n > 1 {
-                return Err(SspError::xml(
-                    &self.file,
-                    line,
-                    format!(
-                        "component '{instance}': OSP's StepSizeHint {hint} asks for a communication step of \
-                         {n}·H (H = {h}); Tether steps every instance at H: per-instance steps are not supported"
-                    ),
-                ));
+                if let Some(i) = self.instances.iter_mut().find(|i| i.name == instance) {
+                    i.step = Some(n as f64 * h);
+                }
             }
-            if nanoseconds(hint) != nanoseconds(h) {
+            if nanoseconds(hint) != nanoseconds(h) * n as i64 {
                 self.notes.push(format!(
-                    "{}:{line}: component '{instance}': OSP's StepSizeHint {hint} is below H = {h}: \
-                     it steps at H, as libcosim does",
-                    self.file
+                    "{}:{line}: component '{instance}': OSP's StepSizeHint {hint} is not a multiple \
+                     of H = {h}: it steps at {n}·H = {}, as libcosim does",
+                    self.file,
+                    n as f64 * h
                 ));
             }
         }
@@ -603,6 +600,7 @@ impl Reader {
             token_file: None,
             fmu_on_host: None,
             resources: Default::default(),
+            step: None,
         });
         Ok(())
     }

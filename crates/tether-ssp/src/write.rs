@@ -162,6 +162,17 @@ fn ssd(
             let _ = writeln!(x, "          </ssd:ParameterBinding>");
             let _ = writeln!(x, "        </ssd:ParameterBindings>");
         }
+        // The instance's own step as OSP's step hint, as libcosim reads it.
+        if let Some(step) = inst.step {
+            let _ = writeln!(x, "        <ssd:Annotations>");
+            let _ = writeln!(
+                x,
+                r#"          <ssc:Annotation type="{OSP_TYPE}" xmlns:osp="{OSP_NAMESPACE}">"#
+            );
+            let _ = writeln!(x, r#"            <osp:StepSizeHint value="{step:?}"/>"#);
+            let _ = writeln!(x, "          </ssc:Annotation>");
+            let _ = writeln!(x, "        </ssd:Annotations>");
+        }
         let _ = writeln!(x, "      </ssd:Component>");
     }
     let _ = writeln!(x, "    </ssd:Elements>");
