@@ -106,25 +106,46 @@ fn the_osp_base_step_is_the_macro_step() {
     assert!(toml.contains("step = 0.001"), "{toml}");
 }
 
-/// A `StepSizeHint` of n·H with n > 1 asks for a per-instance step: refused
-/// in one line.
+/// A `StepSizeHint` gives the instance its own step n·H, n = max(1,
+/// ⌈hint/H⌉) as libcosim computes it: equal to the system file's `step`
+/// key, bit for bit; a hint that is not n·H is noted.
 #[test]
-fn a_step_size_hint_above_h_is_refused() {
+fn a_step_size_hint_is_the_instances_step() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
+    system(d, ALGORITHM, r#"<osp:StepSizeHint value="0.003"/>"#);
+    let out = tether(&["run", ".", "--out", "hint.csv"], d);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("note:"), "{}", stderr(&out));
+    let out = tether(&["ssp", "import", ".", "-o", "system.toml"], d);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let toml = std::fs::read_to_string(d.join("system.toml")).unwrap();
+    assert!(toml.contains("step = 0.003"), "{toml}");
+    let out = tether(&["run", "system.toml", "--out", "toml.csv"], d);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(
+        std::fs::read(d.join("hint.csv")).unwrap(),
+        std::fs::read(d.join("toml.csv")).unwrap()
+    );
+    // 0.0025 is no multiple of H: n = 3, as libcosim, with a note.
     system(d, ALGORITHM, r#"<osp:StepSizeHint value="0.0025"/>"#);
     let out = tether(&["run", ".", "--out", "out.csv"], d);
-    assert_eq!(out.status.code(), Some(1));
+    assert!(out.status.success(), "{}", stderr(&out));
     let text = stderr(&out);
-    assert_eq!(text.lines().count(), 1, "{text}");
-    let line = text.lines().next().unwrap();
+    let notes: Vec<&str> = text.lines().filter(|l| l.starts_with("note:")).collect();
+    assert_eq!(notes.len(), 1, "{text}");
     assert!(
-        line.starts_with("error: SystemStructure.ssd:")
-            && line.ends_with(
-                ": component 'mass': OSP's StepSizeHint 0.0025 asks for a communication step of 3·H \
-                 (H = 0.001); Tether steps every instance at H: per-instance steps are not supported"
+        notes[0].starts_with("note: SystemStructure.ssd:")
+            && notes[0].ends_with(
+                ": component 'mass': OSP's StepSizeHint 0.0025 is not a multiple of H = 0.001: \
+                 it steps at 3·H = 0.003, as libcosim does"
             ),
-        "{line}"
+        "{}",
+        notes[0]
+    );
+    assert_eq!(
+        std::fs::read(d.join("out.csv")).unwrap(),
+        std::fs::read(d.join("hint.csv")).unwrap()
     );
 }
 
@@ -150,7 +171,8 @@ fn a_step_size_hint_of_h_is_accepted_and_one_below_is_noted() {
     assert!(
         notes[0].starts_with("note: SystemStructure.ssd:")
             && notes[0].ends_with(
-                ": component 'mass': OSP's StepSizeHint 0.0004 is below H = 0.001: it steps at H, as libcosim does"
+                ": component 'mass': OSP's StepSizeHint 0.0004 is not a multiple of H = 0.001: \
+                 it steps at 1·H = 0.001, as libcosim does"
             ),
         "{}",
         notes[0]
@@ -205,13 +227,14 @@ fn a_base_step_that_is_not_a_time_is_refused() {
     );
 }
 
-/// `tether ssp export` writes the macro step as OSP's annotation too, which
-/// Tether reads back (and libcosim runs: tests/libcosim_ssp.rs).
+/// `tether ssp export` writes the macro step and the instances' own steps
+/// as OSP's annotations, which Tether reads back (and libcosim runs:
+/// tests/libcosim_ssp.rs).
 #[test]
 fn ssp_export_writes_the_osp_base_step() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    system(d, ALGORITHM, "");
+    system(d, ALGORITHM, r#"<osp:StepSizeHint value="0.002"/>"#);
     let out = tether(&["ssp", "import", ".", "-o", "system.toml"], d);
     assert!(out.status.success(), "{}", stderr(&out));
     let out = tether(&["ssp", "export", "system.toml", "-o", "out.ssp"], d);
@@ -225,11 +248,17 @@ fn ssp_export_writes_the_osp_base_step() {
     )
     .unwrap();
     assert!(
-        ssd.contains(r#"<ssc:Annotation type="com.opensimulationplatform">"#)
-            && ssd.contains(r#"<osp:FixedStepAlgorithm baseStepSize="0.001"/>"#),
+        ssd.contains(r#"<ssc:Annotation type="com.opensimulationplatform" xmlns:osp="#)
+            && ssd.contains(r#"<osp:FixedStepAlgorithm baseStepSize="0.001"/>"#)
+            && ssd.contains(r#"<osp:StepSizeHint value="0.002"/>"#),
         "{ssd}"
     );
     let out = tether(&["run", "out.ssp", "--out", "again.csv"], d);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert_eq!(times(&d.join("again.csv")).len(), 501);
+    let out = tether(&["run", "system.toml", "--out", "toml.csv"], d);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(
+        std::fs::read(d.join("again.csv")).unwrap(),
+        std::fs::read(d.join("toml.csv")).unwrap()
+    );
 }
