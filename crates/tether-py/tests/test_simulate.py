@@ -209,3 +209,22 @@ def test_a_parameter_the_fmu_changes_in_initialization_is_a_warning(tether_bin, 
         "instance 'mass': the FMU changed parameter 'c' in its initialization: set to 800, reads 1000",
         "instance 'mass': the FMU changed parameter 'reset_parameters' in its initialization: set to 2, reads 0"]
     sim.close()
+
+
+def test_an_instance_at_its_own_step_as_on_the_command_line(tether_bin, oscillator_fmu, tmp_path):
+    # step = 4·H (docs/system-file.md, "Per-instance steps"): the same CSV as
+    # `tether run`, the outputs held between the instance's own steps.
+    system = (tether.System().experiment(stop=0.1, step=1e-3)
+              .add_instance("mass", oscillator_fmu, {"exact": True}, step=4e-3))
+    out = tether.run(system)
+    path = tmp_path / "system.toml"
+    path.write_text(system.to_toml())
+    csv = tmp_path / "run.csv"
+    proc = cli(tether_bin, "run", str(path), "--out", str(csv))
+    assert proc.returncode == 0, proc.stderr
+    header, rows, trailer = read_csv(csv)
+    assert trailer is None
+    assert same_bits(out.to_numpy().view(np.float64).reshape(len(out), -1), rows)
+    x = out["mass.x"]
+    assert all(x[n] == x[n - n % 4] for n in range(len(x)))
+    assert out.stats["instances"]["mass"]["do_step"] == 25

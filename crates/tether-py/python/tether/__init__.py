@@ -378,8 +378,11 @@ class System:
         token_file: Optional[PathLike] = None,
         fmu_on_host: Optional[str] = None,
         resources: Optional[Mapping[str, float]] = None,
+        step: Optional[float] = None,
     ) -> "System":
         """An FMU instance named ``name`` (the column prefix) with start values;
+        ``step`` is its own communication step, a whole multiple of the
+        system's (docs/system-file.md, "Per-instance steps");
         ``isolation="process"`` runs it in a host process of its own and
         ``call_timeout`` (seconds) bounds each FMI call (docs/reliability.md).
         ``host="tcp://ADDR:PORT"`` with ``token_file`` runs it on a ``tether
@@ -393,6 +396,8 @@ class System:
             inst["isolation"] = isolation
         if call_timeout is not None:
             inst["call_timeout"] = float(call_timeout)
+        if step is not None:
+            inst["step"] = float(step)
         if host is not None:
             inst["host"] = host
         if token_file is not None:
