@@ -598,7 +598,7 @@ impl Signals {
                     // A receiver with its own step n·H takes its inputs at
                     // its communication points only.
                     let n = slaves[self.links[l].to].decimation;
-                    if at.n % n != 0 {
+                    if !at.n.is_multiple_of(n) {
                         continue;
                     }
                     let y = self.history[l][0];
@@ -625,7 +625,7 @@ impl Signals {
         let (start, h) = self.grid;
         for slave in slaves.iter_mut().filter(|s| s.decimation > 1) {
             let n = slave.decimation;
-            if (at.n + 1) % n == 0 {
+            if (at.n + 1).is_multiple_of(n) {
                 let t = start + (at.n + 1 - n) as f64 * h;
                 slave.do_step(t, n as f64 * h)?;
             }
