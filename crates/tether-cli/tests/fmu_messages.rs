@@ -90,6 +90,9 @@ fn a_quirk_is_one_line_per_fmu_and_kind() {
     std::fs::write(d.join("system.toml"), system).unwrap();
     let out = tether(&["run", "system.toml", "--out", "out.csv"], d);
     assert_eq!(warnings(&out), [LINE]);
+    // Isolated, each instance in a host process of its own: still one line.
+    let out = tether(&["run", "system.toml", "--isolate", "--out", "out.csv"], d);
+    assert_eq!(warnings(&out), [LINE]);
     // `tether info` and `tether simulate` say it the same way.
     let out = tether(&["info", "quirky.fmu"], d);
     assert_eq!(warnings(&out), [LINE]);

@@ -284,6 +284,10 @@ fn file_kind(metadata: &std::fs::Metadata) -> &'static str {
     "special file"
 }
 
+/// The log target of the model descriptions' quirks: a host process of
+/// isolated instances leaves them to the master, which opened the FMU first.
+pub const QUIRKS_TARGET: &str = "tether_fmi::quirks";
+
 /// The model description's quirks as warnings, once per FMU file in this
 /// process however often it is opened: one line per kind, the first
 /// occurrence with the FMU's file name and the line, and how many more
@@ -320,6 +324,7 @@ fn report_quirks(origin: &Path, md: &crate::ModelDescription) {
             n => format!(" (and {n} more variables)"),
         };
         log::warn!(
+            target: QUIRKS_TARGET,
             "{file}: modelDescription.xml:{}: {}{more}",
             first.line,
             first.message

@@ -75,7 +75,7 @@ pub mod xml;
 pub use archive::{remove_extractions_now, sweep_leftovers, ArchiveKind, ExtractLimits};
 pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
-pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions};
+pub use fmu::{set_debug_logging, Fmu, InstanceOptions, OpenOptions, QUIRKS_TARGET};
 pub use instance::{Instance, StatusKind};
 pub use instance3::Fmi3Instance;
 pub use interface::{FmuInstance, Inputs, Int, LocalInstance, RunRequest, Slot, SLOTS};
