@@ -244,3 +244,85 @@ fn a_tolerance_the_user_sets_wins_over_the_experiments() {
         "the user's tolerance 1e-3 is the integrator's"
     );
 }
+
+/// A system exported as an FMU: its members take their start values (the
+/// system file's and the exported parameters', set by the importer) after
+/// `fmi2SetupExperiment` too, and a member's changed parameter is a warning
+/// the exported FMU logs to its importer.
+#[test]
+fn an_exported_systems_members_take_their_start_values_after_setup() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let write = |name: &str, parameters: &str| {
+        let text = format!(
+            r#"
+            [experiment]
+            stop = 0.2
+            step = 1e-2
+
+            [[instance]]
+            name = "mass"
+            fmu = "{fmu}"
+            parameters = {{ {parameters} }}
+
+            [export]
+            model_name = "exported_mass"
+
+            [[export.parameter]]
+            name = "c"
+            to = "mass.c"
+
+            [[export.output]]
+            name = "x"
+            from = "mass.x"
+            "#,
+            fmu = quirks().display()
+        );
+        std::fs::write(d.join(name), text).unwrap();
+    };
+    write("plain.toml", "m = 2.0");
+    write("setup.toml", "reset_parameters = 1, m = 2.0");
+    write("init.toml", "reset_parameters = 2, m = 2.0");
+    // The plain member with c = 800, run by tether run.
+    let text = std::fs::read_to_string(d.join("plain.toml"))
+        .unwrap()
+        .replace("m = 2.0", "m = 2.0, c = 800.0");
+    std::fs::write(d.join("direct.toml"), text).unwrap();
+    success(&tether(&["run", "direct.toml", "--out", "direct.csv"], d));
+    let direct = std::fs::read_to_string(d.join("direct.csv")).unwrap();
+    let x_of = |csv: &str, column: &str| -> Vec<String> {
+        let mut lines = csv.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let i = header.iter().position(|c| *c == column).unwrap();
+        lines
+            .map(|l| l.split(',').nth(i).unwrap().to_string())
+            .collect()
+    };
+    let exported = |system: &str| {
+        let fmu = format!("{system}.fmu");
+        success(&tether(
+            &["fmu", "export", &format!("{system}.toml"), "--out", &fmu],
+            d,
+        ));
+        let out = format!("{system}.csv");
+        let text = success(&tether(
+            &[
+                "simulate", &fmu, "--stop", "0.2", "--step", "1e-2", "--set", "c=800", "--out",
+                &out,
+            ],
+            d,
+        ));
+        (text, std::fs::read_to_string(d.join(out)).unwrap())
+    };
+    let (text, csv) = exported("setup");
+    assert!(!text.contains("changed parameter"), "{text}");
+    assert_eq!(x_of(&csv, "x"), x_of(&direct, "mass.x"));
+    let (text, csv) = exported("init");
+    assert!(
+        text.contains(
+            "instance 'mass': the FMU changed parameter 'c' in its initialization: set to 800, reads 1000"
+        ),
+        "{text}"
+    );
+    assert_ne!(x_of(&csv, "x"), x_of(&direct, "mass.x"));
+}
