@@ -320,7 +320,8 @@ fn an_exported_systems_members_take_their_start_values_after_setup() {
     let (text, csv) = exported("init");
     assert!(
         text.contains(
-            "instance 'mass': the FMU changed parameter 'c' in its initialization: set to 800, reads 1000"
+            "[WARN  fmu::exported_mass] [logStatusWarning] instance 'mass': the FMU changed \
+             parameter 'c' in its initialization: set to 800, reads 1000"
         ),
         "{text}"
     );
