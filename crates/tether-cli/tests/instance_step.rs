@@ -223,3 +223,70 @@ fn what_cannot_have_its_own_step_is_refused_in_one_line() {
          system file, which --set does not change (it sets FMU variables)"
     );
 }
+
+/// k = 1 into an instance at its own step: the polynomial through the
+/// sender's values at the receiver's last two communication points, spacing
+/// n·H. A PI controller with kp = 0, ki = 1, r = 0.1 and no input sends the
+/// ramp u = 0.1·t to a free mass (exact integration) at 4·H: the ramp's
+/// extrapolation is exact from the second point on (the first step holds
+/// u = 0, degree min(k, 0)), so at its communication points T ≥ h = 4·H
+/// x(T) = 0.1·((T³ − h³)/6 − h²(T − h)/2), the closed form.
+#[test]
+fn polynomial_inputs_of_an_instance_at_its_own_step_use_its_spacing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let system = format!(
+        r#"
+        [experiment]
+        stop = 0.1
+        step = 1e-3
+
+        [method]
+        kind = "baumgarte"
+        index = 1
+
+        [coupling]
+        order = 1
+
+        [[instance]]
+        name = "ctrl"
+        fmu = "{ctrl}"
+        parameters = {{ kp = 0.0, ki = 1.0, r = 0.1 }}
+
+        [[instance]]
+        name = "mass"
+        fmu = "{osc}"
+        step = 4e-3
+        parameters = {{ m = 1.0, c = 0.0, d = 0.0, x0 = 0.0, v0 = 0.0, exact = true }}
+
+        [[connection]]
+        from = "ctrl.u"
+        to = "mass.F_ext"
+        "#,
+        ctrl = fmu("controller").display(),
+        osc = fmu("oscillator").display()
+    );
+    std::fs::write(d.join("ramp.toml"), system).unwrap();
+    let out = tether(&["run", "ramp.toml", "--out", "ramp.csv"], d);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (header, rows) = csv(&d.join("ramp.csv"));
+    let (t, x) = (column(&header, "time"), column(&header, "mass.x"));
+    let h = 4e-3;
+    let mut worst: f64 = 0.0;
+    for (n, row) in rows.iter().enumerate() {
+        let at = &rows[n - n % 4];
+        assert_eq!(row[x].to_bits(), at[x].to_bits(), "held at row {n}");
+        let time = at[t];
+        let expected = if time < h {
+            0.0
+        } else {
+            0.1 * ((time.powi(3) - h.powi(3)) / 6.0 - h * h * (time - h) / 2.0)
+        };
+        worst = worst.max((row[x] - expected).abs() / expected.abs().max(1e-12));
+    }
+    assert!(worst <= 1e-9, "largest relative error {worst:e}");
+}
