@@ -21,10 +21,12 @@ fn fmu(name: &str) -> std::path::PathBuf {
 }
 
 /// Run `ssp_dir` in libcosim; the rows of `columns` after every step.
+/// `step` is libcosim's, or with `from_ssp` the one the SSD's OSP
+/// annotation must give.
 fn libcosim(
     python: &Path,
     ssp_dir: &Path,
-    step: f64,
+    (step, from_ssp): (f64, bool),
     stop: f64,
     columns: &[&str],
 ) -> Vec<Vec<f64>> {
@@ -33,7 +35,11 @@ fn libcosim(
     let mut cmd = Command::new(python);
     cmd.arg(script)
         .arg(ssp_dir)
-        .arg(step.to_string())
+        .arg(if from_ssp {
+            format!("ssp:{step}")
+        } else {
+            step.to_string()
+        })
         .arg(stop.to_string())
         .arg(&out)
         .args(columns);
@@ -133,7 +139,8 @@ fn libcosim_and_tether_agree_on_an_exported_signal_only_system() {
         .unwrap()
         .extract(&unpacked)
         .unwrap();
-    let theirs = libcosim(&python, &unpacked, 1e-3, 0.5, &COLUMNS);
+    // libcosim takes the step from the OSP annotation Tether writes.
+    let theirs = libcosim(&python, &unpacked, (1e-3, true), 0.5, &COLUMNS);
     let read = tether_ssp::read(&ssp, None, None).unwrap();
     let ours = tether(&read.spec, &COLUMNS);
     let worst = compare(&ours, &theirs);
@@ -154,7 +161,7 @@ fn libcosim_and_tether_agree_on_the_hand_written_ssd() {
     for name in ["oscillator", "controller"] {
         std::fs::copy(fmu(name), dir.path().join(format!("resources/{name}.fmu"))).unwrap();
     }
-    let theirs = libcosim(&python, dir.path(), 1e-3, 0.5, &COLUMNS);
+    let theirs = libcosim(&python, dir.path(), (1e-3, false), 0.5, &COLUMNS);
     let read = tether_ssp::read(dir.path(), Some(1e-3), None).unwrap();
     let ours = tether(&read.spec, &COLUMNS);
     let worst = compare(&ours, &theirs);

@@ -3,7 +3,9 @@
 
     python run_ssp.py SSP_DIR STEP STOP OUT.csv INSTANCE.VARIABLE...
 
-SSP_DIR is an unpacked SSP folder; STEP and STOP are in seconds.
+SSP_DIR is an unpacked SSP folder; STEP and STOP are in seconds. A STEP
+written `ssp:H` leaves the step to the SSP (OSP's FixedStepAlgorithm
+annotation, which must say H); the rows are at multiples of H.
 """
 
 import sys
@@ -13,11 +15,16 @@ from libcosimpy.CosimObserver import CosimObserver
 
 
 def main():
-    ssp_dir, step, stop, out = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
+    ssp_dir, step, stop, out = sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4]
     columns = sys.argv[5:]
+    from_ssp = step.startswith("ssp:")
+    step = float(step.removeprefix("ssp:"))
     step_ns = round(step * 1e9)
     steps = round(stop / step)
-    execution = CosimExecution.from_ssp_file(ssp_path=ssp_dir, step_size=step_ns)
+    if from_ssp:
+        execution = CosimExecution.from_ssp_file(ssp_path=ssp_dir)
+    else:
+        execution = CosimExecution.from_ssp_file(ssp_path=ssp_dir, step_size=step_ns)
     observer = CosimObserver.create_last_value()
     execution.add_observer(observer=observer)
     reads = []

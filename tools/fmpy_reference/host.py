@@ -163,7 +163,10 @@ class Host:
 
     _unpacked = {}
 
-    def __init__(self, spec):
+    def __init__(self, spec, experiment):
+        """Instantiate, set up the experiment ``(start, stop, tolerance)``,
+        then set the start values, as Tether does (FMI 2.0: some FMUs reset
+        their parameters in fmi2SetupExperiment)."""
         self.name = spec.name
         path = spec.fmu
         if not os.path.exists(path):
@@ -196,6 +199,8 @@ class Host:
             self.fmu.instantiate(self.polynomial_inputs)
         else:
             self.fmu.instantiate()
+        start, stop, tolerance = experiment
+        self.fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
         self.recorded = [v for v in md.modelVariables if v.causality == "output" and v.type in REAL]
         self.recorded_vrs = [v.valueReference for v in self.recorded]
         self.recorded_values = [0.0] * len(self.recorded)
@@ -267,14 +272,14 @@ class Host:
     def is_coupled(self):
         return bool(self.inputs)
 
-    def initialize(self, start, stop, tolerance):
-        self.enter_initialization(start, stop, tolerance)
+    def initialize(self):
+        self.enter_initialization()
         self.exit_initialization()
 
-    def enter_initialization(self, start, stop, tolerance):
-        """Setup experiment and enter initialization mode, where inputs can be
-        set and outputs read before the first step (a loop's values at T_0)."""
-        self.fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
+    def enter_initialization(self):
+        """Enter initialization mode (the experiment was set up at
+        instantiation), where inputs can be set and outputs read before the
+        first step (a loop's values at T_0)."""
         self.fmu.enterInitializationMode()
 
     def exit_initialization(self):

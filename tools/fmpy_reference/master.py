@@ -29,9 +29,10 @@ class Master:
         self.steps = system.macro_steps()
         self.control = None if system.step_control is None else Control(system)
         self.hosts = []
+        stop = self.t0 + self.steps * self.h if self.control is None else system.stop
         try:
             for spec in system.instances:
-                self.hosts.append(Host(spec))
+                self.hosts.append(Host(spec, (self.t0, stop, system.tolerance)))
             self._wire()
             self.signals = Signals(system, self.hosts)
             if self.control is not None and not self.unknowns:
@@ -49,9 +50,8 @@ class Master:
                                            f"{capability}, which adaptive macro steps ([step_control]{role}) "
                                            f"needs")
             self.signals.check_rollback()
-            stop = self.t0 + self.steps * self.h if self.control is None else system.stop
             for host in self.hosts:
-                host.enter_initialization(self.t0, stop, system.tolerance)
+                host.enter_initialization()
             # A loop's values at T_0 are solved in initialization mode.
             if self.signals.loops:
                 self.signals.initialize()

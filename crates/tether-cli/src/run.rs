@@ -148,8 +148,12 @@ pub fn main(args: Args) -> Result<()> {
             e => e,
         })?;
     sim.time_phases(args.timing);
-    for note in sim.notes() {
+    let ssp_notes = _ssp.as_ref().map_or(&[][..], |l| &l.notes[..]);
+    for note in ssp_notes.iter().chain(sim.notes()) {
         crate::say!("note: {note}");
+    }
+    for warning in sim.warnings() {
+        crate::say!("warning: {warning}");
     }
     // The plot's columns are checked now, not after the run.
     let plot_columns = crate::columns::split(&args.columns);

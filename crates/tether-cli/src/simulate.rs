@@ -81,6 +81,9 @@ pub fn main(args: Args) -> Result<()> {
         },
         e => e,
     })?;
+    for warning in single.warnings() {
+        crate::say!("warning: {warning}");
+    }
     let outputs = SingleOutputs::all(md, single.arrays())?;
     let name = single.name().to_string();
 

@@ -57,6 +57,9 @@ pub fn main(args: Args) -> Result<()> {
         } => {
             crate::output::not_an_input(&out, std::iter::once(ssp.as_path()))?;
             let loaded = tether_ssp::read(&ssp, step, stop)?;
+            for note in &loaded.notes {
+                crate::say!("note: {note}");
+            }
             tether_ssp::write_toml(&loaded, &out)
                 .with_context(|| format!("importing {}", ssp.display()))?;
         }

@@ -233,7 +233,9 @@ fn run_terminates_every_instance_before_freeing_it() {
     for name in ["mass1", "mass2", "mass1#1", "mass2#1"] {
         let calls: Vec<&str> = text
             .lines()
-            .filter(|l| l.contains("tether_fmi::call") && l.contains(&format!("({name})")))
+            // The trace lines of target `tether_fmi::call` (the only ones
+            // at that level), shown as `trace: …`.
+            .filter(|l| l.starts_with("trace: ") && l.contains(&format!("({name})")))
             .collect();
         let position = |f: &str| {
             calls

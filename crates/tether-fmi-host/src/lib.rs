@@ -500,11 +500,34 @@ fn level(code: u8) -> log::LevelFilter {
         .unwrap_or(log::LevelFilter::Warn)
 }
 
-/// Logs like the `tether` binary: FMU messages at the master's level for them.
+/// Logs like the `tether` binary: FMU messages at the master's level for
+/// them, as `[WARN  fmu::<instance>] …`; its own as `warning: …`, without a
+/// Rust module path. A model description's quirks are the master's to say
+/// (it opened the FMU first), once.
 fn init_logger(max: log::LevelFilter, fmu: log::LevelFilter) {
     let _ = env_logger::Builder::new()
         .filter_level(max)
         .filter_module("fmu", fmu)
-        .format_timestamp(None)
+        .filter_module(tether_fmi::QUIRKS_TARGET, log::LevelFilter::Off)
+        .format(|buf, record| {
+            use std::io::Write as _;
+            if record.target().starts_with("fmu::") {
+                return writeln!(
+                    buf,
+                    "[{:<5} {}] {}",
+                    record.level(),
+                    record.target(),
+                    record.args()
+                );
+            }
+            let word = match record.level() {
+                log::Level::Error => "error",
+                log::Level::Warn => "warning",
+                log::Level::Info => "info",
+                log::Level::Debug => "debug",
+                log::Level::Trace => "trace",
+            };
+            writeln!(buf, "{word}: {}", record.args())
+        })
         .try_init();
 }

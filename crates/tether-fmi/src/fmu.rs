@@ -127,6 +127,7 @@ impl Fmu {
         // Errors name the file as the user sees it: inside the archive or the directory.
         let shown = origin.join("modelDescription.xml");
         let model_description = model_description::parse_bytes(&bytes, &shown, &origin)?;
+        report_quirks(&origin, &model_description);
         let so = binary_path(
             dir.root(),
             &model_description.co_simulation.model_identifier,
@@ -219,4 +220,52 @@ pub fn special_file_kind(metadata: &std::fs::Metadata) -> Option<&'static str> {
         }
     }
     Some("special file")
+}
+
+/// The log target of the model descriptions' quirks: a host process of
+/// isolated instances leaves them to the master, which opened the FMU first.
+pub const QUIRKS_TARGET: &str = "tether_fmi::quirks";
+
+/// The model description's quirks as warnings, once per FMU file in this
+/// process however often it is opened: one line per kind, the first
+/// occurrence with the FMU's file name and the line, and how many more
+/// (`warning: FourVarsFeedThrough.fmu: modelDescription.xml:108: variable
+/// 'InBool' declares initial=Exact, … (and 3 more variables)`).
+fn report_quirks(origin: &Path, md: &crate::ModelDescription) {
+    static REPORTED: std::sync::Mutex<Vec<std::path::PathBuf>> = std::sync::Mutex::new(Vec::new());
+    if md.quirks.is_empty() {
+        return;
+    }
+    let key = origin.canonicalize().unwrap_or_else(|_| origin.to_owned());
+    {
+        let mut reported = REPORTED.lock().unwrap_or_else(|e| e.into_inner());
+        if reported.contains(&key) {
+            return;
+        }
+        reported.push(key);
+    }
+    let file = origin.file_name().map_or_else(
+        || origin.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    let mut seen: Vec<&str> = Vec::new();
+    for kind in md.quirks.iter().map(|q| q.kind) {
+        if seen.contains(&kind) {
+            continue;
+        }
+        seen.push(kind);
+        let mut of_kind = md.quirks.iter().filter(|q| q.kind == kind);
+        let first = of_kind.next().expect("a quirk of this kind");
+        let more = match of_kind.count() {
+            0 => String::new(),
+            1 => " (and 1 more variable)".to_string(),
+            n => format!(" (and {n} more variables)"),
+        };
+        log::warn!(
+            target: QUIRKS_TARGET,
+            "{file}: modelDescription.xml:{}: {}{more}",
+            first.line,
+            first.message
+        );
+    }
 }

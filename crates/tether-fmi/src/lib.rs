@@ -75,7 +75,9 @@ pub mod xml;
 pub use archive::{remove_extractions_now, sweep_leftovers, ArchiveKind, ExtractLimits};
 pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
-pub use fmu::{set_debug_logging, special_file_kind, Fmu, InstanceOptions, OpenOptions};
+pub use fmu::{
+    set_debug_logging, special_file_kind, Fmu, InstanceOptions, OpenOptions, QUIRKS_TARGET,
+};
 pub use instance::{Fmi3Instance, FmuState, Instance, LocalInstance, StatusKind};
 pub use interface::{FmuInstance, Inputs, Int, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
@@ -83,7 +85,7 @@ pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIM
 pub use model_description::{
     element_names, BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
     DependencyKind, Dimension, DisplayUnit, EnumerationItem, FmiStandard, Initial, IntegerType,
-    IntegerVariable, LogCategory, ModelDescription, ModelStructure, RealType, RealVariable,
+    IntegerVariable, LogCategory, ModelDescription, ModelStructure, Quirk, RealType, RealVariable,
     ScalarVariable, SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown, ValueReference,
     ValueType, Values, Variability, VariableKind, VariableNamingConvention,
 };

@@ -160,7 +160,13 @@ impl log::Log for Forward {
             _ if on => (Status::Ok, "logEvents"),
             _ => return,
         };
-        let message = format!("{}: {}", record.target(), record.args());
+        // A member FMU's message names the member (`fmu::<instance>`); the
+        // system's own say what they say, without a Rust module path.
+        let message = if record.target().starts_with("fmu::") {
+            format!("{}: {}", record.target(), record.args())
+        } else {
+            record.args().to_string()
+        };
         logger.log(status, category, &message);
     }
 

@@ -249,6 +249,9 @@ impl Exported {
                 }
             }
             let sim = Simulation::new(&spec).map_err(|e| Failure::model(e.to_string()))?;
+            for warning in sim.warnings() {
+                log::warn!("{warning}");
+            }
             self.sim = Some(sim);
             self.inputs.at_point.clone_from(&self.values);
             self.resolved = None;

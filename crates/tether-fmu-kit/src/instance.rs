@@ -6,7 +6,7 @@ use crate::declaration::{Parameters, Slot};
 use crate::input::{eval_all, InputJet};
 use crate::integrate;
 use crate::machine::{Call, MachineState};
-use crate::model::{Model, Restore};
+use crate::model::{Model, ParameterReset, Restore};
 use crate::snapshot::{Shape, Snapshot};
 use crate::xml::LOG_CATEGORIES;
 
@@ -245,6 +245,9 @@ impl<M: Model> Instance<M> {
                 "invalid experiment: start {start}, stop {stop:?}"
             )));
         }
+        if !self.fmi3 && self.parameter_reset() == ParameterReset::AtSetupExperiment {
+            self.reset_parameters();
+        }
         if let Some(tol) = tolerance {
             if !(tol > 0.0 && tol.is_finite()) {
                 return Err(Failure::usage(format!("tolerance must be > 0, got {tol}")));
@@ -256,6 +259,27 @@ impl<M: Model> Instance<M> {
         self.data.time = start;
         self.data.stop_time = stop;
         Ok(())
+    }
+
+    /// When the model resets its parameters ([`Model::parameter_reset`]),
+    /// as the parameters are now.
+    fn parameter_reset(&self) -> ParameterReset {
+        let d = &self.data;
+        M::parameter_reset(&Parameters::new(
+            &M::DECLARATION,
+            &d.reals,
+            &d.integers,
+            &d.booleans,
+        ))
+    }
+
+    /// Every parameter back to its declared start value (the tolerance too).
+    fn reset_parameters(&mut self) {
+        let start = initial_snapshot::<M>();
+        self.data.reals = start.reals;
+        self.data.integers = start.integers;
+        self.data.booleans = start.booleans;
+        self.model = None;
     }
 
     fn tolerance_mut(&mut self) -> &mut f64 {
@@ -270,6 +294,9 @@ impl<M: Model> Instance<M> {
     }
 
     pub fn exit_initialization_mode(&mut self) -> Outcome {
+        if self.parameter_reset() == ParameterReset::AtExitInitialization {
+            self.reset_parameters();
+        }
         self.ensure_model().map_err(|f| Failure::model(f.message))?;
         self.data.machine = MachineState::StepComplete;
         self.data.step_base = self.data.time;

@@ -27,7 +27,7 @@ pub use declaration::{
 pub use ffi::{environment_logger, EnvironmentLogger};
 pub use input::InputJet;
 pub use marker::MarkerKinematics;
-pub use model::Model;
+pub use model::{Model, ParameterReset};
 
 /// Exports `$model` (a type implementing [`Model`]) as an FMI 2.0 and an FMI 3.0
 /// co-simulation FMU from one library: generates every `#[no_mangle] extern "C"`

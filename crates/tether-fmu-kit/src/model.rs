@@ -77,6 +77,27 @@ pub trait Model: Sized + 'static {
     fn restore(&self, _t: f64) -> Restore {
         Restore::Exact
     }
+
+    /// Whether the FMU resets every parameter to its declared start value
+    /// (the values set before are lost), as FMUs exported by some modelling
+    /// tools do, given the parameters as set: for conformance tests of
+    /// importers. The default, and every model but such a test model:
+    /// [`ParameterReset::Never`].
+    fn parameter_reset(_parameters: &Parameters) -> ParameterReset {
+        ParameterReset::Never
+    }
+}
+
+/// When an FMU resets its parameters to their start values ([`Model::parameter_reset`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ParameterReset {
+    /// Never: the values set stay.
+    Never,
+    /// In `fmi2SetupExperiment` (FMI 2.0 only): values set before it are lost.
+    AtSetupExperiment,
+    /// In `fmi2ExitInitializationMode` / `fmi3ExitInitializationMode`: every
+    /// value set is lost, whatever the importer's order.
+    AtExitInitialization,
 }
 
 /// How `fmi2SetFMUstate` restores a state ([`Model::restore`]).

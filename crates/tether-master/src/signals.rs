@@ -90,9 +90,24 @@ pub(crate) struct Signals {
     iterating: bool,
     /// The Newton updates' linear solver, reused.
     newton: Solver,
+    /// Per link: for a receiver with its own communication step n·H, the
+    /// slot in `history` (after the links' own) of the sender's values at
+    /// the receiver's communication points `[y_M, y_{M−n}, y_{M−2n}]`.
+    coarse: Vec<Option<usize>>,
+    /// T_0 and H, for the steps of instances with their own step.
+    grid: (f64, f64),
 }
 
 impl Signals {
+    /// The value references the connections set on instance `slave`.
+    pub fn receivers(&self, slave: usize) -> Vec<u32> {
+        self.links
+            .iter()
+            .filter(|l| l.to == slave)
+            .map(|l| l.to_vr)
+            .collect()
+    }
+
     /// The signal values carried between steps: each link's sender values
     /// `[y_N, y_{N-1}, y_{N-2}]` and its value at T_{N+1} once read.
     pub fn values(&self) -> (Vec<[f64; 3]>, Vec<f64>) {
@@ -145,6 +160,15 @@ impl Signals {
             return Err(e);
         }
         let scheme = spec.signals.scheme();
+        decimate(spec, slaves)?;
+        let mut coarse = Vec::with_capacity(links.len());
+        let mut slots = links.len();
+        for link in &links {
+            coarse.push((slaves[link.to].coupled.decimation > 1).then(|| {
+                slots += 1;
+                slots - 1
+            }));
+        }
         let mut sequence = Vec::new();
         if scheme == SignalScheme::GaussSeidel {
             for (s, slave) in slaves.iter_mut().enumerate() {
@@ -157,7 +181,9 @@ impl Signals {
         }
         Ok(Signals {
             loops,
-            history: vec![[0.0; 3]; links.len()],
+            history: vec![[0.0; 3]; slots],
+            coarse,
+            grid: (spec.experiment.start, spec.experiment.step),
             next: vec![0.0; links.len()],
             links,
             order: spec.coupling.order,
@@ -346,6 +372,9 @@ impl Signals {
     /// Link `l`'s value `value` as its history and its receiver's held input.
     fn hold(&mut self, slaves: &mut [Slave], l: usize, value: f64) -> Result<(), MasterError> {
         self.history[l] = [value; 3];
+        if let Some(slot) = self.coarse[l] {
+            self.history[slot] = [value; 3];
+        }
         let held = Taylor {
             value,
             ..Taylor::default()
@@ -359,7 +388,10 @@ impl Signals {
     /// below 1, then up to 20 Newton updates; exact after one for linear
     /// feedthrough). Otherwise an error naming the first loop.
     pub fn solve_loops(&mut self, slaves: &mut [Slave]) -> Result<(), MasterError> {
-        let mut v: Vec<f64> = self.history.iter().map(|h| h[0]).collect();
+        let mut v: Vec<f64> = self.history[..self.links.len()]
+            .iter()
+            .map(|h| h[0])
+            .collect();
         let mut g = vec![0.0; v.len()];
         let real = self.real_links();
         let mut solver = Solver::default();
@@ -540,7 +572,7 @@ impl Signals {
     /// each with the values at T_{N+1} of the senders stepped before it.
     pub fn send(&mut self, slaves: &mut [Slave], at: StepAt) -> Result<(), MasterError> {
         if self.links.is_empty() {
-            return Ok(());
+            return self.step_own(slaves, at);
         }
         self.fresh.fill(false);
         for i in 0..self.sequence.len() {
@@ -563,9 +595,45 @@ impl Signals {
             }
         }
         for l in 0..self.links.len() {
-            if !self.sequence.contains(&self.links[l].to) {
-                let poly = self.polynomial(l, at);
-                self.set(slaves, l, poly)?;
+            if self.sequence.contains(&self.links[l].to) {
+                continue;
+            }
+            let poly = match self.coarse[l] {
+                None => self.polynomial(l, at),
+                Some(slot) => {
+                    // A receiver with its own step n·H takes its inputs at
+                    // its communication points only.
+                    let n = slaves[self.links[l].to].coupled.decimation;
+                    if !at.n.is_multiple_of(n) {
+                        continue;
+                    }
+                    let y = self.history[l][0];
+                    let c = &mut self.history[slot];
+                    *c = [y, c[0], c[1]];
+                    let k = if self.links[l].interpolate {
+                        self.order
+                    } else {
+                        0
+                    };
+                    let m = usize::try_from(at.n / n).unwrap_or(usize::MAX);
+                    extrapolate(&self.history[slot], k.min(m), n as f64 * at.h, None)
+                }
+            };
+            self.set(slaves, l, poly)?;
+        }
+        self.step_own(slaves, at)
+    }
+
+    /// The instances with their own communication step n·H whose step
+    /// ends at T_{N+1}: each steps from T_{N+1−n} over n·H (its outputs
+    /// held for the others until then).
+    fn step_own(&mut self, slaves: &mut [Slave], at: StepAt) -> Result<(), MasterError> {
+        let (start, h) = self.grid;
+        for slave in slaves.iter_mut().filter(|s| s.coupled.decimation > 1) {
+            let n = slave.coupled.decimation;
+            if (at.n + 1).is_multiple_of(n) {
+                let t = start + (at.n + 1 - n) as f64 * h;
+                slave.do_step(t, n as f64 * h)?;
             }
         }
         Ok(())
@@ -1014,4 +1082,53 @@ fn find_loops(links: &[Link], slaves: &[Slave]) -> Vec<Vec<usize>> {
         loops.push(members);
     }
     loops
+}
+
+/// The instances' own communication steps (`step` of an `[[instance]]`):
+/// each a whole multiple n·H of the macro step, for instances coupled by
+/// signals only, with the Jacobi scheme, without adaptive steps or iterated
+/// signals (which close loops at every macro step). Sets each slave's
+/// `decimation` n; an instance with n > 1 is stepped by the signals, not by
+/// the method.
+fn decimate(spec: &SystemSpec, slaves: &mut [Slave]) -> Result<(), MasterError> {
+    let h = spec.experiment.step;
+    let refuse = |instance: &str, reason: String| MasterError::SystemFile {
+        path: spec.source_name(),
+        reason: format!("instance '{instance}': {reason}"),
+    };
+    for (inst, slave) in spec.instances.iter().zip(slaves.iter_mut()) {
+        let Some(step) = inst.step else { continue };
+        let ratio = step / h;
+        let n = ratio.round();
+        if !(step.is_finite() && n >= 1.0 && (ratio - n).abs() <= 1e-9 * ratio) {
+            return Err(refuse(
+                &inst.name,
+                format!("step = {step} is not a whole multiple of the system's macro step H = {h}"),
+            ));
+        }
+        let n = n as u64;
+        if n == 1 {
+            continue;
+        }
+        let why = if slave.is_coupled() || slave.coupled_len() > 0 {
+            Some("it is in a constraint, joint or coupling variable, which every macro step solves")
+        } else if spec.step_control.is_some() {
+            Some("the system has adaptive macro steps ([step_control])")
+        } else if spec.signals.iterations.is_some() {
+            Some("the system iterates its signals at every macro step ([signals] iterations)")
+        } else if spec.signals.scheme() != SignalScheme::Jacobi {
+            Some("its signals use the Gauss-Seidel scheme; per-instance steps run with Jacobi")
+        } else {
+            None
+        };
+        if let Some(why) = why {
+            return Err(refuse(
+                &inst.name,
+                format!("step = {step} ({n}·H) is refused: {why}"),
+            ));
+        }
+        slave.coupled.decimation = n;
+        slave.stepped_ahead = true;
+    }
+    Ok(())
 }

@@ -202,6 +202,7 @@ pub struct SingleFmu {
     instance: Box<dyn FmuInstance>,
     experiment: SingleExperiment,
     arrays: Arrays,
+    warnings: Vec<String>,
 }
 
 impl SingleFmu {
@@ -216,23 +217,31 @@ impl SingleFmu {
         let name = &md.co_simulation.model_identifier;
         let mut instance =
             tether_fmi::instantiate(fmu, name, Default::default(), Placement::InProcess)?;
-        let arrays = apply_start_values(
-            instance.as_mut(),
-            md,
-            start_values.iter().map(|(n, v)| (n.as_str(), v)),
-        )?;
+        // FMI 2.0: the experiment right after instantiation, then the start
+        // values, as FMPy and libcosim set them (docs/fmi-import.md).
         instance.setup(
             experiment.tolerance,
             experiment.start,
             Some(experiment.stop),
         )?;
+        let values = || start_values.iter().map(|(n, v)| (n.as_str(), v));
+        let arrays = apply_start_values(instance.as_mut(), md, values())?;
         instance.enter_initialization()?;
         instance.exit_initialization()?;
+        let exact = crate::start::exact_parameters(md, values());
+        let warnings = crate::start::changed_parameters(instance.as_mut(), &exact, &[])?;
         Ok(SingleFmu {
             instance,
             experiment,
             arrays,
+            warnings,
         })
+    }
+
+    /// Warnings for the user before the run, each one line: every parameter
+    /// set with `initial="exact"` that the FMU changed in its initialization.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// The arrays' sizes and values as the start values set them.

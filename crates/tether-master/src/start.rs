@@ -561,3 +561,110 @@ mod tests {
         assert_eq!(start.real_values(md, u).unwrap(), [1.0, 2.0, 3.0]);
     }
 }
+
+/// A value the user set on a scalar parameter declared `initial="exact"`:
+/// read back after initialization, where an FMU that resets its parameters
+/// (in `fmi2SetupExperiment` or its initialization) shows the change.
+#[derive(Debug, Clone)]
+pub(crate) struct ExactParameter {
+    name: String,
+    vr: u32,
+    base: BaseType,
+    float32: bool,
+    value: StartValue,
+}
+
+/// The values of `values` set on scalar parameters with `initial="exact"`
+/// (the last one of each variable).
+pub(crate) fn exact_parameters<'v>(
+    md: &ModelDescription,
+    values: impl IntoIterator<Item = (&'v str, &'v StartValue)>,
+) -> Vec<ExactParameter> {
+    let mut out: Vec<ExactParameter> = Vec::new();
+    for (name, value) in values {
+        let Ok(var) = md.variable(name) else { continue };
+        if var.causality != Causality::Parameter
+            || var.initial != Some(tether_fmi::Initial::Exact)
+            || var.is_array()
+        {
+            continue;
+        }
+        if matches!(
+            var.value_type,
+            tether_fmi::ValueType::Binary | tether_fmi::ValueType::Clock
+        ) {
+            continue;
+        }
+        let base = match var.base_type() {
+            BaseType::Enumeration => BaseType::Integer,
+            b => b,
+        };
+        out.retain(|p| p.vr != var.value_reference || p.base != base);
+        out.push(ExactParameter {
+            name: var.name.clone(),
+            vr: var.value_reference,
+            base,
+            float32: var.value_type == tether_fmi::ValueType::Float32,
+            value: value.clone(),
+        });
+    }
+    out
+}
+
+/// Read `parameters` back (calls the caller does not count) and say, one
+/// line each, which the FMU changed: compared as the variable's type (a
+/// Float32 after rounding the value set to f32). `receivers` are the value
+/// references signal connections set, left out.
+pub(crate) fn changed_parameters(
+    instance: &mut dyn FmuInstance,
+    parameters: &[ExactParameter],
+    receivers: &[u32],
+) -> Result<Vec<String>, MasterError> {
+    let mut lines = Vec::new();
+    for p in parameters.iter().filter(|p| !receivers.contains(&p.vr)) {
+        let vr = [p.vr];
+        let read = match (p.base, &p.value) {
+            (BaseType::Real, set) => {
+                let set = match set {
+                    StartValue::Real(x) => *x,
+                    StartValue::Integer(i) => *i as f64,
+                    _ => continue,
+                };
+                let mut out = [0.0];
+                instance.get_reals(&vr, &mut out)?;
+                let expected = if p.float32 {
+                    f64::from(set as f32)
+                } else {
+                    set
+                };
+                let same = out[0] == expected || (out[0].is_nan() && expected.is_nan());
+                (!same).then(|| out[0].to_string())
+            }
+            (BaseType::Integer, StartValue::Integer(i)) => {
+                let mut out = [Int::from(0i32)];
+                instance.get_integers(&vr, &mut out)?;
+                (out[0] != Int::from(*i)).then(|| out[0].to_string())
+            }
+            (BaseType::Boolean, StartValue::Boolean(b)) => {
+                let mut out = [false];
+                instance.get_booleans(&vr, &mut out)?;
+                (out[0] != *b).then(|| out[0].to_string())
+            }
+            (BaseType::String, StartValue::String(s)) => {
+                let mut out = [String::new()];
+                instance.get_strings(&vr, &mut out)?;
+                (out[0] != *s).then(|| format!("{:?}", out[0]))
+            }
+            _ => None,
+        };
+        if let Some(read) = read {
+            lines.push(format!(
+                "instance '{}': the FMU changed parameter '{}' in its initialization: set to {}, reads {read}",
+                instance.name(),
+                p.name,
+                p.value
+            ));
+        }
+    }
+    Ok(lines)
+}

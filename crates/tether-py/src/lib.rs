@@ -223,7 +223,7 @@ fn stats_dict<'py>(
     py: Python<'py>,
     stats: &RunStats,
     stop_reason: &str,
-    notes: &[String],
+    (notes, warnings): (&[String], &[String]),
 ) -> PyResult<Bound<'py, PyDict>> {
     let json = py.import("json")?;
     let d = json
@@ -234,6 +234,9 @@ fn stats_dict<'py>(
     // The setup's notes (the CLI's `note:` lines), such as the
     // direct-feedthrough loops closed only at macro points.
     d.set_item("notes", notes.to_vec())?;
+    // The setup's warnings (the CLI's `warning:` lines): parameters an FMU
+    // changed in its initialization.
+    d.set_item("warnings", warnings.to_vec())?;
     Ok(d)
 }
 
@@ -542,12 +545,16 @@ fn run(
 ) -> PyResult<Py<PyAny>> {
     // `_ssp` keeps an extracted archive's FMUs until the run ends.
     let (spec, _ssp) = load_spec(path, text, kwargs)?;
+    let ssp_notes = _ssp.as_ref().map(|l| l.notes.clone()).unwrap_or_default();
     // A divergence of a formulation known to be unstable says so again, as the CLI does.
     let unstable = spec.method.stability_warning(spec.coupling.order);
     let outcome = py.detach(move || -> Result<_, MasterError> {
         spec.check_grid()?;
         let mut sim = Simulation::new(&spec).map_err(|e| e.located(&spec, |_, _| None))?;
-        let notes = sim.notes().to_vec();
+        let notes = (
+            [ssp_notes, sim.notes().to_vec()].concat(),
+            sim.warnings().to_vec(),
+        );
         let mut rows = Rows::default();
         let width = sim.columns().len() + 1;
         let points = usize::try_from(sim.total_steps()).unwrap_or(usize::MAX);
@@ -565,13 +572,13 @@ fn run(
         // The run could not start: no results.
         Err(e) => Err(master_failure(&e, None)),
         Ok((rows, Ok(()), stats, notes)) => {
-            let stats = stats_dict(py, &stats, "completed", &notes)?
+            let stats = stats_dict(py, &stats, "completed", (&notes.0, &notes.1))?
                 .into_any()
                 .unbind();
             rows.into_py(py, stats)
         }
         Ok((rows, Err(e), stats, notes)) => {
-            let stats = stats_dict(py, &stats, &message(&e), &notes)?
+            let stats = stats_dict(py, &stats, &message(&e), (&notes.0, &notes.1))?
                 .into_any()
                 .unbind();
             let partial = rows.into_py(py, stats)?;
@@ -611,6 +618,8 @@ struct PySimulation {
     unstable: Option<String>,
     /// The setup's notes.
     notes: Vec<String>,
+    /// The setup's warnings.
+    warnings: Vec<String>,
     /// An SSP system's extracted archive, kept while its FMUs are used.
     _ssp: Option<tether_ssp::Loaded>,
 }
@@ -643,7 +652,9 @@ impl PySimulation {
             rounded: Vec::new(),
         };
         rows.push(sim.time(), sim.values());
-        let notes = sim.notes().to_vec();
+        let ssp_notes = ssp.as_ref().map(|l| l.notes.clone()).unwrap_or_default();
+        let notes = [ssp_notes, sim.notes().to_vec()].concat();
+        let warnings = sim.warnings().to_vec();
         Ok(PySimulation {
             sim: Some(sim),
             n: 0,
@@ -654,6 +665,7 @@ impl PySimulation {
             closed_stats: None,
             unstable: spec.method.stability_warning(spec.coupling.order),
             notes,
+            warnings,
             _ssp: ssp,
         })
     }
@@ -720,7 +732,7 @@ impl PySimulation {
             (None, true) => "completed".to_string(),
             (None, false) => "running".to_string(),
         };
-        stats_dict(py, &stats, &reason, &self.notes)
+        stats_dict(py, &stats, &reason, (&self.notes, &self.warnings))
     }
 
     /// `(columns, data, stats)` of every point so far.
@@ -1073,15 +1085,15 @@ fn simulate(
     }
     let values: Vec<(String, StartValue)> = values.into_iter().collect();
     let outcome = py.detach(move || simulate_one(&fmu, start, stop, step, tolerance, &values));
-    let (rows, run) = outcome.map_err(|e| master_failure(&e, None))?;
+    let (rows, run, warnings) = outcome.map_err(|e| master_failure(&e, None))?;
     match run.end {
         Err(e) => {
-            let stats = simulate_stats(py, run.steps, &message(&e), None)?;
+            let stats = simulate_stats(py, run.steps, &message(&e), None, &warnings)?;
             let partial = rows.into_py(py, stats)?;
             Err(master_failure(&e, Some(partial)))
         }
         Ok(end) => {
-            let stats = simulate_stats(py, run.steps, "completed", Some(end))?;
+            let stats = simulate_stats(py, run.steps, "completed", Some(end), &warnings)?;
             rows.into_py(py, stats)
         }
     }
@@ -1095,10 +1107,12 @@ fn simulate_stats(
     steps: u64,
     reason: &str,
     end: Option<SingleEnd>,
+    warnings: &[String],
 ) -> PyResult<Py<PyAny>> {
     let d = PyDict::new(py);
     d.set_item("macro_steps", steps)?;
     d.set_item("stop_reason", reason)?;
+    d.set_item("warnings", warnings.to_vec())?;
     if let Some(SingleEnd::Terminated { time }) = end {
         let t = PyDict::new(py);
         t.set_item("requested_at", time)?;
@@ -1118,7 +1132,7 @@ fn simulate_one(
     step: Option<f64>,
     tolerance: Option<f64>,
     parameters: &[(String, StartValue)],
-) -> Result<(Rows, SingleRun), MasterError> {
+) -> Result<(Rows, SingleRun, Vec<String>), MasterError> {
     let fmu = Fmu::open(path)?;
     let md = fmu.model_description();
     let experiment = SingleExperiment::new(md, start, stop, step, tolerance)?;
@@ -1141,7 +1155,8 @@ fn simulate_one(
         // error without them. (After a failure the instance is only freed.)
         single.terminate()?;
     }
-    Ok((rows, run))
+    let warnings = single.warnings().to_vec();
+    Ok((rows, run, warnings))
 }
 
 // ---------------------------------------------------------------------------

@@ -164,7 +164,8 @@ def test_system_without_experiment_is_an_error():
 
 def test_stats_have_the_schema_of_the_cli_summary_json(tmp_path, tether_bin, oscillator_toml):
     """result.stats is the run summary `tether run --summary-json` writes
-    (docs/run-summary.md), plus the text `summary` and the setup's `notes`."""
+    (docs/run-summary.md), plus the text `summary` and the setup's `notes`
+    and `warnings`."""
     import json
 
     summary = tmp_path / "summary.json"
@@ -172,7 +173,7 @@ def test_stats_have_the_schema_of_the_cli_summary_json(tmp_path, tether_bin, osc
         "--summary-json", str(summary))
     theirs = json.loads(summary.read_text())
     ours = tether.run(oscillator_toml, stop=0.1).stats
-    assert set(ours) == set(theirs) | {"summary", "notes"}
+    assert set(ours) == set(theirs) | {"summary", "notes", "warnings"}
     assert ours["schema"] == theirs["schema"] == "tether-run-summary/1"
     for key in ["method", "order", "step", "stop", "completed", "stop_reason", "end_time",
                 "macro_steps", "jacobian_solves", "max_abs_g", "instances"]:

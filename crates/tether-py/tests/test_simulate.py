@@ -169,3 +169,63 @@ def test_simulate_of_an_fmi3_fmu_equals_the_cli(tmp_path, tether_bin, fmi3_refer
     if model == "Stair":
         # Stair asks to end the simulation at t = 9 (fmi3DoStep, terminateSimulation).
         assert out.stats["termination"]["requested_at"] == out["time"][-1] < 10
+
+
+def test_start_values_go_after_setup_experiment_as_in_fmpy(fmpy, tether_bin, quirks_fmu, tmp_path):
+    # reset_parameters = 1: the quirks FMU resets its parameters in
+    # fmi2SetupExperiment, as FMUs of some modelling tools do. Tether sets the
+    # start values after it, as FMPy does: the value is taken, bit for bit
+    # the well-behaved FMU's result, and equal to FMPy's within its rounding.
+    parameters = {"reset_parameters": 1, "m": 2.0, "c": 800.0}
+    ours = tether.simulate(quirks_fmu, stop=0.2, step=1e-2, parameters=parameters)
+    plain = tether.simulate(quirks_fmu, stop=0.2, step=1e-2, parameters={"m": 2.0, "c": 800.0})
+    default = tether.simulate(quirks_fmu, stop=0.2, step=1e-2)
+    assert same_bits(ours["x"], plain["x"])
+    assert not same_bits(ours["x"], default["x"])
+    theirs = fmpy.simulate_fmu(str(quirks_fmu), fmi_type="CoSimulation", start_time=0.0, stop_time=0.2,
+                               step_size=1e-2, output_interval=1e-2, start_values=parameters)
+    np.testing.assert_allclose(ours["x"], theirs["x"], rtol=1e-12, atol=1e-15)
+
+
+def test_a_parameter_the_fmu_changes_in_initialization_is_a_warning(tether_bin, quirks_fmu, tmp_path):
+    # reset_parameters = 2: reset in fmi2ExitInitializationMode, whatever the
+    # order; the CLI's `warning:` lines are Python UserWarnings.
+    expected = ["instance 'quirks': the FMU changed parameter 'reset_parameters' in its initialization: "
+                "set to 2, reads 0",
+                "instance 'quirks': the FMU changed parameter 'm' in its initialization: set to 2, reads 1"]
+    with pytest.warns(UserWarning) as caught:
+        out = tether.simulate(quirks_fmu, stop=0.1, step=1e-2, parameters={"reset_parameters": 2, "m": 2.0})
+    # In the order of the parameters' names (the CLI's: the order of --set).
+    assert [str(w.message) for w in caught] == expected[::-1]
+    assert out.stats["warnings"] == expected[::-1]
+    proc = cli(tether_bin, "simulate", str(quirks_fmu), "--stop", "0.1", "--step", "1e-2",
+               "--set", "reset_parameters=2", "--set", "m=2", "--out", str(tmp_path / "q.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert [l for l in proc.stderr.splitlines() if l.startswith("warning:")] == [f"warning: {w}" for w in expected]
+    system = (tether.System().experiment(stop=0.1, step=1e-2)
+              .add_instance("mass", quirks_fmu, {"reset_parameters": 2, "c": 800.0}))
+    with pytest.warns(UserWarning) as caught:
+        sim = tether.Simulation(system)
+    assert [str(w.message) for w in caught] == [
+        "instance 'mass': the FMU changed parameter 'c' in its initialization: set to 800, reads 1000",
+        "instance 'mass': the FMU changed parameter 'reset_parameters' in its initialization: set to 2, reads 0"]
+    sim.close()
+
+
+def test_an_instance_at_its_own_step_as_on_the_command_line(tether_bin, oscillator_fmu, tmp_path):
+    # step = 4·H (docs/system-file.md, "Per-instance steps"): the same CSV as
+    # `tether run`, the outputs held between the instance's own steps.
+    system = (tether.System().experiment(stop=0.1, step=1e-3)
+              .add_instance("mass", oscillator_fmu, {"exact": True}, step=4e-3))
+    out = tether.run(system)
+    path = tmp_path / "system.toml"
+    path.write_text(system.to_toml())
+    csv = tmp_path / "run.csv"
+    proc = cli(tether_bin, "run", str(path), "--out", str(csv))
+    assert proc.returncode == 0, proc.stderr
+    header, rows, trailer = read_csv(csv)
+    assert trailer is None
+    assert same_bits(out.to_numpy().view(np.float64).reshape(len(out), -1), rows)
+    x = out["mass.x"]
+    assert all(x[n] == x[n - n % 4] for n in range(len(x)))
+    assert out.stats["instances"]["mass"]["do_step"] == 25

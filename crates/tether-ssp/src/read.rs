@@ -18,6 +18,9 @@ pub struct Loaded {
     pub spec: SystemSpec,
     /// Other tools' annotations, skipped: `type (file:line)`.
     pub skipped: Vec<String>,
+    /// Lines for the user (the CLI prints them as `note: …`): OSP's
+    /// annotations Tether does not use, a `StepSizeHint` that is not n·H.
+    pub notes: Vec<String>,
     /// The `SystemStructure.ssd` read.
     pub ssd: PathBuf,
     /// The extracted archive, removed when the system is dropped.
@@ -54,6 +57,7 @@ pub fn read(path: &Path, step: Option<f64>, stop: Option<f64>) -> Result<Loaded,
     }
     Ok(Loaded {
         spec,
+        notes: reader.notes,
         skipped: reader.skipped,
         ssd,
         _extracted: extracted,
@@ -177,6 +181,56 @@ struct Reader {
     /// System-level bindings: system path, parameter path, value, line.
     bindings: Vec<(Vec<String>, String, StartValue, usize)>,
     annotation: Option<Annotation>,
+    /// OSP's `FixedStepAlgorithm baseStepSize` (libcosim's macro step).
+    osp_step: Option<f64>,
+    /// OSP's `StepSizeHint` of each component: instance, hint, line.
+    osp_hints: Vec<(String, f64, usize)>,
+    /// OSP's annotation elements Tether does not use: `<osp:X> (line N)`.
+    osp_ignored: Vec<String>,
+    notes: Vec<String>,
+}
+
+/// Where an `ssd:Annotations` is: OSP's annotation means something on the
+/// default experiment (the algorithm) and on a component (its step hint).
+#[derive(Clone, Copy)]
+enum Place<'a> {
+    /// The root `ssd:System`, where Tether's own annotation goes.
+    RootSystem,
+    /// `ssd:DefaultExperiment`.
+    Experiment,
+    /// An `ssd:Component`, by instance name.
+    Component(&'a str),
+    /// Anywhere else.
+    Other,
+}
+
+/// OSP's annotation type, as libcosim reads it.
+pub(crate) const OSP_TYPE: &str = "com.opensimulationplatform";
+
+/// The namespace of OSP's annotation elements (`osp:`), as OSP's SSP files
+/// declare it (libcosim matches the prefix only).
+pub(crate) const OSP_NAMESPACE: &str = "http://opensimulationplatform.com/SSP/OSPAnnotations";
+
+/// An element's local name (OSP's elements are matched by it, as libcosim
+/// matches `osp:` names whatever namespace the prefix is bound to).
+fn local(name: &str) -> &str {
+    let name = name.rsplit('}').next().unwrap_or(name);
+    name.rsplit(':').next().unwrap_or(name)
+}
+
+/// Seconds as libcosim's integer nanoseconds (truncated, as its
+/// `to_duration` does).
+fn nanoseconds(seconds: f64) -> i64 {
+    (seconds * 1e9) as i64
+}
+
+/// libcosim's decimation factor of a `StepSizeHint`: n = max(1, ⌈hint/H⌉),
+/// both in integer nanoseconds.
+pub(crate) fn decimation(hint: f64, h: f64) -> u64 {
+    let (hint, h) = (nanoseconds(hint), nanoseconds(h).max(1));
+    u64::try_from(hint.div_euclid(h) + i64::from(hint.rem_euclid(h) != 0))
+        .unwrap_or(0)
+        .max(1)
 }
 
 impl Reader {
@@ -238,7 +292,7 @@ impl Reader {
                 "ssd:System" => system = Some(child),
                 "ssd:DefaultExperiment" => experiment = Some(child),
                 "ssd:Units" => self.unit_definitions(child)?,
-                "ssd:Annotations" => self.annotations(child, false)?,
+                "ssd:Annotations" => self.annotations(child, Place::Other)?,
                 "ssd:MetaData" | "ssd:Signature" => {}
                 "ssd:Enumerations" => return Err(self.unsupported(child, "(enumeration types)")),
                 _ => return Err(self.unsupported(child, "in <ssd:SystemStructureDescription>")),
@@ -255,7 +309,7 @@ impl Reader {
             stop_time = self.number(e, "stopTime")?;
             for child in &e.children {
                 match child.name.as_str() {
-                    "ssd:Annotations" => self.annotations(child, false)?,
+                    "ssd:Annotations" => self.annotations(child, Place::Experiment)?,
                     _ => return Err(self.unsupported(child, "in <ssd:DefaultExperiment>")),
                 }
             }
@@ -266,13 +320,21 @@ impl Reader {
                 self.file
             ))
         })?;
-        let step = step.or(annotation.step).ok_or_else(|| {
+        let step = step.or(annotation.step).or(self.osp_step).ok_or_else(|| {
             SspError::Other(format!(
                 "{}: no macro-step size: SSP's DefaultExperiment has none; give --step, or \
-                 step in the Tether annotation (docs/ssp.md)",
+                 step in the Tether annotation, or OSP's FixedStepAlgorithm baseStepSize (docs/ssp.md)",
                 self.file
             ))
         })?;
+        self.step_hints(step)?;
+        if !self.osp_ignored.is_empty() {
+            self.notes.push(format!(
+                "{}: OSP annotations Tether does not use, ignored: {}",
+                self.file,
+                self.osp_ignored.join(", ")
+            ));
+        }
         let spec = SystemSpec {
             name: Some(system.attr("name").unwrap_or("ssp").to_string()),
             experiment: Experiment {
@@ -332,12 +394,17 @@ impl Reader {
     }
 
     /// `ssd:Annotations`: Tether's on the root system, others skipped.
-    fn annotations(&mut self, node: &Node, root_system: bool) -> Result<(), SspError> {
+    fn annotations(&mut self, node: &Node, place: Place<'_>) -> Result<(), SspError> {
+        let root_system = matches!(place, Place::RootSystem);
         for a in &node.children {
             if a.name != "ssc:Annotation" {
                 return Err(self.unsupported(a, "in <ssd:Annotations>"));
             }
             let kind = self.required(a, "type")?;
+            if kind == OSP_TYPE {
+                self.osp(a, place)?;
+                continue;
+            }
             if kind != ANNOTATION_TYPE {
                 self.skipped
                     .push(format!("{kind} ({}:{})", self.file, a.line));
@@ -365,6 +432,77 @@ impl Reader {
                 )
             })?;
             self.annotation = Some(parsed);
+        }
+        Ok(())
+    }
+
+    /// OSP's annotation (`com.opensimulationplatform`), as libcosim reads
+    /// it: `osp:Algorithm/osp:FixedStepAlgorithm baseStepSize` on the default
+    /// experiment, `osp:StepSizeHint value` on a component; every other
+    /// element is noted as ignored.
+    fn osp(&mut self, a: &Node, place: Place<'_>) -> Result<(), SspError> {
+        let positive = |this: &Self, node: &Node, key: &str| -> Result<f64, SspError> {
+            let name = format!("osp:{}", local(&node.name));
+            let value = node
+                .attr(key)
+                .ok_or_else(|| this.at(node, format!("<{name}> needs the attribute '{key}'")))?;
+            match value.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+                _ => Err(this.at(
+                    node,
+                    format!("<{name}> {key}=\"{value}\": expected a time > 0"),
+                )),
+            }
+        };
+        for child in &a.children {
+            match (local(&child.name), place) {
+                ("Algorithm", Place::Experiment) => {
+                    for algorithm in &child.children {
+                        if local(&algorithm.name) == "FixedStepAlgorithm" {
+                            self.osp_step = Some(positive(self, algorithm, "baseStepSize")?);
+                        } else {
+                            self.osp_ignored.push(format!(
+                                "<osp:{}> (line {})",
+                                local(&algorithm.name),
+                                algorithm.line
+                            ));
+                        }
+                    }
+                }
+                ("StepSizeHint", Place::Component(name)) => {
+                    let hint = positive(self, child, "value")?;
+                    self.osp_hints.push((name.to_string(), hint, child.line));
+                }
+                _ => self.osp_ignored.push(format!(
+                    "<osp:{}> (line {})",
+                    local(&child.name),
+                    child.line
+                )),
+            }
+        }
+        Ok(())
+    }
+
+    /// Each component's OSP `StepSizeHint` against the macro step H: n =
+    /// max(1, ⌈hint/H⌉) as libcosim computes it, the instance's `step` n·H
+    /// (docs/system-file.md "Per-instance steps"); a note when n·H is not
+    /// the hint.
+    fn step_hints(&mut self, h: f64) -> Result<(), SspError> {
+        for (instance, hint, line) in std::mem::take(&mut self.osp_hints) {
+            let n = decimation(hint, h);
+            if n > 1 {
+                if let Some(i) = self.instances.iter_mut().find(|i| i.name == instance) {
+                    i.step = Some(n as f64 * h);
+                }
+            }
+            if nanoseconds(hint) != nanoseconds(h) * n as i64 {
+                self.notes.push(format!(
+                    "{}:{line}: component '{instance}': OSP's StepSizeHint {hint} is not a multiple \
+                     of H = {h}: it steps at {n}·H = {}, as libcosim does",
+                    self.file,
+                    n as f64 * h
+                ));
+            }
         }
         Ok(())
     }
@@ -401,7 +539,14 @@ impl Reader {
                         self.connection(c, path)?;
                     }
                 }
-                "ssd:Annotations" => self.annotations(child, root)?,
+                "ssd:Annotations" => {
+                    let place = if root {
+                        Place::RootSystem
+                    } else {
+                        Place::Other
+                    };
+                    self.annotations(child, place)?
+                }
                 // Graphical information only.
                 "ssd:SystemGeometry" | "ssd:GraphicalElements" | "ssd:ElementGeometry" => {}
                 _ => return Err(self.unsupported(child, "in <ssd:System>")),
@@ -448,7 +593,7 @@ impl Reader {
                         parameters.insert(var, value);
                     }
                 }
-                "ssd:Annotations" => self.annotations(child, false)?,
+                "ssd:Annotations" => self.annotations(child, Place::Component(&name))?,
                 "ssd:ElementGeometry" => {}
                 _ => return Err(self.unsupported(child, "in <ssd:Component>")),
             }
@@ -464,6 +609,7 @@ impl Reader {
             token_file: None,
             fmu_on_host: None,
             resources: Default::default(),
+            step: None,
         });
         Ok(())
     }
@@ -573,7 +719,7 @@ impl Reader {
                         return Err(self.unsupported(t, "(connector type)"))
                     }
                     "ssd:ConnectorGeometry" => {}
-                    "ssd:Annotations" => self.annotations(t, false)?,
+                    "ssd:Annotations" => self.annotations(t, Place::Other)?,
                     _ => return Err(self.unsupported(t, "in <ssd:Connector>")),
                 }
             }
@@ -625,7 +771,7 @@ impl Reader {
                     edge.transformed = true;
                 }
                 "ssd:ConnectionGeometry" => {}
-                "ssd:Annotations" => self.annotations(t, false)?,
+                "ssd:Annotations" => self.annotations(t, Place::Other)?,
                 _ => return Err(self.unsupported(t, "in <ssd:Connection>")),
             }
         }
@@ -675,7 +821,7 @@ impl Reader {
                     "ssd:ParameterMapping" => {
                         return Err(self.unsupported(child, "(parameter mappings)"))
                     }
-                    "ssd:Annotations" => self.annotations(child, false)?,
+                    "ssd:Annotations" => self.annotations(child, Place::Other)?,
                     _ => return Err(self.unsupported(child, "in <ssd:ParameterBinding>")),
                 }
             }

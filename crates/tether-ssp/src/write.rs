@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use tether_fmi::{BaseType, Causality, ModelDescription};
 use tether_master::{StartValue, SystemSpec};
 
-use crate::read::Loaded;
+use crate::read::{Loaded, OSP_NAMESPACE, OSP_TYPE};
 use crate::NAMESPACES;
 use crate::{Annotation, SspError, ANNOTATION_NAMESPACE, ANNOTATION_TYPE};
 
@@ -162,6 +162,17 @@ fn ssd(
             let _ = writeln!(x, "          </ssd:ParameterBinding>");
             let _ = writeln!(x, "        </ssd:ParameterBindings>");
         }
+        // The instance's own step as OSP's step hint, as libcosim reads it.
+        if let Some(step) = inst.step {
+            let _ = writeln!(x, "        <ssd:Annotations>");
+            let _ = writeln!(
+                x,
+                r#"          <ssc:Annotation type="{OSP_TYPE}" xmlns:osp="{OSP_NAMESPACE}">"#
+            );
+            let _ = writeln!(x, r#"            <osp:StepSizeHint value="{step:?}"/>"#);
+            let _ = writeln!(x, "          </ssc:Annotation>");
+            let _ = writeln!(x, "        </ssd:Annotations>");
+        }
         let _ = writeln!(x, "      </ssd:Component>");
     }
     let _ = writeln!(x, "    </ssd:Elements>");
@@ -228,12 +239,30 @@ fn ssd(
     let _ = writeln!(x, "      </ssc:Annotation>");
     let _ = writeln!(x, "    </ssd:Annotations>");
     let _ = writeln!(x, "  </ssd:System>");
+    // The macro step also as OSP's annotation, which libcosim reads.
     let e = spec.experiment;
     let _ = writeln!(
         x,
-        r#"  <ssd:DefaultExperiment startTime="{:?}" stopTime="{:?}"/>"#,
+        r#"  <ssd:DefaultExperiment startTime="{:?}" stopTime="{:?}">"#,
         e.start, e.stop
     );
+    let _ = writeln!(x, "    <ssd:Annotations>");
+    // libcosim takes every child of osp:Algorithm, attributes too, for an
+    // algorithm: the namespace is declared on the annotation.
+    let _ = writeln!(
+        x,
+        r#"      <ssc:Annotation type="{OSP_TYPE}" xmlns:osp="{OSP_NAMESPACE}">"#
+    );
+    let _ = writeln!(x, "        <osp:Algorithm>");
+    let _ = writeln!(
+        x,
+        r#"          <osp:FixedStepAlgorithm baseStepSize="{:?}"/>"#,
+        e.step
+    );
+    let _ = writeln!(x, "        </osp:Algorithm>");
+    let _ = writeln!(x, "      </ssc:Annotation>");
+    let _ = writeln!(x, "    </ssd:Annotations>");
+    let _ = writeln!(x, "  </ssd:DefaultExperiment>");
     let _ = writeln!(x, "</ssd:SystemStructureDescription>");
     Ok(x)
 }
@@ -312,6 +341,13 @@ pub fn write_toml(loaded: &Loaded, out: &Path) -> Result<(), SspError> {
     let mut copied = BTreeMap::new();
     for (path, name) in &files {
         let target = dir.join(name);
+        // The SSP's own file (imported next to it): copying a file onto
+        // itself would empty it.
+        let same = |a: &Path, b: &Path| matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b);
+        if same(path, &target) {
+            copied.insert(path.clone(), name.clone());
+            continue;
+        }
         if target.exists() && std::fs::read(&target).ok() != std::fs::read(path).ok() {
             return Err(SspError::file(
                 &target,

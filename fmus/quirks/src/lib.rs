@@ -13,7 +13,12 @@
 //! - `huge_after`: from this time on the output `x` is 1e300;
 //! - `stop_after`: the first step that reaches this time asks the master to end
 //!   the simulation (fmi2Discard with fmi2Terminated, as the Reference FMU
-//!   `Stair` does at t = 9).
+//!   `Stair` does at t = 9);
+//! - `reset_parameters = 1`: `fmi2SetupExperiment` resets every parameter to
+//!   its start value, as FMUs of some modelling tools do (20-sim's among them):
+//!   a value set before it is lost, one set after it stays;
+//!   `reset_parameters = 2`: `fmi2ExitInitializationMode` resets them, so that
+//!   every value set is lost, whatever the importer's order.
 //!
 //! With the defaults (0 and times beyond any run) it is a well-behaved FMU.
 //!
@@ -23,7 +28,9 @@
 use std::cell::Cell;
 
 use oscillator_model::{declare, Oscillator};
-use tether_fmu_kit::{export_fmu, Declaration, InputJet, Integer, Model, Parameters, Real};
+use tether_fmu_kit::{
+    export_fmu, Declaration, InputJet, Integer, Model, ParameterReset, Parameters, Real,
+};
 
 /// Runge–Kutta sub-steps per communication step.
 const SUBSTEPS: u32 = 16;
@@ -101,9 +108,14 @@ impl Model for Quirks {
                 "The step reaching this time returns fmi2Discard with fmi2Terminated = true",
             ),
         ],
-        integer_parameters: &[Integer::new("rollback", 0).min(0).max(2).description(
-            "0: exact rollback; 1: fmi2SetFMUstate has no effect; 2: a repeated step differs",
-        )],
+        integer_parameters: &[
+            Integer::new("rollback", 0).min(0).max(2).description(
+                "0: exact rollback; 1: fmi2SetFMUstate has no effect; 2: a repeated step differs",
+            ),
+            Integer::new("reset_parameters", 0).min(0).max(2).description(
+                "0: parameters keep their values; 1: fmi2SetupExperiment resets them to their start values; 2: fmi2ExitInitializationMode does",
+            ),
+        ],
         inputs: &[declare::FORCE],
         outputs: &[
             declare::POSITION_AND_VELOCITY[0],
@@ -166,6 +178,14 @@ impl Model for Quirks {
 
     fn terminate(&self, t: f64, _x: &[f64]) -> bool {
         t >= self.stop_after
+    }
+
+    fn parameter_reset(p: &Parameters) -> ParameterReset {
+        match p.integer("reset_parameters") {
+            Ok(1) => ParameterReset::AtSetupExperiment,
+            Ok(2) => ParameterReset::AtExitInitialization,
+            _ => ParameterReset::Never,
+        }
     }
 }
 

@@ -10,9 +10,20 @@ use crate::xml::Element;
 #[derive(Clone, Copy)]
 pub(crate) struct Attrs<'a> {
     pub file: &'a Path,
+    /// What the file does that FMI does not allow and Tether works around.
+    pub quirks: &'a std::cell::RefCell<Vec<super::Quirk>>,
 }
 
 impl<'a> Attrs<'a> {
+    /// Record a quirk of `kind` at `line` (reported by `Fmu::open`).
+    pub fn quirk(&self, kind: &'static str, line: usize, message: String) {
+        self.quirks.borrow_mut().push(super::Quirk {
+            kind,
+            line,
+            message,
+        });
+    }
+
     /// An `InvalidModelDescription` error at `element`'s line.
     pub fn invalid(&self, element: &Element, message: impl Into<String>) -> Error {
         self.invalid_at(element.line, message)

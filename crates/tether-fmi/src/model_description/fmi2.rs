@@ -71,6 +71,7 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
         default_experiment,
         model_variables,
         model_structure,
+        quirks: Vec::new(),
         by_name,
     })
 }

@@ -156,6 +156,7 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
         default_experiment,
         model_variables,
         model_structure,
+        quirks: Vec::new(),
         by_name,
     })
 }
@@ -395,10 +396,13 @@ fn variable(
         Some(Initial::Exact) if case == InitialCase::None => Some(Initial::Exact),
         Some(explicit) if case.allows(explicit) => Some(explicit),
         Some(explicit) => {
-            log::warn!(
-                "{}:{}: variable '{name}' declares initial={explicit:?}, not allowed for its causality and variability; using the default",
-                at.file.display(),
-                e.line
+            at.quirk(
+                "initial",
+                e.line,
+                format!(
+                    "variable '{name}' declares initial={explicit:?}, not allowed for its \
+                     causality and variability; using the default"
+                ),
             );
             case.default_initial()
         }

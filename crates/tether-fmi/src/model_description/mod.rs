@@ -205,10 +205,17 @@ pub(crate) fn parse_bytes(bytes: &[u8], file: &Path, origin: &Path) -> Result<Mo
             offers: "scheduled execution",
         });
     }
-    match standard {
-        FmiStandard::Fmi2 => fmi2::model_description(attrs::Attrs { file }, &root),
-        FmiStandard::Fmi3 => fmi3::model_description(attrs::Attrs { file }, &root),
-    }
+    let quirks = std::cell::RefCell::new(Vec::new());
+    let at = attrs::Attrs {
+        file,
+        quirks: &quirks,
+    };
+    let mut md = match standard {
+        FmiStandard::Fmi2 => fmi2::model_description(at, &root),
+        FmiStandard::Fmi3 => fmi3::model_description(at, &root),
+    }?;
+    md.quirks = quirks.into_inner();
+    Ok(md)
 }
 
 pub(crate) use fmi3::{hex_decode, hex_encode};

@@ -60,7 +60,23 @@ pub struct ModelDescription {
     pub model_variables: Vec<ScalarVariable>,
     /// `ModelStructure`.
     pub model_structure: ModelStructure,
+    /// What the file does that FMI does not allow and Tether works around,
+    /// in file order (`Fmu::open` reports them, one line per kind).
+    pub quirks: Vec<Quirk>,
     pub(crate) by_name: std::collections::HashMap<String, usize>,
+}
+
+/// A quirk of a model description: what it declares that FMI does not
+/// allow, and what Tether does instead.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Quirk {
+    /// The kind (one line per kind and FMU): `"initial"` for an `initial`
+    /// attribute its causality and variability do not allow.
+    pub kind: &'static str,
+    /// The line in `modelDescription.xml`.
+    pub line: usize,
+    /// What is wrong and what Tether does, without the file and line.
+    pub message: String,
 }
 
 /// The FMI standard of a model description.

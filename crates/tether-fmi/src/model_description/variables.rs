@@ -155,10 +155,13 @@ fn scalar_variable(at: Attrs<'_>, e: &Element, types: &[SimpleType]) -> Result<S
     let initial = match at.choice(e, "initial", INITIALS)? {
         Some(explicit) if case.allows(explicit) => Some(explicit),
         Some(explicit) => {
-            log::warn!(
-                "{}:{}: variable '{name}' declares initial={explicit:?}, not allowed for causality {causality:?} and variability {variability:?}; using the default",
-                at.file.display(),
-                e.line
+            at.quirk(
+                "initial",
+                e.line,
+                format!(
+                    "variable '{name}' declares initial={explicit:?}, not allowed for causality \
+                     {causality:?} and variability {variability:?}; using the default"
+                ),
             );
             case.default_initial()
         }

@@ -51,6 +51,9 @@ pub struct Simulation {
     stats: RunStats,
     /// Lines for the user before the run (the direct-feedthrough loops).
     notes: Vec<String>,
+    /// Warnings for the user before the run: the parameters set with
+    /// `initial="exact"` that an FMU changed in its initialization.
+    warnings: Vec<String>,
     /// Whether the phases of each macro step are timed (off by default),
     /// and the clock reading that ended the last macro step's phases, for
     /// the recording phase that follows it in [`Simulation::run`].
@@ -108,6 +111,10 @@ impl Simulation {
             signals.initialize(&mut system.slaves)?;
         }
         system.exit_initialization()?;
+        let mut warnings = Vec::new();
+        for (k, slave) in system.slaves.iter_mut().enumerate() {
+            warnings.extend(slave.changed_parameters(&signals.receivers(k))?);
+        }
         let (step, initial_level): (Box<dyn MacroStep>, _) = match method {
             Method::Explicit { mu } => (
                 Box::new(Explicit::new(&system, mu)),
@@ -256,6 +263,7 @@ impl Simulation {
             health,
             stats,
             notes,
+            warnings,
             timing: Timing::default(),
             recheck: (method.needs_rollback()
                 && matches!(
@@ -272,6 +280,14 @@ impl Simulation {
     /// direct-feedthrough loops closed only at macro points.
     pub fn notes(&self) -> &[String] {
         &self.notes
+    }
+
+    /// Warnings for the user before the run, each one line (the CLI prints
+    /// them as `warning: …`): every parameter set with `initial="exact"` that
+    /// an FMU changed in its initialization, with the value set and the
+    /// value read.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// Number of perturbed runs per macro step of the predictor/corrector

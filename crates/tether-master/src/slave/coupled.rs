@@ -81,6 +81,10 @@ pub(crate) struct Coupled {
     pub limits: Vec<f64>,
     /// The first coupled value read beyond its limit in the latest step.
     pub beyond: Option<crate::culprit::Beyond>,
+    /// The instance's own communication step as a multiple n of H (1: H,
+    /// set at instantiation): with n > 1 the signals step it every n-th
+    /// macro step.
+    pub decimation: u64,
 }
 
 /// The coupled inputs' values and their derivatives (the first derivatives

@@ -105,7 +105,13 @@ pub struct Slave {
     /// Stepped by the signal connections' Gauss–Seidel sweep before the
     /// method's step, which then only reads its outputs.
     pub(crate) stepped_ahead: bool,
+    /// The start values set on parameters with `initial="exact"`, read back
+    /// after initialization ([`Slave::changed_parameters`]).
+    exact_parameters: Vec<crate::start::ExactParameter>,
 }
+
+/// The experiment an instance is set up for: start, stop and tolerance.
+pub(crate) type Experiment = (f64, f64, Option<f64>);
 
 impl Slave {
     /// Number of coupled outputs (the length [`read_coupled`](Self::read_coupled) fills).

@@ -5,7 +5,7 @@
 use tether_fmi::{Fmu, ModelDescription, Placement};
 
 use super::coupled::UNUSED;
-use super::Slave;
+use super::{Experiment, Slave};
 use crate::spec::{InstanceSpec, Isolation, StartValue};
 use crate::stats::InstanceCounters;
 use crate::MasterError;
@@ -46,6 +46,7 @@ impl Slave {
         spec: &InstanceSpec,
         opened: &mut Vec<(std::path::PathBuf, Fmu)>,
         order: usize,
+        experiment: Experiment,
     ) -> Result<Slave, MasterError> {
         let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
             Some((_, fmu)) => fmu.clone(),
@@ -63,7 +64,7 @@ impl Slave {
                 fmu
             }
         };
-        Slave::instantiate_as(fmu, spec, &spec.name, order)
+        Slave::instantiate_as(fmu, spec, &spec.name, order, experiment)
     }
 
     /// Another instance of this slave's FMU with the same start values and the
@@ -73,23 +74,33 @@ impl Slave {
         &self,
         spec: &InstanceSpec,
         copy: usize,
-        experiment: (f64, f64, Option<f64>),
+        experiment: Experiment,
     ) -> Result<Slave, MasterError> {
         let name = format!("{}#{copy}", spec.name);
-        let mut extra = Slave::instantiate_as(self.fmu.clone(), spec, &name, self.coupled.order)?;
+        let mut extra = Slave::instantiate_as(
+            self.fmu.clone(),
+            spec,
+            &name,
+            self.coupled.order,
+            experiment,
+        )?;
         extra.coupled.inputs = self.coupled.inputs.clone();
         extra.coupled.outputs = self.coupled.outputs.clone();
         extra.finalize(self.coupled.order);
-        let (start, stop, tolerance) = experiment;
-        extra.initialize(start, stop, tolerance)?;
+        extra.initialize()?;
         Ok(extra)
     }
 
+    /// FMI 2.0: `fmi2SetupExperiment` right after `fmi2Instantiate` (FMI 3.0
+    /// keeps the experiment for `fmi3EnterInitializationMode`), then the start
+    /// values, as FMPy and libcosim set them: FMUs of some modelling tools
+    /// reset their parameters in `fmi2SetupExperiment`.
     pub(super) fn instantiate_as(
         fmu: Fmu,
         spec: &InstanceSpec,
         name: &str,
         order: usize,
+        experiment: Experiment,
     ) -> Result<Slave, MasterError> {
         let md = fmu.model_description();
         let caps = Capabilities::of(md);
@@ -118,7 +129,13 @@ impl Slave {
             (_, _, Isolation::None) => Placement::InProcess,
         };
         let options = tether_fmi::InstanceOptions::default().with_polynomial_inputs(order > 0);
-        let backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
+        let mut backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
+        let (start, stop, tolerance) = experiment;
+        backend.setup(tolerance, start, Some(stop))?;
+        let exact_parameters = crate::start::exact_parameters(
+            fmu.model_description(),
+            spec.parameters.iter().map(|(n, v)| (n.as_str(), v)),
+        );
         let mut slave = Slave {
             name: name.to_string(),
             model_name,
@@ -134,7 +151,9 @@ impl Slave {
             signal_buf: Vec::new(),
             counters,
             stepped_ahead: false,
+            exact_parameters,
         };
+        slave.coupled.decimation = 1;
         slave.arrays = crate::start::apply_start_values(
             slave.backend.as_mut(),
             slave.fmu.model_description(),
@@ -256,28 +275,38 @@ impl Slave {
         self.check.readback = vec![0.0; self.coupled.outputs.len()];
     }
 
-    /// Initialise: setup experiment, initialization mode.
-    pub(crate) fn initialize(
-        &mut self,
-        start: f64,
-        stop: f64,
-        tolerance: Option<f64>,
-    ) -> Result<(), MasterError> {
-        self.enter_initialization(start, stop, tolerance)?;
+    /// Initialise: initialization mode, entered and left (the experiment
+    /// was set up at instantiation).
+    pub(crate) fn initialize(&mut self) -> Result<(), MasterError> {
+        self.enter_initialization()?;
         self.exit_initialization()
     }
 
-    /// Setup experiment and enter initialization mode, where inputs can be
-    /// set and outputs read before the first step (a loop's values at T_0).
-    pub(crate) fn enter_initialization(
-        &mut self,
-        start: f64,
-        stop: f64,
-        tolerance: Option<f64>,
-    ) -> Result<(), MasterError> {
-        self.backend.setup(tolerance, start, Some(stop))?;
+    /// Enter initialization mode, where inputs can be set and outputs read
+    /// before the first step (a loop's values at T_0).
+    pub(crate) fn enter_initialization(&mut self) -> Result<(), MasterError> {
         self.backend.enter_initialization()?;
         Ok(())
+    }
+
+    /// After initialization: the parameters set with `initial="exact"` that
+    /// the FMU changed, one line each (the signal connections' receivers,
+    /// `receivers`, left out). The reads are not counted.
+    pub(crate) fn changed_parameters(
+        &mut self,
+        receivers: &[u32],
+    ) -> Result<Vec<String>, MasterError> {
+        if self.exact_parameters.is_empty() {
+            return Ok(Vec::new());
+        }
+        let trips = self.backend.round_trips();
+        let lines = crate::start::changed_parameters(
+            self.backend.as_mut(),
+            &self.exact_parameters,
+            receivers,
+        );
+        self.check.trips += self.backend.round_trips() - trips;
+        lines
     }
 
     /// Leave initialization mode.

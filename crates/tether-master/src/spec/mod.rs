@@ -411,6 +411,11 @@ pub struct InstanceSpec {
         deserialize_with = "resources"
     )]
     pub resources: BTreeMap<String, f64>,
+    /// The instance's own communication step, a whole multiple n·H of the
+    /// system's macro step (signal-only instances: it steps every n-th
+    /// macro step, docs/system-file.md "Per-instance steps"). None: H.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step: Option<f64>,
 }
 
 /// `resources`: a table of numbers, the error naming what is expected.

@@ -240,6 +240,15 @@ impl Overrides {
                 .iter_mut()
                 .find(|i| i.name == instance)
                 .ok_or(missing)?;
+            if parameter == "step" && inst.step.is_some() {
+                return Err(OverrideError::Target {
+                    target: target.clone(),
+                    reason: format!(
+                        "'step' of instance '{instance}' is its communication step in the system \
+                         file, which --set does not change (it sets FMU variables)"
+                    ),
+                });
+            }
             inst.parameters.insert(parameter.to_string(), value.clone());
         }
         Ok(())

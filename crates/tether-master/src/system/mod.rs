@@ -50,7 +50,10 @@ impl System {
         let mut slaves = spec
             .instances
             .iter()
-            .map(|instance| Slave::instantiate(instance, &mut opened, order))
+            .map(|instance| {
+                let experiment = (spec.experiment.start, stop, spec.experiment.tolerance);
+                Slave::instantiate(instance, &mut opened, order, experiment)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         let coupling = Coupling::build(spec, &mut slaves, method, order)?;
         let mut owners: Vec<Vec<usize>> = vec![Vec::new(); coupling.len()];
@@ -88,10 +91,9 @@ impl System {
                 members
             })
             .collect();
-        let exp = spec.experiment;
         let every_step = spec.coupling.check_rollback == CheckRollback::EveryStep;
         for slave in &mut slaves {
-            slave.enter_initialization(exp.start, stop, exp.tolerance)?;
+            slave.enter_initialization()?;
             slave.check.verify_restore =
                 every_step && method.needs_rollback() && slave.is_coupled();
         }

@@ -97,6 +97,10 @@ class Note(UserWarning):
 def _notes(stats: Dict[str, Any]) -> None:
     for note in stats.get("notes", []):
         warnings.warn(note, Note, stacklevel=3)
+    # What the command prints as ``warning:``: a parameter an FMU changed in
+    # its initialization (docs/fmi-import.md).
+    for warning in stats.get("warnings", []):
+        warnings.warn(warning, UserWarning, stacklevel=3)
 
 
 class TetherError(Exception):
@@ -374,8 +378,11 @@ class System:
         token_file: Optional[PathLike] = None,
         fmu_on_host: Optional[str] = None,
         resources: Optional[Mapping[str, float]] = None,
+        step: Optional[float] = None,
     ) -> "System":
         """An FMU instance named ``name`` (the column prefix) with start values;
+        ``step`` is its own communication step, a whole multiple of the
+        system's (docs/system-file.md, "Per-instance steps");
         ``isolation="process"`` runs it in a host process of its own and
         ``call_timeout`` (seconds) bounds each FMI call (docs/reliability.md).
         ``host="tcp://ADDR:PORT"`` with ``token_file`` runs it on a ``tether
@@ -389,6 +396,8 @@ class System:
             inst["isolation"] = isolation
         if call_timeout is not None:
             inst["call_timeout"] = float(call_timeout)
+        if step is not None:
+            inst["step"] = float(step)
         if host is not None:
             inst["host"] = host
         if token_file is not None:
@@ -868,6 +877,7 @@ def simulate(
         )
     except _tether.Failure as f:
         raise _error(f) from None
+    _notes(raw[2])
     return Result(*raw)
 
 
