@@ -22,7 +22,9 @@ use tether_study::{
     Stability, Study, StudyError, StudyResults, Table,
 };
 
-use crate::{failure, kind_of, message, overrides, py_to_toml, Rows, SIGNAL_INTERVAL};
+use crate::results::Rows;
+use crate::system::{overrides, py_to_toml};
+use crate::{failure, kind_of, message, SIGNAL_INTERVAL};
 
 /// A study's failure as a Python error of the matching class.
 fn study_failure(e: &StudyError) -> PyErr {
