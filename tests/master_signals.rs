@@ -151,8 +151,8 @@ fn a_direct_feedthrough_loop_is_checked_at_setup() {
     let message = setup_error(&spec);
     assert_eq!(
         message,
-        "connection mass2.a → ctrl2.y: mass2.a is in 'm/s2' and ctrl2.y in 'm': units differ \
-         and there is no conversion"
+        "connection mass2.a → ctrl2.y: mass2.a is in 'm/s2' and ctrl2.y in 'm': units differ; \
+         set gain (and offset) on the connection to convert (to = gain·from + offset)"
     );
 }
 

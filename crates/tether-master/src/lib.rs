@@ -29,6 +29,7 @@ mod linalg;
 mod method;
 mod observer;
 pub mod polynomial;
+pub mod polynomial_inputs;
 mod simulation;
 mod single;
 mod slave;
@@ -37,6 +38,7 @@ mod start;
 mod state_bytes;
 mod stats;
 mod step_control;
+pub mod units;
 
 pub use error::{MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};

@@ -921,10 +921,31 @@ fn resolve(
     let units = match (unit_of(&out), unit_of(&input)) {
         // A gain or offset is the user's conversion.
         _ if c.gain.is_some() || c.offset.is_some() => None,
-        (Some(a), Some(b)) if a != b => Some(fail(format!(
-            "{} is in '{a}' and {} in '{b}': units differ and there is no conversion",
-            c.from, c.to
-        ))),
+        (Some(a), Some(b)) if a != b => {
+            let dimension = |s: usize, var: &ScalarVariable| {
+                crate::units::unit_of(slaves[s].fmu.model_description(), var).and_then(|u| u.1)
+            };
+            let convert = match (dimension(from, &out), dimension(to, &input)) {
+                // Two names of one unit (`N.m`, `J`): nothing to convert.
+                (Some(da), Some(db)) if da.same(&db) => Ok(()),
+                (Some(da), Some(db)) => Err(crate::units::Dimension::conversion(&da, &db)),
+                _ => Err(None),
+            };
+            convert.err().map(|conversion| {
+                let how = match conversion {
+                    Some((gain, 0.0)) => format!("gain = {gain} on the connection converts"),
+                    Some((gain, offset)) => {
+                        format!("gain = {gain}, offset = {offset} on the connection convert")
+                    }
+                    None => "set gain (and offset) on the connection to convert".into(),
+                };
+                fail(format!(
+                    "{} is in '{a}' and {} in '{b}': units differ; {how} \
+                     (to = gain·from + offset)",
+                    c.from, c.to
+                ))
+            })
+        }
         _ => None,
     };
     let link = Link {
