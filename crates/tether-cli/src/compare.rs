@@ -71,6 +71,9 @@ struct Table {
 
 fn read_table(path: &Path) -> Result<Table> {
     let shown = path.display();
+    if let Some(e) = crate::missing(path) {
+        return Err(e);
+    }
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {shown}"))?;
     let incomplete = text
         .lines()

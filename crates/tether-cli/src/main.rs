@@ -104,6 +104,23 @@ pub fn stdout(text: std::fmt::Arguments<'_>) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot write to stdout: {e}"))
 }
 
+/// A results or input file that is not there, said with the resolved path,
+/// the folder it was resolved against and a name that differs only in case;
+/// `None` when it is there (the reader reports other failures).
+pub fn missing(path: &std::path::Path) -> Option<anyhow::Error> {
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let place = tether_fmi::paths::Missing::new(path, None);
+            Some(anyhow::anyhow!(
+                "cannot access {}: {e}{}",
+                place.located(),
+                place.hint()
+            ))
+        }
+        _ => None,
+    }
+}
+
 /// The hidden first argument that makes `tether` the host process of an
 /// isolated FMU instance (docs/reliability.md).
 const FMI_HOST: &str = "__fmi-host";

@@ -30,6 +30,9 @@ pub fn main(args: Args) -> Result<()> {
         .results
         .iter()
         .map(|p| {
+            if let Some(e) = crate::missing(p) {
+                return Err(e);
+            }
             let mut t = Table::read_csv(p)?;
             t.source = p
                 .file_stem()

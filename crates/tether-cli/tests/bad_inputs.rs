@@ -796,7 +796,7 @@ fn a_system_file_naming_a_missing_fmu_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nowhere.fmu");
     let sys = system_with(dir.path(), Some(&missing), |t| t);
-    assert!(matches!(fmi(&setup_err(&sys)), Error::Io { .. }));
+    assert!(matches!(fmi(&setup_err(&sys)), Error::Missing { .. }));
     run_error(&sys, &[&shown(&missing)]);
 }
 

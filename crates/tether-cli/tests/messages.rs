@@ -39,15 +39,63 @@ fn system_file_mistakes_are_one_clear_line() {
     let osc = oscillator().display().to_string();
     let run = |file: &str| only_error(&tether(&["run", file, "--out", "r.csv"], dir.path(), &[]));
 
-    // A wrong FMU path: resolved against the system file's folder, the OS
-    // error once, the instance named.
+    // A wrong FMU path: resolved against the system file's folder, which is
+    // named with the resolved path; the OS error once, the instance named.
     example(dir.path(), "sub/wrong.toml", |t| {
-        t.replacen(&osc, "fmus/nothere.fmu", 1)
+        t.replacen(&osc, "../fmus/nothere.fmu", 1)
     });
+    let root = dir.path().display();
     assert_eq!(
         run("sub/wrong.toml"),
-        "error: instance 'mass1': cannot access 'sub/fmus/nothere.fmu': No such file or \
-         directory (os error 2)"
+        format!(
+            "error: instance 'mass1': cannot access '{root}/fmus/nothere.fmu' \
+             ('../fmus/nothere.fmu' in {root}/sub, the system file's folder): No such file or \
+             directory (os error 2)"
+        )
+    );
+    // A name that differs only in case: did you mean.
+    std::fs::create_dir_all(dir.path().join("fmus")).unwrap();
+    std::fs::copy(oscillator(), dir.path().join("fmus/Mass.fmu")).unwrap();
+    example(dir.path(), "sub/case.toml", |t| {
+        t.replacen(&osc, "../fmus/mass.fmu", 1)
+    });
+    assert_eq!(
+        run("sub/case.toml"),
+        format!(
+            "error: instance 'mass1': cannot access '{root}/fmus/mass.fmu' \
+             ('../fmus/mass.fmu' in {root}/sub, the system file's folder): No such file or \
+             directory (os error 2); did you mean '../fmus/Mass.fmu'?"
+        )
+    );
+    // On the command line: against the current folder.
+    let info = |file: &str| only_error(&tether(&["info", file], dir.path(), &[]));
+    assert_eq!(
+        info("fmus/MASS.fmu"),
+        format!(
+            "error: cannot access '{root}/fmus/MASS.fmu' ('fmus/MASS.fmu' in {root}, the \
+             current folder): No such file or directory (os error 2); did you mean \
+             'fmus/Mass.fmu'?"
+        )
+    );
+    assert_eq!(
+        run("sub/Case.toml"),
+        format!(
+            "error: system file sub/Case.toml: cannot access '{root}/sub/Case.toml' \
+             ('sub/Case.toml' in {root}, the current folder): No such file or directory (os \
+             error 2); did you mean 'sub/case.toml'?"
+        )
+    );
+    std::fs::write(dir.path().join("Results.csv"), "time,x\n0,1\n").unwrap();
+    assert_eq!(
+        only_error(&tether(
+            &["compare", "results.csv", "Results.csv"],
+            dir.path(),
+            &[]
+        )),
+        format!(
+            "error: cannot access '{root}/results.csv' ('results.csv' in {root}, the current \
+             folder): No such file or directory (os error 2); did you mean 'Results.csv'?"
+        )
     );
 
     // A name used twice: the file is named.

@@ -2,6 +2,8 @@
 //! coupling rows and unknowns, the unknowns' history, which instances each
 //! unknown drives — and [`MacroStep`], a coupling method's step on it.
 
+use std::path::Path;
+
 use crate::coupling::touched::{Touched, MAX_INTERFACE_ENTRIES};
 use crate::coupling::Coupling;
 use crate::polynomial::{Past, Taylor};
@@ -44,7 +46,10 @@ impl System {
         let mut slaves = spec
             .instances
             .iter()
-            .map(|instance| Slave::instantiate(instance, &mut opened, order))
+            .map(|instance| {
+                Slave::instantiate(instance, &mut opened, order)
+                    .map_err(|e| against_system_folder(e, spec, &instance.fmu))
+            })
             .collect::<Result<Vec<_>, _>>()?;
         let coupling = Coupling::build(spec, &mut slaves, method, order)?;
         let mut owners: Vec<Vec<usize>> = vec![Vec::new(); coupling.len()];
@@ -298,5 +303,36 @@ mod tests {
         let owners = vec![vec![0, 1], vec![0], vec![2], vec![1]];
         let groups = perturbation_groups(&owners, 3);
         assert_eq!(groups, vec![vec![0, 2], vec![1, 3]]);
+    }
+}
+
+/// An FMU that is not there, said as the system file has it: the path as
+/// written, resolved against the system file's folder (`from_file` joined
+/// them; a path the file gives absolute stays as it is).
+fn against_system_folder(e: MasterError, spec: &SystemSpec, fmu: &Path) -> MasterError {
+    let MasterError::InstanceFmu {
+        instance,
+        error: tether_fmi::Error::Missing { place, source },
+    } = e
+    else {
+        return e;
+    };
+    let folder = spec
+        .source
+        .as_deref()
+        .map(|file| file.parent().unwrap_or(Path::new("")));
+    let place = match folder {
+        Some(folder) if !fmu.is_absolute() || fmu.starts_with(folder) => {
+            let written = fmu.strip_prefix(folder).unwrap_or(fmu);
+            Box::new(tether_fmi::paths::Missing::new(
+                written,
+                Some((folder, "the system file's folder")),
+            ))
+        }
+        _ => place,
+    };
+    MasterError::InstanceFmu {
+        instance,
+        error: tether_fmi::Error::Missing { place, source },
     }
 }

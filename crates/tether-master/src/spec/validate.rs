@@ -13,7 +13,13 @@ impl SystemSpec {
     pub fn from_file(path: &Path) -> Result<SystemSpec, MasterError> {
         let text = std::fs::read_to_string(path).map_err(|e| MasterError::SystemFile {
             path: path.to_path_buf(),
-            reason: e.to_string(),
+            reason: if e.kind() == std::io::ErrorKind::NotFound {
+                // Where it was looked for, and a name that differs in case.
+                let place = tether_fmi::paths::Missing::new(path, None);
+                format!("cannot access {}: {e}{}", place.located(), place.hint())
+            } else {
+                e.to_string()
+            },
         })?;
         let mut spec = SystemSpec::from_toml(&text).map_err(|e| match e {
             MasterError::SystemFile { reason, .. } => MasterError::SystemFile {
