@@ -149,7 +149,9 @@ pub fn main(args: Args) -> Result<()> {
         })?;
     sim.time_phases(args.timing);
     for note in sim.notes() {
-        crate::say!("note: {note}");
+        for line in tether_master::wrap(&format!("note: {note}"), tether_master::SUMMARY_WIDTH) {
+            crate::say!("{line}");
+        }
     }
     // The plot's columns are checked now, not after the run.
     let plot_columns = crate::columns::split(&args.columns);
@@ -195,25 +197,17 @@ pub fn main(args: Args) -> Result<()> {
     }
     if !args.quiet {
         let name = spec.name.as_deref().unwrap_or("system");
-        crate::say!(
-            "{name}: {} with k = {}, H = {}, t = {} … {}",
-            spec.method,
-            spec.coupling.order,
-            step_text(&spec),
-            spec.experiment.start,
-            last
-        );
+        let mut parts = what_it_does(&spec);
+        parts.push(format!("t = {} … {last}", spec.experiment.start));
+        for line in wrap_parts(&format!("{name}: "), &parts) {
+            crate::say!("{line}");
+        }
         crate::say!("{stats}");
     }
     if let Some(path) = &args.plot {
         let name = spec.name.clone().unwrap_or_else(|| "system".into());
         let table = tether_study::Table::from_recorder(&name, &memory);
-        let title = format!(
-            "{name}: {}, k = {}, H = {}",
-            spec.method,
-            spec.coupling.order,
-            step_text(&spec)
-        );
+        let title = format!("{name}: {}", what_it_does(&spec).join(", "));
         crate::plot::draw(&[table], &plot_columns, &sim.units(), &title, path)?;
         if !args.quiet {
             crate::say!("plot: {}", path.display());
@@ -252,6 +246,66 @@ pub fn main(args: Args) -> Result<()> {
             out.display()
         ))),
     }
+}
+
+/// What the system does, for the summary's first line and the plot's title:
+/// the method (only when constraints, joints or coupling variables make one
+/// work), the signals' scheme (when there are connections), k and H.
+pub fn what_it_does(spec: &SystemSpec) -> Vec<String> {
+    let mut parts = Vec::new();
+    let coupled = !(spec.constraints.is_empty()
+        && spec.joints.is_empty()
+        && spec.coupling_variables.is_empty());
+    if coupled {
+        parts.push(spec.method.to_string());
+    }
+    if !spec.connections.is_empty() {
+        let scheme = match spec.signals.scheme() {
+            tether_master::SignalScheme::Jacobi => "Jacobi",
+            tether_master::SignalScheme::GaussSeidel => "Gauss–Seidel",
+        };
+        let iterated = match (spec.signals.iterations, spec.signals.solver) {
+            (Some(n), Some(tether_master::SignalSolver::Newton)) => {
+                format!(" iterated by Newton (at most {n} updates)")
+            }
+            (Some(n), _) => format!(" iterated (at most {n} repetitions)"),
+            (None, _) => String::new(),
+        };
+        parts.push(format!("signals: {scheme}{iterated}"));
+    }
+    if !coupled && spec.connections.is_empty() {
+        parts.push("instances not coupled".into());
+    }
+    if coupled || spec.coupling.order > 0 {
+        parts.push(format!("k = {}", spec.coupling.order));
+    }
+    parts.push(format!("H = {}", step_text(spec)));
+    parts
+}
+
+/// `head` and `parts` joined by `, `, wrapped after a comma within the
+/// summary's width (the continuation lines indented by two).
+fn wrap_parts(head: &str, parts: &[String]) -> Vec<String> {
+    let mut lines = vec![head.to_string()];
+    for (i, part) in parts.iter().enumerate() {
+        let last = lines.last_mut().expect("a line");
+        let piece = if i + 1 < parts.len() {
+            format!("{part},")
+        } else {
+            part.clone()
+        };
+        let fresh = last.trim().is_empty() || last.as_str() == head;
+        if !fresh && last.chars().count() + 1 + piece.chars().count() > tether_master::SUMMARY_WIDTH
+        {
+            lines.push(format!("  {piece}"));
+        } else {
+            if !fresh {
+                last.push(' ');
+            }
+            last.push_str(&piece);
+        }
+    }
+    lines
 }
 
 /// The macro step for the summary: the fixed H, or the adaptive tolerances.

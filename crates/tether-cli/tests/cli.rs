@@ -450,7 +450,7 @@ fn method_index_selects_the_weights_as_the_weight_only_form_does() {
     assert!(a == run_bytes(d, &w1, &["--index", "2"], "w2.csv"));
     let summary = tether(&["run", w1.to_str().unwrap(), "--stop", "0.01"], d);
     assert!(
-        stderr(&summary).contains("weighted (index 1, a = 1, b = 1) with k = 0"),
+        stderr(&summary).contains("weighted (index 1, a = 1, b = 1), k = 0"),
         "{}",
         stderr(&summary)
     );

@@ -57,8 +57,8 @@ pub use spec::{
 };
 pub use start::{apply_start_value, apply_start_values, Arrays};
 pub use stats::{
-    AdaptiveStats, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, SignalStats,
-    Termination, SUMMARY_SCHEMA,
+    wrap, AdaptiveStats, CallNames, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats,
+    SignalStats, Termination, SUMMARY_SCHEMA, SUMMARY_WIDTH,
 };
 pub use step_control::StepControl;
 

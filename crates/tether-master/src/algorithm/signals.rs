@@ -215,6 +215,14 @@ impl Signals {
         }
     }
 
+    /// The inputs of instance `s` that connections set.
+    pub fn receivers(&self, s: usize) -> impl Iterator<Item = u32> + '_ {
+        self.links
+            .iter()
+            .filter(move |l| l.to == s)
+            .map(|l| l.to_vr)
+    }
+
     /// One line per direct-feedthrough loop for the setup's note: the
     /// instances in it, and where the macro points close it.
     pub fn loop_notes(&self, slaves: &[Slave]) -> Vec<String> {
@@ -245,6 +253,21 @@ impl Signals {
                         instances.join(", ")
                     );
                 }
+                // The instances whose feedthrough in the loop is assumed:
+                // their outputs declare no dependencies (the ordinary case).
+                let mut assumed: Vec<&str> = Vec::new();
+                for &a in members {
+                    for &b in members {
+                        let (la, lb) = (&self.links[a], &self.links[b]);
+                        if la.to == lb.from
+                            && !declares_dependencies(&slaves[lb.from], lb.from_vr)
+                            && !assumed.contains(&slaves[lb.from].name.as_str())
+                        {
+                            assumed.push(&slaves[lb.from].name);
+                        }
+                    }
+                }
+                assumed.sort_by_key(|a| instances.iter().position(|i| i == a));
                 let lagged = members.iter().filter(|&&l| self.lagged(l)).count();
                 let how = match self.scheme {
                     SignalScheme::Jacobi => format!(
@@ -258,11 +281,24 @@ impl Signals {
                         members.len()
                     ),
                 };
-                format!(
-                    "direct-feedthrough loop through {} is closed only at macro points: {how} \
-                     (-v names the connections)",
-                    instances.join(", ")
-                )
+                if assumed.is_empty() {
+                    format!(
+                        "direct-feedthrough loop through {} is closed only at macro points: \
+                         {how} (-v names the connections)",
+                        instances.join(", ")
+                    )
+                } else {
+                    format!(
+                        "the connections between {} form a loop; {} declare{} no dependencies \
+                         of {} outputs, so Tether takes them to feed through, and the loop is \
+                         closed at macro points as co-simulation masters do: {how} (-v names \
+                         the connections)",
+                        instances.join(", "),
+                        assumed.join(", "),
+                        if assumed.len() == 1 { "s" } else { "" },
+                        if assumed.len() == 1 { "its" } else { "their" }
+                    )
+                }
             })
             .collect()
     }
@@ -664,7 +700,11 @@ impl Signals {
                 f64::from(u8::from(v[0]))
             }
         };
-        slave.counters.get_reals += 1;
+        match link.kind {
+            Kind::Real => slave.counters.get_reals += 1,
+            Kind::Integer => slave.counters.get_integers += 1,
+            Kind::Boolean => slave.counters.get_booleans += 1,
+        }
         if !value.is_finite() {
             return Err(slave.non_finite(link.variable.clone(), value, run));
         }
@@ -712,7 +752,11 @@ impl Signals {
             Kind::Integer => slave.backend.set_integers(&vr, &[p.value as Int])?,
             Kind::Boolean => slave.backend.set_booleans(&vr, &[p.value != 0.0])?,
         }
-        slave.counters.set_reals += 1;
+        match link.kind {
+            Kind::Real => slave.counters.set_reals += 1,
+            Kind::Integer => slave.counters.set_integers += 1,
+            Kind::Boolean => slave.counters.set_booleans += 1,
+        }
         Ok(())
     }
 }
@@ -968,6 +1012,25 @@ fn resolve(
             && slaves[to].interpolates(input.value_reference),
     };
     Ok((link, units))
+}
+
+/// Whether instance `slave`'s model description says which inputs its output
+/// `output` depends on (a `dependencies` list in ModelStructure/Outputs), so
+/// that [`feeds_through`] knows rather than assumes.
+fn declares_dependencies(slave: &Slave, output: u32) -> bool {
+    let md = slave.fmu.model_description();
+    let Some(o) = md
+        .model_variables
+        .iter()
+        .position(|v| v.value_reference == output && v.causality == Causality::Output)
+        .map(|i| i + 1)
+    else {
+        return false;
+    };
+    md.model_structure
+        .outputs
+        .iter()
+        .any(|u| u.index == o && u.dependencies.is_some())
 }
 
 /// Whether output `output` of instance `slave` depends directly on input

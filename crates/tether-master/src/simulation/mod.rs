@@ -94,6 +94,13 @@ impl Simulation {
         };
         let mut system = System::new(spec, &method, stop)?;
         let mut signals = Signals::build(spec, &mut system.slaves)?;
+        // The summary names the FMI 3.0 functions for the types set.
+        for (s, slave) in system.slaves.iter_mut().enumerate() {
+            let mut set: Vec<u32> = slave.inputs.iter().map(|i| i.vr).collect();
+            set.extend(signals.receivers(s));
+            let md = slave.fmu.model_description();
+            slave.counters.functions = crate::stats::CallNames::of(md, &set);
+        }
         let notes = signals.loop_notes(&system.slaves);
         for (k, connections) in signals.loop_connections().iter().enumerate() {
             log::info!("direct-feedthrough loop {}: {connections}", k + 1);
