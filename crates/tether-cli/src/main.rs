@@ -12,6 +12,7 @@ mod host;
 mod info;
 mod interrupt;
 mod isolation;
+mod new;
 mod output;
 mod plot;
 mod progress;
@@ -66,6 +67,8 @@ enum Command {
     Info(info::Args),
     /// Run one FMU at a fixed communication step and write its outputs to CSV.
     Simulate(simulate::Args),
+    /// Write a starter system file for FMUs: instances, parameters, interface.
+    New(new::Args),
     /// Run a coupled system (a system file, or SSP: .ssp, .ssd or a folder) and write CSV.
     Run(run::Args),
     /// Report the largest deviation per column between two result files.
@@ -197,6 +200,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Info(args) => info::main(args),
         Command::Simulate(args) => simulate::main(args),
+        Command::New(args) => new::main(args),
         Command::Run(args) => run::main(args),
         Command::Compare(args) => compare::main(args),
         Command::Plot(args) => plot::main(args),
