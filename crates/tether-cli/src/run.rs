@@ -206,9 +206,18 @@ pub fn main(args: Args) -> Result<()> {
     }
     if let Some(path) = &args.plot {
         let name = spec.name.clone().unwrap_or_else(|| "system".into());
-        let table = tether_study::Table::from_recorder(&name, &memory);
+        // One run: the title names it, the legend only says where it stopped.
+        let table = tether_study::Table::from_recorder("", &memory);
         let title = format!("{name}: {}", what_it_does(&spec).join(", "));
-        crate::plot::draw(&[table], &plot_columns, &sim.units(), &title, path)?;
+        let preferred = plotted_first(&spec, sim.columns());
+        crate::plot::draw(
+            &[table],
+            &plot_columns,
+            &preferred,
+            &sim.units(),
+            &title,
+            path,
+        )?;
         if !args.quiet {
             crate::say!("plot: {}", path.display());
         }
@@ -246,6 +255,40 @@ pub fn main(args: Args) -> Result<()> {
             out.display()
         ))),
     }
+}
+
+/// The columns a run's plot shows when none are chosen: the instances'
+/// coupled outputs (the terms of the constraints' position levels, the
+/// senders of connections), then the multipliers and residuals.
+fn plotted_first(spec: &SystemSpec, columns: &[String]) -> Vec<String> {
+    let mut chosen: Vec<String> = Vec::new();
+    let mut take = |name: String| {
+        if columns.contains(&name) && !chosen.contains(&name) {
+            chosen.push(name);
+        }
+    };
+    for c in &spec.constraints {
+        if let Ok(expr) = tether_master::expr::LinearExpr::parse(&c.position) {
+            for t in expr.terms.iter().filter(|t| t.derivative_order == 0) {
+                take(format!("{}.{}", t.instance, t.variable));
+            }
+        }
+    }
+    for c in &spec.connections {
+        take(c.from.clone());
+    }
+    let base = |c: &str| match c.rfind('[') {
+        Some(i) if c.ends_with(']') => c[..i].to_string(),
+        _ => c.to_string(),
+    };
+    for suffix in [".lambda", ".value", ".g"] {
+        for c in columns {
+            if base(c).ends_with(suffix) {
+                take(c.clone());
+            }
+        }
+    }
+    chosen
 }
 
 /// What the system does, for the summary's first line and the plot's title:
