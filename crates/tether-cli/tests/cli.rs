@@ -141,7 +141,7 @@ fn run_the_oscillator_example_writes_the_documented_columns() {
     assert!(out.status.success(), "{}", stderr(&out));
     let summary = stderr(&out);
     assert!(
-        summary.contains("macro steps: 100") && summary.contains("doStep"),
+        summary.contains("macro steps: 100") && summary.contains("fmi2DoStep"),
         "{summary}"
     );
     let text = std::fs::read_to_string(&csv).unwrap();
