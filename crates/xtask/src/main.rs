@@ -72,30 +72,6 @@ fn first_build_notice() -> String {
     )
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_first_build_is_announced_until_the_command_and_the_fmus_are_built() {
-        let dir = tempfile::tempdir().unwrap();
-        let root = dir.path();
-        let fmus = vec!["oscillator".to_string()];
-        assert!(first_build_in(root, &fmus));
-        std::fs::create_dir_all(root.join("target/release")).unwrap();
-        std::fs::write(root.join("target/release/tether"), b"").unwrap();
-        assert!(first_build_in(root, &fmus), "the FMUs are missing");
-        std::fs::create_dir_all(root.join("target/fmus")).unwrap();
-        std::fs::write(root.join("target/fmus/oscillator.fmu"), b"").unwrap();
-        assert!(!first_build_in(root, &fmus));
-        assert_eq!(
-            first_build_notice(),
-            "cargo tether: building the tether command and the workspace FMUs in release mode, \
-             once (about 5 minutes on 2 cores); cargo's progress follows, later runs start at once"
-        );
-    }
-}
-
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
@@ -143,5 +119,29 @@ fn main() -> Result<()> {
         _ => bail!(
             "usage: cargo xtask fmus | cargo xtask figures [STUDY…] | cargo tether <tether arguments…>"
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_build_is_announced_until_the_command_and_the_fmus_are_built() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        let fmus = vec!["oscillator".to_string()];
+        assert!(first_build_in(root, &fmus));
+        std::fs::create_dir_all(root.join("target/release")).unwrap();
+        std::fs::write(root.join("target/release/tether"), b"").unwrap();
+        assert!(first_build_in(root, &fmus), "the FMUs are missing");
+        std::fs::create_dir_all(root.join("target/fmus")).unwrap();
+        std::fs::write(root.join("target/fmus/oscillator.fmu"), b"").unwrap();
+        assert!(!first_build_in(root, &fmus));
+        assert_eq!(
+            first_build_notice(),
+            "cargo tether: building the tether command and the workspace FMUs in release mode, \
+             once (about 5 minutes on 2 cores); cargo's progress follows, later runs start at once"
+        );
     }
 }

@@ -293,19 +293,6 @@ pub(crate) fn perturbation_groups(owners: &[Vec<usize>], instances: usize) -> Ve
     groups
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn unknowns_on_different_instances_share_a_perturbed_run() {
-        // λ0 drives A and B, λ1 drives only A, λ2 only C, λ3 only B.
-        let owners = vec![vec![0, 1], vec![0], vec![2], vec![1]];
-        let groups = perturbation_groups(&owners, 3);
-        assert_eq!(groups, vec![vec![0, 2], vec![1, 3]]);
-    }
-}
-
 /// An FMU that is not there, said as the system file has it: the path as
 /// written, resolved against the system file's folder (`from_file` joined
 /// them; a path the file gives absolute stays as it is).
@@ -334,5 +321,18 @@ fn against_system_folder(e: MasterError, spec: &SystemSpec, fmu: &Path) -> Maste
     MasterError::InstanceFmu {
         instance,
         error: tether_fmi::Error::Missing { place, source },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknowns_on_different_instances_share_a_perturbed_run() {
+        // λ0 drives A and B, λ1 drives only A, λ2 only C, λ3 only B.
+        let owners = vec![vec![0, 1], vec![0], vec![2], vec![1]];
+        let groups = perturbation_groups(&owners, 3);
+        assert_eq!(groups, vec![vec![0, 2], vec![1, 3]]);
     }
 }
