@@ -162,7 +162,8 @@ fn a_direct_feedthrough_loop_is_checked_at_setup() {
 fn an_fmu_without_states_cannot_be_constraint_coupled() {
     let mut spec = system(1e-3, 0, "jacobi", "");
     spec.connections.clear();
-    spec.constraints[0].drives = "mass1.F - mass2.F + ctrl.y".into();
+    // ctrl.y is in m: a coefficient converts the multiplier (N) for it.
+    spec.constraints[0].drives = "mass1.F - mass2.F + 1e-3*ctrl.y".into();
     let message = setup_error(&spec);
     assert!(message.contains("canGetAndSetFMUstate"), "{message}");
 }

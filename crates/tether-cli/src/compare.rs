@@ -496,9 +496,10 @@ pub fn main(args: Args) -> Result<()> {
     let names = columns_to_compare(&a, &b, &wanted, !args.maps.is_empty(), &mut left)?;
     if left > 0 {
         crate::stdout(format_args!(
-            "note: {left} column{} of {} not in {} and not compared\n",
-            if left == 1 { " is" } else { "s are" },
+            "note: {left} column{} of {} {} not in {} and not compared\n",
+            if left == 1 { "" } else { "s" },
             b.path.display(),
+            if left == 1 { "is" } else { "are" },
             a.path.display()
         ))?;
     }
