@@ -59,7 +59,7 @@ fn a_truncated_zip_is_refused_as_not_a_zip() {
 fn a_missing_path_is_an_io_error_naming_it() {
     let path = PathBuf::from("/nonexistent/tether/none.fmu");
     let err = open_err(&path);
-    assert!(matches!(err, Error::Io { .. }), "{err:?}");
+    assert!(matches!(err, Error::Missing { .. }), "{err:?}");
     assert_one_line_naming(&err, &["/nonexistent/tether/none.fmu"]);
 }
 

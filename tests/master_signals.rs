@@ -152,8 +152,8 @@ fn a_direct_feedthrough_loop_is_checked_at_setup() {
     let message = setup_error(&spec);
     assert_eq!(
         message,
-        "connection mass2.a → ctrl2.y: mass2.a is in 'm/s2' and ctrl2.y in 'm': units differ \
-         and there is no conversion"
+        "connection mass2.a → ctrl2.y: mass2.a is in 'm/s2' and ctrl2.y in 'm': units differ; \
+         set gain (and offset) on the connection to convert (to = gain·from + offset)"
     );
 }
 
@@ -163,7 +163,8 @@ fn a_direct_feedthrough_loop_is_checked_at_setup() {
 fn an_fmu_without_states_cannot_be_constraint_coupled() {
     let mut spec = system(1e-3, 0, "jacobi", "");
     spec.connections.clear();
-    spec.constraints[0].drives = "mass1.F - mass2.F + ctrl.y".into();
+    // ctrl.y is in m: a coefficient converts the multiplier (N) for it.
+    spec.constraints[0].drives = "mass1.F - mass2.F + 1e-3*ctrl.y".into();
     let message = setup_error(&spec);
     assert!(message.contains("canGetAndSetFMUstate"), "{message}");
 }

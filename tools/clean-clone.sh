@@ -53,6 +53,9 @@ for step in "${steps[@]}"; do
       # The README installs into python3's pip; here into a virtualenv of the clone.
       python3 -m venv "$work/venv"
       timed python env PYTHON="$work/venv/bin/python" bash -c "$python_cmd --quiet"
+      # The install writes nothing into the source tree (target/ is the build's).
+      written="$(git status --porcelain --ignored | grep -v '^!! target/$' || true)"
+      [ -z "$written" ] || { echo "the Python install wrote into the clone: $written" >&2; exit 1; }
       # The check below runs the oscillator example, whose FMUs `run` and `test` package.
       [ -f target/fmus/oscillator.fmu ] || cargo xtask fmus >/dev/null
       (cd "$work" && "$work/venv/bin/python" -c \

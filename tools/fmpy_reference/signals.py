@@ -154,8 +154,9 @@ class Signals:
         units = None
         a, b = getattr(out, "unit", None), getattr(inp, "unit", None)
         if c.gain is None and c.offset is None and a and b and a != b:
-            units = RunError(f"connection {name}: {c.frm} is in '{a}' and {c.to} in '{b}': units differ "
-                             f"and there is no conversion")
+            units = RunError(f"connection {name}: {c.frm} is in '{a}' and {c.to} in '{b}': units differ; "
+                             f"set gain (and offset) on the connection to convert "
+                             f"(to = gain·from + offset)")
         link = Link(name, out.name, frm, out.valueReference, to, inp.valueReference, kind,
                     1.0 if c.gain is None else c.gain, 0.0 if c.offset is None else c.offset,
                     kind == "Real" and self.hosts[to].interpolates(inp.valueReference))

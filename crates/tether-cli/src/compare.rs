@@ -55,6 +55,77 @@ pub struct Args {
     /// brackets belong to the name: body.R[1,2]).
     #[arg(long, num_args = 1.., value_name = "NAME")]
     columns: Vec<String>,
+    /// Compare column NEW of the first file with column OLD of the second
+    /// (repeatable). One `*` on each side stands for the same text:
+    /// `--map 'truck.*=*'` compares every column `truck.<name>` of the first
+    /// file with `<name>` of the second.
+    #[arg(long = "map", value_name = "NEW=OLD")]
+    maps: Vec<String>,
+}
+
+/// `--map NEW=OLD`: renames the second file's columns to the first's; returns
+/// (NEW, OLD) for every column renamed, for the report.
+fn apply_maps(a: &Table, b: &mut Table, maps: &[String]) -> Result<Vec<(String, String)>> {
+    let mut renamed: Vec<(String, String)> = Vec::new();
+    for map in maps {
+        let Some((new, old)) = map.split_once('=') else {
+            bail!(
+                "--map {map:?}: expected NEW=OLD, a column of {} and one of {}",
+                a.path.display(),
+                b.path.display()
+            );
+        };
+        let (new, old) = (new.trim(), old.trim());
+        let stars = (new.matches('*').count(), old.matches('*').count());
+        let pairs: Vec<(String, String)> = match stars {
+            (0, 0) => vec![(new.to_string(), old.to_string())],
+            (1, 1) => {
+                let (prefix, suffix) = new.split_once('*').unwrap_or_default();
+                a.names
+                    .iter()
+                    .filter_map(|n| {
+                        let rest = n.strip_prefix(prefix)?.strip_suffix(suffix)?;
+                        Some((n.clone(), old.replacen('*', rest, 1)))
+                    })
+                    .filter(|(_, o)| b.names.contains(o))
+                    .collect()
+            }
+            _ => bail!("--map {map:?}: one '*' on each side, or none"),
+        };
+        if pairs.is_empty() {
+            bail!(
+                "--map {map:?}: no column '{new}' of {} has a column '{old}' in {}",
+                a.path.display(),
+                b.path.display()
+            );
+        }
+        for (new, old) in pairs {
+            if !a.names.contains(&new) {
+                bail!(
+                    "--map {map:?}: column '{new}' is not in {}",
+                    a.path.display()
+                );
+            }
+            let Some(j) = b.names.iter().position(|n| *n == old) else {
+                bail!(
+                    "--map {map:?}: column '{old}' is not in {}",
+                    b.path.display()
+                );
+            };
+            if let Some((_, first)) = renamed.iter().find(|(n, _)| *n == new) {
+                bail!("--map {map:?}: column '{new}' is already compared with '{first}'");
+            }
+            if new != old && b.names.contains(&new) {
+                bail!(
+                    "--map {map:?}: {} has a column '{new}' of its own",
+                    b.path.display()
+                );
+            }
+            b.names[j] = new.clone();
+            renamed.push((new, old));
+        }
+    }
+    Ok(renamed)
 }
 
 /// One result file.
@@ -69,6 +140,9 @@ struct Table {
 }
 
 fn read_table(path: &Path) -> Result<Table> {
+    if let Some(e) = crate::missing(path) {
+        return Err(e);
+    }
     let results = tether_master::Results::read(path)
         .map_err(|reason| anyhow::anyhow!("{}: {reason}", path.display()))?;
     Ok(Table {
@@ -100,7 +174,16 @@ fn difference(a: f64, b: f64) -> f64 {
     }
 }
 
-fn columns_to_compare(a: &Table, b: &Table, wanted: &[String]) -> Result<Vec<String>> {
+/// The columns compared: `wanted`, else every column, which both files must
+/// have; with `--map` (`mapped`), every column of the first file, which the
+/// second must have (its other columns are left, and counted in `left`).
+fn columns_to_compare(
+    a: &Table,
+    b: &Table,
+    wanted: &[String],
+    mapped: bool,
+    left: &mut usize,
+) -> Result<Vec<String>> {
     if !wanted.is_empty() {
         for name in wanted {
             for t in [a, b] {
@@ -119,6 +202,10 @@ fn columns_to_compare(a: &Table, b: &Table, wanted: &[String]) -> Result<Vec<Str
             .collect()
     };
     let (only_a, only_b) = (only(a, b), only(b, a));
+    if mapped && only_a.is_empty() {
+        *left = only_b.len();
+        return Ok(a.names.clone());
+    }
     if !only_a.is_empty() || !only_b.is_empty() {
         let list = |v: &[String]| {
             if v.is_empty() {
@@ -128,7 +215,7 @@ fn columns_to_compare(a: &Table, b: &Table, wanted: &[String]) -> Result<Vec<Str
             }
         };
         bail!(
-            "the files have different columns: only in {}: {}; only in {}: {} (use --columns to compare the common ones)",
+            "the files have different columns: only in {}: {}; only in {}: {} (use --columns to compare the common ones, --map NEW=OLD to pair renamed ones)",
             a.path.display(),
             list(&only_a),
             b.path.display(),
@@ -359,8 +446,20 @@ pub fn main(args: Args) -> Result<()> {
         }
     }
     let a = read_table(&args.a)?;
-    let b = read_table(&args.b)?;
-    let names = columns_to_compare(&a, &b, &crate::columns::split(&args.columns))?;
+    let mut b = read_table(&args.b)?;
+    let renamed = apply_maps(&a, &mut b, &args.maps)?;
+    let mut left = 0;
+    let wanted = crate::columns::split(&args.columns);
+    let names = columns_to_compare(&a, &b, &wanted, !args.maps.is_empty(), &mut left)?;
+    if left > 0 {
+        crate::stdout(format_args!(
+            "note: {left} column{} of {} {} not in {} and not compared\n",
+            if left == 1 { "" } else { "s" },
+            b.path.display(),
+            if left == 1 { "is" } else { "are" },
+            a.path.display()
+        ))?;
+    }
     let (a, b) = if same_grid(&a, &b) {
         (a, b)
     } else {
@@ -368,7 +467,12 @@ pub fn main(args: Args) -> Result<()> {
         crate::stdout(format_args!("{note}\n"))?;
         (a, b)
     };
-    let devs = deviations(&a, &b, &names, args.rtol, args.atol);
+    let mut devs = deviations(&a, &b, &names, args.rtol, args.atol);
+    for d in &mut devs {
+        if let Some((new, old)) = renamed.iter().find(|(n, o)| *n == d.name && n != o) {
+            d.name = format!("{new}={old}");
+        }
+    }
 
     let width = devs.iter().map(|d| d.name.len()).max().unwrap_or(6).max(6);
     crate::stdout(format_args!(

@@ -177,13 +177,7 @@ pub fn describe(md: &ModelDescription) -> String {
     ));
     line(format!(
         "  coupling polynomials k > 0                 {}",
-        if cs.can_interpolate_inputs {
-            "yes"
-        } else if fmi3 {
-            "no: FMI 3.0 has no input derivatives (intermediate update: not yet)"
-        } else {
-            "no: needs canInterpolateInputs"
-        }
+        tether_master::polynomial_inputs::summary(md)
     ));
     line("  explicit                                   yes".into());
     let markers = markers(md);

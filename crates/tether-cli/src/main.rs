@@ -12,6 +12,7 @@ mod host;
 mod info;
 mod interrupt;
 mod isolation;
+mod new;
 mod output;
 mod plot;
 mod progress;
@@ -66,6 +67,8 @@ enum Command {
     Info(info::Args),
     /// Run one FMU at a fixed communication step and write its outputs to CSV.
     Simulate(simulate::Args),
+    /// Write a starter system file for FMUs: instances, parameters, interface.
+    New(new::Args),
     /// Run a coupled system (a system file, or SSP: .ssp, .ssd or a folder) and write CSV.
     Run(run::Args),
     /// Report the largest deviation per column between two result files.
@@ -127,6 +130,23 @@ pub fn stdout(text: std::fmt::Arguments<'_>) -> anyhow::Result<()> {
     out.write_fmt(text)
         .and_then(|()| out.flush())
         .map_err(|e| anyhow::anyhow!("cannot write to stdout: {e}"))
+}
+
+/// A results or input file that is not there, said with the resolved path,
+/// the folder it was resolved against and a name that differs only in case;
+/// `None` when it is there (the reader reports other failures).
+pub fn missing(path: &std::path::Path) -> Option<anyhow::Error> {
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let place = tether_fmi::paths::Missing::new(path, None);
+            Some(anyhow::anyhow!(
+                "cannot access {}: {e}{}",
+                place.located(),
+                place.hint()
+            ))
+        }
+        _ => None,
+    }
 }
 
 /// The hidden first argument that makes `tether` the host process of an
@@ -205,6 +225,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Info(args) => info::main(args),
         Command::Simulate(args) => simulate::main(args),
+        Command::New(args) => new::main(args),
         Command::Run(args) => run::main(args),
         Command::Compare(args) => compare::main(args),
         Command::Plot(args) => plot::main(args),

@@ -30,6 +30,9 @@ pub fn main(args: Args) -> Result<()> {
         .results
         .iter()
         .map(|p| {
+            if let Some(e) = crate::missing(p) {
+                return Err(e);
+            }
             let mut t = Table::read_csv(p)?;
             t.source = p
                 .file_stem()
@@ -49,6 +52,7 @@ pub fn main(args: Args) -> Result<()> {
         &tables,
         &crate::columns::split(&args.columns),
         &[],
+        &[],
         &title,
         &args.out,
     )?;
@@ -56,11 +60,13 @@ pub fn main(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Plot `columns` (or the default choice) of every table into `out`, with
-/// the `units` of columns where known.
+/// Plot `columns` of every table into `out`, with the `units` of columns
+/// where known; without `columns`, the `preferred` ones first (a run's
+/// coupled outputs, multipliers and residuals), else the default choice.
 pub fn draw(
     tables: &[Table],
     columns: &[String],
+    preferred: &[String],
     units: &[(String, String)],
     title: &str,
     out: &Path,
@@ -69,15 +75,22 @@ pub fn draw(
         bail!("nothing to plot");
     };
     let columns = if columns.is_empty() {
-        let chosen = default_columns(first);
+        let chosen = if preferred.is_empty() || first.columns.len() <= DEFAULT_PANELS {
+            default_columns(first)
+        } else {
+            preferred.iter().take(DEFAULT_PANELS).cloned().collect()
+        };
         if chosen.len() < first.columns.len() {
-            crate::say!(
+            let note = format!(
                 "note: {} plots {} of the {} columns ({}); choose others with --columns NAME,…",
                 out.display(),
                 chosen.len(),
                 first.columns.len(),
                 chosen.join(", ")
             );
+            for line in tether_master::wrap(&note, tether_master::SUMMARY_WIDTH) {
+                crate::say!("{line}");
+            }
         }
         chosen
     } else {

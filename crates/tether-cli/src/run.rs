@@ -150,7 +150,9 @@ pub fn main(args: Args) -> Result<()> {
     sim.time_phases(args.timing);
     let ssp_notes = _ssp.as_ref().map_or(&[][..], |l| &l.notes[..]);
     for note in ssp_notes.iter().chain(sim.notes()) {
-        crate::say!("note: {note}");
+        for line in tether_master::wrap(&format!("note: {note}"), tether_master::SUMMARY_WIDTH) {
+            crate::say!("{line}");
+        }
     }
     for warning in sim.warnings() {
         crate::say!("warning: {warning}");
@@ -199,26 +201,27 @@ pub fn main(args: Args) -> Result<()> {
     }
     if !args.quiet {
         let name = spec.name.as_deref().unwrap_or("system");
-        crate::say!(
-            "{name}: {} with k = {}, H = {}, t = {} … {}",
-            spec.method,
-            spec.coupling.order,
-            step_text(&spec),
-            spec.experiment.start,
-            last
-        );
+        let mut parts = what_it_does(&spec);
+        parts.push(format!("t = {} … {last}", spec.experiment.start));
+        for line in wrap_parts(&format!("{name}: "), &parts) {
+            crate::say!("{line}");
+        }
         crate::say!("{stats}");
     }
     if let Some(path) = &args.plot {
         let name = spec.name.clone().unwrap_or_else(|| "system".into());
-        let table = tether_study::Table::from_recorder(&name, &memory);
-        let title = format!(
-            "{name}: {}, k = {}, H = {}",
-            spec.method,
-            spec.coupling.order,
-            step_text(&spec)
-        );
-        crate::plot::draw(&[table], &plot_columns, &sim.units(), &title, path)?;
+        // One run: the title names it, the legend only says where it stopped.
+        let table = tether_study::Table::from_recorder("", &memory);
+        let title = format!("{name}: {}", what_it_does(&spec).join(", "));
+        let preferred = plotted_first(&spec, sim.columns());
+        crate::plot::draw(
+            &[table],
+            &plot_columns,
+            &preferred,
+            &sim.units(),
+            &title,
+            path,
+        )?;
         if !args.quiet {
             crate::say!("plot: {}", path.display());
         }
@@ -256,6 +259,100 @@ pub fn main(args: Args) -> Result<()> {
             out.display()
         ))),
     }
+}
+
+/// The columns a run's plot shows when none are chosen: the instances'
+/// coupled outputs (the terms of the constraints' position levels, the
+/// senders of connections), then the multipliers and residuals.
+fn plotted_first(spec: &SystemSpec, columns: &[String]) -> Vec<String> {
+    let mut chosen: Vec<String> = Vec::new();
+    let mut take = |name: String| {
+        if columns.contains(&name) && !chosen.contains(&name) {
+            chosen.push(name);
+        }
+    };
+    for c in &spec.constraints {
+        if let Ok(expr) = tether_master::expr::LinearExpr::parse(&c.position) {
+            for t in expr.terms.iter().filter(|t| t.derivative_order == 0) {
+                take(format!("{}.{}", t.instance, t.variable));
+            }
+        }
+    }
+    for c in &spec.connections {
+        take(c.from.clone());
+    }
+    let base = |c: &str| match c.rfind('[') {
+        Some(i) if c.ends_with(']') => c[..i].to_string(),
+        _ => c.to_string(),
+    };
+    for suffix in [".lambda", ".value", ".g"] {
+        for c in columns {
+            if base(c).ends_with(suffix) {
+                take(c.clone());
+            }
+        }
+    }
+    chosen
+}
+
+/// What the system does, for the summary's first line and the plot's title:
+/// the method (only when constraints, joints or coupling variables make one
+/// work), the signals' scheme (when there are connections), k and H.
+pub fn what_it_does(spec: &SystemSpec) -> Vec<String> {
+    let mut parts = Vec::new();
+    let coupled = !(spec.constraints.is_empty()
+        && spec.joints.is_empty()
+        && spec.coupling_variables.is_empty());
+    if coupled {
+        parts.push(spec.method.to_string());
+    }
+    if !spec.connections.is_empty() {
+        let scheme = match spec.signals.scheme() {
+            tether_master::SignalScheme::Jacobi => "Jacobi",
+            tether_master::SignalScheme::GaussSeidel => "Gauss–Seidel",
+        };
+        let iterated = match (spec.signals.iterations, spec.signals.solver) {
+            (Some(n), Some(tether_master::SignalSolver::Newton)) => {
+                format!(" iterated by Newton (at most {n} updates)")
+            }
+            (Some(n), _) => format!(" iterated (at most {n} repetitions)"),
+            (None, _) => String::new(),
+        };
+        parts.push(format!("signals: {scheme}{iterated}"));
+    }
+    if !coupled && spec.connections.is_empty() {
+        parts.push("instances not coupled".into());
+    }
+    if coupled || spec.coupling.order > 0 {
+        parts.push(format!("k = {}", spec.coupling.order));
+    }
+    parts.push(format!("H = {}", step_text(spec)));
+    parts
+}
+
+/// `head` and `parts` joined by `, `, wrapped after a comma within the
+/// summary's width (the continuation lines indented by two).
+fn wrap_parts(head: &str, parts: &[String]) -> Vec<String> {
+    let mut lines = vec![head.to_string()];
+    for (i, part) in parts.iter().enumerate() {
+        let last = lines.last_mut().expect("a line");
+        let piece = if i + 1 < parts.len() {
+            format!("{part},")
+        } else {
+            part.clone()
+        };
+        let fresh = last.trim().is_empty() || last.as_str() == head;
+        if !fresh && last.chars().count() + 1 + piece.chars().count() > tether_master::SUMMARY_WIDTH
+        {
+            lines.push(format!("  {piece}"));
+        } else {
+            if !fresh {
+                last.push(' ');
+            }
+            last.push_str(&piece);
+        }
+    }
+    lines
 }
 
 /// The macro step for the summary: the fixed H, or the adaptive tolerances.

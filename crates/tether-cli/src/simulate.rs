@@ -40,6 +40,51 @@ pub struct Args {
     /// Output CSV file (default: <modelIdentifier>.csv).
     #[arg(long, short)]
     out: Option<PathBuf>,
+    /// Also plot the outputs over time into this file (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    plot: Option<PathBuf>,
+    /// Outputs to plot: names separated by commas or spaces (default: all, or
+    /// the first eight).
+    #[arg(long, num_args = 1.., value_name = "NAME", requires = "plot")]
+    columns: Vec<String>,
+}
+
+/// The plot of a simulation: the CSV as written, the units the FMU declares.
+fn plot(
+    args: &Args,
+    md: &tether_fmi::ModelDescription,
+    csv: &std::path::Path,
+    title: &str,
+) -> Result<()> {
+    let Some(path) = &args.plot else {
+        return Ok(());
+    };
+    let mut table = tether_study::Table::read_csv(csv)?;
+    // One run: the title names it.
+    table.source = String::new();
+    let units: Vec<(String, String)> = table
+        .columns
+        .iter()
+        .filter_map(|c| {
+            let name = match c.rfind('[') {
+                Some(i) if c.ends_with(']') => &c[..i],
+                _ => c.as_str(),
+            };
+            let var = md.model_variables.iter().find(|v| v.name == name)?;
+            let unit = var.real()?.attributes.unit.clone()?;
+            Some((c.clone(), unit))
+        })
+        .collect();
+    crate::plot::draw(
+        &[table],
+        &crate::columns::split(&args.columns),
+        &[],
+        &units,
+        title,
+        path,
+    )?;
+    crate::say!("plot: {}", path.display());
+    Ok(())
 }
 
 pub fn main(args: Args) -> Result<()> {
@@ -48,6 +93,7 @@ pub fn main(args: Args) -> Result<()> {
     let md = fmu.model_description();
     let x = SingleExperiment::new(md, args.start, args.stop, args.step, args.tolerance)?;
     let (start, stop, step, steps) = (x.start, x.stop, x.step, x.steps);
+    let x_end = x.end();
     if !x.stop_on_grid() {
         crate::say!(
             "warning: stop = {stop} is not on the communication grid start + n·step (start = {start}, \
@@ -92,6 +138,18 @@ pub fn main(args: Args) -> Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{name}.csv")));
     crate::output::not_an_input(&out, [args.fmu.as_path()])?;
+    if let Some(path) = &args.plot {
+        crate::output::not_an_input(path, [args.fmu.as_path(), out.as_path()])?;
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        if !matches!(ext.as_deref(), Some("svg" | "png")) {
+            anyhow::bail!(
+                "--plot {}: the file name must end in .svg or .png",
+                path.display()
+            );
+        }
+    }
     let file = crate::output::create(&out)?;
     let mut recorder = CsvRecorder::file_at(file, &out);
     let guard = crate::exit_guard::arm(recorder.emergency(), &out);
@@ -112,6 +170,12 @@ pub fn main(args: Args) -> Result<()> {
         }
     };
     single.terminate()?;
+    let last = match end {
+        SingleEnd::Completed => x_end,
+        SingleEnd::Terminated { time } => time,
+    };
+    let title = format!("{name}: H = {step}, t = {start} … {last}");
+    plot(&args, md, &out, &title)?;
     match end {
         SingleEnd::Completed => crate::say!(
             "{name}: {steps} steps of {step} from {start} to {stop}; results: {}",

@@ -874,7 +874,7 @@ fn a_system_file_naming_a_missing_fmu_is_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nowhere.fmu");
     let sys = system_with(dir.path(), Some(&missing), |t| t);
-    assert!(matches!(fmi(&setup_err(&sys)), Error::Io { .. }));
+    assert!(matches!(fmi(&setup_err(&sys)), Error::Missing { .. }));
     run_error(&sys, &[&shown(&missing)]);
 }
 
@@ -1001,6 +1001,168 @@ fn a_negative_mass_the_fmu_refuses_is_one_error_line_naming_the_instance() {
     run_error(
         &sys,
         &["fmi2ExitInitializationMode", "fmi2Error", "'mass2'"],
+    );
+}
+
+// ---------------------------------------------------------------- units
+
+/// The one error line of `tether run SYSTEM` (all of stderr), exit code 1.
+fn only_line(system: &Path) -> String {
+    let dir = system.parent().unwrap();
+    let out = tether(&["run", system.to_str().unwrap(), "--quiet"], dir);
+    let text = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert_eq!(text.lines().count(), 1, "one line: {text}");
+    text.trim_end().to_string()
+}
+
+/// The oscillator's model description with its output `x` in millimetres.
+fn in_millimetres(xml: &str) -> String {
+    let (head, tail) = xml.split_at(xml.find(r#"<ScalarVariable name="x""#).unwrap());
+    format!(
+        "{head}{}",
+        tail.replacen(r#"<Real unit="m"/>"#, r#"<Real unit="mm"/>"#, 1)
+    )
+}
+
+/// Units the FMUs declare are checked in constraints before the first step: the
+/// terms of a level, the levels against each other, the drives.
+#[test]
+fn constraint_terms_in_units_that_do_not_fit_are_one_line_before_the_first_step() {
+    let dir = tempfile::tempdir().unwrap();
+    // Metres minus metres per second (the mistake that used to fail at t = 0 with
+    // advice about the numerical method).
+    let sys = system_with(dir.path(), None, |t| {
+        swap(
+            t,
+            "position = \"mass2.x - mass1.x\"",
+            "position = \"mass2.x - mass1.v\"",
+        )
+    });
+    assert!(matches!(setup_err(&sys), MasterError::Units { .. }));
+    assert_eq!(
+        only_line(&sys),
+        "error: constraint 'link', position: mass2.x is in 'm' and mass1.v in 'm/s': the \
+         terms of a level need one unit (a coefficient converts)"
+    );
+    // A velocity level in metres.
+    let sys = system_with(dir.path(), None, |t| {
+        swap(
+            t,
+            "velocity = \"mass2.v - mass1.v\"",
+            "velocity = \"mass2.x - mass1.x\"",
+        )
+    });
+    assert_eq!(
+        only_line(&sys),
+        "error: constraint 'link', velocity: mass2.x is in 'm'; the velocity level needs the \
+         position level's unit per second (mass2.x is in 'm')"
+    );
+    // An acceleration level in m/s, after no velocity level (index 3 needs none).
+    let sys = system_with(dir.path(), None, |t| {
+        let t = swap(t, "velocity = \"mass2.v - mass1.v\"\n", "");
+        let t = swap(t, "beta = 2e-3\ngamma = 1e-6", "index = 3");
+        swap(
+            t,
+            "acceleration = \"mass2.a - mass1.a\"",
+            "acceleration = \"mass2.v - mass1.v\"",
+        )
+    });
+    assert_eq!(
+        only_line(&sys),
+        "error: constraint 'link', acceleration: mass2.v is in 'm/s'; the acceleration level \
+         needs the position level's unit per second squared (mass2.x is in 'm')"
+    );
+    // der(x) is in m/s: a velocity level of derivatives fits.
+    let sys = system_with(dir.path(), None, |t| {
+        swap(
+            t,
+            "velocity = \"mass2.v - mass1.v\"",
+            "velocity = \"der(mass2.x) - der(mass1.x)\"",
+        )
+    });
+    let out = tether(&["run", sys.to_str().unwrap(), "--quiet"], dir.path());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Millimetres against metres: a coefficient converts.
+    let mm = edited_oscillator(dir.path(), "mm", in_millimetres);
+    let sys = system_with(dir.path(), Some(&mm), |t| t);
+    let line = only_line(&sys);
+    assert_eq!(
+        line,
+        "error: constraint 'link', position: mass2.x is in 'mm' and mass1.x in 'm': the \
+         terms of a level need one unit (a coefficient converts)"
+    );
+    let sys = system_with(dir.path(), Some(&mm), |t| {
+        swap(
+            t,
+            "position = \"mass2.x - mass1.x\"",
+            "position = \"0.001*mass2.x - mass1.x\"",
+        )
+    });
+    assert!(!matches!(
+        SystemSpec::from_file(&sys).and_then(|spec| Simulation::new(&spec).map(drop)),
+        Err(MasterError::Units { .. })
+    ));
+    // A multiplier that would drive a position input.
+    let kinematic = edited_oscillator(dir.path(), "fm", |xml| {
+        xml.replace(r#"unit="N"/>"#, r#"unit="m"/>"#)
+    });
+    let sys = system_with(dir.path(), Some(&kinematic), |t| t);
+    assert_eq!(
+        only_line(&sys),
+        "error: constraint 'link', drives: mass2.F is in 'm': the multiplier drives force or \
+         torque inputs, not positions, velocities or accelerations"
+    );
+}
+
+/// A connection between different units says how `gain` and `offset` convert,
+/// with the numbers where the units are one quantity.
+#[test]
+fn a_connection_unit_error_says_how_gain_and_offset_convert() {
+    let dir = tempfile::tempdir().unwrap();
+    let mm = edited_oscillator(dir.path(), "mm", in_millimetres);
+    let ctrl = tether_fmu_build::workspace_fmu("controller").unwrap();
+    let write = |extra: &str| {
+        let path = dir.path().join("signals.toml");
+        std::fs::write(
+            &path,
+            format!(
+                "[experiment]\nstop = 0.01\nstep = 1e-3\n\n[method]\nkind = \"explicit\"\nmu = 1e-3\n\n\
+                 [[instance]]\nname = \"mass1\"\nfmu = {mm:?}\n\n[[instance]]\nname = \"ctrl\"\n\
+                 fmu = {ctrl:?}\n\n[[connection]]\nfrom = \"mass1.x\"\nto = \"ctrl.y\"\n{extra}"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    assert_eq!(
+        only_line(&write("")),
+        "error: connection mass1.x → ctrl.y: mass1.x is in 'mm' and ctrl.y in 'm': units \
+         differ; gain = 0.001 on the connection converts (to = gain·from + offset)"
+    );
+    let out = tether(
+        &["run", write("gain = 0.001\n").to_str().unwrap(), "--quiet"],
+        dir.path(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Another quantity: how, without numbers.
+    let sys = write("");
+    let text = std::fs::read_to_string(&sys)
+        .unwrap()
+        .replace("from = \"mass1.x\"", "from = \"mass1.v\"");
+    std::fs::write(&sys, text).unwrap();
+    assert_eq!(
+        only_line(&sys),
+        "error: connection mass1.v → ctrl.y: mass1.v is in 'm/s' and ctrl.y in 'm': units \
+         differ; set gain (and offset) on the connection to convert (to = gain·from + offset)"
     );
 }
 
@@ -1160,12 +1322,28 @@ fn input_polynomials_without_can_interpolate_inputs_are_one_error_line() {
         swap(t, "order = 0", "order = 1")
     });
     match setup_err(&sys) {
-        MasterError::MissingCapability { capability, .. } => {
-            assert_eq!(capability, "canInterpolateInputs")
+        MasterError::NoPolynomialInput { reason, .. } => {
+            assert_eq!(reason, "the FMU does not declare canInterpolateInputs")
         }
         other => panic!("{other:?}"),
     }
-    run_error(&sys, &["'mass2'", "canInterpolateInputs", "k = 1"]);
+    // The sentence `tether info` prints for the FMU, after the instance.
+    run_error(
+        &sys,
+        &[
+            "instance 'mass2' (oscillator): k > 0 needs inputs that take polynomials; \
+             the FMU does not declare canInterpolateInputs; use order = 0",
+        ],
+    );
+    let out = tether(&["info", fmu.to_str().unwrap()], dir.path());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(
+            "coupling polynomials k > 0                 no: k > 0 needs inputs that take \
+             polynomials; the FMU does not declare canInterpolateInputs\n"
+        ),
+        "{text}"
+    );
 }
 
 #[test]

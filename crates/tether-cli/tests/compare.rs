@@ -253,3 +253,90 @@ fn unreadable_input_names_the_file_line_and_column() {
     let err = one_error_line(&compare(&a, &a, &["--rtol", "-1"]));
     assert!(err.contains("--rtol"), "{err}");
 }
+
+/// `--map NEW=OLD` compares renamed columns, one `*` per side maps a whole
+/// prefix, and a map that pairs nothing is one line.
+#[test]
+fn renamed_columns_are_compared_with_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(
+        dir.path(),
+        "new.csv",
+        "time,mass1_x,\"m.R[1,2]\",link.lambda,link.g",
+        &rows(),
+        "",
+    );
+    let b = write(dir.path(), "old.csv", HEADER, &rows(), "");
+    let err = one_error_line(&compare(&a, &b, &[]));
+    assert!(err.contains("--map NEW=OLD"), "{err}");
+    let out = compare(&a, &b, &["--map", "mass1_x=mass1.x"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = stdout(&out);
+    assert!(table.contains("mass1_x=mass1.x "), "{table}");
+    assert_eq!(table.matches(" yes").count(), 4, "{table}");
+    assert!(
+        table.contains("largest relative deviation 0 (rtol = 1e-6, atol = 1e-12)"),
+        "{table}"
+    );
+
+    // A prefix, in one option; the second file's other columns are left.
+    let prefixed = HEADER
+        .replace("mass1.x", "pair.mass1.x")
+        .replace("link.", "pair.link.");
+    let p = write(dir.path(), "nested.csv", &prefixed, &rows(), "");
+    let out = compare(&p, &b, &["--map", "pair.*=*"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = stdout(&out);
+    for line in [
+        "pair.mass1.x=mass1.x ",
+        "pair.link.lambda=link.lambda ",
+        "pair.link.g=link.g ",
+    ] {
+        assert!(table.contains(line), "{line} in {table}");
+    }
+    assert!(!table.contains("note:"), "{table}");
+    // The first file has fewer columns: its own are compared, the rest noted.
+    let text = std::fs::read_to_string(&p).unwrap();
+    let fewer: String = text
+        .lines()
+        .map(|l| {
+            let (head, _) = l.rsplit_once(',').unwrap();
+            format!("{head}\n")
+        })
+        .collect();
+    std::fs::write(&p, fewer).unwrap();
+    let out = compare(&p, &b, &["--map", "pair.*=*"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = stdout(&out);
+    assert!(
+        table.starts_with(&format!(
+            "note: 1 column of {} is not in {} and not compared\n",
+            b.display(),
+            p.display()
+        )),
+        "{table}"
+    );
+    assert!(!table.contains("link.g"), "{table}");
+
+    for (map, expected) in [
+        (
+            "mass1_x",
+            "error: --map \"mass1_x\": expected NEW=OLD, a column of",
+        ),
+        (
+            "mass1_x=mass2.x",
+            "error: --map \"mass1_x=mass2.x\": column 'mass2.x' is not in",
+        ),
+        (
+            "pair.*=other.*",
+            "error: --map \"pair.*=other.*\": no column 'pair.*' of",
+        ),
+        (
+            "a*b*=*",
+            "error: --map \"a*b*=*\": one '*' on each side, or none",
+        ),
+    ] {
+        let err = one_error_line(&compare(&a, &b, &["--map", map]));
+        assert!(err.starts_with(expected), "{map}: {err}");
+    }
+}

@@ -865,3 +865,46 @@ to = "mass2.F_ext"
         "{line}"
     );
 }
+
+/// k > 0 on StateSpace, whose input `u` is an array: one reason, the same sentence
+/// in `tether info`, in the refusal of `tether run --order 1` and in
+/// docs/algorithm.md ("FMI 3.0 instances"), although the FMU declares
+/// `providesIntermediateUpdate`.
+#[test]
+fn k_1_on_statespace_is_refused_with_the_reason_tether_info_gives() {
+    let Some(ss) = statespace() else {
+        return;
+    };
+    let reason = "k > 0 needs inputs that take polynomials; array elements of 'u' take values only";
+    let info = tether(&["info", ss.to_str().unwrap()]);
+    assert!(info.status.success());
+    let text = String::from_utf8_lossy(&info.stdout);
+    let line = text
+        .lines()
+        .find(|l| l.contains("coupling polynomials k > 0"))
+        .unwrap_or_else(|| panic!("no k > 0 line in\n{text}"));
+    assert!(line.ends_with(&format!("no: {reason}")), "{line}");
+    assert!(
+        text.contains("providesIntermediateUpdate             yes"),
+        "{text}"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("system.toml");
+    std::fs::write(&file, joined(BAUMGARTE_1, 1e-3, &ss)).unwrap();
+    let out = tether(&["run", file.to_str().unwrap(), "--order", "1", "--quiet"]);
+    assert_eq!(
+        one_line(&out),
+        format!("error: instance 'ss' (StateSpace): {reason}; use order = 0")
+    );
+
+    let docs = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/algorithm.md"),
+    )
+    .unwrap();
+    let docs = docs.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        docs.contains(reason),
+        "docs/algorithm.md does not say: {reason}"
+    );
+}

@@ -36,7 +36,8 @@ fn info_shows_the_fmi3_capabilities_and_array_dimensions() {
         "hasEventMode                           yes",
         "fixedInternalStepSize                  1",
         "Tether runs it without event mode",
-        "no: FMI 3.0 has no input derivatives",
+        "coupling polynomials k > 0                 no: k > 0 needs inputs that take \
+         polynomials; array elements of 'u' take values only\n",
         "  m                             1  structural   tunable",
         "UInt64",
         "Arrays (elements named y[1], A[2,3]: 1-based, row-major)",

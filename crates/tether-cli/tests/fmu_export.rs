@@ -668,3 +668,52 @@ fn same_columns(
     }
     (h1, r1)
 }
+
+/// An `[[export.output]]` without `name` is named as its column: the exported
+/// FMU nested as instance `pair` gives `pair.mass1.x`, `pair.link.lambda`, and
+/// one `--map 'pair.*=*'` compares them with the system's own run (bit for bit).
+#[test]
+fn exported_outputs_named_as_their_columns_compare_with_one_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let system = system_with(
+        dir.path(),
+        "[export]\nmodel_name = \"pair\"\n\
+         [[export.output]]\nfrom = \"mass1.x\"\n\
+         [[export.output]]\nfrom = \"link.lambda\"\n",
+    );
+    let fmu = dir.path().join("pair.fmu");
+    let s = system.to_str().unwrap();
+    success(&tether(
+        &["fmu", "export", s, "--out", fmu.to_str().unwrap()],
+        dir.path(),
+    ));
+    success(&tether(&["run", s, "--out", "run.csv"], dir.path()));
+    let outer = dir.path().join("outer.toml");
+    std::fs::write(
+        &outer,
+        format!(
+            "[experiment]\nstop = 0.1\nstep = 1e-3\n\n[method]\nkind = \"explicit\"\nmu = 1e-3\n\n\
+             [[instance]]\nname = \"pair\"\nfmu = {fmu:?}\n"
+        ),
+    )
+    .unwrap();
+    success(&tether(
+        &["run", outer.to_str().unwrap(), "--out", "outer.csv"],
+        dir.path(),
+    ));
+    let header = std::fs::read_to_string(dir.path().join("outer.csv")).unwrap();
+    assert!(
+        header.starts_with("time,pair.mass1.x,pair.link.lambda\n"),
+        "{}",
+        header.lines().next().unwrap()
+    );
+    let out = tether(
+        &["compare", "outer.csv", "run.csv", "--map", "pair.*=*"],
+        dir.path(),
+    );
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{table}");
+    assert!(table.contains("pair.mass1.x=mass1.x "), "{table}");
+    assert!(table.contains("pair.link.lambda=link.lambda "), "{table}");
+    assert!(table.contains("largest relative deviation 0 "), "{table}");
+}

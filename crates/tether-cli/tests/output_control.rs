@@ -566,15 +566,17 @@ fn an_iterated_step_that_does_not_converge_is_counted_or_fails_with_strict() {
         dir.path(),
     );
     let text = success(&out);
+    // The summary wraps its lines within 100 characters.
+    let flat = text.split_whitespace().collect::<Vec<_>>().join(" ");
     assert!(
-        text.contains(
+        flat.contains(
             "signal iterations per step: 2.00 on average, 2 at most (10 repeated runs of the \
              step); not converged: 5 steps"
         ),
         "{text}"
     );
     assert!(
-        text.contains("warning: 5 macro steps did not converge within [signals] iterations"),
+        flat.contains("warning: 5 macro steps did not converge within [signals] iterations"),
         "{text}"
     );
     let strict = write(true);
@@ -596,4 +598,110 @@ fn an_iterated_step_that_does_not_converge_is_counted_or_fails_with_strict() {
     );
     let rows = csv.lines().filter(|l| !l.starts_with('#')).count() - 1;
     assert_eq!(rows, 1, "the row at T_0 is kept: {csv}");
+}
+
+/// The texts of an SVG's `<text>` elements, in order.
+fn svg_texts(svg: &str) -> Vec<String> {
+    svg.split("<text")
+        .skip(1)
+        .filter_map(|s| s.split_once('>'))
+        .filter_map(|(_, rest)| rest.split('<').next())
+        .map(|t| t.trim().replace("&amp;", "&"))
+        .collect()
+}
+
+/// `tether run --plot` without columns: the instances' coupled outputs first,
+/// then the multiplier and the residual; a long title on two lines that fit;
+/// no legend repeating the title.
+#[test]
+fn the_default_plot_of_a_run_shows_the_coupled_outputs_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/controlled_oscillator.toml"),
+    )
+    .unwrap();
+    for fmu in ["oscillator", "controller"] {
+        text = text.replace(
+            &format!("../target/fmus/{fmu}.fmu"),
+            &tether_fmu_build::workspace_fmu(fmu)
+                .unwrap()
+                .display()
+                .to_string(),
+        );
+    }
+    std::fs::write(dir.path().join("co.toml"), text).unwrap();
+    let out = tether(
+        &[
+            "run", "co.toml", "--stop", "0.1", "--out", "r.csv", "--plot", "p.svg",
+        ],
+        dir.path(),
+    );
+    let said = success(&out);
+    assert!(
+        said.lines().any(|l| l
+            == "note: p.svg plots 5 of the 9 columns (mass2.x, mass1.x, ctrl.u, link.lambda, \
+                link.g); choose others"),
+        "{said}"
+    );
+    let texts = svg_texts(&std::fs::read_to_string(dir.path().join("p.svg")).unwrap());
+    assert_eq!(
+        texts[..2],
+        [
+            "controlled two-mass oscillator: baumgarte (index 1, beta = 2e-3, gamma = 1e-6),",
+            "signals: Jacobi, k = 1, H = 0.001",
+        ]
+    );
+    let panels: Vec<&String> = texts
+        .iter()
+        .filter(|t| t.contains('.') && t.chars().next().is_some_and(char::is_alphabetic))
+        .filter(|t| !t.starts_with("controlled") && !t.starts_with("signals"))
+        .collect();
+    assert_eq!(
+        panels,
+        [
+            "mass2.x [m]",
+            "mass1.x [m]",
+            "ctrl.u [N]",
+            "link.lambda",
+            "link.g"
+        ],
+        "{texts:?}"
+    );
+    assert!(
+        !texts.iter().any(|t| t == "controlled two-mass oscillator"),
+        "{texts:?}"
+    );
+}
+
+/// `tether simulate --plot`: the outputs with their units, titled with the model
+/// and the grid; a plot file that is not SVG or PNG is refused before the run.
+#[test]
+fn simulate_plots_the_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let osc = oscillator();
+    let fmu = osc.to_str().unwrap();
+    let out = tether(
+        &[
+            "simulate", fmu, "--stop", "0.5", "--out", "s.csv", "--plot", "s.svg",
+        ],
+        dir.path(),
+    );
+    let said = success(&out);
+    assert!(said.lines().any(|l| l == "plot: s.svg"), "{said}");
+    let texts = svg_texts(&std::fs::read_to_string(dir.path().join("s.svg")).unwrap());
+    assert_eq!(texts[0], "oscillator: H = 0.001, t = 0 … 0.5");
+    for label in ["x [m]", "v [m/s]", "a [m/s2]", "time [s]"] {
+        assert!(texts.iter().any(|t| t == label), "{label}: {texts:?}");
+    }
+    let out = tether(
+        &[
+            "simulate", fmu, "--stop", "0.5", "--out", "t.csv", "--plot", "s.txt",
+        ],
+        dir.path(),
+    );
+    assert_eq!(
+        error_line(&out),
+        "error: --plot s.txt: the file name must end in .svg or .png"
+    );
+    assert!(!dir.path().join("t.csv").exists());
 }

@@ -184,10 +184,17 @@ fn a_default_plot_has_at_most_eight_panels() {
     let out = tether(&["plot", "wide.csv", "--out", "w.svg"], dir.path());
     assert!(out.status.success(), "{}", text(&out));
     let stderr = String::from_utf8_lossy(&out.stderr);
+    let note: Vec<&str> = stderr
+        .lines()
+        .take_while(|l| !l.starts_with("plot:"))
+        .collect();
     assert_eq!(
-        stderr.lines().next().unwrap_or(""),
-        "note: w.svg plots 8 of the 20 columns (body0.x, body1.x, body2.x, body3.x, body4.x, \
-         body5.x, body6.x, body7.x); choose others with --columns NAME,…"
+        note,
+        [
+            "note: w.svg plots 8 of the 20 columns (body0.x, body1.x, body2.x, body3.x, body4.x, \
+             body5.x,",
+            "  body6.x, body7.x); choose others with --columns NAME,…",
+        ]
     );
     let svg = std::fs::read_to_string(dir.path().join("w.svg")).unwrap();
     assert!(svg.contains("body7.x") && !svg.contains("body8.x"));

@@ -42,6 +42,18 @@ pub enum Error {
         source: std::io::Error,
     },
 
+    /// A file or folder that cannot be reached, said with where it was looked
+    /// for: the resolved path, the folder a relative path was resolved
+    /// against, and a name that differs only in case.
+    #[error("cannot access {}: {source}{}", .place.located(), .place.hint())]
+    Missing {
+        /// Where it was looked for.
+        place: Box<crate::paths::Missing>,
+        /// The underlying I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+
     /// The path is neither a readable zip archive nor an unpacked FMU directory.
     #[error("'{}' is not an {kind} archive (not a valid zip file: {reason})", path.display())]
     NotAnArchive {

@@ -105,8 +105,8 @@ impl Fmu {
     /// never runs in this process (the host checks and loads it).
     pub fn open_unloaded(path: impl AsRef<Path>, options: &OpenOptions) -> Result<Fmu> {
         let origin = path.as_ref().to_owned();
-        let metadata = std::fs::metadata(&origin).map_err(|source| Error::Io {
-            path: origin.clone(),
+        let metadata = std::fs::metadata(&origin).map_err(|source| Error::Missing {
+            place: Box::new(crate::paths::Missing::new(&origin, None)),
             source,
         })?;
         let dir = if metadata.is_dir() {

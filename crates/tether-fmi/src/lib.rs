@@ -64,6 +64,7 @@ mod interface;
 mod library;
 mod logger;
 pub mod model_description;
+pub mod paths;
 mod placement;
 pub mod raw;
 pub mod remote;

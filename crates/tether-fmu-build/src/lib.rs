@@ -339,6 +339,17 @@ pub fn workspace_fmu_as(name: &str, version: FmiVersion) -> Result<PathBuf, Erro
     Ok(path)
 }
 
+/// Whether the FMUs' cargo builds show their progress on stderr (set by
+/// [`show_build_progress`]); otherwise their output is kept for errors.
+static SHOW_PROGRESS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Let the FMUs' cargo builds print their progress on stderr (for a person
+/// waiting on a first build, `cargo tether`), instead of keeping it for the
+/// error of a failed build.
+pub fn show_build_progress(on: bool) {
+    SHOW_PROGRESS.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
 /// Builds `name` and packages it. The first build of a process builds every crate under
 /// `fmus/` with it, in one cargo run: cargo then compiles them side by side on every
 /// core, and a later call finds them built.
@@ -378,6 +389,12 @@ fn build_and_package(root: &Path, name: &str, version: FmiVersion) -> Result<Pat
         packages.join(" "),
         build_dir.display()
     );
+    // The first build of the process builds them all: its progress shows.
+    if SHOW_PROGRESS.load(std::sync::atomic::Ordering::Relaxed)
+        && !ALL_BUILT.load(std::sync::atomic::Ordering::Relaxed)
+    {
+        command.stderr(std::process::Stdio::inherit());
+    }
     let output = command.output().map_err(|source| Error::Spawn {
         command: shown.clone(),
         source,

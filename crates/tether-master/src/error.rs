@@ -150,6 +150,28 @@ pub enum MasterError {
         /// What needs it.
         needed_by: String,
     },
+    /// A constraint's terms in units that do not fit together.
+    #[error("constraint '{constraint}', {level}: {detail}")]
+    Units {
+        /// Constraint name.
+        constraint: String,
+        /// `position`, `velocity`, `acceleration` or `drives`.
+        level: &'static str,
+        /// The two terms and their units.
+        detail: String,
+    },
+    /// Coupling polynomials (k > 0) into an input that takes values only.
+    #[error("instance '{instance}' ({model}): {needs}; {reason}; use order = 0")]
+    NoPolynomialInput {
+        /// Instance name.
+        instance: String,
+        /// Model name.
+        model: String,
+        /// `k > 0 needs inputs that take polynomials`.
+        needs: &'static str,
+        /// Why this FMU or input takes none, in one plain clause.
+        reason: String,
+    },
     /// A start value cannot be applied to its variable.
     #[error(
         "instance '{instance}': cannot set {variable} = {}: {reason}",
@@ -353,6 +375,7 @@ impl MasterError {
             MasterError::InvalidParameter { .. } => "invalid_parameter",
             MasterError::InvalidTimeSpan { .. } => "invalid_time_span",
             MasterError::Expression { .. } => "expression",
+            MasterError::Units { .. } => "units",
             MasterError::UnknownInstance { .. } => "unknown_instance",
             MasterError::UnknownVariable(_) => "unknown_variable",
             MasterError::ArrayElement { .. } => "array_element",
@@ -362,7 +385,9 @@ impl MasterError {
             MasterError::Joint { .. } => "joint",
             MasterError::WrongVariable { .. } => "wrong_variable",
             MasterError::MissingLevel { .. } => "missing_level",
-            MasterError::MissingCapability { .. } => "missing_capability",
+            MasterError::MissingCapability { .. } | MasterError::NoPolynomialInput { .. } => {
+                "missing_capability"
+            }
             MasterError::StartValue { .. } => "start_value",
             MasterError::SingularJacobian { .. } => "singular_jacobian",
             MasterError::Diverged { .. } => "diverged",

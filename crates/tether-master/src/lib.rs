@@ -29,6 +29,7 @@ mod linalg;
 mod method;
 mod observer;
 pub mod polynomial;
+pub mod polynomial_inputs;
 mod signals;
 mod simulation;
 mod single;
@@ -39,6 +40,7 @@ mod state_bytes;
 mod stats;
 mod step_control;
 mod system;
+pub mod units;
 
 pub use error::{error_line, MasterError, UnknownName};
 pub use method::{IndexConflict, IndexedKind, Method};
@@ -59,8 +61,8 @@ pub use spec::{
 };
 pub use start::{apply_start_value, apply_start_values, Arrays};
 pub use stats::{
-    AdaptiveStats, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats, SignalStats,
-    Termination, SUMMARY_SCHEMA,
+    wrap, AdaptiveStats, CallNames, Failure, InstanceCounters, ParallelInfo, PhaseTimes, RunStats,
+    SignalStats, Termination, SUMMARY_SCHEMA, SUMMARY_WIDTH,
 };
 pub use step_control::StepControl;
 pub use tether_fmi::Time;

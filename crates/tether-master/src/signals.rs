@@ -99,15 +99,6 @@ pub(crate) struct Signals {
 }
 
 impl Signals {
-    /// The value references the connections set on instance `slave`.
-    pub fn receivers(&self, slave: usize) -> Vec<u32> {
-        self.links
-            .iter()
-            .filter(|l| l.to == slave)
-            .map(|l| l.to_vr)
-            .collect()
-    }
-
     /// The signal values carried between steps: each link's sender values
     /// `[y_N, y_{N-1}, y_{N-2}]` and its value at T_{N+1} once read.
     pub fn values(&self) -> (Vec<[f64; 3]>, Vec<f64>) {
@@ -247,6 +238,14 @@ impl Signals {
         }
     }
 
+    /// The inputs of instance `s` that connections set.
+    pub fn receivers(&self, s: usize) -> impl Iterator<Item = u32> + '_ {
+        self.links
+            .iter()
+            .filter(move |l| l.to == s)
+            .map(|l| l.to_vr)
+    }
+
     /// One line per direct-feedthrough loop for the setup's note: the
     /// instances in it, and where the macro points close it.
     pub fn loop_notes(&self, slaves: &[Slave]) -> Vec<String> {
@@ -277,6 +276,21 @@ impl Signals {
                         instances.join(", ")
                     );
                 }
+                // The instances whose feedthrough in the loop is assumed:
+                // their outputs declare no dependencies (the ordinary case).
+                let mut assumed: Vec<&str> = Vec::new();
+                for &a in members {
+                    for &b in members {
+                        let (la, lb) = (&self.links[a], &self.links[b]);
+                        if la.to == lb.from
+                            && !declares_dependencies(&slaves[lb.from], lb.from_vr)
+                            && !assumed.contains(&slaves[lb.from].name.as_str())
+                        {
+                            assumed.push(&slaves[lb.from].name);
+                        }
+                    }
+                }
+                assumed.sort_by_key(|a| instances.iter().position(|i| i == a));
                 let lagged = members.iter().filter(|&&l| self.lagged(l)).count();
                 let how = match self.scheme {
                     SignalScheme::Jacobi => format!(
@@ -290,11 +304,24 @@ impl Signals {
                         members.len()
                     ),
                 };
-                format!(
-                    "direct-feedthrough loop through {} is closed only at macro points: {how} \
-                     (-v names the connections)",
-                    instances.join(", ")
-                )
+                if assumed.is_empty() {
+                    format!(
+                        "direct-feedthrough loop through {} is closed only at macro points: \
+                         {how} (-v names the connections)",
+                        instances.join(", ")
+                    )
+                } else {
+                    format!(
+                        "the connections between {} form a loop; {} declare{} no dependencies \
+                         of {} outputs, so Tether takes them to feed through, and the loop is \
+                         closed at macro points as co-simulation masters do: {how} (-v names \
+                         the connections)",
+                        instances.join(", "),
+                        assumed.join(", "),
+                        if assumed.len() == 1 { "s" } else { "" },
+                        if assumed.len() == 1 { "its" } else { "their" }
+                    )
+                }
             })
             .collect()
     }
@@ -738,7 +765,11 @@ impl Signals {
                 f64::from(u8::from(v[0]))
             }
         };
-        slave.counters.get_reals += 1;
+        match link.kind {
+            Kind::Real => slave.counters.get_reals += 1,
+            Kind::Integer => slave.counters.get_integers += 1,
+            Kind::Boolean => slave.counters.get_booleans += 1,
+        }
         if !value.is_finite() {
             return Err(slave.non_finite(link.variable.clone(), value, run));
         }
@@ -786,7 +817,11 @@ impl Signals {
             Kind::Integer => slave.backend.set_integers(&vr, &[p.value as Int])?,
             Kind::Boolean => slave.backend.set_booleans(&vr, &[p.value != 0.0])?,
         }
-        slave.counters.set_reals += 1;
+        match link.kind {
+            Kind::Real => slave.counters.set_reals += 1,
+            Kind::Integer => slave.counters.set_integers += 1,
+            Kind::Boolean => slave.counters.set_booleans += 1,
+        }
         Ok(())
     }
 }
@@ -995,10 +1030,31 @@ fn resolve(
     let units = match (unit_of(&out), unit_of(&input)) {
         // A gain or offset is the user's conversion.
         _ if c.gain.is_some() || c.offset.is_some() => None,
-        (Some(a), Some(b)) if a != b => Some(fail(format!(
-            "{} is in '{a}' and {} in '{b}': units differ and there is no conversion",
-            c.from, c.to
-        ))),
+        (Some(a), Some(b)) if a != b => {
+            let dimension = |s: usize, var: &ScalarVariable| {
+                crate::units::unit_of(slaves[s].fmu.model_description(), var).and_then(|u| u.1)
+            };
+            let convert = match (dimension(from, &out), dimension(to, &input)) {
+                // Two names of one unit (`N.m`, `J`): nothing to convert.
+                (Some(da), Some(db)) if da.same(&db) => Ok(()),
+                (Some(da), Some(db)) => Err(crate::units::Dimension::conversion(&da, &db)),
+                _ => Err(None),
+            };
+            convert.err().map(|conversion| {
+                let how = match conversion {
+                    Some((gain, 0.0)) => format!("gain = {gain} on the connection converts"),
+                    Some((gain, offset)) => {
+                        format!("gain = {gain}, offset = {offset} on the connection convert")
+                    }
+                    None => "set gain (and offset) on the connection to convert".into(),
+                };
+                fail(format!(
+                    "{} is in '{a}' and {} in '{b}': units differ; {how} \
+                     (to = gain·from + offset)",
+                    c.from, c.to
+                ))
+            })
+        }
         _ => None,
     };
     let link = Link {
@@ -1021,6 +1077,25 @@ fn resolve(
             && slaves[to].interpolates(input.value_reference),
     };
     Ok((link, units))
+}
+
+/// Whether instance `slave`'s model description says which inputs its output
+/// `output` depends on (a `dependencies` list in ModelStructure/Outputs), so
+/// that [`feeds_through`] knows rather than assumes.
+fn declares_dependencies(slave: &Slave, output: u32) -> bool {
+    let md = slave.fmu.model_description();
+    let Some(o) = md
+        .model_variables
+        .iter()
+        .position(|v| v.value_reference == output && v.causality == Causality::Output)
+        .map(|i| i + 1)
+    else {
+        return false;
+    };
+    md.model_structure
+        .outputs
+        .iter()
+        .any(|u| u.index == o && u.dependencies.is_some())
 }
 
 /// Whether output `output` of instance `slave` depends directly on input

@@ -27,6 +27,13 @@ pub struct InstanceCounters {
     pub get_integers: u64,
     /// `fmi2GetBoolean` calls (recorded Boolean outputs).
     pub get_booleans: u64,
+    /// `fmi2SetInteger` calls (Integer signal connections).
+    pub set_integers: u64,
+    /// `fmi2SetBoolean` calls (Boolean signal connections).
+    pub set_booleans: u64,
+    /// The FMI functions these counts stand for, by the FMU's standard and
+    /// variable types (`fmi2SetReal`, `fmi3SetFloat64`, …).
+    pub functions: CallNames,
     /// `fmi2SetRealInputDerivatives` calls.
     pub set_input_derivatives: u64,
     /// `fmi2GetRealOutputDerivatives` calls.
@@ -34,6 +41,154 @@ pub struct InstanceCounters {
     /// Messages to and from the instance's host process (0 in process):
     /// [`FmuInstance::round_trips`](tether_fmi::FmuInstance::round_trips).
     pub round_trips: u64,
+}
+
+/// The names of the FMI functions an instance's counts stand for: FMI 2.0's,
+/// or FMI 3.0's for the types of its inputs and outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CallNames {
+    /// FMI 3.0 (`fmi3DoStep`, …), else FMI 2.0.
+    pub fmi3: bool,
+    /// FMI 3.0: the float type set (`Float64`, or `Float64/Float32` where
+    /// the inputs have both).
+    pub set_float: &'static str,
+    /// FMI 3.0: the float type read.
+    pub get_float: &'static str,
+    /// FMI 3.0: the integer type set (`Int32`, …; `Int*` for several).
+    pub set_int: &'static str,
+    /// FMI 3.0: the integer type read.
+    pub get_int: &'static str,
+}
+
+impl Default for CallNames {
+    fn default() -> Self {
+        CallNames {
+            fmi3: false,
+            set_float: "Float64",
+            get_float: "Float64",
+            set_int: "Int32",
+            get_int: "Int32",
+        }
+    }
+}
+
+impl CallNames {
+    /// The names for an FMU: FMI 3.0's types of the inputs in `set` (the
+    /// value references the master sets; all inputs when empty) and of its
+    /// outputs (read).
+    pub fn of(md: &tether_fmi::ModelDescription, set: &[u32]) -> CallNames {
+        use tether_fmi::{Causality, ValueType};
+        if md.standard != tether_fmi::FmiStandard::Fmi3 {
+            return CallNames::default();
+        }
+        let kinds = |causality: Causality| {
+            let mut floats: Vec<ValueType> = Vec::new();
+            let mut ints: Vec<ValueType> = Vec::new();
+            let chosen = |v: &&tether_fmi::ScalarVariable| {
+                v.causality == causality
+                    && (causality != Causality::Input
+                        || set.is_empty()
+                        || set.contains(&v.value_reference))
+            };
+            for v in md.model_variables.iter().filter(chosen) {
+                let list = match v.value_type {
+                    ValueType::Float32 | ValueType::Float64 => &mut floats,
+                    ValueType::Boolean
+                    | ValueType::String
+                    | ValueType::Binary
+                    | ValueType::Clock => continue,
+                    _ => &mut ints,
+                };
+                let ty = if v.value_type == ValueType::Enumeration {
+                    ValueType::Int64
+                } else {
+                    v.value_type
+                };
+                if !list.contains(&ty) {
+                    list.push(ty);
+                }
+            }
+            let float = match floats.as_slice() {
+                [ValueType::Float32] => "Float32",
+                [_, _] => "Float64/Float32",
+                _ => "Float64",
+            };
+            let int = match ints.as_slice() {
+                [] => "Int32",
+                [one] => one.name(),
+                _ => "Int*",
+            };
+            (float, int)
+        };
+        let (set_float, set_int) = kinds(Causality::Input);
+        let (get_float, get_int) = kinds(Causality::Output);
+        CallNames {
+            fmi3: true,
+            set_float,
+            get_float,
+            set_int,
+            get_int,
+        }
+    }
+}
+
+impl InstanceCounters {
+    /// Each FMI function called, by its name (`fmi2DoStep`,
+    /// `fmi3SetFloat64`, …), with its count; those never called left out.
+    pub fn calls(&self) -> Vec<(String, u64)> {
+        self.all_calls()
+            .into_iter()
+            .filter(|(_, count)| *count > 0)
+            .collect()
+    }
+
+    /// Every function counted, called or not, in a fixed order.
+    fn all_calls(&self) -> Vec<(String, u64)> {
+        let n = &self.functions;
+        let v = if n.fmi3 { "fmi3" } else { "fmi2" };
+        let state = if n.fmi3 { "FMUState" } else { "FMUstate" };
+        let (set_real, get_real, set_int, get_int) = if n.fmi3 {
+            (
+                format!("fmi3Set{}", n.set_float),
+                format!("fmi3Get{}", n.get_float),
+                format!("fmi3Set{}", n.set_int),
+                format!("fmi3Get{}", n.get_int),
+            )
+        } else {
+            (
+                "fmi2SetReal".to_string(),
+                "fmi2GetReal".to_string(),
+                "fmi2SetInteger".to_string(),
+                "fmi2GetInteger".to_string(),
+            )
+        };
+        let derivatives_in = if n.fmi3 {
+            // FMI 3.0 has no input derivatives: the polynomials go to the
+            // intermediate update callback, which sets the inputs itself.
+            "polynomials for intermediate update".to_string()
+        } else {
+            "fmi2SetRealInputDerivatives".to_string()
+        };
+        let derivatives_out = if n.fmi3 {
+            "fmi3GetOutputDerivatives"
+        } else {
+            "fmi2GetRealOutputDerivatives"
+        };
+        [
+            (format!("{v}DoStep"), self.do_steps),
+            (format!("{v}Get{state}"), self.state_gets),
+            (format!("{v}Set{state}"), self.state_sets),
+            (set_real, self.set_reals),
+            (get_real, self.get_reals),
+            (set_int, self.set_integers),
+            (get_int, self.get_integers),
+            (format!("{v}SetBoolean"), self.set_booleans),
+            (format!("{v}GetBoolean"), self.get_booleans),
+            (derivatives_in, self.set_input_derivatives),
+            (derivatives_out.to_string(), self.get_output_derivatives),
+        ]
+        .into()
+    }
 }
 
 /// Wall time spent in each phase of the macro steps. The setup is always
@@ -275,14 +430,82 @@ pub struct Termination {
 }
 
 impl fmt::Display for RunStats {
+    /// The text summary, every line within [`SUMMARY_WIDTH`] characters
+    /// (longer ones wrapped at spaces, the rest indented).
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(
-            f,
-            "macro steps: {}   Jacobian solves: {}   wall time: {:.3} s",
-            self.macro_steps,
-            self.jacobian_solves,
-            self.wall.as_secs_f64()
-        )?;
+        let mut text = String::new();
+        self.write_summary(&mut text)?;
+        let lines: Vec<String> = text.lines().flat_map(|l| wrap(l, SUMMARY_WIDTH)).collect();
+        write!(f, "{}", lines.join("\n"))
+    }
+}
+
+/// The text summary's width: lines are wrapped within it.
+pub const SUMMARY_WIDTH: usize = 100;
+
+/// `line` wrapped at spaces within `width` characters, preferring the
+/// double spaces that separate a summary's fields; the continuation lines
+/// indented two more than the line. A word longer than the width stays whole.
+pub fn wrap(line: &str, width: usize) -> Vec<String> {
+    let indent = line.len() - line.trim_start().len();
+    let more = " ".repeat(indent + 2);
+    let mut out: Vec<String> = Vec::new();
+    let mut rest = line;
+    let mut prefix = "";
+    loop {
+        let room = width.saturating_sub(prefix.len());
+        if rest.chars().count() <= room {
+            out.push(format!("{prefix}{rest}"));
+            return out;
+        }
+        // Byte positions of the spaces within the room, after the indent.
+        let from = if out.is_empty() { indent } else { 0 };
+        let spaces: Vec<usize> = rest
+            .char_indices()
+            .take(room + 1)
+            .filter(|&(i, c)| c == ' ' && i > from)
+            .map(|(i, _)| i)
+            .collect();
+        let double = spaces
+            .iter()
+            .rev()
+            .find(|&&i| rest[i..].starts_with("  "))
+            .filter(|&&i| i * 3 >= room);
+        let cut = match double.or(spaces.last()) {
+            Some(&i) => i,
+            None => match rest[from..].find(' ') {
+                Some(i) => from + i,
+                None => {
+                    out.push(format!("{prefix}{rest}"));
+                    return out;
+                }
+            },
+        };
+        out.push(format!("{prefix}{}", rest[..cut].trim_end()));
+        rest = rest[cut..].trim_start();
+        prefix = &more;
+    }
+}
+
+impl RunStats {
+    fn write_summary(&self, f: &mut String) -> fmt::Result {
+        use std::fmt::Write as _;
+        if self.jacobian_solves > 0 {
+            writeln!(
+                f,
+                "macro steps: {}   Jacobian solves: {}   wall time: {:.3} s",
+                self.macro_steps,
+                self.jacobian_solves,
+                self.wall.as_secs_f64()
+            )?;
+        } else {
+            writeln!(
+                f,
+                "macro steps: {}   wall time: {:.3} s",
+                self.macro_steps,
+                self.wall.as_secs_f64()
+            )?;
+        }
         if let Some(a) = &self.adaptive {
             writeln!(
                 f,
@@ -325,20 +548,8 @@ impl fmt::Display for RunStats {
                 self.max_corrections
             )?;
         }
-        for (label, c) in instance_lines(&self.instances) {
-            writeln!(
-                f,
-                "  {label:<16} doStep: {:>9}   getFMUstate: {:>8}   setFMUstate: {:>8}   \
-                 setReal: {:>9}   getReal: {:>9}   setRealInputDerivatives: {:>8}   \
-                 getRealOutputDerivatives: {:>8}",
-                c.do_steps,
-                c.state_gets,
-                c.state_sets,
-                c.set_reals,
-                c.get_reals,
-                c.set_input_derivatives,
-                c.get_output_derivatives
-            )?;
+        for line in call_table(&instance_lines(&self.instances), SUMMARY_WIDTH) {
+            writeln!(f, "{line}")?;
         }
         if self.instances.len() > SUMMARY_ROWS {
             writeln!(
@@ -418,21 +629,32 @@ impl fmt::Display for RunStats {
             )?;
         }
         let p = &self.parallel;
-        if p.workers == 0 && p.handoff.is_zero() && !p.sequential.is_zero() {
+        if p.workers == 0 && !p.handoff.is_zero() {
             writeln!(
                 f,
-                "  parallel perturbed runs: 0 worker(s)   predicted runs per step {:.1} µs sequential: \
-                 less than a hand-off could save, no worker started",
+                "  parallel runs not started: {:.1} µs a step in sequence, {:.1} µs in parallel \
+                 (hand-off {:.1} µs)",
+                p.sequential.as_secs_f64() * 1e6,
+                p.parallel.as_secs_f64() * 1e6,
+                p.handoff.as_secs_f64() * 1e6
+            )?;
+        } else if p.workers == 0 && p.handoff.is_zero() && !p.sequential.is_zero() {
+            writeln!(
+                f,
+                "  parallel runs not started: each run is too short to gain ({:.1} µs a step \
+                 in sequence)",
                 p.sequential.as_secs_f64() * 1e6
             )?;
         } else if p.workers > 0 || p.handoff > Duration::ZERO {
             writeln!(
                 f,
-                "  parallel perturbed runs: {} worker(s)   hand-off {:.1} µs   predicted runs per step {:.1} µs sequential, {:.1} µs parallel",
+                "  parallel runs: {} worker{}, {:.1} µs a step in sequence, {:.1} µs in parallel \
+                 (hand-off {:.1} µs)",
                 p.workers,
-                p.handoff.as_secs_f64() * 1e6,
+                if p.workers == 1 { "" } else { "s" },
                 p.sequential.as_secs_f64() * 1e6,
-                p.parallel.as_secs_f64() * 1e6
+                p.parallel.as_secs_f64() * 1e6,
+                p.handoff.as_secs_f64() * 1e6
             )?;
         }
         let t = &self.times;
@@ -455,6 +677,78 @@ impl fmt::Display for RunStats {
             t.recording.as_secs_f64()
         )
     }
+}
+
+/// The FMI calls as a table within `width` characters: one row per function
+/// called by any instance, one column per instance (or model), the columns
+/// wrapped into blocks that fit.
+fn call_table(columns: &[(String, InstanceCounters)], width: usize) -> Vec<String> {
+    let calls: Vec<(&str, Vec<(String, u64)>)> = columns
+        .iter()
+        .map(|(label, c)| (label.as_str(), c.calls()))
+        .collect();
+    // In the order of the counters (FMI 2.0 and 3.0 names of one counter
+    // together), those some instance called.
+    let mut ranked: Vec<(usize, String)> = Vec::new();
+    for (_, c) in columns {
+        for (rank, (name, count)) in c.all_calls().into_iter().enumerate() {
+            if count > 0 && !ranked.iter().any(|(_, n)| *n == name) {
+                ranked.push((rank, name));
+            }
+        }
+    }
+    ranked.sort();
+    let functions: Vec<String> = ranked.into_iter().map(|(_, name)| name).collect();
+    if functions.is_empty() {
+        return Vec::new();
+    }
+    let first = functions
+        .iter()
+        .map(String::len)
+        .max()
+        .unwrap_or(0)
+        .max("FMI calls".len());
+    let widths: Vec<usize> = calls
+        .iter()
+        .map(|(label, list)| {
+            let digits = list
+                .iter()
+                .map(|(_, n)| n.to_string().len())
+                .max()
+                .unwrap_or(1);
+            label.chars().count().max(digits)
+        })
+        .collect();
+    let mut lines = Vec::new();
+    let mut start = 0;
+    while start < calls.len() {
+        // As many columns as fit after the function names (at least one).
+        let mut end = start + 1;
+        let mut used = 2 + first + 2 + widths[start];
+        while end < calls.len() && used + 2 + widths[end] <= width {
+            used += 2 + widths[end];
+            end += 1;
+        }
+        let mut header = format!("  {:<first$}", "FMI calls");
+        for k in start..end {
+            header.push_str(&format!("  {:>w$}", calls[k].0, w = widths[k]));
+        }
+        lines.push(header);
+        for function in &functions {
+            let mut row = format!("  {function:<first$}");
+            for k in start..end {
+                let count = calls[k]
+                    .1
+                    .iter()
+                    .find(|(name, _)| name == function)
+                    .map_or(0, |(_, n)| *n);
+                row.push_str(&format!("  {count:>w$}", w = widths[k]));
+            }
+            lines.push(row);
+        }
+        start = end;
+    }
+    lines
 }
 
 /// Instances shown one per line in the text summary; beyond, one line per model.
@@ -514,6 +808,9 @@ fn add(sum: &mut InstanceCounters, c: &InstanceCounters) {
     sum.get_reals += c.get_reals;
     sum.get_integers += c.get_integers;
     sum.get_booleans += c.get_booleans;
+    sum.set_integers += c.set_integers;
+    sum.set_booleans += c.set_booleans;
+    sum.functions = c.functions;
     sum.set_input_derivatives += c.set_input_derivatives;
     sum.get_output_derivatives += c.get_output_derivatives;
 }
@@ -585,6 +882,8 @@ struct Calls {
     get_real: u64,
     get_integer: u64,
     get_boolean: u64,
+    set_integer: u64,
+    set_boolean: u64,
     set_real_input_derivatives: u64,
     get_real_output_derivatives: u64,
     round_trips: u64,
@@ -692,6 +991,8 @@ impl Serialize for RunStats {
                             get_real: c.get_reals,
                             get_integer: c.get_integers,
                             get_boolean: c.get_booleans,
+                            set_integer: c.set_integers,
+                            set_boolean: c.set_booleans,
                             set_real_input_derivatives: c.set_input_derivatives,
                             get_real_output_derivatives: c.get_output_derivatives,
                             round_trips: c.round_trips,
@@ -768,8 +1069,21 @@ mod summary_tests {
         };
         let text = stats.to_string();
         assert!(text.lines().count() <= 30, "{text}");
-        assert!(text.contains("  model0 ×84 "), "{text}");
-        assert!(text.contains("  5 other models ×415 "), "{text}");
+        assert!(
+            text.lines().all(|l| l.chars().count() <= SUMMARY_WIDTH),
+            "{text}"
+        );
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[1..5],
+            [
+                "  FMI calls   model0 ×84  model1 ×84  model2 ×84  model3 ×84  model4 ×83  model5 ×83  model6 ×83",
+                "  fmi2DoStep         252         252         252         252         249         249         249",
+                "  FMI calls   5 other models ×415",
+                "  fmi2DoStep                 1245",
+            ],
+            "{text}"
+        );
         assert!(
             text.contains("(1000 instances, counted per model; per instance in --summary-json)")
         );
@@ -781,8 +1095,9 @@ mod summary_tests {
             text.contains("… 992 more, smaller (all in --summary-json)"),
             "{text}"
         );
+        let flat = text.split_whitespace().collect::<Vec<_>>().join(" ");
         assert!(
-            text.contains(
+            flat.contains(
                 "warning: 899 residuals exceed residual_warning = 1e-4, the largest max \
                  |joint[999].g| = 9.99e-4, |joint[998].g| = 9.98e-4, |joint[997].g| = 9.97e-4 and \
                  896 more: "
@@ -794,6 +1109,7 @@ mod summary_tests {
             instances: vec![InstanceCounters {
                 name: "mass1".into(),
                 model: "oscillator".into(),
+                do_steps: 5,
                 ..Default::default()
             }],
             residuals: vec![("link.g".into(), 2e-3)],
@@ -801,7 +1117,10 @@ mod summary_tests {
             ..Default::default()
         };
         let text = small.to_string();
-        assert!(text.contains("\n  mass1 "), "{text}");
+        assert!(
+            text.contains("\n  FMI calls   mass1\n  fmi2DoStep      5\n"),
+            "{text}"
+        );
         assert!(text.contains("max |g|:  link.g 2.00e-3\n"), "{text}");
         assert!(text.contains("warning: max |link.g| = 2.00e-3 exceeds residual_warning = 1e-3"));
     }

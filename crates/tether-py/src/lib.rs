@@ -57,7 +57,8 @@ pub(crate) fn kind_of(e: &MasterError) -> &'static str {
         MasterError::Fmi(_)
         | MasterError::UnknownVariable(_)
         | MasterError::InstanceFmu { .. }
-        | MasterError::MissingCapability { .. } => "fmu",
+        | MasterError::MissingCapability { .. }
+        | MasterError::NoPolynomialInput { .. } => "fmu",
         MasterError::Diverged { .. }
         | MasterError::ResidualLimit { .. }
         | MasterError::DivergedOutput { .. }
@@ -67,6 +68,7 @@ pub(crate) fn kind_of(e: &MasterError) -> &'static str {
         MasterError::InvalidParameter { .. } | MasterError::InvalidTimeSpan { .. } => "settings",
         MasterError::SystemFile { .. }
         | MasterError::Expression { .. }
+        | MasterError::Units { .. }
         | MasterError::UnknownInstance { .. }
         | MasterError::UnknownMarker { .. }
         | MasterError::IncompleteMarker { .. }

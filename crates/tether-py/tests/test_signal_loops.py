@@ -22,7 +22,18 @@ def control_loop(root):
 
 
 def cli_notes(proc):
-    return [line[len("note: "):] for line in proc.stderr.splitlines() if line.startswith("note: ")]
+    """The CLI's notes, each joined from its lines (wrapped within 100
+    characters, the continuation lines indented)."""
+    notes, in_note = [], False
+    for line in proc.stderr.splitlines():
+        if line.startswith("note: "):
+            notes.append(line[len("note: "):])
+            in_note = True
+        elif in_note and line.startswith("  "):
+            notes[-1] += " " + line.strip()
+        else:
+            in_note = False
+    return notes
 
 
 def test_control_loop_equals_cli_and_notes_the_loop(tmp_path, tether_bin, control_loop):

@@ -101,6 +101,13 @@ impl Simulation {
         };
         let mut system = System::new(spec, &method, stop)?;
         let mut signals = Signals::build(spec, &mut system.slaves)?;
+        // The summary names the FMI 3.0 functions for the types set.
+        for (s, slave) in system.slaves.iter_mut().enumerate() {
+            let mut set: Vec<u32> = slave.coupled.inputs.iter().map(|i| i.vr).collect();
+            set.extend(signals.receivers(s));
+            let md = slave.fmu.model_description();
+            slave.counters.functions = crate::stats::CallNames::of(md, &set);
+        }
         let notes = signals.loop_notes(&system.slaves);
         for (k, connections) in signals.loop_connections().iter().enumerate() {
             log::info!("direct-feedthrough loop {}: {connections}", k + 1);
@@ -113,7 +120,7 @@ impl Simulation {
         system.exit_initialization()?;
         let mut warnings = Vec::new();
         for (k, slave) in system.slaves.iter_mut().enumerate() {
-            warnings.extend(slave.changed_parameters(&signals.receivers(k))?);
+            warnings.extend(slave.changed_parameters(&signals.receivers(k).collect::<Vec<_>>())?);
         }
         let (step, initial_level): (Box<dyn MacroStep>, _) = match method {
             Method::Explicit { mu } => (

@@ -56,8 +56,11 @@ impl Simulation {
             value,
             &coupled,
         )?;
-        if kind == BaseType::Real {
-            slave.counters.set_reals += 1;
+        match kind {
+            BaseType::Real => slave.counters.set_reals += 1,
+            BaseType::Integer | BaseType::Enumeration => slave.counters.set_integers += 1,
+            BaseType::Boolean => slave.counters.set_booleans += 1,
+            _ => {}
         }
         Ok(())
     }

@@ -108,6 +108,7 @@ impl Slave {
         let counters = InstanceCounters {
             name: name.to_string(),
             model: model_name.clone(),
+            functions: crate::stats::CallNames::of(md, &[]),
             ..Default::default()
         };
         let timeout = spec.call_timeout.map(std::time::Duration::from_secs_f64);

@@ -36,12 +36,26 @@ pub struct ExportLink {
     pub to: String,
 }
 
-/// An exported output: `name` reads the column `from`.
+/// An exported output: `name` reads the column `from`. Without `name` the
+/// output is named as the column (`chassis.position`), so that results of
+/// the exported FMU compare with those of the system by column name.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExportSource {
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub name: String,
     pub from: String,
+}
+
+impl ExportSource {
+    /// The exported output's name: `name`, else the column `from`.
+    pub fn name(&self) -> &str {
+        if self.name.is_empty() {
+            &self.from
+        } else {
+            &self.name
+        }
+    }
 }
 
 impl ExportSpec {
@@ -59,7 +73,7 @@ impl ExportSpec {
         let outputs = self
             .outputs
             .iter()
-            .map(|o| ("output", o.name.as_str(), o.from.as_str()));
+            .map(|o| ("output", o.name(), o.from.as_str()));
         parameters.chain(inputs).chain(outputs)
     }
 }

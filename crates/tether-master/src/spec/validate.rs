@@ -15,13 +15,22 @@ impl SystemSpec {
             path: path.to_path_buf(),
             reason,
         };
+        let unreadable = |e: std::io::Error| {
+            fail(if e.kind() == std::io::ErrorKind::NotFound {
+                // Where it was looked for, and a name that differs in case.
+                let place = tether_fmi::paths::Missing::new(path, None);
+                format!("cannot access {}: {e}{}", place.located(), place.hint())
+            } else {
+                e.to_string()
+            })
+        };
         // A FIFO or a device is refused before it is opened: the open of a
         // FIFO waits for a writer that may never come.
-        let metadata = std::fs::metadata(path).map_err(|e| fail(e.to_string()))?;
+        let metadata = std::fs::metadata(path).map_err(unreadable)?;
         if let Some(kind) = tether_fmi::special_file_kind(&metadata) {
             return Err(fail(format!("is a {kind}, not a regular file")));
         }
-        let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+        let text = std::fs::read_to_string(path).map_err(unreadable)?;
         let mut spec = SystemSpec::from_toml(&text).map_err(|e| match e {
             MasterError::SystemFile { reason, .. } => MasterError::SystemFile {
                 path: path.to_path_buf(),

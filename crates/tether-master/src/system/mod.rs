@@ -10,6 +10,8 @@
 pub(crate) mod feedthrough;
 pub(crate) mod resolve;
 
+use std::path::Path;
+
 use crate::coupling::touched::{Touched, MAX_INTERFACE_ENTRIES};
 use crate::coupling::Coupling;
 use crate::polynomial::Taylor;
@@ -53,6 +55,7 @@ impl System {
             .map(|instance| {
                 let experiment = (spec.experiment.start, stop, spec.experiment.tolerance);
                 Slave::instantiate(instance, &mut opened, order, experiment)
+                    .map_err(|e| against_system_folder(e, spec, &instance.fmu))
             })
             .collect::<Result<Vec<_>, _>>()?;
         let coupling = Coupling::build(spec, &mut slaves, method, order)?;
@@ -209,6 +212,37 @@ pub(crate) fn perturbation_groups(owners: &[Vec<usize>], instances: usize) -> Ve
         }
     }
     groups
+}
+
+/// An FMU that is not there, said as the system file has it: the path as
+/// written, resolved against the system file's folder (`from_file` joined
+/// them; a path the file gives absolute stays as it is).
+fn against_system_folder(e: MasterError, spec: &SystemSpec, fmu: &Path) -> MasterError {
+    let MasterError::InstanceFmu {
+        instance,
+        error: tether_fmi::Error::Missing { place, source },
+    } = e
+    else {
+        return e;
+    };
+    let folder = spec
+        .source
+        .as_deref()
+        .map(|file| file.parent().unwrap_or(Path::new("")));
+    let place = match folder {
+        Some(folder) if !fmu.is_absolute() || fmu.starts_with(folder) => {
+            let written = fmu.strip_prefix(folder).unwrap_or(fmu);
+            Box::new(tether_fmi::paths::Missing::new(
+                written,
+                Some((folder, "the system file's folder")),
+            ))
+        }
+        _ => place,
+    };
+    MasterError::InstanceFmu {
+        instance,
+        error: tether_fmi::Error::Missing { place, source },
+    }
 }
 
 #[cfg(test)]

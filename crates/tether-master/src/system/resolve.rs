@@ -12,6 +12,7 @@ use crate::expr::LinearExpr;
 use crate::slave::{CoupledOutput, Slave};
 use crate::spec::names::{describe, find_instance, Element};
 use crate::spec::{ConstraintSpec, InitialMultiplier, JointInitial, JointSpec, SystemSpec};
+use crate::units::{self, Dimension};
 use crate::{MasterError, Method};
 
 /// A port found while resolving joints: slave, input value reference, column
@@ -144,7 +145,18 @@ impl Coupling {
                 "a consistent initial multiplier (or give `initial = <value>`)".into(),
             )?;
         }
-        drive_inputs(&owner, &parse("drives", &spec.drives)?, m, slaves)?;
+        let drives = parse("drives", &spec.drives)?;
+        drive_inputs(&owner, &drives, m, slaves)?;
+        let mut levels = vec![("position", parse("position", &spec.position)?)];
+        for (level, text) in [
+            ("velocity", &spec.velocity),
+            ("acceleration", &spec.acceleration),
+        ] {
+            if let Some(text) = text {
+                levels.push((level, parse(level, text)?));
+            }
+        }
+        check_units(&spec.name, &levels, &drives, slaves)?;
         self.constraints.push(Constraint {
             position,
             velocity,
@@ -504,51 +516,27 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                 needed_by,
             };
         let md = slave.fmu.model_description();
-        let fmi3 = md.standard == tether_fmi::FmiStandard::Fmi3;
-        if order > 0 && fmi3 {
-            // FMI 3.0 has no input derivatives: a polynomial input goes through
-            // intermediate update, for inputs that may be set there.
-            if !slave.caps.can_interpolate_inputs {
-                return Err(capability(
-                    "providesIntermediateUpdate (FMI 3.0 has no input derivatives: a polynomial input goes through intermediate update)",
-                    format!("coupling polynomials of degree k = {order} (use order = 0)"),
-                ));
+        if order > 0 {
+            // One plain reason per refusal, the sentence `tether info` prints
+            // (FMI 3.0 has no input derivatives: a polynomial goes through
+            // intermediate update, into scalar inputs declared for it).
+            let refusal = |reason: String| MasterError::NoPolynomialInput {
+                instance: slave.name.clone(),
+                model: slave.model_name.clone(),
+                needs: crate::polynomial_inputs::NEEDS,
+                reason,
+            };
+            if let Some(reason) = crate::polynomial_inputs::fmu_refusal(md) {
+                return Err(refusal(reason));
             }
-            if let Some(input) = slave.coupled.inputs.iter().find(|i| i.count > 1) {
-                let name = md
-                    .variable_by_vr(input.vr)
-                    .map_or_else(|| input.vr.to_string(), |v| v.name.clone());
-                return Err(capability(
-                    "polynomial inputs into array elements (an array input takes values only; Tether does not pass a polynomial into an element)",
-                    format!(
-                        "coupling polynomials of degree k = {order} into an element of '{name}' (use order = 0)"
-                    ),
-                ));
+            for input in &slave.coupled.inputs {
+                let Some(var) = md.variable_by_vr(input.vr) else {
+                    continue;
+                };
+                if let Some(reason) = crate::polynomial_inputs::input_refusal(md, var) {
+                    return Err(refusal(reason));
+                }
             }
-            if let Some(input) = slave
-                .coupled
-                .inputs
-                .iter()
-                .find(|i| !slave.interpolates(i.vr))
-            {
-                let name = md
-                    .model_variables
-                    .iter()
-                    .find(|v| v.value_reference == input.vr)
-                    .map_or_else(|| input.vr.to_string(), |v| v.name.clone());
-                return Err(capability(
-                    "intermediateUpdate=\"true\" on its coupled inputs (FMI 3.0: only those may be set in intermediate update)",
-                    format!(
-                        "coupling polynomials of degree k = {order} into input '{name}' (use order = 0)"
-                    ),
-                ));
-            }
-        }
-        if order > 0 && !slave.caps.can_interpolate_inputs {
-            return Err(capability(
-                "canInterpolateInputs",
-                format!("coupling polynomials of degree k = {order} (use order = 0)"),
-            ));
         }
         if method.needs_rollback() && !slave.caps.can_get_and_set_state {
             return Err(capability(
@@ -644,6 +632,126 @@ fn named(
         });
     }
     Ok((var.clone(), element))
+}
+
+/// A term's unit for the unit check: its text (`'m'`, `'m' per s` for a
+/// derivative) and dimension, or `None` where it is not compared (no or an
+/// unknown unit, or a coefficient other than ±1, which may carry a unit).
+fn term_unit(
+    owner: &str,
+    level: &str,
+    term: &crate::expr::Term,
+    slaves: &[Slave],
+) -> Result<Option<(String, Dimension)>, MasterError> {
+    if term.coefficient.abs() != 1.0 {
+        return Ok(None);
+    }
+    let slave = &slaves[find_slave(owner, &term.instance, slaves)?];
+    let (var, _) = named(slave, &format!("{owner}, {level}"), &term.variable)?;
+    let Some((name, Some(dimension))) = units::unit_of(slave.fmu.model_description(), &var) else {
+        return Ok(None);
+    };
+    Ok(Some(match term.derivative_order {
+        0 => (format!("'{name}'"), dimension),
+        1 => (format!("'{name}' per s"), dimension.per_second(1)),
+        n => (format!("'{name}' per s{n}"), dimension.per_second(n)),
+    }))
+}
+
+/// Units of a constraint, before the first step, where the FMUs declare them:
+/// the terms of each level in one unit, each level the previous one's per
+/// second, and drives into forces or torques, not kinematic inputs. Terms
+/// with a coefficient other than ±1 are not compared (it may convert).
+fn check_units(
+    constraint: &str,
+    levels: &[(&'static str, LinearExpr)],
+    drives: &LinearExpr,
+    slaves: &[Slave],
+) -> Result<(), MasterError> {
+    let owner = format!("constraint '{constraint}'");
+    let fail = |level: &'static str, detail: String| MasterError::Units {
+        constraint: constraint.to_string(),
+        level,
+        detail,
+    };
+    // The first compared term of the previous level, and its order.
+    let mut previous: Option<(&'static str, String, String, Dimension, u32)> = None;
+    for (level, expr) in levels {
+        let order: u32 = match *level {
+            "position" => 0,
+            "velocity" => 1,
+            _ => 2,
+        };
+        let mut first: Option<(String, String, Dimension)> = None;
+        for term in &expr.terms {
+            let Some((text, dim)) = term_unit(&owner, level, term, slaves)? else {
+                continue;
+            };
+            match &first {
+                None => first = Some((term.to_string(), text, dim)),
+                Some((other, other_text, other_dim)) if !other_dim.same(&dim) => {
+                    return Err(fail(
+                        level,
+                        format!(
+                            "{other} is in {other_text} and {term} in {text}: the terms of a \
+                             level need one unit (a coefficient converts)"
+                        ),
+                    ));
+                }
+                Some(_) => {}
+            }
+        }
+        if let (Some((term, text, dim)), Some((prev_level, prev_term, prev_text, prev_dim, n))) =
+            (&first, &previous)
+        {
+            if !prev_dim.per_second(order - n).same(dim) {
+                return Err(fail(
+                    level,
+                    format!(
+                        "{term} is in {text}; the {level} level needs the {prev_level} \
+                         level's unit per {} ({prev_term} is in {prev_text})",
+                        if order - n == 2 {
+                            "second squared"
+                        } else {
+                            "second"
+                        }
+                    ),
+                ));
+            }
+        }
+        if let Some((term, text, dim)) = first {
+            previous = Some((level, term, text, dim, order));
+        }
+    }
+    let mut first: Option<(String, String, Dimension)> = None;
+    for term in &drives.terms {
+        let Some((text, dim)) = term_unit(&owner, "drives", term, slaves)? else {
+            continue;
+        };
+        if dim.is_kinematic() {
+            return Err(fail(
+                "drives",
+                format!(
+                    "{term} is in {text}: the multiplier drives force or torque inputs, \
+                     not positions, velocities or accelerations"
+                ),
+            ));
+        }
+        match &first {
+            None => first = Some((term.to_string(), text, dim)),
+            Some((other, other_text, other_dim)) if !other_dim.same(&dim) => {
+                return Err(fail(
+                    "drives",
+                    format!(
+                        "{other} is in {other_text} and {term} in {text}: the inputs a \
+                         multiplier drives need one unit (a coefficient converts)"
+                    ),
+                ));
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
 }
 
 fn find_slave(owner: &str, instance: &str, slaves: &[Slave]) -> Result<usize, MasterError> {

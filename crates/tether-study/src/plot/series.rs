@@ -19,15 +19,82 @@ pub struct SeriesPlot<'a> {
     pub units: Vec<(String, String)>,
 }
 
+/// The figure's width in pixels.
+const WIDTH: u32 = 960;
+
+/// Title text size in pixels.
+const TITLE_SIZE: f64 = 24.0;
+
+/// Height of a title line after the first.
+const TITLE_LINE: u32 = 30;
+
+impl SeriesPlot<'_> {
+    /// The title in lines that fit the figure's width (with a margin),
+    /// broken after commas where it can, else at spaces; one line when it
+    /// fits.
+    fn title_lines(&self) -> Vec<String> {
+        let font = ("sans-serif", TITLE_SIZE).into_font();
+        let fits = |text: &str| font.box_size(text).map_or(true, |(w, _)| w + 40 <= WIDTH);
+        if fits(&self.title) {
+            return vec![self.title.clone()];
+        }
+        // Pieces that end after a comma (or a space where there is none).
+        let pieces: Vec<String> = if self.title.contains(", ") {
+            self.title
+                .split_inclusive(", ")
+                .map(str::to_string)
+                .collect()
+        } else {
+            self.title
+                .split_inclusive(' ')
+                .map(str::to_string)
+                .collect()
+        };
+        let mut lines: Vec<String> = vec![String::new()];
+        for piece in pieces {
+            let last = lines.last_mut().expect("a line");
+            let joined = format!("{last}{piece}");
+            if last.is_empty() || fits(joined.trim_end()) {
+                *last = joined;
+            } else {
+                lines.push(piece);
+            }
+        }
+        lines.iter().map(|l| l.trim_end().to_string()).collect()
+    }
+}
+
 impl Figure for SeriesPlot<'_> {
     fn size(&self) -> (u32, u32) {
-        (960, 70 + 230 * self.columns.len().max(1) as u32)
+        let extra = TITLE_LINE * (self.title_lines().len() as u32 - 1);
+        (WIDTH, 70 + extra + 230 * self.columns.len().max(1) as u32)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
-        let root = root
-            .titled(&self.title, ("sans-serif", 24))
-            .map_err(text_error)?;
+        let lines = self.title_lines();
+        let root = if lines.len() == 1 {
+            root.titled(&self.title, ("sans-serif", TITLE_SIZE))
+                .map_err(text_error)?
+        } else {
+            // A long title on several centred lines, none clipped.
+            let height = 14 + TITLE_LINE * lines.len() as u32;
+            let (top, rest) = root.split_vertically(height);
+            let style = ("sans-serif", TITLE_SIZE).into_font().color(&BLACK).pos(
+                plotters::style::text_anchor::Pos::new(
+                    plotters::style::text_anchor::HPos::Center,
+                    plotters::style::text_anchor::VPos::Top,
+                ),
+            );
+            for (i, line) in lines.iter().enumerate() {
+                top.draw(&Text::new(
+                    line.clone(),
+                    ((WIDTH / 2) as i32, 8 + (TITLE_LINE as i32) * i as i32),
+                    style.clone(),
+                ))
+                .map_err(text_error)?;
+            }
+            rest
+        };
         let panels = root.split_evenly((self.columns.len().max(1), 1));
         // Incomplete runs (diverged) would dwarf the others: ranges come from
         // the completed runs when there are any.
@@ -96,6 +163,10 @@ impl Figure for SeriesPlot<'_> {
                     .map_err(text_error)?;
                 if p == 0 {
                     let label = match &table.incomplete {
+                        Some(_) if label.is_empty() => format!(
+                            "stopped at t = {}",
+                            tick(table.times.last().unwrap_or(&0.0))
+                        ),
                         Some(_) => format!(
                             "{label} (stopped at t = {})",
                             tick(table.times.last().unwrap_or(&0.0))
@@ -107,7 +178,10 @@ impl Figure for SeriesPlot<'_> {
                     });
                 }
             }
-            if p == 0 && (self.runs.len() > 1 || !self.runs[0].0.is_empty()) {
+            // The legend names the runs; one unnamed run (the title names
+            // it) gets one only to say where it stopped.
+            let stopped = self.runs.len() == 1 && self.runs[0].1.incomplete.is_some();
+            if p == 0 && (self.runs.len() > 1 || !self.runs[0].0.is_empty() || stopped) {
                 chart
                     .configure_series_labels()
                     .position(SeriesLabelPosition::UpperRight)
@@ -119,5 +193,51 @@ impl Figure for SeriesPlot<'_> {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plot(title: &str) -> SeriesPlot<'static> {
+        SeriesPlot {
+            title: title.into(),
+            columns: vec!["x".into()],
+            runs: Vec::new(),
+            units: Vec::new(),
+        }
+    }
+
+    /// The titles of the paper's time-series figures fit on one line (their
+    /// figures are drawn as before); a longer one is broken after commas.
+    #[test]
+    fn titles_fit_the_figure() {
+        super::super::register_font();
+        let root =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/figures/studies");
+        for entry in std::fs::read_dir(root).unwrap() {
+            let text = std::fs::read_to_string(entry.unwrap().path()).unwrap();
+            if !text.contains("[series]") {
+                continue;
+            }
+            let title = text
+                .lines()
+                .find_map(|l| l.strip_prefix("title = \""))
+                .and_then(|t| t.strip_suffix('"'))
+                .unwrap();
+            assert_eq!(plot(title).title_lines(), [title]);
+        }
+        let long = "controlled two-mass oscillator: baumgarte (index 1, beta = 2e-3, \
+                    gamma = 1e-6), signals: Jacobi, k = 1, H = 0.001";
+        let lines = plot(long).title_lines();
+        assert_eq!(
+            lines,
+            [
+                "controlled two-mass oscillator: baumgarte (index 1, beta = 2e-3, gamma = 1e-6),",
+                "signals: Jacobi, k = 1, H = 0.001",
+            ]
+        );
+        assert_eq!(plot(long).size().1, 70 + TITLE_LINE + 230);
     }
 }
