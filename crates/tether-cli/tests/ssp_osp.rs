@@ -132,7 +132,7 @@ fn a_step_size_hint_is_the_instances_step() {
     let out = tether(&["run", ".", "--out", "out.csv"], d);
     assert!(out.status.success(), "{}", stderr(&out));
     let text = stderr(&out);
-    let notes: Vec<&str> = text.lines().filter(|l| l.starts_with("note:")).collect();
+    let notes = notes(&text);
     assert_eq!(notes.len(), 1, "{text}");
     assert!(
         notes[0].starts_with("note: SystemStructure.ssd:")
@@ -162,11 +162,7 @@ fn a_step_size_hint_of_h_is_accepted_and_one_below_is_noted() {
     system(d, ALGORITHM, r#"<osp:StepSizeHint value="4e-4"/>"#);
     let out = tether(&["run", ".", "--out", "out.csv"], d);
     assert!(out.status.success(), "{}", stderr(&out));
-    let notes: Vec<String> = stderr(&out)
-        .lines()
-        .filter(|l| l.starts_with("note:"))
-        .map(str::to_string)
-        .collect();
+    let notes = notes(&stderr(&out));
     assert_eq!(notes.len(), 1, "{}", stderr(&out));
     assert!(
         notes[0].starts_with("note: SystemStructure.ssd:")
@@ -188,13 +184,9 @@ fn other_osp_annotations_are_ignored_with_one_note() {
     system(d, &experiment, r#"<osp:Decoration color="red"/>"#);
     let out = tether(&["run", ".", "--out", "out.csv"], d);
     assert!(out.status.success(), "{}", stderr(&out));
-    let notes: Vec<&str> = std::str::from_utf8(&out.stderr)
-        .unwrap()
-        .lines()
-        .filter(|l| l.starts_with("note:"))
-        .collect();
+    let notes = notes(&stderr(&out));
     assert_eq!(notes.len(), 1, "{}", stderr(&out));
-    let line = notes[0];
+    let line = &notes[0];
     assert!(
         line.starts_with(
             "note: SystemStructure.ssd: OSP annotations Tether does not use, ignored: <osp:Decoration> (line "
@@ -261,4 +253,24 @@ fn ssp_export_writes_the_osp_base_step() {
         std::fs::read(d.join("again.csv")).unwrap(),
         std::fs::read(d.join("toml.csv")).unwrap()
     );
+}
+
+/// The CLI's notes, each with its wrapped lines (indented, docs/run-summary.md)
+/// joined back into one.
+fn notes(text: &str) -> Vec<String> {
+    let mut notes: Vec<String> = Vec::new();
+    let mut in_note = false;
+    for line in text.lines() {
+        if line.starts_with("note:") {
+            notes.push(line.to_string());
+            in_note = true;
+        } else if in_note && line.starts_with("  ") {
+            let last = notes.last_mut().expect("a note before its continuation");
+            last.push(' ');
+            last.push_str(line.trim_start());
+        } else {
+            in_note = false;
+        }
+    }
+    notes
 }
