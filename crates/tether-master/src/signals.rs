@@ -94,8 +94,9 @@ pub(crate) struct Signals {
     /// slot in `history` (after the links' own) of the sender's values at
     /// the receiver's communication points `[y_M, y_{M−n}, y_{M−2n}]`.
     coarse: Vec<Option<usize>>,
-    /// T_0 and H, for the steps of instances with their own step.
-    grid: (f64, f64),
+    /// T_0 and H, for the steps of instances with their own step; `None`
+    /// when none has one (the macro step then skips them at no cost).
+    own_steps: Option<(f64, f64)>,
 }
 
 impl Signals {
@@ -174,7 +175,10 @@ impl Signals {
             loops,
             history: vec![[0.0; 3]; slots],
             coarse,
-            grid: (spec.experiment.start, spec.experiment.step),
+            own_steps: slaves
+                .iter()
+                .any(|s| s.coupled.decimation > 1)
+                .then_some((spec.experiment.start, spec.experiment.step)),
             next: vec![0.0; links.len()],
             links,
             order: spec.coupling.order,
@@ -599,7 +603,10 @@ impl Signals {
     /// each with the values at T_{N+1} of the senders stepped before it.
     pub fn send(&mut self, slaves: &mut [Slave], at: StepAt) -> Result<(), MasterError> {
         if self.links.is_empty() {
-            return self.step_own(slaves, at);
+            return match self.own_steps {
+                None => Ok(()),
+                Some(grid) => self.step_own(slaves, at, grid),
+            };
         }
         self.fresh.fill(false);
         for i in 0..self.sequence.len() {
@@ -648,14 +655,23 @@ impl Signals {
             };
             self.set(slaves, l, poly)?;
         }
-        self.step_own(slaves, at)
+        match self.own_steps {
+            None => Ok(()),
+            Some(grid) => self.step_own(slaves, at, grid),
+        }
     }
 
     /// The instances with their own communication step n·H whose step
     /// ends at T_{N+1}: each steps from T_{N+1−n} over n·H (its outputs
     /// held for the others until then).
-    fn step_own(&mut self, slaves: &mut [Slave], at: StepAt) -> Result<(), MasterError> {
-        let (start, h) = self.grid;
+    /// Out of line: systems without own steps skip it before the call.
+    #[inline(never)]
+    fn step_own(
+        &mut self,
+        slaves: &mut [Slave],
+        at: StepAt,
+        (start, h): (f64, f64),
+    ) -> Result<(), MasterError> {
         for slave in slaves.iter_mut().filter(|s| s.coupled.decimation > 1) {
             let n = slave.coupled.decimation;
             if (at.n + 1).is_multiple_of(n) {
