@@ -87,31 +87,6 @@ enum Command {
     Host(host::Args),
 }
 
-/// One log record as a line for people: Tether's own as `warning: …`
-/// (`error:`, `info:`, `debug:`, `trace:`), without a Rust module path; an
-/// FMU's messages (target `fmu::<instance>`) as `[WARN  fmu::mass1] …`,
-/// naming the instance.
-fn log_line(buf: &mut env_logger::fmt::Formatter, record: &log::Record<'_>) -> std::io::Result<()> {
-    use std::io::Write as _;
-    if record.target().starts_with("fmu::") {
-        return writeln!(
-            buf,
-            "[{:<5} {}] {}",
-            record.level(),
-            record.target(),
-            record.args()
-        );
-    }
-    let word = match record.level() {
-        log::Level::Error => "error",
-        log::Level::Warn => "warning",
-        log::Level::Info => "info",
-        log::Level::Debug => "debug",
-        log::Level::Trace => "trace",
-    };
-    writeln!(buf, "{word}: {}", record.args())
-}
-
 /// `eprintln!` that never panics: a closed or full stderr (`2>/dev/full`) is no
 /// reason to fail a run, nor to panic.
 #[macro_export]
@@ -221,7 +196,10 @@ fn main() -> ExitCode {
         ));
     }
     tether_fmi::set_rate_limit(cli.fmu_log_limit.0);
-    logger.parse_env("TETHER_LOG").format(log_line).init();
+    logger
+        .parse_env("TETHER_LOG")
+        .format(tether_fmi_host::log_line)
+        .init();
     let result = match cli.command {
         Command::Info(args) => info::main(args),
         Command::Simulate(args) => simulate::main(args),

@@ -500,6 +500,34 @@ fn level(code: u8) -> log::LevelFilter {
         .unwrap_or(log::LevelFilter::Warn)
 }
 
+/// One log record as a line for people, in `tether` and its host processes
+/// alike: Tether's own as `warning: …` (`error:`, `info:`, `debug:`,
+/// `trace:`), without a Rust module path; an FMU's messages (target
+/// `fmu::<instance>`) as `[WARN  fmu::mass1] …`, naming the instance.
+pub fn log_line(
+    buf: &mut env_logger::fmt::Formatter,
+    record: &log::Record<'_>,
+) -> std::io::Result<()> {
+    use std::io::Write as _;
+    if record.target().starts_with("fmu::") {
+        return writeln!(
+            buf,
+            "[{:<5} {}] {}",
+            record.level(),
+            record.target(),
+            record.args()
+        );
+    }
+    let word = match record.level() {
+        log::Level::Error => "error",
+        log::Level::Warn => "warning",
+        log::Level::Info => "info",
+        log::Level::Debug => "debug",
+        log::Level::Trace => "trace",
+    };
+    writeln!(buf, "{word}: {}", record.args())
+}
+
 /// Logs like the `tether` binary: FMU messages at the master's level for
 /// them, as `[WARN  fmu::<instance>] …`; its own as `warning: …`, without a
 /// Rust module path. A model description's quirks are the master's to say
@@ -509,25 +537,6 @@ fn init_logger(max: log::LevelFilter, fmu: log::LevelFilter) {
         .filter_level(max)
         .filter_module("fmu", fmu)
         .filter_module(tether_fmi::QUIRKS_TARGET, log::LevelFilter::Off)
-        .format(|buf, record| {
-            use std::io::Write as _;
-            if record.target().starts_with("fmu::") {
-                return writeln!(
-                    buf,
-                    "[{:<5} {}] {}",
-                    record.level(),
-                    record.target(),
-                    record.args()
-                );
-            }
-            let word = match record.level() {
-                log::Level::Error => "error",
-                log::Level::Warn => "warning",
-                log::Level::Info => "info",
-                log::Level::Debug => "debug",
-                log::Level::Trace => "trace",
-            };
-            writeln!(buf, "{word}: {}", record.args())
-        })
+        .format(log_line)
         .try_init();
 }
