@@ -23,7 +23,6 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use tether_master::{MemoryRecorder, Simulation};
 use tether_tests::fmpy::workspace_root;
 
 /// Every output of both FMUs (all Real).
@@ -112,23 +111,7 @@ fn fmpy(py: &Path, ssp_dir: &Path, h: f64, times: &str) -> Vec<Vec<f64>> {
 /// annotation's).
 fn tether(ssp_dir: &Path, step: Option<f64>) -> Vec<Vec<f64>> {
     let read = tether_ssp::read(ssp_dir, step, None).unwrap();
-    let mut sim = Simulation::new(&read.spec).unwrap();
-    let mut rec = MemoryRecorder::default();
-    sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
-    let idx: Vec<usize> = COLUMNS
-        .iter()
-        .map(|c| rec.columns.iter().position(|n| n == c).unwrap())
-        .collect();
-    rec.times
-        .iter()
-        .zip(&rec.rows)
-        .skip(1)
-        .map(|(t, row)| {
-            std::iter::once(*t)
-                .chain(idx.iter().map(|&i| row[i]))
-                .collect()
-        })
-        .collect()
+    tether_tests::tools::tether_rows(&read.spec, &COLUMNS)
 }
 
 /// The largest |a − b| / max(1, |b|) over every output and point, the

@@ -13,7 +13,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use tether_master::{MemoryRecorder, Simulation, SystemSpec};
+use tether_master::SystemSpec;
 use tether_tests::fmpy::workspace_root;
 
 fn fmu(name: &str) -> std::path::PathBuf {
@@ -57,23 +57,7 @@ fn libcosim(
 }
 
 fn tether(spec: &SystemSpec, columns: &[&str]) -> Vec<Vec<f64>> {
-    let mut sim = Simulation::new(spec).unwrap();
-    let mut rec = MemoryRecorder::default();
-    sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
-    let idx: Vec<usize> = columns
-        .iter()
-        .map(|c| rec.columns.iter().position(|n| n == c).unwrap())
-        .collect();
-    rec.times
-        .iter()
-        .zip(&rec.rows)
-        .skip(1)
-        .map(|(t, row)| {
-            std::iter::once(*t)
-                .chain(idx.iter().map(|&i| row[i]))
-                .collect()
-        })
-        .collect()
+    tether_tests::tools::tether_rows(spec, columns)
 }
 
 fn compare(ours: &[Vec<f64>], theirs: &[Vec<f64>]) -> f64 {

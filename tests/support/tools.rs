@@ -28,3 +28,25 @@ pub fn fmpy() -> Option<PathBuf> {
 pub fn libcosimpy() -> Option<PathBuf> {
     needed("libcosimpy", crate::fmpy::libcosim_python())
 }
+
+/// Tether's rows of `spec` after every step (the point T_0 left out, as
+/// libcosim's observer records it): time, then `columns`.
+pub fn tether_rows(spec: &tether_master::SystemSpec, columns: &[&str]) -> Vec<Vec<f64>> {
+    let mut sim = tether_master::Simulation::new(spec).unwrap();
+    let mut rec = tether_master::MemoryRecorder::default();
+    sim.run(&mut [&mut rec], &mut |_, _| {}).unwrap();
+    let idx: Vec<usize> = columns
+        .iter()
+        .map(|c| rec.columns.iter().position(|n| n == c).unwrap())
+        .collect();
+    rec.times
+        .iter()
+        .zip(&rec.rows)
+        .skip(1)
+        .map(|(t, row)| {
+            std::iter::once(*t)
+                .chain(idx.iter().map(|&i| row[i]))
+                .collect()
+        })
+        .collect()
+}

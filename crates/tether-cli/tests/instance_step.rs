@@ -4,34 +4,14 @@
 //! between; what cannot have its own step is refused in one line. Against
 //! libcosim's decimation: tests/libcosim_quarter_truck.rs.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn tether(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tether"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run tether")
-}
+use std::path::{Path, PathBuf};
+
+use common::{read_csv as csv, tether};
 
 fn fmu(name: &str) -> PathBuf {
     tether_fmu_build::workspace_fmu(name).expect("package the workspace FMU")
-}
-
-fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::to_string)
-        .collect();
-    let rows = lines
-        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
-        .collect();
-    (header, rows)
 }
 
 fn column(header: &[String], name: &str) -> usize {
