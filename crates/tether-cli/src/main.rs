@@ -1,7 +1,5 @@
 //! `tether`: couple FMI 2.0 co-simulation FMUs through algebraic constraints.
 
-use std::process::ExitCode;
-
 use clap::{Parser, Subcommand};
 
 mod columns;
@@ -145,7 +143,17 @@ fn one_line(e: &anyhow::Error) -> String {
     line.replace('\n', " ")
 }
 
-fn main() -> ExitCode {
+/// Runs the command, then ends the process with its exit code
+/// ([`tether_fmi::exit_hook::leave`]: once the command has returned, every
+/// instance is freed, every file closed and every extraction folder removed;
+/// what the FMU libraries still loaded would do at process exit is skipped).
+fn main() {
+    let code = command();
+    tether_fmi::exit_hook::leave(code)
+}
+
+/// The command line's command; its exit code.
+fn command() -> u8 {
     // A file size limit (`ulimit -f`) reached is a write error (EFBIG) like a
     // full disk, handled by the writer (whole rows, trailer, cleanup), not a
     // signal that kills the process mid-row.
@@ -159,7 +167,7 @@ fn main() -> ExitCode {
         .and_then(std::path::Path::file_name)
         .is_some_and(|n| n == tether_fmi::remote::HOST_NAME);
     if as_host || std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
-        return tether_fmi_host::serve_stdin();
+        tether_fmi_host::serve_stdin();
     }
     // Isolated instances run in `tether __fmi-host`: one file to install.
     if let Ok(exe) = std::env::current_exe() {
@@ -214,7 +222,7 @@ fn main() -> ExitCode {
         Command::Host(args) => host::main(args),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => 0,
         Err(e) => {
             let message = one_line(&e);
             say!("error: {message}");
@@ -225,9 +233,9 @@ fn main() -> ExitCode {
                 )
             });
             if interrupted {
-                ExitCode::from(interrupt::EXIT_CODE)
+                interrupt::EXIT_CODE
             } else {
-                ExitCode::FAILURE
+                1
             }
         }
     }

@@ -36,6 +36,38 @@ fn without_a_fault_the_results_are_the_oscillators() {
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
 }
 
+/// An FMU library that stays loaded and aborts in its destructor at process
+/// exit (mode 15, as pythonfmu3's runtime may after a finished run): the run
+/// and its host processes end once every instance is freed and every file
+/// written, without the libraries' teardown, so a finished run exits 0 with the
+/// same results as mode 0; in process and isolated.
+#[test]
+fn an_fmu_that_aborts_at_process_exit_does_not_fail_a_finished_run() {
+    let s = Scratch::new();
+    let clean = s.run(&system(s.path(), 0, ""), "clean.csv", &["--quiet"]);
+    assert!(clean.status.success(), "{}", stderr(&clean));
+    for isolate in [false, true] {
+        let sys = system(s.path(), 15, "");
+        let flags: &[&str] = if isolate {
+            &["--quiet", "--isolate"]
+        } else {
+            &["--quiet"]
+        };
+        let out = s.run(&sys, "out.csv", flags);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "isolate {isolate}: {}",
+            stderr(&out)
+        );
+        assert_eq!(stderr(&out), "", "isolate {isolate}");
+        let a = std::fs::read(s.path().join("out.csv")).unwrap();
+        let b = std::fs::read(s.path().join("clean.csv")).unwrap();
+        assert!(a == b, "isolate {isolate}: mode 15 changes the results");
+    }
+    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+}
+
 /// A segmentation fault inside `fmi2DoStep` at t = 0.5 kills the process (no
 /// handler can save it in-process), but the header and the rows accepted up to
 /// the last flush (FLUSH_INTERVAL, 0.2 s) are on disk: with each macro step

@@ -18,7 +18,6 @@ pub mod listen;
 use std::fs::File;
 use std::io::{BufReader, Write};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
@@ -30,17 +29,19 @@ use tether_fmi::{Error, FmiStandard, Fmu, FmuInstance, Inputs, InstanceOptions, 
 /// request it refused, a broken connection), said on its standard error.
 pub const GAVE_UP: u8 = 2;
 
-/// Serves the master on standard input and output; the exit code is 0 when
-/// the master closed the connection, 2 when standard input and output are not
-/// pipes or a message could not be read.
-pub fn serve_stdin() -> ExitCode {
-    match serve_standard_streams() {
-        Ok(()) => ExitCode::SUCCESS,
+/// Serves the master on standard input and output, then ends the process
+/// ([`tether_fmi::exit_hook::leave`], after the instance is freed and its FMU
+/// released): exit code 0 when the master closed the connection, 2 when
+/// standard input and output are not pipes or a message could not be read.
+pub fn serve_stdin() -> ! {
+    let code = match serve_standard_streams() {
+        Ok(()) => 0,
         Err(message) => {
             let _ = writeln!(std::io::stderr(), "error: tether-fmi-host: {message}");
-            ExitCode::from(GAVE_UP)
+            GAVE_UP
         }
-    }
+    };
+    tether_fmi::exit_hook::leave(code)
 }
 
 /// [`serve_stdin`] for hosts embedded in another program (the Python

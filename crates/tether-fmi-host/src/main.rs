@@ -2,6 +2,6 @@
 //! which started it with pipes as standard input and output
 //! (docs/reliability.md).
 
-fn main() -> std::process::ExitCode {
+fn main() {
     tether_fmi_host::serve_stdin()
 }

@@ -170,3 +170,26 @@ extern "C" fn on_abort(_signal: c_int) {
         libc::raise(libc::SIGABRT);
     }
 }
+
+/// Ends this process with `code`, once the program has finished its work and
+/// dropped what it owns (instances freed, libraries released, results files
+/// closed, extraction folders removed): standard output and error are flushed,
+/// then `_exit` ends the process without the C library's exit handlers and
+/// the destructors of shared libraries still loaded.
+///
+/// Those are the FMUs' own teardown, which FMI does not define and a finished
+/// run does not need; some run code that is unsafe at process exit. An FMU
+/// library that the loader cannot unload (a C++ library with unique symbols
+/// is pinned, `RTLD_NODELETE`) keeps its destructors for the exit, and
+/// pythonfmu3's runtime then resets a static that the exit handlers have
+/// already destroyed: a use after free that ends a finished run by SIGABRT
+/// now and then (docs/reliability.md, "After the run").
+pub fn leave(code: u8) -> ! {
+    use std::io::Write as _;
+    let _ = std::io::stdout().flush();
+    let _ = std::io::stderr().flush();
+    // SAFETY: _exit has no preconditions; everything this process must write
+    // is written (the buffered standard streams flushed just above, files
+    // closed by their owners before the call).
+    unsafe { libc::_exit(c_int::from(code)) }
+}

@@ -23,6 +23,7 @@ pub enum Mode {
     RestoreIgnored,
     RestoreNoisy,
     OutputsDrift,
+    AbortAtExit,
 }
 
 impl Mode {
@@ -44,6 +45,7 @@ impl Mode {
             12 => Mode::RestoreIgnored,
             13 => Mode::RestoreNoisy,
             14 => Mode::OutputsDrift,
+            15 => Mode::AbortAtExit,
             _ => return None,
         })
     }
@@ -108,6 +110,7 @@ impl Fault {
                 crate::crash()
             }
             Mode::Helper if t < self.at + 0.5 * h => crate::start_helper(),
+            Mode::AbortAtExit => crate::abort_at_exit(),
             Mode::Helper | Mode::RestoreIgnored | Mode::RestoreNoisy | Mode::OutputsDrift => {}
         }
     }

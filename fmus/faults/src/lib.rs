@@ -23,6 +23,8 @@
 //! | 11 | a helper process (`system("sleep 15 &")`), and the run goes on (only in the step from `at`) |
 //! | 12 | `fmi2SetFMUstate` restores the time but not the states (and returns fmi2OK) once the instance is at `at` or later |
 //! | 13 | once the instance is at `at` or later, `fmi2SetFMUstate` restores the states (the outputs read back are the saved ones) but the next `fmi2DoStep` starts from them plus a pseudo-random offset in [-`noise`, `noise`] (default 0.01): a restore that is not deterministic |
+//! | 14 | once the instance is at `at` or later, every read of the outputs adds `noise` to the position: outputs that change without a step |
+//! | 15 | the library pins itself in the process (`RTLD_NODELETE`, as the loader pins a C++ library with unique symbols) and its destructor calls `abort()` at process exit, as pythonfmu3's runtime may (after a finished run; only from the step at `at`) |
 //!
 //! `delay` (seconds, default 0) makes every `fmi2DoStep` sleep, in every mode, to
 //! slow a run down to wall-clock scales.
@@ -31,7 +33,8 @@
 //! ([`tether_fmu_kit::environment_logger`]) with a printf format of their own, as a
 //! C FMU logs.
 
-use std::ffi::{c_int, c_uint};
+use std::ffi::{c_int, c_uint, c_void};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use tether_fmu_kit::export_fmu;
 
@@ -102,6 +105,45 @@ fn fork_lingering_child() {
         }
     }
 }
+
+/// Mode 15 has struck: the library's destructor aborts.
+static ABORT_AT_EXIT: AtomicBool = AtomicBool::new(false);
+
+/// Mode 15: keeps this library loaded to the end of the process, as the loader
+/// keeps a C++ library whose unique symbols libstdc++ binds (pythonfmu3's
+/// runtime is one), so that its destructor runs at process exit, and makes that
+/// destructor abort, as a runtime that resets a static the exit handlers have
+/// destroyed may.
+fn abort_at_exit() {
+    ABORT_AT_EXIT.store(true, Ordering::SeqCst);
+    // SAFETY: dladdr with the address of a function of this library fills
+    // `info` with the path the library was loaded from (valid while it is
+    // loaded, as it is during this call); dlopen of that path with RTLD_NOLOAD
+    // only takes another reference to the loaded library, and RTLD_NODELETE
+    // keeps it loaded when every reference is dropped.
+    unsafe {
+        let mut info: libc::Dl_info = std::mem::zeroed();
+        let here = abort_at_exit as fn() as *const c_void;
+        if libc::dladdr(here, &mut info) != 0 && !info.dli_fname.is_null() {
+            libc::dlopen(
+                info.dli_fname,
+                libc::RTLD_NOW | libc::RTLD_NOLOAD | libc::RTLD_NODELETE,
+            );
+        }
+    }
+}
+
+/// The library's destructor (run by `dlclose`, or at process exit for a library
+/// still loaded): aborts once mode 15 has struck.
+extern "C" fn at_unload() {
+    if ABORT_AT_EXIT.load(Ordering::SeqCst) {
+        std::process::abort();
+    }
+}
+
+#[used]
+#[link_section = ".fini_array"]
+static AT_UNLOAD: extern "C" fn() = at_unload;
 
 /// A segmentation fault, as a buggy FMU has one: a write to an unmapped address.
 fn crash() -> ! {

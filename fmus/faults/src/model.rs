@@ -40,8 +40,8 @@ impl Model for Faults {
                 .description("Mode 13: the largest offset the fmi2DoStep after each fmi2SetFMUstate from `at` on adds to the states; mode 14: the drift of the position output per read"),
         ],
         integer_parameters: &[
-            Integer::new("mode", 0).min(0).max(14).description(
-                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise, 14 every read of the outputs adds noise (they change without a step)",
+            Integer::new("mode", 0).min(0).max(15).description(
+                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise, 14 every read of the outputs adds noise (they change without a step), 15 the library stays loaded and aborts at process exit",
             ),
             Integer::new("flood", 2000)
                 .min(0)

@@ -9,6 +9,7 @@ through them. Not meant to be started by hand.
 client=…)`` starts on a Dask worker."""
 
 import argparse
+import os
 import sys
 
 from tether import _tether
@@ -35,4 +36,10 @@ if __name__ == "__main__":
             _tether.serve_fmi_host()
     except RuntimeError as e:
         print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
+        sys.stderr.flush()
+        os._exit(2)
+    # The instance is freed and its FMU released: end without the exit-time
+    # teardown of FMU libraries still loaded (docs/reliability.md, "After the run").
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
