@@ -512,6 +512,7 @@ fn bench_recording() {
                 time: i as f64 * 1e-3,
                 values: &row,
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
         }
@@ -527,6 +528,7 @@ fn bench_recording() {
                 time: i as f64 * 1e-3,
                 values: &row,
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
         }

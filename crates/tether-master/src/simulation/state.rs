@@ -18,6 +18,9 @@ pub struct MasterState {
     history: Vec<[f64; 3]>,
     outputs: Vec<Vec<f64>>,
     recorded: Vec<Vec<f64>>,
+    /// The recorded String outputs (kept in memory, not among the bytes of
+    /// [`SystemState::write`]).
+    recorded_strings: Vec<Vec<(usize, String)>>,
     grid: Grid,
     health: Health,
     signals: (Vec<[f64; 3]>, Vec<f64>),
@@ -55,6 +58,11 @@ impl Simulation {
                 .iter()
                 .map(|s| s.recorded_values().to_vec())
                 .collect(),
+            recorded_strings: system
+                .slaves
+                .iter()
+                .map(|s| s.recorded_strings().to_vec())
+                .collect(),
             grid: self.grid.clone(),
             health: self.health.clone(),
             signals: self.signals.values(),
@@ -70,6 +78,9 @@ impl Simulation {
         system.outputs.clone_from(&state.outputs);
         for (slave, recorded) in system.slaves.iter_mut().zip(&state.recorded) {
             slave.set_recorded_values(recorded);
+        }
+        for (slave, strings) in system.slaves.iter_mut().zip(&state.recorded_strings) {
+            slave.set_recorded_strings(strings);
         }
         self.grid.clone_from(&state.grid);
         self.health.clone_from(&state.health);

@@ -1,8 +1,9 @@
 //! The outputs an instance records at accepted points: the Real outputs,
-//! then the Integer (and Enumeration) ones, then the Boolean ones, each in the
-//! order of the model description, an array one column per element.
+//! then the Integer (and Enumeration) ones, then the Boolean ones, then the
+//! String ones, each in the order of the model description, an array one
+//! column per element.
 
-use tether_fmi::{BaseType, Causality, Int, ModelDescription};
+use tether_fmi::{BaseType, Causality, Int, ModelDescription, ValueType};
 
 use super::{Run, Slave};
 use crate::observer::integer_value;
@@ -23,6 +24,14 @@ pub(super) struct Recorded {
     /// Boolean outputs, recorded after the Integer ones (as 0 and 1).
     pub bools: Vec<u32>,
     pub bool_buf: Vec<bool>,
+    /// String outputs, recorded after the Boolean ones (0 in `values`, the
+    /// text in `strings`).
+    pub strs: Vec<u32>,
+    /// The String outputs after the latest read, by index in `values`
+    /// (empty, and never touched, without String outputs).
+    pub strings: Vec<(usize, String)>,
+    /// The buffer `strs` is read into.
+    pub str_buf: Vec<String>,
     /// Recorded outputs after the latest read.
     pub values: Vec<f64>,
     /// The integers among them that a float rounds, exactly (by index).
@@ -32,22 +41,31 @@ pub(super) struct Recorded {
 impl Recorded {
     /// The recorded outputs of instance `instance` of `md` and their columns:
     /// the Real outputs, then the Integer (and Enumeration) ones, then the
-    /// Boolean ones, each in the order of the model description, an array one
-    /// column per element (`inst.y[1]`, sized as `arrays` makes it).
+    /// Boolean ones, then the String ones, each in the order of the model
+    /// description, an array one column per element (`inst.y[1]`, sized as
+    /// `arrays` makes it).
     pub(super) fn new(
         md: &ModelDescription,
         arrays: &Arrays,
         instance: &str,
     ) -> Result<Recorded, MasterError> {
         let mut recorded = Recorded::default();
-        let (mut ints, mut bools) = (0, 0);
-        for kind in [BaseType::Real, BaseType::Integer, BaseType::Boolean] {
+        let (mut ints, mut bools, mut strs) = (0, 0, 0);
+        let kinds = [
+            BaseType::Real,
+            BaseType::Integer,
+            BaseType::Boolean,
+            BaseType::String,
+        ];
+        for kind in kinds {
             for v in &md.model_variables {
                 let base = match v.base_type() {
                     BaseType::Enumeration => BaseType::Integer,
                     other => other,
                 };
-                if v.causality != Causality::Output || base != kind {
+                // FMI 3.0 Binary outputs are not recorded.
+                let binary = base == BaseType::String && v.value_type != ValueType::String;
+                if v.causality != Causality::Output || base != kind || binary {
                     continue;
                 }
                 let names = arrays.element_names(md, v)?;
@@ -64,9 +82,13 @@ impl Recorded {
                         recorded.ints.push(v.value_reference);
                         ints += n;
                     }
-                    _ => {
+                    BaseType::Boolean => {
                         recorded.bools.push(v.value_reference);
                         bools += n;
+                    }
+                    _ => {
+                        recorded.strs.push(v.value_reference);
+                        strs += n;
                     }
                 }
             }
@@ -74,6 +96,11 @@ impl Recorded {
         recorded.int_buf = vec![0; ints];
         recorded.bool_buf = vec![false; bools];
         recorded.values = vec![0.0; recorded.names.len()];
+        let first = recorded.names.len() - strs;
+        recorded.strings = (first..recorded.names.len())
+            .map(|k| (k, String::new()))
+            .collect();
+        recorded.str_buf = vec![String::new(); strs];
         Ok(recorded)
     }
 }
@@ -116,6 +143,9 @@ impl Slave {
                 *slot = if v { 1.0 } else { 0.0 };
             }
         }
+        if !self.recorded.strs.is_empty() {
+            self.read_recorded_strings()?;
+        }
         match self.recorded.values[..reals]
             .iter()
             .position(|v| !v.is_finite())
@@ -128,6 +158,29 @@ impl Slave {
                 Err(self.non_finite(variable, self.recorded.values[i], run))
             }
         }
+    }
+
+    /// The recorded String outputs, read now (out of line: systems without
+    /// them skip it before the call).
+    #[inline(never)]
+    fn read_recorded_strings(&mut self) -> Result<(), MasterError> {
+        let r = &mut self.recorded;
+        self.backend.get_strings(&r.strs, &mut r.str_buf)?;
+        for ((_, slot), text) in r.strings.iter_mut().zip(&r.str_buf) {
+            slot.clone_from(text);
+        }
+        Ok(())
+    }
+
+    /// The recorded String outputs after the latest read, by index in
+    /// [`recorded_values`](Self::recorded_values).
+    pub fn recorded_strings(&self) -> &[(usize, String)] {
+        &self.recorded.strings
+    }
+
+    /// Back to recorded String outputs read earlier (a master state restored).
+    pub(crate) fn set_recorded_strings(&mut self, strings: &[(usize, String)]) {
+        self.recorded.strings.clone_from_slice(strings);
     }
 
     /// Back to recorded outputs read earlier (a master state restored).
