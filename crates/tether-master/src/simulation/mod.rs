@@ -318,6 +318,13 @@ impl Simulation {
         self.row.values()
     }
 
+    /// The String values of the current point (String outputs), by index in
+    /// [`values`](Self::values), which holds 0 there: what observers
+    /// receive as [`Sample::strings`](crate::Sample::strings).
+    pub fn strings(&self) -> &[(usize, String)] {
+        self.row.strings()
+    }
+
     /// The units the FMUs declare for the recorded outputs among
     /// [`columns`](Self::columns): `(column, unit)` pairs.
     pub fn units(&self) -> Vec<(String, String)> {

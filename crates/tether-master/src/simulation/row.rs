@@ -100,7 +100,7 @@ impl Row {
     }
 
     /// The String values among the recorded values (by index).
-    fn strings(&self) -> &[(usize, String)] {
+    pub(crate) fn strings(&self) -> &[(usize, String)] {
         match self.keep {
             Some(_) => &self.selected_strings,
             None => &self.strings,

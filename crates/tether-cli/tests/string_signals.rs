@@ -1,0 +1,328 @@
+//! String signals end to end with the `tether` binary: the Reference FMU
+//! `Feedthrough` (FMI 2.0 and 3.0, whose `String_output` is its
+//! `String_input`) sends text to another instance; the CSV has the String
+//! columns in quotes (commas and quotes inside the text), the receiver's own
+//! output shows what it received, `tether compare` compares them for
+//! equality, a String connection in a loop is held, an SSD connects String
+//! connectors, and wrong uses are one error line naming the connection.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Text with a comma, quotes and a semicolon: what CSV must quote.
+const TEXT: &str = r#"a, "quoted" text; ok"#;
+
+fn feedthrough(version: &str) -> Option<PathBuf> {
+    tether_fmu_build::fixture_fmu(&format!("reference-fmus/{version}/Feedthrough.fmu"))
+}
+
+/// `text` as a TOML basic string.
+fn toml_string(text: &str) -> String {
+    format!("\"{}\"", text.replace('\\', "\\\\").replace('"', "\\\""))
+}
+
+/// `src` (FMU `a`, its String input set to `text`) sends its String output to
+/// `dst` (FMU `b`); `extra` is added to the connection.
+fn chain(a: &Path, b: &Path, text: &str, extra: &str) -> String {
+    format!(
+        "[experiment]\nstop = 0.05\nstep = 0.01\n\n\
+         [[instance]]\nname = \"src\"\nfmu = {a:?}\nparameters = {{ String_input = {} }}\n\n\
+         [[instance]]\nname = \"dst\"\nfmu = {b:?}\n\n\
+         [[connection]]\nfrom = \"src.String_output\"\nto = \"dst.String_input\"\n{extra}",
+        toml_string(text)
+    )
+}
+
+fn tether(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tether"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Runs `system` in `dir` into `csv`; the output.
+fn run(dir: &Path, system: &str, csv: &str, args: &[&str]) -> Output {
+    std::fs::write(dir.join("system.toml"), system).unwrap();
+    let mut all = vec!["run", "system.toml", "--out", csv];
+    all.extend_from_slice(args);
+    tether(dir, &all)
+}
+
+fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "tether failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The one `error: ` line of a failed command.
+fn error_line(out: &Output) -> String {
+    assert!(!out.status.success(), "the command succeeded");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.starts_with("error: "))
+        .collect();
+    assert_eq!(lines.len(), 1, "{stderr}");
+    lines[0].to_string()
+}
+
+/// The CSV as read by the `csv` crate: the header and the rows' fields.
+fn read(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .unwrap();
+    let header = reader.headers().unwrap().iter().map(String::from).collect();
+    let rows = reader
+        .records()
+        .map(|r| r.unwrap().iter().map(String::from).collect())
+        .collect();
+    (header, rows)
+}
+
+fn column(header: &[String], rows: &[Vec<String>], name: &str) -> Vec<String> {
+    let j = header.iter().position(|h| h == name).unwrap();
+    rows.iter().map(|r| r[j].clone()).collect()
+}
+
+/// FMI 2.0 to FMI 2.0 and FMI 2.0 to FMI 3.0: every row has the sender's
+/// text, and the receiver's `String_output`, which is the input it got, has
+/// it too; the text is written in quotes, its quotes doubled.
+#[test]
+fn a_string_connection_hands_text_with_commas_and_quotes_to_the_receiver() {
+    let (Some(fmi2), Some(fmi3)) = (feedthrough("fmi2"), feedthrough("fmi3")) else {
+        return;
+    };
+    for receiver in [&fmi2, &fmi3] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = run(dir.path(), &chain(&fmi2, receiver, TEXT, ""), "r.csv", &[]);
+        ok(&out);
+        let (header, rows) = read(&dir.path().join("r.csv"));
+        assert_eq!(rows.len(), 6);
+        for name in ["src.String_output", "dst.String_output"] {
+            assert_eq!(column(&header, &rows, name), vec![TEXT; 6], "{name}");
+        }
+        // String columns come after an instance's numbers, and are quoted.
+        let last = header.iter().rposition(|h| h.starts_with("src.")).unwrap();
+        assert_eq!(header[last], "src.String_output");
+        let text = std::fs::read_to_string(dir.path().join("r.csv")).unwrap();
+        let line = text.lines().nth(1).unwrap();
+        assert!(line.contains(r#","a, ""quoted"" text; ok","#), "{line}");
+    }
+}
+
+/// `tether compare` of two runs with the same texts passes and prints the
+/// String columns as text; with another text it fails with one line naming
+/// the first String column that differs, the time and both texts.
+#[test]
+fn compare_takes_string_columns_as_equal_or_not() {
+    let Some(fmi2) = feedthrough("fmi2") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    ok(&run(
+        dir.path(),
+        &chain(&fmi2, &fmi2, TEXT, ""),
+        "a.csv",
+        &[],
+    ));
+    ok(&run(
+        dir.path(),
+        &chain(&fmi2, &fmi2, TEXT, ""),
+        "b.csv",
+        &[],
+    ));
+    ok(&run(
+        dir.path(),
+        &chain(&fmi2, &fmi2, "other", ""),
+        "c.csv",
+        &[],
+    ));
+    let same = tether(dir.path(), &["compare", "a.csv", "b.csv"]);
+    ok(&same);
+    let stdout = String::from_utf8_lossy(&same.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("dst.String_output"))
+        .unwrap();
+    assert!(
+        line.contains("same text") && line.ends_with("yes"),
+        "{line}"
+    );
+    let differ = tether(dir.path(), &["compare", "a.csv", "c.csv"]);
+    assert_eq!(
+        error_line(&differ),
+        r#"error: column 'src.String_output' has other text in 6 of 6 rows, first at t = 0: "a, \"quoted\" text; ok" in a.csv, "other" in c.csv"#
+    );
+    let stdout = String::from_utf8_lossy(&differ.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("dst.String_output"))
+        .unwrap();
+    assert!(line.contains("6 rows") && line.ends_with("NO"), "{line}");
+}
+
+/// A String column compared with a column of numbers is one error line.
+#[test]
+fn compare_refuses_text_against_numbers() {
+    let Some(fmi2) = feedthrough("fmi2") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    ok(&run(
+        dir.path(),
+        &chain(&fmi2, &fmi2, TEXT, ""),
+        "a.csv",
+        &[],
+    ));
+    let text = std::fs::read_to_string(dir.path().join("a.csv")).unwrap();
+    let numbers = text.replace(r#""a, ""quoted"" text; ok""#, "1");
+    std::fs::write(dir.path().join("n.csv"), numbers).unwrap();
+    let out = tether(dir.path(), &["compare", "a.csv", "n.csv"]);
+    assert_eq!(
+        error_line(&out),
+        "error: column 'src.String_output' is text (a String output) in a.csv and numbers in n.csv: cannot compare"
+    );
+}
+
+/// `gain` or `offset` on a String connection, a String output to a Real
+/// input and an FMI 3.0 Binary output: one line naming the connection.
+#[test]
+fn wrong_string_connections_are_one_line_naming_the_connection() {
+    let (Some(fmi2), Some(fmi3)) = (feedthrough("fmi2"), feedthrough("fmi3")) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for extra in ["gain = 2.0\n", "offset = 1.0\n"] {
+        let out = run(dir.path(), &chain(&fmi2, &fmi2, TEXT, extra), "r.csv", &[]);
+        assert_eq!(
+            error_line(&out),
+            "error: connection src.String_output → dst.String_input: gain and offset apply \
+             to Real connections only"
+        );
+    }
+    let to_real = chain(&fmi2, &fmi2, TEXT, "").replace(
+        "to = \"dst.String_input\"",
+        "to = \"dst.Float64_continuous_input\"",
+    );
+    let out = run(dir.path(), &to_real, "r.csv", &[]);
+    let line = error_line(&out);
+    assert!(
+        line.starts_with("error: connection src.String_output → dst.Float64_continuous_input: ")
+            && line.ends_with("a connection joins variables of one type"),
+        "{line}"
+    );
+    let binary = chain(&fmi3, &fmi3, "x", "")
+        .replace("String_input = \"x\"", "Binary_input = \"0a0b\"")
+        .replace("src.String_output", "src.Binary_output")
+        .replace("dst.String_input", "dst.Binary_input");
+    let out = run(dir.path(), &binary, "r.csv", &[]);
+    let line = error_line(&out);
+    assert!(
+        line.contains("Binary_output")
+            && line.contains("needs a Real, Integer, Boolean or String output"),
+        "{line}"
+    );
+}
+
+/// Two instances feeding each other's String input through (a
+/// direct-feedthrough loop): the loop is closed at T_0, `-v` names its
+/// connections, each passing the value at T_N (held, as Integer and Boolean
+/// links are), and both carry the text set on `src` at every point.
+#[test]
+fn a_string_loop_is_held() {
+    let Some(fmi2) = feedthrough("fmi2") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let system = chain(&fmi2, &fmi2, TEXT, "")
+        + "\n[[connection]]\nfrom = \"dst.String_output\"\nto = \"src.String_input\"\n";
+    let out = run(dir.path(), &system, "r.csv", &["-v"]);
+    ok(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("direct-feedthrough loop 1: src.String_output → dst.String_input (value at T_N), dst.String_output → src.String_input (value at T_N)"),
+        "{stderr}"
+    );
+    let (header, rows) = read(&dir.path().join("r.csv"));
+    // At T_0 the loop settles on the text src started with.
+    for name in ["src.String_output", "dst.String_output"] {
+        assert_eq!(column(&header, &rows, name), vec![TEXT; 6], "{name}");
+    }
+}
+
+/// An SSD whose components connect String connectors (`ssc:String`) runs
+/// like the system file: the receiver gets the text of an `ssv:String`
+/// parameter binding.
+#[test]
+fn ssp_string_connectors_connect() {
+    let Some(fmi2) = feedthrough("fmi2") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("resources")).unwrap();
+    std::fs::copy(&fmi2, dir.path().join("resources/Feedthrough.fmu")).unwrap();
+    let component = |name: &str, kind: &str, connector: &str, binding: &str| {
+        format!(
+            r#"      <ssd:Component name="{name}" type="application/x-fmu-sharedlibrary" source="resources/Feedthrough.fmu">
+        <ssd:Connectors>
+          <ssd:Connector name="{connector}" kind="{kind}"><ssc:String/></ssd:Connector>
+        </ssd:Connectors>{binding}
+      </ssd:Component>
+"#
+        )
+    };
+    let binding = r#"
+        <ssd:ParameterBindings>
+          <ssd:ParameterBinding>
+            <ssd:ParameterValues>
+              <ssv:ParameterSet version="1.0" name="text">
+                <ssv:Parameters>
+                  <ssv:Parameter name="String_input"><ssv:String value="from SSP, &quot;quoted&quot;"/></ssv:Parameter>
+                </ssv:Parameters>
+              </ssv:ParameterSet>
+            </ssd:ParameterValues>
+          </ssd:ParameterBinding>
+        </ssd:ParameterBindings>"#;
+    let ssd = format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+    version="1.0" name="texts">
+  <ssd:System name="texts">
+    <ssd:Elements>
+{}{}    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="src" startConnector="String_output" endElement="dst" endConnector="String_input"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0.0" stopTime="0.05"/>
+</ssd:SystemStructureDescription>
+"#,
+        component("src", "output", "String_output", binding),
+        component("dst", "input", "String_input", ""),
+    );
+    std::fs::write(dir.path().join("SystemStructure.ssd"), ssd).unwrap();
+    let out = tether(
+        dir.path(),
+        &[
+            "run",
+            "SystemStructure.ssd",
+            "--step",
+            "0.01",
+            "--out",
+            "r.csv",
+        ],
+    );
+    ok(&out);
+    let (header, rows) = read(&dir.path().join("r.csv"));
+    assert_eq!(
+        column(&header, &rows, "dst.String_output"),
+        vec![r#"from SSP, "quoted""#; rows.len()]
+    );
+}
