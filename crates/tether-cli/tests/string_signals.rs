@@ -90,7 +90,8 @@ fn column(header: &[String], rows: &[Vec<String>], name: &str) -> Vec<String> {
 
 /// FMI 2.0 to FMI 2.0 and FMI 2.0 to FMI 3.0: every row has the sender's
 /// text, and the receiver's `String_output`, which is the input it got, has
-/// it too; the text is written in quotes, its quotes doubled.
+/// it too; the text is written in quotes, its quotes doubled. Isolated
+/// instances (host processes) give the same file.
 #[test]
 fn a_string_connection_hands_text_with_commas_and_quotes_to_the_receiver() {
     let (Some(fmi2), Some(fmi3)) = (feedthrough("fmi2"), feedthrough("fmi3")) else {
@@ -111,6 +112,12 @@ fn a_string_connection_hands_text_with_commas_and_quotes_to_the_receiver() {
         let text = std::fs::read_to_string(dir.path().join("r.csv")).unwrap();
         let line = text.lines().nth(1).unwrap();
         assert!(line.contains(r#","a, ""quoted"" text; ok","#), "{line}");
+        // Through host processes: the texts cross the protocol whole.
+        let isolated =
+            chain(&fmi2, receiver, TEXT, "").replace("fmu = ", "isolation = \"process\"\nfmu = ");
+        ok(&run(dir.path(), &isolated, "isolated.csv", &[]));
+        let again = std::fs::read_to_string(dir.path().join("isolated.csv")).unwrap();
+        assert_eq!(again, text);
     }
 }
 
