@@ -209,10 +209,11 @@ impl Slave {
 mod tests {
     use super::*;
 
-    /// Reals first, then Integers and Enumerations, then Booleans, each in
-    /// the description's order; inputs and parameters are not recorded.
+    /// Reals first, then Integers and Enumerations, then Booleans, then
+    /// Strings, each in the description's order; inputs and parameters are
+    /// not recorded.
     #[test]
-    fn columns_are_reals_then_integers_then_booleans() {
+    fn columns_are_reals_then_integers_then_booleans_then_strings() {
         let md = ModelDescription::from_xml(
             r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="2.0" modelName="m" guid="{g}">
@@ -227,18 +228,21 @@ mod tests {
     <ScalarVariable name="u" valueReference="3" causality="input"><Real start="0"/></ScalarVariable>
     <ScalarVariable name="mode" valueReference="4" causality="output" variability="discrete"><Enumeration declaredType="Mode"/></ScalarVariable>
     <ScalarVariable name="y" valueReference="5" causality="output"><Real/></ScalarVariable>
+    <ScalarVariable name="s" valueReference="6" causality="output" variability="discrete"><String/></ScalarVariable>
   </ModelVariables>
   <ModelStructure>
-    <Outputs><Unknown index="1"/><Unknown index="2"/><Unknown index="3"/><Unknown index="5"/><Unknown index="6"/></Outputs>
+    <Outputs><Unknown index="1"/><Unknown index="2"/><Unknown index="3"/><Unknown index="5"/><Unknown index="6"/><Unknown index="7"/></Outputs>
   </ModelStructure>
 </fmiModelDescription>"#,
         )
         .unwrap();
         let r = Recorded::new(&md, &Arrays::default(), "i").unwrap();
-        assert_eq!(r.names, ["i.x", "i.y", "i.n", "i.mode", "i.on"]);
+        assert_eq!(r.names, ["i.x", "i.y", "i.n", "i.mode", "i.on", "i.s"]);
         assert_eq!((r.vrs.as_slice(), r.reals), (&[2, 5][..], 2));
         assert_eq!((r.ints.as_slice(), r.int_buf.len()), (&[1, 4][..], 2));
         assert_eq!((r.bools.as_slice(), r.bool_buf.len()), (&[0][..], 1));
-        assert_eq!(r.values.len(), 5);
+        assert_eq!((r.strs.as_slice(), r.str_buf.len()), (&[6][..], 1));
+        assert_eq!(r.strings, [(5, String::new())]);
+        assert_eq!(r.values.len(), 6);
     }
 }

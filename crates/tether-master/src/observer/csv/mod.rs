@@ -846,15 +846,36 @@ mod tests {
                     values[k] = x as f64;
                 }
             }
+            // Every fifth row, two String values (a comma and quotes in one).
+            let strings = if n % 5 == 1 {
+                vec![(4, format!("row {n}, \"q\"")), (7, "plain".to_string())]
+            } else {
+                Vec::new()
+            };
             rec.sample(Sample {
                 step: n,
                 time: n as f64 * 1e-3,
                 values: &values,
                 exact: &exact,
-                strings: &[],
+                strings: &strings,
             })?;
         }
         rec.finish(failure)
+    }
+
+    /// String values are written in quotes, their quotes doubled, and the
+    /// reader takes their columns as String columns.
+    #[test]
+    fn string_values_are_quoted_and_read_back() {
+        let mut text = Vec::new();
+        record(&mut CsvRecorder::new(&mut text), 3, None).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        let row = text.lines().nth(2).unwrap();
+        assert!(row.ends_with(r#","plain""#), "{text}");
+        assert!(row.contains(r#","row 1, ""q""","#), "{text}");
+        let results = Results::parse(&text).unwrap();
+        assert_eq!(results.texts_of("c4").unwrap()[1], r#"row 1, "q""#);
+        assert_eq!(results.texts_of("c7").unwrap()[1], "plain");
     }
 
     /// Integers a float rounds are written exactly, the other values of their
@@ -872,7 +893,8 @@ mod tests {
 
     /// The writer thread writes the same bytes as the caller's thread: no
     /// rows, one, exactly one block (910 rows of 9 numbers), and several
-    /// blocks with a failure at the end; exact integers among them.
+    /// blocks with a failure at the end; exact integers and String values
+    /// among them.
     #[test]
     fn background_writes_the_same_bytes() {
         for (rows, failure) in [
