@@ -177,10 +177,12 @@ struct Deviation {
     relative: f64,
     /// max_abs / (atol + rtol·scale): above 1 fails.
     excess: f64,
-    /// A String column: the rows whose texts differ, and the first of them
-    /// (its time and the two texts).
-    text: Option<(usize, Option<(f64, String, String)>)>,
+    /// A String column: the rows whose texts differ, and the first of them.
+    text: Option<(usize, Option<FirstDifference>)>,
 }
+
+/// Where a String column first differs: the time and the two texts.
+type FirstDifference = (f64, String, String);
 
 /// |a − b|, with equal non-finite values (both NaN, the same infinity) as 0.
 fn difference(a: f64, b: f64) -> f64 {
