@@ -333,3 +333,91 @@ fn ssp_string_connectors_connect() {
         vec![r#"from SSP, "quoted""#; rows.len()]
     );
 }
+
+/// The pythonfmu3 FMU of tests/fixtures/pythonfmu3/Texts.py (a String output
+/// `label` that changes every step; a String input `text` whose `length`
+/// and `echo` are outputs), built once; `None` (skip) without Python or
+/// pythonfmu3 outside CI.
+fn texts() -> Option<tether_tests::fmpy::PythonFmu> {
+    tether_tests::fmpy::pythonfmu3_for_test("Texts")
+}
+
+/// `a` sends its label to `b`; `extra` is added to the system.
+fn texts_system(fmu: &Path, extra: &str) -> String {
+    format!(
+        "[experiment]\nstop = 0.5\nstep = 0.1\n\n\
+         [[instance]]\nname = \"a\"\nfmu = {fmu:?}\n\n\
+         [[instance]]\nname = \"b\"\nfmu = {fmu:?}\n\n\
+         [[connection]]\nfrom = \"a.label\"\nto = \"b.text\"\n{extra}"
+    )
+}
+
+/// Runs a system of the Python FMU; the CSV's header and fields.
+fn run_texts(fmu: &tether_tests::fmpy::PythonFmu, system: &str) -> (Vec<String>, Vec<Vec<String>>) {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("system.toml"), system).unwrap();
+    let out = fmu
+        .env(Command::new(env!("CARGO_BIN_EXE_tether")).current_dir(dir.path()))
+        .args(["run", "system.toml", "--out", "r.csv"])
+        .output()
+        .unwrap();
+    ok(&out);
+    read(&dir.path().join("r.csv"))
+}
+
+/// The label after step s, as Texts.py writes it.
+fn label(s: usize) -> String {
+    let t = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5][s];
+    format!("step {s}, \"t\" = {t}")
+}
+
+/// A text that changes every step: with Jacobi the receiver takes the
+/// sender's text at T_N, held over the step, so its echo at T_{N+1} is the
+/// label of the row before (at T_0 the label of T_0, set at initialization);
+/// with Gauss–Seidel the sender steps first and the echo is the label of the
+/// same row. The receiver's `length` counts the characters it received.
+#[test]
+fn a_changing_text_is_held_over_each_step_as_the_scheme_says() {
+    let Some(fmu) = texts() else {
+        return;
+    };
+    let (header, rows) = run_texts(&fmu, &texts_system(&fmu.fmu, ""));
+    let labels: Vec<String> = (0..6).map(label).collect();
+    assert_eq!(column(&header, &rows, "a.label"), labels);
+    let echo = column(&header, &rows, "b.echo");
+    assert_eq!(echo[0], labels[0]);
+    assert_eq!(echo[1..], labels[..5]);
+    let lengths: Vec<String> = echo
+        .iter()
+        .map(|e| format!("{:?}", e.chars().count() as f64))
+        .collect();
+    assert_eq!(column(&header, &rows, "b.length"), lengths);
+
+    let gauss_seidel = texts_system(&fmu.fmu, "\n[signals]\nscheme = \"gauss_seidel\"\n");
+    let (header, rows) = run_texts(&fmu, &gauss_seidel);
+    assert_eq!(column(&header, &rows, "b.echo"), labels);
+}
+
+/// A loop of String connections, a → b → a (Texts.py declares no
+/// dependencies, so its outputs are taken to feed through): closed at macro
+/// points, each connection passes the text at T_N, so a's echo lags a's own
+/// label by two steps; iterated (`[signals] iterations`), every receiver
+/// takes the text at T_{N+1}, compared for equality, and the loop converges
+/// on the label of the same row.
+#[test]
+fn a_loop_of_changing_texts_is_held_or_iterated() {
+    let Some(fmu) = texts() else {
+        return;
+    };
+    let back = "\n[[connection]]\nfrom = \"b.echo\"\nto = \"a.text\"\n";
+    let labels: Vec<String> = (0..6).map(label).collect();
+    let (header, rows) = run_texts(&fmu, &texts_system(&fmu.fmu, back));
+    let echo = column(&header, &rows, "a.echo");
+    assert_eq!(echo[..2], [labels[0].clone(), labels[0].clone()]);
+    assert_eq!(echo[2..], labels[..4]);
+
+    let iterated = format!("{back}\n[signals]\niterations = 5\nstrict = true\n");
+    let (header, rows) = run_texts(&fmu, &texts_system(&fmu.fmu, &iterated));
+    assert_eq!(column(&header, &rows, "b.echo"), labels);
+    assert_eq!(column(&header, &rows, "a.echo"), labels);
+}
