@@ -245,7 +245,8 @@ impl Simulation {
         let first_residual = columns.len();
         columns.extend(unknowns.iter().filter_map(|u| u.residual.clone()));
         let keep = spec.output.select(&columns)?;
-        let mut row = Row::new(columns, keep);
+        let texts = (system.slaves.iter()).any(|s| !s.recorded_strings().is_empty());
+        let mut row = Row::new(columns, keep, texts);
         row.fill(&system);
         let mut health = Health::new(
             row.all_values(),

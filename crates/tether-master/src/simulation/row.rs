@@ -16,8 +16,10 @@ pub(crate) struct Row {
     values: Vec<f64>,
     /// The integers among them that a float rounds, exactly (by index).
     exact: Vec<(usize, Int)>,
-    /// The String values among them (String outputs), by index.
+    /// The String values among them (String outputs), by index …
     strings: Vec<(usize, String)>,
+    /// … if any instance records String outputs.
+    texts: bool,
     /// The columns the observers receive …
     columns: Vec<String>,
     /// … their indices in `values`, when not all of them …
@@ -46,8 +48,9 @@ struct Held {
 }
 
 impl Row {
-    /// A row of `columns`, of which the observers receive those at `keep`.
-    pub(crate) fn new(columns: Vec<String>, keep: Vec<usize>) -> Row {
+    /// A row of `columns`, of which the observers receive those at `keep`;
+    /// `texts`: some of them are String outputs.
+    pub(crate) fn new(columns: Vec<String>, keep: Vec<usize>, texts: bool) -> Row {
         let keep = (keep.len() < columns.len()).then_some(keep);
         let selected: Vec<String> = match &keep {
             Some(keep) => keep.iter().map(|&i| columns[i].clone()).collect(),
@@ -57,6 +60,7 @@ impl Row {
             values: vec![0.0; columns.len()],
             exact: Vec::new(),
             strings: Vec::new(),
+            texts,
             selected: vec![0.0; selected.len()],
             selected_exact: Vec::new(),
             selected_strings: Vec::new(),
@@ -116,27 +120,17 @@ impl Row {
     /// unknowns, the residuals (the values from `first_residual` on).
     pub(crate) fn fill(&mut self, system: &System) {
         let mut i = 0;
-        let mut texts = 0;
         self.exact.clear();
         for slave in &system.slaves {
             let values = slave.recorded_values();
             self.values[i..i + values.len()].copy_from_slice(values);
             let exact = slave.recorded_exact().iter().map(|&(k, x)| (i + k, x));
             self.exact.extend(exact);
-            for (k, text) in slave.recorded_strings() {
-                // The slots are reused: no allocation once the texts fit.
-                match self.strings.get_mut(texts) {
-                    Some(slot) => {
-                        slot.0 = i + k;
-                        slot.1.clone_from(text);
-                    }
-                    None => self.strings.push((i + k, text.clone())),
-                }
-                texts += 1;
-            }
             i += values.len();
         }
-        self.strings.truncate(texts);
+        if self.texts {
+            self.fill_strings(system);
+        }
         for h in &system.history {
             self.values[i] = h[0];
             i += 1;
@@ -166,6 +160,28 @@ impl Row {
                 }
             }
         }
+    }
+
+    /// The String outputs' texts of the current point (out of line:
+    /// systems without them skip it before the call).
+    #[inline(never)]
+    fn fill_strings(&mut self, system: &System) {
+        let (mut i, mut texts) = (0, 0);
+        for slave in &system.slaves {
+            for (k, text) in slave.recorded_strings() {
+                // The slots are reused: no allocation once the texts fit.
+                match self.strings.get_mut(texts) {
+                    Some(slot) => {
+                        slot.0 = i + k;
+                        slot.1.clone_from(text);
+                    }
+                    None => self.strings.push((i + k, text.clone())),
+                }
+                texts += 1;
+            }
+            i += slave.recorded_values().len();
+        }
+        self.strings.truncate(texts);
     }
 
     /// Hand the current point (`step`, `time`) to the observers.
@@ -205,8 +221,10 @@ impl Row {
         held.values.extend_from_slice(self.values());
         held.exact.clear();
         held.exact.extend_from_slice(self.exact());
-        held.strings.clear();
-        held.strings.extend_from_slice(self.strings());
+        if self.texts {
+            held.strings.clear();
+            held.strings.extend_from_slice(self.strings());
+        }
         self.held = Some(held);
     }
 

@@ -32,6 +32,9 @@ pub(super) struct Recorded {
     pub strings: Vec<(usize, String)>,
     /// The buffer `strs` is read into.
     pub str_buf: Vec<String>,
+    /// Whether there are Integer, Boolean or String outputs (read after the
+    /// Real ones, out of line).
+    pub others: bool,
     /// Recorded outputs after the latest read.
     pub values: Vec<f64>,
     /// The integers among them that a float rounds, exactly (by index).
@@ -101,6 +104,7 @@ impl Recorded {
             .map(|k| (k, String::new()))
             .collect();
         recorded.str_buf = vec![String::new(); strs];
+        recorded.others = ints + bools + strs > 0;
         Ok(recorded)
     }
 }
@@ -118,6 +122,28 @@ impl Slave {
     pub(super) fn take_recorded(&mut self, reals: &[f64], run: Run) -> Result<(), MasterError> {
         self.recorded.values[..reals.len()].copy_from_slice(reals);
         let reals = reals.len();
+        if self.recorded.others {
+            self.take_others(reals)?;
+        }
+        match self.recorded.values[..reals]
+            .iter()
+            .position(|v| !v.is_finite())
+        {
+            None => Ok(()),
+            Some(i) => {
+                let column = &self.recorded.names[i];
+                // `<instance>.<variable>`: the instance's name is the prefix.
+                let variable = column[column.find('.').map_or(0, |d| d + 1)..].to_string();
+                Err(self.non_finite(variable, self.recorded.values[i], run))
+            }
+        }
+    }
+
+    /// The recorded Integer, Boolean and String outputs, read now, after
+    /// the `reals` Real ones (out of line: systems with Real outputs only
+    /// skip it before the call).
+    #[inline(never)]
+    fn take_others(&mut self, reals: usize) -> Result<(), MasterError> {
         if !self.recorded.ints.is_empty() {
             self.backend
                 .get_integers(&self.recorded.ints, &mut self.recorded.int_buf)?;
@@ -146,23 +172,10 @@ impl Slave {
         if !self.recorded.strs.is_empty() {
             self.read_recorded_strings()?;
         }
-        match self.recorded.values[..reals]
-            .iter()
-            .position(|v| !v.is_finite())
-        {
-            None => Ok(()),
-            Some(i) => {
-                let column = &self.recorded.names[i];
-                // `<instance>.<variable>`: the instance's name is the prefix.
-                let variable = column[column.find('.').map_or(0, |d| d + 1)..].to_string();
-                Err(self.non_finite(variable, self.recorded.values[i], run))
-            }
-        }
+        Ok(())
     }
 
-    /// The recorded String outputs, read now (out of line: systems without
-    /// them skip it before the call).
-    #[inline(never)]
+    /// The recorded String outputs, read now.
     fn read_recorded_strings(&mut self) -> Result<(), MasterError> {
         let r = &mut self.recorded;
         self.backend.get_strings(&r.strs, &mut r.str_buf)?;
