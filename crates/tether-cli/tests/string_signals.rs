@@ -421,3 +421,26 @@ fn a_loop_of_changing_texts_is_held_or_iterated() {
     assert_eq!(column(&header, &rows, "b.echo"), labels);
     assert_eq!(column(&header, &rows, "a.echo"), labels);
 }
+
+/// `[output]` picks String columns like others: `variables` keeps the
+/// chosen String column, `interval` records every second point and the last
+/// one, held back off the grid, with its text.
+#[test]
+fn output_selection_keeps_string_columns() {
+    let Some(fmu) = texts() else {
+        return;
+    };
+    let output = "\n[output]\nvariables = [\"b.echo\", \"a.label\"]\ninterval = 0.2\n";
+    let (header, rows) = run_texts(&fmu, &texts_system(&fmu.fmu, output));
+    assert_eq!(header, ["time", "a.label", "b.echo"]);
+    let times: Vec<&str> = rows.iter().map(|r| r[0].as_str()).collect();
+    assert_eq!(times, ["0.0", "0.2", "0.4", "0.5"]);
+    assert_eq!(
+        column(&header, &rows, "a.label"),
+        [label(0), label(2), label(4), label(5)]
+    );
+    assert_eq!(
+        column(&header, &rows, "b.echo"),
+        [label(0), label(1), label(3), label(4)]
+    );
+}
