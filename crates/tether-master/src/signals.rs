@@ -123,6 +123,18 @@ impl Signals {
         self.next.clone_from(next);
     }
 
+    /// The texts each String link has carried (empty for other links): the
+    /// meaning of its values in [`values`](Self::values).
+    pub fn texts(&self) -> Vec<Vec<String>> {
+        self.texts.clone()
+    }
+
+    /// Back to texts of [`texts`](Self::texts), with values of the same
+    /// state.
+    pub fn set_texts(&mut self, texts: &[Vec<String>]) {
+        self.texts.clone_from_slice(texts);
+    }
+
     /// Resolve the system file's connections against the instances (after
     /// the coupling: an input an unknown drives cannot also be a receiver).
     pub fn build(spec: &SystemSpec, slaves: &mut [Slave]) -> Result<Signals, MasterError> {
