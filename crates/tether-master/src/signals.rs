@@ -16,6 +16,8 @@
 //! carried (each distinct text once, kept for the run), held over the step
 //! and compared for equality in loops.
 
+use std::collections::HashMap;
+
 use tether_fmi::{BaseType, Causality, ScalarVariable, ValueType};
 
 use crate::algorithm::step::{MacroStep, StepAt};
@@ -100,7 +102,7 @@ pub(crate) struct Signals {
     newton: Solver,
     /// Per link: the texts a String link has carried, each once (its values
     /// are indices into them; `""` is index 0); empty for other links.
-    texts: Vec<Vec<String>>,
+    texts: Vec<Texts>,
     /// Per link: for a receiver with its own communication step n·H, the
     /// slot in `history` (after the links' own) of the sender's values at
     /// the receiver's communication points `[y_M, y_{M−n}, y_{M−2n}]`.
@@ -126,13 +128,18 @@ impl Signals {
     /// The texts each String link has carried (empty for other links): the
     /// meaning of its values in [`values`](Self::values).
     pub fn texts(&self) -> Vec<Vec<String>> {
-        self.texts.clone()
+        self.texts.iter().map(|t| t.all.clone()).collect()
     }
 
     /// Back to texts of [`texts`](Self::texts), with values of the same
     /// state.
     pub fn set_texts(&mut self, texts: &[Vec<String>]) {
-        self.texts.clone_from_slice(texts);
+        for (t, all) in self.texts.iter_mut().zip(texts) {
+            *t = Texts::default();
+            for text in all {
+                t.index_of(text.clone());
+            }
+        }
     }
 
     /// Resolve the system file's connections against the instances (after
@@ -216,9 +223,12 @@ impl Signals {
             newton: Solver::default(),
             texts: links
                 .iter()
-                .map(|l| match l.kind {
-                    Kind::String => vec![String::new()],
-                    _ => Vec::new(),
+                .map(|l| {
+                    let mut texts = Texts::default();
+                    if l.kind == Kind::String {
+                        texts.index_of(String::new());
+                    }
+                    texts
                 })
                 .collect(),
             links,
@@ -890,7 +900,7 @@ impl Signals {
     /// The text of String link `l` that `value` stands for (an index into
     /// its texts; a value held over a step is one of them).
     fn text(&self, l: usize, value: f64) -> &str {
-        let texts = &self.texts[l];
+        let texts = &self.texts[l].all;
         texts.get(value as usize).map_or("", String::as_str)
     }
 
@@ -913,15 +923,26 @@ impl Signals {
                 std::mem::take(&mut v[0])
             }
         };
-        let texts = &mut self.texts[l];
-        let index = match texts.iter().rposition(|t| *t == text) {
-            Some(i) => i,
-            None => {
-                texts.push(text);
-                texts.len() - 1
-            }
-        };
-        Ok(index as f64)
+        Ok(self.texts[l].index_of(text) as f64)
+    }
+}
+
+/// The texts a String link has carried, each once, and where each is.
+#[derive(Debug, Default)]
+struct Texts {
+    all: Vec<String>,
+    index: HashMap<String, usize>,
+}
+
+impl Texts {
+    /// The index of `text`, added if new.
+    fn index_of(&mut self, text: String) -> usize {
+        if let Some(&i) = self.index.get(&text) {
+            return i;
+        }
+        self.all.push(text.clone());
+        self.index.insert(text, self.all.len() - 1);
+        self.all.len() - 1
     }
 }
 
