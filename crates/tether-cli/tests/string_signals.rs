@@ -444,3 +444,45 @@ fn output_selection_keeps_string_columns() {
         [label(0), label(1), label(3), label(4)]
     );
 }
+
+/// The run summary counts String calls: per recorded point one
+/// `fmi2GetString` of each instance's recorded String outputs, and for the
+/// connection one get of the sender and one `fmi2SetString` of the
+/// receiver per macro step and per sweep at T_0.
+#[test]
+fn the_summary_counts_string_calls() {
+    let Some(fmi2) = feedthrough("fmi2") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("system.toml"),
+        chain(&fmi2, &fmi2, TEXT, ""),
+    )
+    .unwrap();
+    let out = tether(
+        dir.path(),
+        &[
+            "run",
+            "system.toml",
+            "--out",
+            "r.csv",
+            "--summary-json",
+            "s.json",
+        ],
+    );
+    ok(&out);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("s.json")).unwrap()).unwrap();
+    let calls = |i: &str, key: &str| json["instances"][i][key].as_u64().unwrap();
+    // 6 recorded points; the link read and set 3 times at T_0 (the setup
+    // sweeps until nothing changes, before and after the consistent
+    // multipliers: 2 + 1) and once for each of the 5 steps, as Integer
+    // and Boolean links are.
+    assert_eq!(calls("src", "get_string"), 6 + 3 + 5);
+    assert_eq!(calls("dst", "get_string"), 6);
+    assert_eq!(calls("dst", "set_string"), 3 + 5);
+    assert_eq!(calls("src", "set_string"), 0);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("  fmi2GetString"), "{stderr}");
+}

@@ -892,7 +892,7 @@ impl Signals {
             Kind::Real => slave.counters.set_reals += 1,
             Kind::Integer => slave.counters.set_integers += 1,
             Kind::Boolean => slave.counters.set_booleans += 1,
-            Kind::String => {}
+            Kind::String => slave.counters.set_strings += 1,
         }
         Ok(())
     }
@@ -923,6 +923,7 @@ impl Signals {
                 std::mem::take(&mut v[0])
             }
         };
+        slave.counters.get_strings += 1;
         Ok(self.texts[l].index_of(text) as f64)
     }
 }

@@ -179,6 +179,7 @@ impl Slave {
     fn read_recorded_strings(&mut self) -> Result<(), MasterError> {
         let r = &mut self.recorded;
         self.backend.get_strings(&r.strs, &mut r.str_buf)?;
+        self.counters.get_strings += 1;
         for ((_, slot), text) in r.strings.iter_mut().zip(&r.str_buf) {
             slot.clone_from(text);
         }
