@@ -774,9 +774,6 @@ impl Signals {
     /// Read link `l`'s sender (Integer and Boolean as numbers, String as
     /// the index of its text).
     fn read(&mut self, slaves: &mut [Slave], l: usize, run: Run) -> Result<f64, MasterError> {
-        if self.links[l].kind == Kind::String {
-            return self.read_text(slaves, l);
-        }
         let link = &self.links[l];
         let slave = &mut slaves[link.from];
         let value = match link.kind {
@@ -831,7 +828,7 @@ impl Signals {
                 }
                 f64::from(u8::from(v[0]))
             }
-            Kind::String => unreachable!("read by read_text"),
+            Kind::String => return self.read_text(slaves, l),
         };
         match link.kind {
             Kind::Real => slave.counters.get_reals += 1,
