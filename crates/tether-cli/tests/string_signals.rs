@@ -486,3 +486,23 @@ fn the_summary_counts_string_calls() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("  fmi2GetString"), "{stderr}");
 }
+
+/// `tether ssp export` writes the String connectors (`ssc:String`) and the
+/// String start value; the archive runs to the same CSV byte for byte.
+#[test]
+fn a_string_system_round_trips_through_ssp() {
+    let Some(fmi2) = feedthrough("fmi2") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&run(d, &chain(&fmi2, &fmi2, TEXT, ""), "toml.csv", &[]));
+    ok(&tether(
+        d,
+        &["ssp", "export", "system.toml", "-o", "system.ssp"],
+    ));
+    ok(&tether(d, &["run", "system.ssp", "--out", "ssp.csv"]));
+    let toml = std::fs::read_to_string(d.join("toml.csv")).unwrap();
+    assert!(toml.contains(r#""a, ""quoted"" text; ok""#), "{toml}");
+    assert_eq!(std::fs::read_to_string(d.join("ssp.csv")).unwrap(), toml);
+}
