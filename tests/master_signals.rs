@@ -105,7 +105,7 @@ fn bad_connections_are_one_clear_line() {
         // An input as the sender.
         (
             "[[connection]]\nfrom = \"mass2.F_ext\"\nto = \"mass2.F_ext\"",
-            "needs a Real, Integer or Boolean output",
+            "needs a Real, Integer, Boolean or String output",
         ),
         (
             "[[connection]]\nfrom = \"mass3.x\"\nto = \"ctrl.y\"",

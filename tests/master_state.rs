@@ -150,3 +150,50 @@ fn the_state_of_another_system_is_refused_with_the_reason() {
         .expect("a state of another system");
     assert!(error.contains("in this system"), "{error}");
 }
+
+/// String connections and String outputs in the state: the texts a String
+/// link has carried travel with the bytes, so another simulation of the
+/// system, which has seen only the first text, repeats the texts after a
+/// second one was set between steps (the Reference FMU Feedthrough passes
+/// its String input through).
+#[test]
+fn a_restored_state_repeats_string_signals() {
+    let Some(ft) = tether_fmu_build::fixture_fmu("reference-fmus/fmi2/Feedthrough.fmu") else {
+        return;
+    };
+    let text = format!(
+        "[experiment]\nstop = 0.1\nstep = 0.01\n\n\
+         [[instance]]\nname = \"src\"\nfmu = {ft:?}\nparameters = {{ String_input = \"first\" }}\n\n\
+         [[instance]]\nname = \"dst\"\nfmu = {ft:?}\n\n\
+         [[connection]]\nfrom = \"src.String_output\"\nto = \"dst.String_input\"\n"
+    );
+    let spec = SystemSpec::from_toml(&text).expect("system");
+    let mut sim = Simulation::new(&spec).expect("simulation");
+    sim.step().expect("step");
+    let second = tether_master::StartValue::String("second, \"2\"".into());
+    sim.set_parameter("src.String_input", &second).expect("set");
+    sim.step().expect("step");
+    sim.step().expect("step");
+    let mut saved = sim.save_state().expect("save");
+    let mut bytes = Out::default();
+    saved.write(&mut bytes).expect("write the state");
+    let mut first = Vec::new();
+    for _ in 0..3 {
+        sim.step().expect("step");
+        first.push(sim.strings().to_vec());
+    }
+    let texts: Vec<&str> = first[0].iter().map(|(_, t)| t.as_str()).collect();
+    assert_eq!(texts, ["second, \"2\"", "second, \"2\""]);
+    let mut other = Simulation::new(&spec).expect("simulation");
+    other.step().expect("step");
+    let mut input = In::new(&bytes.0);
+    let read = other.read_state(&mut input).expect("read the state");
+    assert!(input.is_empty(), "every byte read");
+    other.restore_state(&read).expect("restore from bytes");
+    let texts: Vec<&str> = other.strings().iter().map(|(_, t)| t.as_str()).collect();
+    assert_eq!(texts, ["second, \"2\"", "second, \"2\""]);
+    for row in &first {
+        other.step().expect("step");
+        assert_eq!(other.strings(), row.as_slice());
+    }
+}

@@ -512,6 +512,7 @@ fn bench_recording() {
                 time: i as f64 * 1e-3,
                 values: &row,
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
         }
@@ -527,6 +528,7 @@ fn bench_recording() {
                 time: i as f64 * 1e-3,
                 values: &row,
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
         }
@@ -738,7 +740,7 @@ const FMI_HOST: &str = "__fmi-host";
 
 fn main() -> std::process::ExitCode {
     if std::env::args_os().nth(1).is_some_and(|a| a == FMI_HOST) {
-        return tether_fmi_host::serve_stdin();
+        tether_fmi_host::serve_stdin();
     }
     let wanted: Vec<String> = std::env::args()
         .skip(1)

@@ -23,6 +23,12 @@
 //! multiplier changing sign) from inflating the measure. Residual columns
 //! (`<constraint>.g`) are differences of nearly equal outputs and have a tiny
 //! scale of their own; `--atol` bounds them in absolute terms.
+//!
+//! String columns (quoted text, as `tether run` writes String outputs) are
+//! compared for equality: a column passes when every row has the same text
+//! in both files (off the common grid, the text of the last row at or
+//! before the time). A column of text in one file and numbers in the other
+//! is an error naming it.
 
 use std::path::{Path, PathBuf};
 
@@ -135,6 +141,9 @@ struct Table {
     times: Vec<f64>,
     /// `rows[i][j]`: column `names[j]` (after `time`) at `times[i]`.
     rows: Vec<Vec<f64>>,
+    /// `texts[j]`: the texts of column `names[j]` by row, if it is a
+    /// String column.
+    texts: Vec<Option<Vec<String>>>,
     /// The reason of a `# incomplete: …` line, if the run stopped early.
     incomplete: Option<String>,
 }
@@ -145,11 +154,16 @@ fn read_table(path: &Path) -> Result<Table> {
     }
     let results = tether_master::Results::read(path)
         .map_err(|reason| anyhow::anyhow!("{}: {reason}", path.display()))?;
+    let mut texts = vec![None; results.columns.len()];
+    for (j, column) in results.texts {
+        texts[j] = Some(column);
+    }
     Ok(Table {
         path: path.to_path_buf(),
         names: results.columns,
         times: results.times,
         rows: results.rows,
+        texts,
         incomplete: results.incomplete,
     })
 }
@@ -163,7 +177,12 @@ struct Deviation {
     relative: f64,
     /// max_abs / (atol + rtol·scale): above 1 fails.
     excess: f64,
+    /// A String column: the rows whose texts differ, and the first of them.
+    text: Option<(usize, Option<FirstDifference>)>,
 }
+
+/// Where a String column first differs: the time and the two texts.
+type FirstDifference = (f64, String, String);
 
 /// |a − b|, with equal non-finite values (both NaN, the same infinity) as 0.
 fn difference(a: f64, b: f64) -> f64 {
@@ -278,12 +297,14 @@ fn interpolated(a: &Table, b: &Table) -> Result<Table> {
         );
     }
     let mut rows = Vec::with_capacity(a.times.len());
+    let mut picked = Vec::with_capacity(a.times.len());
     let mut k = 0;
     for &t in &a.times {
         // The last row of b at or before t (its later row at a repeated time).
         while k + 1 < b.times.len() && b.times[k + 1] <= t {
             k += 1;
         }
+        picked.push(k);
         let row = if k + 1 == b.times.len() || b.times[k] >= t {
             b.rows[k].clone()
         } else {
@@ -302,8 +323,20 @@ fn interpolated(a: &Table, b: &Table) -> Result<Table> {
         names: b.names.clone(),
         times: a.times.clone(),
         rows,
+        texts: pick_texts(b, &picked),
         incomplete: b.incomplete.clone(),
     })
+}
+
+/// The String columns of `t` at its rows `rows`.
+fn pick_texts(t: &Table, rows: &[usize]) -> Vec<Option<Vec<String>>> {
+    t.texts
+        .iter()
+        .map(|c| {
+            c.as_ref()
+                .map(|texts| rows.iter().map(|&i| texts[i].clone()).collect())
+        })
+        .collect()
 }
 
 /// Both files on the coarser grid over the span both cover: the file with
@@ -357,6 +390,7 @@ fn on_the_coarser_grid(a: Table, b: Table) -> Result<(Table, Table, String)> {
         names: coarse.names.clone(),
         times: rows.iter().map(|&i| coarse.times[i]).collect(),
         rows: rows.iter().map(|&i| coarse.rows[i].clone()).collect(),
+        texts: pick_texts(coarse, rows),
         incomplete: coarse.incomplete.clone(),
     };
     let fine = interpolated(&coarse, fine)?;
@@ -390,12 +424,59 @@ fn on_the_coarser_grid(a: Table, b: Table) -> Result<(Table, Table, String)> {
     })
 }
 
-fn deviations(a: &Table, b: &Table, names: &[String], rtol: f64, atol: f64) -> Vec<Deviation> {
+/// The deviation of String column `name` (`ja` in `a`, `jb` in `b`): the
+/// rows whose texts differ.
+fn text_deviation(
+    (a, ja): (&Table, usize),
+    (b, jb): (&Table, usize),
+    name: &str,
+) -> Result<Deviation> {
+    let (Some(ta), Some(tb)) = (&a.texts[ja], &b.texts[jb]) else {
+        let (text, numbers) = if a.texts[ja].is_some() {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        bail!(
+            "column '{name}' is text (a String output) in {} and numbers in {}: cannot compare",
+            text.path.display(),
+            numbers.path.display()
+        );
+    };
+    let mut differing = 0;
+    let mut first = None;
+    for (i, (x, y)) in ta.iter().zip(tb).enumerate() {
+        if x != y {
+            differing += 1;
+            first.get_or_insert_with(|| (a.times[i], x.clone(), y.clone()));
+        }
+    }
+    Ok(Deviation {
+        name: name.to_string(),
+        max_abs: 0.0,
+        at_time: first.as_ref().map_or(a.times[0], |f| f.0),
+        scale: 0.0,
+        relative: 0.0,
+        excess: 0.0,
+        text: Some((differing, first)),
+    })
+}
+
+fn deviations(
+    a: &Table,
+    b: &Table,
+    names: &[String],
+    rtol: f64,
+    atol: f64,
+) -> Result<Vec<Deviation>> {
     names
         .iter()
         .map(|name| {
             let ja = a.names.iter().position(|n| n == name).expect("checked");
             let jb = b.names.iter().position(|n| n == name).expect("checked");
+            if a.texts[ja].is_some() || b.texts[jb].is_some() {
+                return text_deviation((a, ja), (b, jb), name);
+            }
             let (mut max_abs, mut at_time, mut scale) = (0.0f64, a.times[0], 0.0f64);
             for (i, (ra, rb)) in a.rows.iter().zip(&b.rows).enumerate() {
                 let (x, y) = (ra[ja], rb[jb]);
@@ -423,7 +504,7 @@ fn deviations(a: &Table, b: &Table, names: &[String], rtol: f64, atol: f64) -> V
             } else {
                 f64::INFINITY
             };
-            Deviation {
+            Ok(Deviation {
                 name: name.clone(),
                 max_abs,
                 at_time,
@@ -434,7 +515,8 @@ fn deviations(a: &Table, b: &Table, names: &[String], rtol: f64, atol: f64) -> V
                 } else {
                     excess
                 },
-            }
+                text: None,
+            })
         })
         .collect()
 }
@@ -467,7 +549,7 @@ pub fn main(args: Args) -> Result<()> {
         crate::stdout(format_args!("{note}\n"))?;
         (a, b)
     };
-    let mut devs = deviations(&a, &b, &names, args.rtol, args.atol);
+    let mut devs = deviations(&a, &b, &names, args.rtol, args.atol)?;
     for d in &mut devs {
         if let Some((new, old)) = renamed.iter().find(|(n, o)| *n == d.name && n != o) {
             d.name = format!("{new}={old}");
@@ -480,6 +562,24 @@ pub fn main(args: Args) -> Result<()> {
         "column", "max |a-b|", "at t", "scale", "relative"
     ))?;
     for d in &devs {
+        if let Some((differing, _)) = &d.text {
+            let at = if *differing == 0 {
+                "-".to_string()
+            } else {
+                d.at_time.to_string()
+            };
+            let rows = format!("{differing} rows");
+            crate::stdout(format_args!(
+                "{:<width$}  {:>10}  {:>12}  {:>10}  {:>10}  {}\n",
+                d.name,
+                if *differing == 0 { "same text" } else { &rows },
+                at,
+                "text",
+                "-",
+                if *differing == 0 { "yes" } else { "NO" }
+            ))?;
+            continue;
+        }
         let at = if d.max_abs == 0.0 {
             "-".to_string()
         } else {
@@ -526,6 +626,19 @@ pub fn main(args: Args) -> Result<()> {
             d.at_time,
             tol(args.rtol),
             tol(args.atol)
+        );
+    }
+    let texts = devs.iter().filter_map(|d| match &d.text {
+        Some((n, Some(first))) => Some((d, n, first)),
+        _ => None,
+    });
+    if let Some((d, n, (t, x, y))) = texts.into_iter().next() {
+        bail!(
+            "column '{}' has other text in {n} of {} rows, first at t = {t}: {x:?} in {}, {y:?} in {}",
+            d.name,
+            a.times.len(),
+            a.path.display(),
+            b.path.display()
         );
     }
     Ok(())

@@ -365,7 +365,8 @@ fn a_signal_only_system_is_summarised_by_its_signals() {
 }
 
 /// FMI 3.0 instances and Integer and Boolean connections: each function under
-/// its own name (`fmi3SetInt32`, `fmi3SetBoolean`), not counted as Real calls.
+/// its own name (`fmi3SetInt32`, `fmi3SetBoolean`), not counted as Real calls;
+/// the recorded String output `String_output` read once per recorded point.
 #[test]
 fn call_counts_name_the_fmi3_functions_and_the_value_types() {
     let Some(ft) = tether_fmu_build::fixture_fmu("reference-fmus/fmi3/Feedthrough.fmu") else {
@@ -407,6 +408,7 @@ fn call_counts_name_the_fmi3_functions_and_the_value_types() {
             "  fmi3GetInt*              23   11",
             "  fmi3SetBoolean            0   12",
             "  fmi3GetBoolean           23   11",
+            "  fmi3GetString            11   11",
         ],
         "{lines:#?}"
     );

@@ -402,6 +402,16 @@ impl Host {
                     out.bools(&self.bools);
                 })
             }
+            op::GET_STRING => {
+                input.u32s(&mut self.vrs)?;
+                let mut strings = vec![String::new(); input.u32()? as usize];
+                i.get_strings(&self.vrs, &mut strings).map(|()| {
+                    out.u32(strings.len() as u32);
+                    for s in &strings {
+                        out.str(s);
+                    }
+                })
+            }
             op::SET_INTEGER => {
                 input.u32s(&mut self.vrs)?;
                 input.ints(&mut self.integers)?;

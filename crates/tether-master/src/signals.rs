@@ -10,8 +10,15 @@
 //! A Real input of an instance that declares `canInterpolateInputs` (FMI 3.0:
 //! intermediate update for that input) gets the polynomial of degree k through
 //! the sender's last values; every other input is held constant over the step.
+//!
+//! A String connection carries its values through the same machinery as a
+//! number: the index of the text in the link's table of the texts it has
+//! carried (each distinct text once, kept for the run), held over the step
+//! and compared for equality in loops.
 
-use tether_fmi::{BaseType, Causality, ScalarVariable};
+use std::collections::HashMap;
+
+use tether_fmi::{BaseType, Causality, ScalarVariable, ValueType};
 
 use crate::algorithm::step::{MacroStep, StepAt};
 use crate::linalg::solve::Solver;
@@ -32,6 +39,9 @@ enum Kind {
     Real,
     Integer,
     Boolean,
+    /// FMI `String` (not FMI 3.0 `Binary`): carried as an index into the
+    /// link's texts.
+    String,
 }
 
 /// One resolved connection.
@@ -90,6 +100,9 @@ pub(crate) struct Signals {
     iterating: bool,
     /// The Newton updates' linear solver, reused.
     newton: Solver,
+    /// Per link: the texts a String link has carried, each once (its values
+    /// are indices into them; `""` is index 0); empty for other links.
+    texts: Vec<Texts>,
     /// Per link: for a receiver with its own communication step n·H, the
     /// slot in `history` (after the links' own) of the sender's values at
     /// the receiver's communication points `[y_M, y_{M−n}, y_{M−2n}]`.
@@ -110,6 +123,23 @@ impl Signals {
     pub fn set_values(&mut self, (history, next): &(Vec<[f64; 3]>, Vec<f64>)) {
         self.history.clone_from(history);
         self.next.clone_from(next);
+    }
+
+    /// The texts each String link has carried (empty for other links): the
+    /// meaning of its values in [`values`](Self::values).
+    pub fn texts(&self) -> Vec<Vec<String>> {
+        self.texts.iter().map(|t| t.all.clone()).collect()
+    }
+
+    /// Back to texts of [`texts`](Self::texts), with values of the same
+    /// state.
+    pub fn set_texts(&mut self, texts: &[Vec<String>]) {
+        for (t, all) in self.texts.iter_mut().zip(texts) {
+            *t = Texts::default();
+            for text in all {
+                t.index_of(text.clone());
+            }
+        }
     }
 
     /// Resolve the system file's connections against the instances (after
@@ -180,7 +210,6 @@ impl Signals {
                 .any(|s| s.coupled.decimation > 1)
                 .then_some((spec.experiment.start, spec.experiment.step)),
             next: vec![0.0; links.len()],
-            links,
             order: spec.coupling.order,
             sequence,
             scheme,
@@ -192,6 +221,17 @@ impl Signals {
             strict: spec.signals.strict,
             iterating: false,
             newton: Solver::default(),
+            texts: links
+                .iter()
+                .map(|l| {
+                    let mut texts = Texts::default();
+                    if l.kind == Kind::String {
+                        texts.index_of(String::new());
+                    }
+                    texts
+                })
+                .collect(),
+            links,
         })
     }
 
@@ -424,11 +464,11 @@ impl Signals {
             .map(|h| h[0])
             .collect();
         let mut g = vec![0.0; v.len()];
-        let real = self.real_links();
+        let kinds = (self.real_links(), self.text_links());
         let mut solver = Solver::default();
         let solved = solve_loop(
             (&mut v, &mut g),
-            &real,
+            (&kinds.0, &kinds.1),
             (50, 20),
             self.tolerance,
             &mut solver,
@@ -452,9 +492,16 @@ impl Signals {
             .collect()
     }
 
+    /// The links that carry String values (compared for equality).
+    fn text_links(&self) -> Vec<usize> {
+        (0..self.links.len())
+            .filter(|&l| self.links[l].kind == Kind::String)
+            .collect()
+    }
+
     /// G(v) into `g` at T_0: every receiver set to its link's value `v`,
     /// every sender read.
-    fn apply(&self, slaves: &mut [Slave], v: &[f64], g: &mut [f64]) -> Result<(), MasterError> {
+    fn apply(&mut self, slaves: &mut [Slave], v: &[f64], g: &mut [f64]) -> Result<(), MasterError> {
         for (l, &value) in v.iter().enumerate() {
             let held = Taylor {
                 value,
@@ -499,7 +546,7 @@ impl Signals {
         self.read_next(&mut system.slaves)?;
         let mut v = self.next.clone();
         let mut g = vec![0.0; v.len()];
-        let real = self.real_links();
+        let kinds = (self.real_links(), self.text_links());
         let limits = match self.solver {
             SignalSolver::FixedPoint => (max - 1, 0),
             SignalSolver::Newton => (0, max),
@@ -509,7 +556,7 @@ impl Signals {
         let tolerance = self.tolerance;
         let solved = solve_loop(
             (&mut v, &mut g),
-            &real,
+            (&kinds.0, &kinds.1),
             limits,
             tolerance,
             &mut newton,
@@ -724,8 +771,9 @@ impl Signals {
         }
     }
 
-    /// Read link `l`'s sender (Integer and Boolean as numbers).
-    fn read(&self, slaves: &mut [Slave], l: usize, run: Run) -> Result<f64, MasterError> {
+    /// Read link `l`'s sender (Integer and Boolean as numbers, String as
+    /// the index of its text).
+    fn read(&mut self, slaves: &mut [Slave], l: usize, run: Run) -> Result<f64, MasterError> {
         let link = &self.links[l];
         let slave = &mut slaves[link.from];
         let value = match link.kind {
@@ -780,11 +828,13 @@ impl Signals {
                 }
                 f64::from(u8::from(v[0]))
             }
+            Kind::String => return self.read_text(slaves, l),
         };
         match link.kind {
             Kind::Real => slave.counters.get_reals += 1,
             Kind::Integer => slave.counters.get_integers += 1,
             Kind::Boolean => slave.counters.get_booleans += 1,
+            Kind::String => {}
         }
         if !value.is_finite() {
             return Err(slave.non_finite(link.variable.clone(), value, run));
@@ -806,6 +856,7 @@ impl Signals {
                     // Values read from an Integer output: exact in f64 (checked by `read`).
                     Kind::Integer => StartValue::Integer(p.value as i64),
                     Kind::Boolean => StartValue::Boolean(p.value != 0.0),
+                    Kind::String => StartValue::String(self.text(l, p.value).to_string()),
                 };
                 slave.set_array_element(link.to_vr, e, value)?;
             }
@@ -832,13 +883,64 @@ impl Signals {
             // Values read from an Integer output: exact in f64 (checked by `read`).
             Kind::Integer => slave.backend.set_integers(&vr, &[p.value as Int])?,
             Kind::Boolean => slave.backend.set_booleans(&vr, &[p.value != 0.0])?,
+            Kind::String => slave.backend.set_strings(&vr, &[self.text(l, p.value)])?,
         }
         match link.kind {
             Kind::Real => slave.counters.set_reals += 1,
             Kind::Integer => slave.counters.set_integers += 1,
             Kind::Boolean => slave.counters.set_booleans += 1,
+            Kind::String => slave.counters.set_strings += 1,
         }
         Ok(())
+    }
+
+    /// The text of String link `l` that `value` stands for (an index into
+    /// its texts; a value held over a step is one of them).
+    fn text(&self, l: usize, value: f64) -> &str {
+        let texts = &self.texts[l].all;
+        texts.get(value as usize).map_or("", String::as_str)
+    }
+
+    /// Read String link `l`'s sender: the index of its text among the
+    /// texts the link has carried (a new text is added). Allocates, for
+    /// String links only.
+    #[inline(never)]
+    fn read_text(&mut self, slaves: &mut [Slave], l: usize) -> Result<f64, MasterError> {
+        let link = &self.links[l];
+        let slave = &mut slaves[link.from];
+        let text = match link.from_element {
+            Some(e) => {
+                let mut all = vec![String::new(); e.count];
+                slave.backend.get_strings(&[link.from_vr], &mut all)?;
+                std::mem::take(&mut all[e.index])
+            }
+            None => {
+                let mut v = [String::new()];
+                slave.backend.get_strings(&[link.from_vr], &mut v)?;
+                std::mem::take(&mut v[0])
+            }
+        };
+        slave.counters.get_strings += 1;
+        Ok(self.texts[l].index_of(text) as f64)
+    }
+}
+
+/// The texts a String link has carried, each once, and where each is.
+#[derive(Debug, Default)]
+struct Texts {
+    all: Vec<String>,
+    index: HashMap<String, usize>,
+}
+
+impl Texts {
+    /// The index of `text`, added if new.
+    fn index_of(&mut self, text: String) -> usize {
+        if let Some(&i) = self.index.get(&text) {
+            return i;
+        }
+        self.all.push(text.clone());
+        self.index.insert(text, self.all.len() - 1);
+        self.all.len() - 1
     }
 }
 
@@ -864,20 +966,29 @@ struct Solved {
 /// per Real link with v_j increased by 1e-7·max(1, |v_j|) (the other links
 /// take G's value), each followed by a run at the new v. Converged, and
 /// stopped, as soon as a run gives |v_l − G(v)_l| ≤ tolerance·max(1, |v_l|)
-/// for every link l. On return `g` holds G(v) of the last run, which was
-/// at `v` (after a singular Jacobian G(v) is run once more).
+/// for every link l, and equal texts on the String links `text` (a text
+/// that differs counts as 1/tolerance, at least 2). On return `g` holds
+/// G(v) of the last run, which was at `v` (after a singular Jacobian G(v)
+/// is run once more).
 fn solve_loop(
     (v, g): (&mut [f64], &mut [f64]),
-    real: &[usize],
+    (real, text): (&[usize], &[usize]),
     (sweeps, newton): (usize, usize),
     tolerance: f64,
     solver: &mut Solver,
     mut apply: impl FnMut(&[f64], &mut [f64]) -> Result<(), MasterError>,
 ) -> Result<Solved, MasterError> {
     let residual = |v: &[f64], g: &[f64]| {
-        v.iter().zip(g.iter()).fold(0.0_f64, |worst, (&v, &g)| {
+        let numbers = v.iter().zip(g.iter()).fold(0.0_f64, |worst, (&v, &g)| {
             worst.max((v - g).abs() / (tolerance * v.abs().max(1.0)))
-        })
+        });
+        // String links: an index is its text, equal or not.
+        let differs = text.iter().any(|&l| v[l] != g[l]);
+        if differs {
+            numbers.max((1.0 / tolerance).max(2.0))
+        } else {
+            numbers
+        }
     };
     let n = v.len();
     apply(v, g)?;
@@ -960,6 +1071,8 @@ fn kind_of(var: &ScalarVariable) -> Option<Kind> {
         BaseType::Real => Some(Kind::Real),
         BaseType::Integer | BaseType::Enumeration => Some(Kind::Integer),
         BaseType::Boolean => Some(Kind::Boolean),
+        // FMI 3.0 Binary values are not connected.
+        BaseType::String if var.value_type == ValueType::String => Some(Kind::String),
         BaseType::String => None,
     }
 }
@@ -1012,7 +1125,7 @@ fn resolve(
                 found: describe(&var),
                 role: format!("'{role}' of {owner}"),
                 expected: format!(
-                    "a Real, Integer or Boolean {}",
+                    "a Real, Integer, Boolean or String {}",
                     if causality == Causality::Output {
                         "output"
                     } else {

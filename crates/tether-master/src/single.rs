@@ -405,6 +405,7 @@ impl<'a> Recorder<'a> {
             time,
             values: &self.row,
             exact: &self.exact,
+            strings: &[],
         })?;
         Ok(())
     }

@@ -82,6 +82,33 @@ impl Pass<'_, '_> {
         }
     }
 
+    /// A text of any length (UTF-8).
+    pub(crate) fn text(&mut self, x: &mut String) -> Passed {
+        let mut bytes = std::mem::take(x).into_bytes();
+        self.bytes(&mut bytes)?;
+        *x = String::from_utf8(bytes).map_err(|_| "a text is not UTF-8".to_string())?;
+        Ok(())
+    }
+
+    /// Texts, as many as the bytes hold (read one by one: bytes that claim
+    /// more than they hold end early, before much is allocated).
+    pub(crate) fn texts(&mut self, xs: &mut Vec<String>) -> Passed {
+        let mut n = xs.len() as u64;
+        self.u64(&mut n)?;
+        match self {
+            Pass::Write(_) => xs.iter_mut().try_for_each(|x| self.text(x)),
+            Pass::Read(_) => {
+                xs.clear();
+                for _ in 0..n {
+                    let mut x = String::new();
+                    self.text(&mut x)?;
+                    xs.push(x);
+                }
+                Ok(())
+            }
+        }
+    }
+
     /// A byte string of any length (an instance's serialized FMU state).
     pub(crate) fn bytes(&mut self, x: &mut Vec<u8>) -> Passed {
         match self {

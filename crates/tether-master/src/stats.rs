@@ -31,6 +31,11 @@ pub struct InstanceCounters {
     pub set_integers: u64,
     /// `fmi2SetBoolean` calls (Boolean signal connections).
     pub set_booleans: u64,
+    /// `fmi2GetString` calls (recorded String outputs, String signal
+    /// connections).
+    pub get_strings: u64,
+    /// `fmi2SetString` calls (String signal connections).
+    pub set_strings: u64,
     /// The FMI functions these counts stand for, by the FMU's standard and
     /// variable types (`fmi2SetReal`, `fmi3SetFloat64`, …).
     pub functions: CallNames,
@@ -184,6 +189,8 @@ impl InstanceCounters {
             (get_int, self.get_integers),
             (format!("{v}SetBoolean"), self.set_booleans),
             (format!("{v}GetBoolean"), self.get_booleans),
+            (format!("{v}SetString"), self.set_strings),
+            (format!("{v}GetString"), self.get_strings),
             (derivatives_in, self.set_input_derivatives),
             (derivatives_out.to_string(), self.get_output_derivatives),
         ]
@@ -810,6 +817,8 @@ fn add(sum: &mut InstanceCounters, c: &InstanceCounters) {
     sum.get_booleans += c.get_booleans;
     sum.set_integers += c.set_integers;
     sum.set_booleans += c.set_booleans;
+    sum.get_strings += c.get_strings;
+    sum.set_strings += c.set_strings;
     sum.functions = c.functions;
     sum.set_input_derivatives += c.set_input_derivatives;
     sum.get_output_derivatives += c.get_output_derivatives;
@@ -884,6 +893,8 @@ struct Calls {
     get_boolean: u64,
     set_integer: u64,
     set_boolean: u64,
+    get_string: u64,
+    set_string: u64,
     set_real_input_derivatives: u64,
     get_real_output_derivatives: u64,
     round_trips: u64,
@@ -993,6 +1004,8 @@ impl Serialize for RunStats {
                             get_boolean: c.get_booleans,
                             set_integer: c.set_integers,
                             set_boolean: c.set_booleans,
+                            get_string: c.get_strings,
+                            set_string: c.set_strings,
                             set_real_input_derivatives: c.set_input_derivatives,
                             get_real_output_derivatives: c.get_output_derivatives,
                             round_trips: c.round_trips,

@@ -280,6 +280,7 @@ pub(crate) fn simulate_one(
                 .min(1 << 30),
         ),
         rounded: Vec::new(),
+        texts: Vec::new(),
     };
     let mut signals = Signals::new(None);
     let run = single.run(&outputs, &mut rows, &mut || signals.interrupt());

@@ -11,6 +11,8 @@ pub(crate) struct Rows {
     pub(crate) bytes: Vec<u8>,
     /// Columns that held an integer a float rounds (beyond ±2^53).
     pub(crate) rounded: Vec<usize>,
+    /// The String columns: each one's index and its text in every row.
+    pub(crate) texts: Vec<(usize, Vec<String>)>,
 }
 
 impl Rows {
@@ -21,8 +23,19 @@ impl Rows {
         }
     }
 
-    /// `(columns, data, stats)` for the Python `Result`; a `UserWarning`
-    /// names the columns whose integers the floats rounded.
+    /// A row's String values (by column index), after [`push`](Self::push).
+    pub(crate) fn push_texts(&mut self, strings: &[(usize, String)]) {
+        for (k, text) in strings {
+            match self.texts.iter_mut().find(|(j, _)| j == k) {
+                Some((_, column)) => column.push(text.clone()),
+                None => self.texts.push((*k, vec![text.clone()])),
+            }
+        }
+    }
+
+    /// `(columns, data, stats)` for the Python `Result`, with a fourth
+    /// item when there are String columns: `{column: [text per row]}`; a
+    /// `UserWarning` names the columns whose integers the floats rounded.
     pub(crate) fn into_py(self, py: Python<'_>, stats: Py<PyAny>) -> PyResult<Py<PyAny>> {
         if !self.rounded.is_empty() {
             let names: Vec<&str> = self
@@ -39,7 +52,15 @@ impl Rows {
             PyErr::warn(py, &category, &std::ffi::CString::new(text)?, 1)?;
         }
         let data = PyBytes::new(py, &self.bytes);
-        let tuple = (self.columns, data, stats).into_pyobject(py)?;
+        if self.texts.is_empty() {
+            let tuple = (self.columns, data, stats).into_pyobject(py)?;
+            return Ok(tuple.into_any().unbind());
+        }
+        let texts = PyDict::new(py);
+        for (k, column) in &self.texts {
+            texts.set_item(&self.columns[*k], column)?;
+        }
+        let tuple = (self.columns, data, stats, texts).into_pyobject(py)?;
         Ok(tuple.into_any().unbind())
     }
 }
@@ -52,6 +73,9 @@ impl Observer for Rows {
 
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
         self.push(sample.time, sample.values);
+        if !sample.strings.is_empty() {
+            self.push_texts(sample.strings);
+        }
         for &(k, _) in sample.exact {
             if !self.rounded.contains(&k) {
                 self.rounded.push(k);

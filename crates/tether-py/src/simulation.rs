@@ -54,8 +54,10 @@ impl PySimulation {
             columns: sim.columns().to_vec(),
             bytes: Vec::new(),
             rounded: Vec::new(),
+            texts: Vec::new(),
         };
         rows.push(sim.time(), sim.values());
+        rows.push_texts(sim.strings());
         let ssp_notes = ssp.as_ref().map(|l| l.notes.clone()).unwrap_or_default();
         let notes = [ssp_notes, sim.notes().to_vec()].concat();
         let warnings = sim.warnings().to_vec();
@@ -146,6 +148,7 @@ impl PySimulation {
             columns: self.rows.columns.clone(),
             bytes: self.rows.bytes.clone(),
             rounded: Vec::new(),
+            texts: self.rows.texts.clone(),
         };
         rows.into_py(py, stats)
     }
@@ -196,6 +199,7 @@ impl PySimulation {
             self.n += 1;
             made += 1;
             self.rows.push(sim.time(), sim.values());
+            self.rows.push_texts(sim.strings());
         }
         Ok(made)
     }

@@ -493,6 +493,7 @@ fn series_result(py: Python<'_>, run: &RunResult) -> PyResult<Py<PyAny>> {
         columns: t.columns.clone(),
         bytes: Vec::with_capacity(t.times.len() * (t.columns.len() + 1) * 8),
         rounded: Vec::new(),
+        texts: Vec::new(),
     };
     let mut row = vec![0.0; t.columns.len()];
     for (i, &time) in t.times.iter().enumerate() {

@@ -1,7 +1,7 @@
 """Every Python block of README.md and docs/python.md runs as written, in
 order, each file's blocks in one namespace (a block may use the names of the
-ones before it), in a scratch folder where `examples`, `target` and `docs` are
-the repository's. A block that cannot run here has a visible
+ones before it), in a scratch folder where `examples`, `target`, `docs` and
+`tests` (the vendored Reference FMUs) are the repository's. A block that cannot run here has a visible
 `(Not run in tests: reason.)` line before it (crates/tether-cli/tests/
 docs_blocks.rs runs the shell and TOML blocks)."""
 
@@ -32,7 +32,7 @@ def python_blocks(path):
 
 @pytest.mark.parametrize("doc", ["README.md", "docs/python.md"])
 def test_every_python_block_runs_as_written(doc, tmp_path, monkeypatch):
-    for name in ("examples", "target", "docs"):
+    for name in ("examples", "target", "docs", "tests"):
         (tmp_path / name).symlink_to(ROOT / name)
     monkeypatch.chdir(tmp_path)
     namespace = {"__name__": "__docs__"}

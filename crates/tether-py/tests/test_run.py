@@ -77,7 +77,7 @@ def test_result_gives_columns_as_float_arrays_and_the_run_stats(oscillator_toml)
     assert stats["instances"]["mass1"]["do_step"] > 100
     assert set(stats["instances"]["mass1"]) == {
         "do_step", "get_fmu_state", "set_fmu_state", "set_real", "get_real",
-        "get_integer", "get_boolean", "set_integer", "set_boolean",
+        "get_integer", "get_boolean", "set_integer", "set_boolean", "get_string", "set_string",
         "set_real_input_derivatives", "get_real_output_derivatives", "round_trips",
     }
     assert set(stats["times"]) >= {"setup", "predictor", "jacobian", "solve", "corrector", "recording"}

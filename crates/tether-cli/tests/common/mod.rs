@@ -44,19 +44,27 @@ pub fn error_line(out: &Output) -> String {
     text.lines().last().unwrap_or_default().to_string()
 }
 
-/// A results file's header and rows (every line after the header a row of
-/// numbers: a trailer line fails the parse).
+/// A results file's header and rows (every record after the header a row
+/// of numbers, a String output's text read as NaN: a trailer line fails the
+/// parse).
 pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::to_string)
-        .collect();
-    let rows = lines
-        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+    let mut reader = csv::Reader::from_reader(text.as_bytes());
+    let header = reader.headers().unwrap().iter().map(String::from).collect();
+    let rows = reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            let quoted =
+                |field: &str| text.contains(&format!("\"{}\"", field.replace('"', "\"\"")));
+            r.iter()
+                .map(|v| match v.parse() {
+                    Ok(x) => x,
+                    Err(_) if quoted(v) => f64::NAN,
+                    Err(e) => panic!("{v:?} is not a number: {e}"),
+                })
+                .collect()
+        })
         .collect();
     (header, rows)
 }

@@ -721,6 +721,28 @@ impl RemoteInstance {
         self.copy_reply(read, &values, out)
     }
 
+    /// `fmi2GetString` (FMI 3.0: `fmi3GetString`).
+    pub fn get_string(&mut self, vrs: &[ValueReference], out: &mut [String]) -> Result<()> {
+        self.queue(op::GET_STRING).u32s(vrs).u32(count(out.len()));
+        self.send()?;
+        let mut input = In::new(&self.reply[1..]);
+        let read = (|| -> io::Result<()> {
+            if input.u32()? as usize != out.len() {
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    "wrong number of values",
+                ));
+            }
+            for o in out.iter_mut() {
+                let text = input.str()?;
+                o.clear();
+                o.push_str(text);
+            }
+            Ok(())
+        })();
+        read.map_err(|e| self.protocol_error(e))
+    }
+
     /// `fmi2SetInteger`.
     pub fn set_integer(&mut self, vrs: &[ValueReference], values: &[Int]) -> Result<()> {
         self.queue(op::SET_INTEGER).u32s(vrs).ints(values);
@@ -954,12 +976,8 @@ impl crate::interface::FmuInstance for RemoteInstance {
         self.queue(op::SET_BOOLEAN).u32s(vrs).bools(values);
         Ok(())
     }
-    fn get_strings(&mut self, _vrs: &[ValueReference], _out: &mut [String]) -> Result<()> {
-        Err(Error::InvalidArgument {
-            function: "fmi2GetString",
-            instance: self.name.to_string(),
-            message: "String values are not read from isolated instances".into(),
-        })
+    fn get_strings(&mut self, vrs: &[ValueReference], out: &mut [String]) -> Result<()> {
+        self.get_string(vrs, out)
     }
     fn set_strings(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
         self.set_string(vrs, values)

@@ -16,7 +16,7 @@ use crate::interface::Int;
 use crate::model_description::FmiStandard;
 
 /// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 6;
+pub const VERSION: u32 = 7;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -45,6 +45,7 @@ pub mod op {
     pub const FREE_INSTANCE: u8 = 23;
     pub const GET_INTEGER: u8 = 25;
     pub const GET_BOOLEAN: u8 = 26;
+    pub const GET_STRING: u8 = 27;
     /// Answered by `exit` without a reply (for tests of the transport's cost).
     pub const PING: u8 = 24;
 }

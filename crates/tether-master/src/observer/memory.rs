@@ -11,6 +11,9 @@ pub struct MemoryRecorder {
     pub times: Vec<f64>,
     /// One row per sample.
     pub rows: Vec<Vec<f64>>,
+    /// Per sample: its String values by column index (the row holds 0
+    /// there); empty rows without String outputs.
+    pub strings: Vec<Vec<(usize, String)>>,
     /// The failure that ended the run, if any.
     pub failure: Option<String>,
 }
@@ -26,6 +29,15 @@ impl MemoryRecorder {
         let i = self.column(name)?;
         Some(self.rows.iter().map(|r| r[i]).collect())
     }
+
+    /// All values of one String column (`None` for a column of numbers).
+    pub fn texts(&self, name: &str) -> Option<Vec<String>> {
+        let i = self.column(name)?;
+        self.strings
+            .iter()
+            .map(|row| row.iter().find(|(k, _)| *k == i).map(|(_, s)| s.clone()))
+            .collect()
+    }
 }
 
 impl Observer for MemoryRecorder {
@@ -37,6 +49,7 @@ impl Observer for MemoryRecorder {
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
         self.times.push(sample.time);
         self.rows.push(sample.values.to_vec());
+        self.strings.push(sample.strings.to_vec());
         Ok(())
     }
 

@@ -21,6 +21,10 @@ pub struct Sample<'a> {
     /// FMI 3.0 `Int64` or `UInt64`), exactly, by index in `values`, in
     /// increasing order; `values` holds them rounded. Usually empty.
     pub exact: &'a [(usize, Int)],
+    /// The String values (String outputs), by index in `values`, in
+    /// increasing order; `values` holds 0 at their columns. Empty when the
+    /// system records no String output.
+    pub strings: &'a [(usize, String)],
 }
 
 /// `x` as a float, and whether the float is exact.

@@ -245,7 +245,8 @@ impl Simulation {
         let first_residual = columns.len();
         columns.extend(unknowns.iter().filter_map(|u| u.residual.clone()));
         let keep = spec.output.select(&columns)?;
-        let mut row = Row::new(columns, keep);
+        let texts = (system.slaves.iter()).any(|s| !s.recorded_strings().is_empty());
+        let mut row = Row::new(columns, keep, texts);
         row.fill(&system);
         let mut health = Health::new(
             row.all_values(),
@@ -316,6 +317,13 @@ impl Simulation {
     /// [`Sample::values`](crate::Sample::values).
     pub fn values(&self) -> &[f64] {
         self.row.values()
+    }
+
+    /// The String values of the current point (String outputs), by index in
+    /// [`values`](Self::values), which holds 0 there: what observers
+    /// receive as [`Sample::strings`](crate::Sample::strings).
+    pub fn strings(&self) -> &[(usize, String)] {
+        self.row.strings()
     }
 
     /// The units the FMUs declare for the recorded outputs among

@@ -16,14 +16,20 @@ pub(crate) struct Row {
     values: Vec<f64>,
     /// The integers among them that a float rounds, exactly (by index).
     exact: Vec<(usize, Int)>,
+    /// The String values among them (String outputs), by index …
+    strings: Vec<(usize, String)>,
+    /// … if any instance records String outputs.
+    texts: bool,
     /// The columns the observers receive …
     columns: Vec<String>,
     /// … their indices in `values`, when not all of them …
     keep: Option<Vec<usize>>,
     /// … and their values at the current point …
     selected: Vec<f64>,
-    /// … and exact integers (by index in `selected`).
+    /// … and exact integers (by index in `selected`) …
     selected_exact: Vec<(usize, Int)>,
+    /// … and String values (by index in `selected`).
+    selected_strings: Vec<(usize, String)>,
     /// The last accepted point when it was not recorded (off the output
     /// grid): its step, time, values and exact integers, written at the end
     /// of the run.
@@ -38,11 +44,13 @@ struct Held {
     time: f64,
     values: Vec<f64>,
     exact: Vec<(usize, Int)>,
+    strings: Vec<(usize, String)>,
 }
 
 impl Row {
-    /// A row of `columns`, of which the observers receive those at `keep`.
-    pub(crate) fn new(columns: Vec<String>, keep: Vec<usize>) -> Row {
+    /// A row of `columns`, of which the observers receive those at `keep`;
+    /// `texts`: some of them are String outputs.
+    pub(crate) fn new(columns: Vec<String>, keep: Vec<usize>, texts: bool) -> Row {
         let keep = (keep.len() < columns.len()).then_some(keep);
         let selected: Vec<String> = match &keep {
             Some(keep) => keep.iter().map(|&i| columns[i].clone()).collect(),
@@ -51,8 +59,11 @@ impl Row {
         Row {
             values: vec![0.0; columns.len()],
             exact: Vec::new(),
+            strings: Vec::new(),
+            texts,
             selected: vec![0.0; selected.len()],
             selected_exact: Vec::new(),
+            selected_strings: Vec::new(),
             columns: selected,
             all_columns: columns,
             keep,
@@ -92,6 +103,14 @@ impl Row {
         }
     }
 
+    /// The String values among the recorded values (by index).
+    pub(crate) fn strings(&self) -> &[(usize, String)] {
+        match self.keep {
+            Some(_) => &self.selected_strings,
+            None => &self.strings,
+        }
+    }
+
     /// The time of the last point handed to the observers.
     pub(crate) fn last_recorded(&self) -> Option<f64> {
         self.last_recorded
@@ -108,6 +127,9 @@ impl Row {
             let exact = slave.recorded_exact().iter().map(|&(k, x)| (i + k, x));
             self.exact.extend(exact);
             i += values.len();
+        }
+        if self.texts {
+            self.fill_strings(system);
         }
         for h in &system.history {
             self.values[i] = h[0];
@@ -129,7 +151,37 @@ impl Row {
                     }
                 }
             }
+            if !self.strings.is_empty() {
+                self.selected_strings.clear();
+                for (j, &k) in keep.iter().enumerate() {
+                    if let Some((_, text)) = self.strings.iter().find(|(i, _)| *i == k) {
+                        self.selected_strings.push((j, text.clone()));
+                    }
+                }
+            }
         }
+    }
+
+    /// The String outputs' texts of the current point (out of line:
+    /// systems without them skip it before the call).
+    #[inline(never)]
+    fn fill_strings(&mut self, system: &System) {
+        let (mut i, mut texts) = (0, 0);
+        for slave in &system.slaves {
+            for (k, text) in slave.recorded_strings() {
+                // The slots are reused: no allocation once the texts fit.
+                match self.strings.get_mut(texts) {
+                    Some(slot) => {
+                        slot.0 = i + k;
+                        slot.1.clone_from(text);
+                    }
+                    None => self.strings.push((i + k, text.clone())),
+                }
+                texts += 1;
+            }
+            i += slave.recorded_values().len();
+        }
+        self.strings.truncate(texts);
     }
 
     /// Hand the current point (`step`, `time`) to the observers.
@@ -144,6 +196,7 @@ impl Row {
             time,
             values: self.values(),
             exact: self.exact(),
+            strings: self.strings(),
         };
         for o in observers.iter_mut() {
             o.sample(sample)?;
@@ -160,6 +213,7 @@ impl Row {
             time,
             values: Vec::with_capacity(self.columns.len()),
             exact: Vec::new(),
+            strings: Vec::new(),
         });
         held.step = step;
         held.time = time;
@@ -167,6 +221,10 @@ impl Row {
         held.values.extend_from_slice(self.values());
         held.exact.clear();
         held.exact.extend_from_slice(self.exact());
+        if self.texts {
+            held.strings.clear();
+            held.strings.extend_from_slice(self.strings());
+        }
         self.held = Some(held);
     }
 
@@ -183,6 +241,7 @@ impl Row {
             time: held.time,
             values: &held.values,
             exact: &held.exact,
+            strings: &held.strings,
         };
         for o in observers.iter_mut() {
             o.sample(sample)?;

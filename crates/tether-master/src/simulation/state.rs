@@ -1,6 +1,6 @@
 //! The run's state as one value: the master's own state (the unknowns'
 //! history, the coupled and recorded outputs, the time grid with its step
-//! control, the signal values, the method's Jacobian reuse and error scales,
+//! control, the signal values and texts, the method's Jacobian reuse and error scales,
 //! the residuals so far) and, for the whole system, every instance's FMU
 //! state. Restoring it and repeating a step gives the same results bit for
 //! bit (tests/master_state.rs).
@@ -18,9 +18,13 @@ pub struct MasterState {
     history: Vec<[f64; 3]>,
     outputs: Vec<Vec<f64>>,
     recorded: Vec<Vec<f64>>,
+    /// The recorded String outputs.
+    recorded_strings: Vec<Vec<(usize, String)>>,
     grid: Grid,
     health: Health,
     signals: (Vec<[f64; 3]>, Vec<f64>),
+    /// The texts of the String links, which their values in `signals` index.
+    signal_texts: Vec<Vec<String>>,
     method: MethodState,
 }
 
@@ -55,9 +59,15 @@ impl Simulation {
                 .iter()
                 .map(|s| s.recorded_values().to_vec())
                 .collect(),
+            recorded_strings: system
+                .slaves
+                .iter()
+                .map(|s| s.recorded_strings().to_vec())
+                .collect(),
             grid: self.grid.clone(),
             health: self.health.clone(),
             signals: self.signals.values(),
+            signal_texts: self.signals.texts(),
             method: self.method.save(),
         }
     }
@@ -71,9 +81,13 @@ impl Simulation {
         for (slave, recorded) in system.slaves.iter_mut().zip(&state.recorded) {
             slave.set_recorded_values(recorded);
         }
+        for (slave, strings) in system.slaves.iter_mut().zip(&state.recorded_strings) {
+            slave.set_recorded_strings(strings);
+        }
         self.grid.clone_from(&state.grid);
         self.health.clone_from(&state.health);
         self.signals.set_values(&state.signals);
+        self.signals.set_texts(&state.signal_texts);
         self.method.restore(&state.method);
         self.row.fill(&self.system);
     }
@@ -126,6 +140,13 @@ impl MasterState {
         self.health.pass(p)?;
         p.f64s(self.signals.0.as_flattened_mut(), "the signal links")?;
         p.f64s(&mut self.signals.1, "the signal links")?;
+        p.same(self.signal_texts.len(), "the signal links")?;
+        self.signal_texts.iter_mut().try_for_each(|t| p.texts(t))?;
+        p.same(self.recorded_strings.len(), "the number of instances")?;
+        for strings in &mut self.recorded_strings {
+            p.same(strings.len(), "the recorded String outputs")?;
+            strings.iter_mut().try_for_each(|(_, t)| p.text(t))?;
+        }
         pass_saved(&mut self.method, p)
     }
 }

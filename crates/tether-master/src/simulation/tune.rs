@@ -60,7 +60,7 @@ impl Simulation {
             BaseType::Real => slave.counters.set_reals += 1,
             BaseType::Integer | BaseType::Enumeration => slave.counters.set_integers += 1,
             BaseType::Boolean => slave.counters.set_booleans += 1,
-            _ => {}
+            BaseType::String => slave.counters.set_strings += 1,
         }
         Ok(())
     }

@@ -1,8 +1,9 @@
 //! The outputs an instance records at accepted points: the Real outputs,
-//! then the Integer (and Enumeration) ones, then the Boolean ones, each in the
-//! order of the model description, an array one column per element.
+//! then the Integer (and Enumeration) ones, then the Boolean ones, then the
+//! String ones, each in the order of the model description, an array one
+//! column per element.
 
-use tether_fmi::{BaseType, Causality, Int, ModelDescription};
+use tether_fmi::{BaseType, Causality, Int, ModelDescription, ValueType};
 
 use super::{Run, Slave};
 use crate::observer::integer_value;
@@ -23,6 +24,17 @@ pub(super) struct Recorded {
     /// Boolean outputs, recorded after the Integer ones (as 0 and 1).
     pub bools: Vec<u32>,
     pub bool_buf: Vec<bool>,
+    /// String outputs, recorded after the Boolean ones (0 in `values`, the
+    /// text in `strings`).
+    pub strs: Vec<u32>,
+    /// The String outputs after the latest read, by index in `values`
+    /// (empty, and never touched, without String outputs).
+    pub strings: Vec<(usize, String)>,
+    /// The buffer `strs` is read into.
+    pub str_buf: Vec<String>,
+    /// Whether there are Integer, Boolean or String outputs (read after the
+    /// Real ones, out of line).
+    pub others: bool,
     /// Recorded outputs after the latest read.
     pub values: Vec<f64>,
     /// The integers among them that a float rounds, exactly (by index).
@@ -32,22 +44,31 @@ pub(super) struct Recorded {
 impl Recorded {
     /// The recorded outputs of instance `instance` of `md` and their columns:
     /// the Real outputs, then the Integer (and Enumeration) ones, then the
-    /// Boolean ones, each in the order of the model description, an array one
-    /// column per element (`inst.y[1]`, sized as `arrays` makes it).
+    /// Boolean ones, then the String ones, each in the order of the model
+    /// description, an array one column per element (`inst.y[1]`, sized as
+    /// `arrays` makes it).
     pub(super) fn new(
         md: &ModelDescription,
         arrays: &Arrays,
         instance: &str,
     ) -> Result<Recorded, MasterError> {
         let mut recorded = Recorded::default();
-        let (mut ints, mut bools) = (0, 0);
-        for kind in [BaseType::Real, BaseType::Integer, BaseType::Boolean] {
+        let (mut ints, mut bools, mut strs) = (0, 0, 0);
+        let kinds = [
+            BaseType::Real,
+            BaseType::Integer,
+            BaseType::Boolean,
+            BaseType::String,
+        ];
+        for kind in kinds {
             for v in &md.model_variables {
                 let base = match v.base_type() {
                     BaseType::Enumeration => BaseType::Integer,
                     other => other,
                 };
-                if v.causality != Causality::Output || base != kind {
+                // FMI 3.0 Binary outputs are not recorded.
+                let binary = base == BaseType::String && v.value_type != ValueType::String;
+                if v.causality != Causality::Output || base != kind || binary {
                     continue;
                 }
                 let names = arrays.element_names(md, v)?;
@@ -64,9 +85,13 @@ impl Recorded {
                         recorded.ints.push(v.value_reference);
                         ints += n;
                     }
-                    _ => {
+                    BaseType::Boolean => {
                         recorded.bools.push(v.value_reference);
                         bools += n;
+                    }
+                    _ => {
+                        recorded.strs.push(v.value_reference);
+                        strs += n;
                     }
                 }
             }
@@ -74,6 +99,12 @@ impl Recorded {
         recorded.int_buf = vec![0; ints];
         recorded.bool_buf = vec![false; bools];
         recorded.values = vec![0.0; recorded.names.len()];
+        let first = recorded.names.len() - strs;
+        recorded.strings = (first..recorded.names.len())
+            .map(|k| (k, String::new()))
+            .collect();
+        recorded.str_buf = vec![String::new(); strs];
+        recorded.others = ints + bools + strs > 0;
         Ok(recorded)
     }
 }
@@ -91,6 +122,28 @@ impl Slave {
     pub(super) fn take_recorded(&mut self, reals: &[f64], run: Run) -> Result<(), MasterError> {
         self.recorded.values[..reals.len()].copy_from_slice(reals);
         let reals = reals.len();
+        if self.recorded.others {
+            self.take_others(reals)?;
+        }
+        match self.recorded.values[..reals]
+            .iter()
+            .position(|v| !v.is_finite())
+        {
+            None => Ok(()),
+            Some(i) => {
+                let column = &self.recorded.names[i];
+                // `<instance>.<variable>`: the instance's name is the prefix.
+                let variable = column[column.find('.').map_or(0, |d| d + 1)..].to_string();
+                Err(self.non_finite(variable, self.recorded.values[i], run))
+            }
+        }
+    }
+
+    /// The recorded Integer, Boolean and String outputs, read now, after
+    /// the `reals` Real ones (out of line: systems with Real outputs only
+    /// skip it before the call).
+    #[inline(never)]
+    fn take_others(&mut self, reals: usize) -> Result<(), MasterError> {
         if !self.recorded.ints.is_empty() {
             self.backend
                 .get_integers(&self.recorded.ints, &mut self.recorded.int_buf)?;
@@ -116,18 +169,32 @@ impl Slave {
                 *slot = if v { 1.0 } else { 0.0 };
             }
         }
-        match self.recorded.values[..reals]
-            .iter()
-            .position(|v| !v.is_finite())
-        {
-            None => Ok(()),
-            Some(i) => {
-                let column = &self.recorded.names[i];
-                // `<instance>.<variable>`: the instance's name is the prefix.
-                let variable = column[column.find('.').map_or(0, |d| d + 1)..].to_string();
-                Err(self.non_finite(variable, self.recorded.values[i], run))
-            }
+        if !self.recorded.strs.is_empty() {
+            self.read_recorded_strings()?;
         }
+        Ok(())
+    }
+
+    /// The recorded String outputs, read now.
+    fn read_recorded_strings(&mut self) -> Result<(), MasterError> {
+        let r = &mut self.recorded;
+        self.backend.get_strings(&r.strs, &mut r.str_buf)?;
+        self.counters.get_strings += 1;
+        for ((_, slot), text) in r.strings.iter_mut().zip(&r.str_buf) {
+            slot.clone_from(text);
+        }
+        Ok(())
+    }
+
+    /// The recorded String outputs after the latest read, by index in
+    /// [`recorded_values`](Self::recorded_values).
+    pub fn recorded_strings(&self) -> &[(usize, String)] {
+        &self.recorded.strings
+    }
+
+    /// Back to recorded String outputs read earlier (a master state restored).
+    pub(crate) fn set_recorded_strings(&mut self, strings: &[(usize, String)]) {
+        self.recorded.strings.clone_from_slice(strings);
     }
 
     /// Back to recorded outputs read earlier (a master state restored).
@@ -156,10 +223,11 @@ impl Slave {
 mod tests {
     use super::*;
 
-    /// Reals first, then Integers and Enumerations, then Booleans, each in
-    /// the description's order; inputs and parameters are not recorded.
+    /// Reals first, then Integers and Enumerations, then Booleans, then
+    /// Strings, each in the description's order; inputs and parameters are
+    /// not recorded.
     #[test]
-    fn columns_are_reals_then_integers_then_booleans() {
+    fn columns_are_reals_then_integers_then_booleans_then_strings() {
         let md = ModelDescription::from_xml(
             r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="2.0" modelName="m" guid="{g}">
@@ -174,18 +242,21 @@ mod tests {
     <ScalarVariable name="u" valueReference="3" causality="input"><Real start="0"/></ScalarVariable>
     <ScalarVariable name="mode" valueReference="4" causality="output" variability="discrete"><Enumeration declaredType="Mode"/></ScalarVariable>
     <ScalarVariable name="y" valueReference="5" causality="output"><Real/></ScalarVariable>
+    <ScalarVariable name="s" valueReference="6" causality="output" variability="discrete"><String/></ScalarVariable>
   </ModelVariables>
   <ModelStructure>
-    <Outputs><Unknown index="1"/><Unknown index="2"/><Unknown index="3"/><Unknown index="5"/><Unknown index="6"/></Outputs>
+    <Outputs><Unknown index="1"/><Unknown index="2"/><Unknown index="3"/><Unknown index="5"/><Unknown index="6"/><Unknown index="7"/></Outputs>
   </ModelStructure>
 </fmiModelDescription>"#,
         )
         .unwrap();
         let r = Recorded::new(&md, &Arrays::default(), "i").unwrap();
-        assert_eq!(r.names, ["i.x", "i.y", "i.n", "i.mode", "i.on"]);
+        assert_eq!(r.names, ["i.x", "i.y", "i.n", "i.mode", "i.on", "i.s"]);
         assert_eq!((r.vrs.as_slice(), r.reals), (&[2, 5][..], 2));
         assert_eq!((r.ints.as_slice(), r.int_buf.len()), (&[1, 4][..], 2));
         assert_eq!((r.bools.as_slice(), r.bool_buf.len()), (&[0][..], 1));
-        assert_eq!(r.values.len(), 5);
+        assert_eq!((r.strs.as_slice(), r.str_buf.len()), (&[6][..], 1));
+        assert_eq!(r.strings, [(5, String::new())]);
+        assert_eq!(r.values.len(), 6);
     }
 }

@@ -164,23 +164,43 @@ class Result:
     """The results of a run: one row per accepted macro point.
 
     ``columns`` are the names after ``time``, as in the CSV of ``tether run``:
-    every output (Real, then Integer, then Boolean, as numbers) as
-    ``<instance>.<variable>``, then the multipliers
+    every output (Real, then Integer, then Boolean, as numbers, then String,
+    as text) as ``<instance>.<variable>``, then the multipliers
     (``<constraint>.lambda``), then the residuals (``<constraint>.g``).
 
-    ``result[name]`` is a NumPy float64 array of one column (``"time"`` too),
-    :meth:`to_numpy` the whole table as a structured array whose fields are
-    ``time`` and the columns (the shape of fmpy's ``simulate_fmu`` result),
+    ``result[name]`` is a NumPy float64 array of one column (``"time"`` too;
+    an object array of ``str`` for a String output), :meth:`to_numpy` the
+    whole table as a structured array whose fields are ``time`` and the
+    columns (the shape of fmpy's ``simulate_fmu`` result; String outputs are
+    object fields),
     ``complete`` whether the run reached its stop time, ``stats`` the run's
     counters (see docs/python.md).
     """
 
-    def __init__(self, columns: Sequence[str], data: bytes, stats: Dict[str, Any]) -> None:
+    def __init__(
+        self,
+        columns: Sequence[str],
+        data: bytes,
+        stats: Dict[str, Any],
+        texts: Optional[Dict[str, List[str]]] = None,
+    ) -> None:
         self.columns: List[str] = list(columns)
         self.stats: Dict[str, Any] = stats
         self._dtype = np.dtype([("time", "f8")] + [(c, "f8") for c in self.columns])
         # A view of the bytes the master produced: no copy.
         self._table = np.frombuffer(data, dtype=self._dtype)
+        if texts:
+            # String outputs: object fields holding the texts (a copy).
+            self._dtype = np.dtype(
+                [("time", "f8")] + [(c, "O" if c in texts else "f8") for c in self.columns]
+            )
+            table = np.empty(len(self._table), dtype=self._dtype)
+            for name in ["time"] + self.columns:
+                if name in texts:
+                    table[name] = np.array(texts[name], dtype=object)
+                else:
+                    table[name] = self._table[name]
+            self._table = table
         self._index = {name: i for i, name in enumerate(self.columns)}
         #: Where :func:`run` with ``client=`` placed each isolated instance:
         #: ``{name: {"worker": address, "host": "tcp://ADDR:PORT"}}``.

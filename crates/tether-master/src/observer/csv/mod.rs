@@ -232,7 +232,14 @@ impl<W: Write> Observer for CsvRecorder<W> {
 
     fn sample(&mut self, sample: Sample<'_>) -> std::io::Result<()> {
         match &mut self.mode {
-            Mode::Direct(text) => text.row(sample.time, sample.values, sample.exact),
+            Mode::Direct(text) => text.row(
+                sample.time,
+                sample.values,
+                Cells {
+                    exact: sample.exact,
+                    strings: sample.strings,
+                },
+            ),
             Mode::Background(bg) => bg.sample(sample),
         }
     }
@@ -288,12 +295,17 @@ impl<W: Write> CsvText<W> {
     }
 
     /// One row: `values` in the shortest text that reads back bit for bit,
-    /// except the integers in `exact` (by index in `values`), written exactly.
+    /// except the integers in `cells.exact` (by index in `values`), written
+    /// exactly, and the String values of `cells.strings`, written in quotes.
     #[inline]
-    fn row(&mut self, time: f64, values: &[f64], exact: &[(usize, Int)]) -> std::io::Result<()> {
+    fn row(&mut self, time: f64, values: &[f64], cells: Cells<'_>) -> std::io::Result<()> {
+        let Cells { exact, strings } = cells;
         let line = &mut self.line;
         line.clear();
         line.extend_from_slice(self.number.format(time).as_bytes());
+        if !strings.is_empty() {
+            return self.row_with_strings(values, cells);
+        }
         if exact.is_empty() {
             for &v in values {
                 line.push(b',');
@@ -307,6 +319,30 @@ impl<W: Write> CsvText<W> {
                     Some((_, x)) => write!(line, "{x}")?,
                     None => line.extend_from_slice(self.number.format(v).as_bytes()),
                 }
+            }
+        }
+        line.push(b'\n');
+        self.out.write_all(line)
+    }
+
+    /// The rest of a row with String values (after its time, in `line`):
+    /// every String value in double quotes, a quote inside doubled (RFC
+    /// 4180), so that a reader tells text from numbers.
+    #[cold]
+    fn row_with_strings(&mut self, values: &[f64], cells: Cells<'_>) -> std::io::Result<()> {
+        let line = &mut self.line;
+        let mut exact = cells.exact.iter().peekable();
+        let mut strings = cells.strings.iter().peekable();
+        for (i, &v) in values.iter().enumerate() {
+            line.push(b',');
+            if let Some((_, text)) = strings.next_if(|(k, _)| *k == i) {
+                line.push(b'"');
+                line.extend_from_slice(text.replace('"', "\"\"").as_bytes());
+                line.push(b'"');
+            } else if let Some((_, x)) = exact.next_if(|(k, _)| *k == i) {
+                write!(line, "{x}")?;
+            } else {
+                line.extend_from_slice(self.number.format(v).as_bytes());
             }
         }
         line.push(b'\n');
@@ -410,12 +446,22 @@ struct Exchange {
     error: Option<std::io::Error>,
 }
 
+/// What a row holds besides numbers: exact integers and String values, by
+/// index in its values.
+#[derive(Clone, Copy)]
+struct Cells<'a> {
+    exact: &'a [(usize, Int)],
+    strings: &'a [(usize, String)],
+}
+
 /// Rows of numbers, time first, and the integers among them that a float
-/// rounds, exactly, by position in `values` (rarely any).
+/// rounds, exactly, and the String values, by position in `values` (rarely
+/// any).
 #[derive(Default)]
 struct Block {
     values: Vec<f64>,
     exact: Vec<(usize, Int)>,
+    strings: Vec<(usize, String)>,
 }
 
 impl Block {
@@ -423,12 +469,14 @@ impl Block {
         Block {
             values: Vec::with_capacity(capacity),
             exact: Vec::new(),
+            strings: Vec::new(),
         }
     }
 
     fn clear(&mut self) {
         self.values.clear();
         self.exact.clear();
+        self.strings.clear();
     }
 
     fn is_empty(&self) -> bool {
@@ -438,6 +486,7 @@ impl Block {
     /// Writes the rows of `width` numbers.
     fn write<W: Write>(&self, width: usize, text: &mut CsvText<W>) -> std::io::Result<()> {
         let mut exact = &self.exact[..];
+        let mut strings = &self.strings[..];
         for (r, row) in self.values.chunks_exact(width).enumerate() {
             // Positions of this row's values: after its time.
             let first = r * width + 1;
@@ -445,14 +494,31 @@ impl Block {
                 .iter()
                 .take_while(|(k, _)| *k < first + width - 1)
                 .count();
-            if n == 0 {
-                text.row(row[0], &row[1..], &[])?;
+            let m = strings
+                .iter()
+                .take_while(|(k, _)| *k < first + width - 1)
+                .count();
+            if n == 0 && m == 0 {
+                let none = Cells {
+                    exact: &[],
+                    strings: &[],
+                };
+                text.row(row[0], &row[1..], none)?;
             } else {
                 let here: Vec<(usize, Int)> =
                     exact[..n].iter().map(|&(k, x)| (k - first, x)).collect();
-                text.row(row[0], &row[1..], &here)?;
+                let texts: Vec<(usize, String)> = strings[..m]
+                    .iter()
+                    .map(|(k, s)| (k - first, s.clone()))
+                    .collect();
+                let cells = Cells {
+                    exact: &here,
+                    strings: &texts,
+                };
+                text.row(row[0], &row[1..], cells)?;
             }
             exact = &exact[n..];
+            strings = &strings[m..];
         }
         Ok(())
     }
@@ -576,6 +642,10 @@ impl Background {
         state.filling.values.extend_from_slice(sample.values);
         let exact = sample.exact.iter().map(|&(k, x)| (first + k, x));
         state.filling.exact.extend(exact);
+        if !sample.strings.is_empty() {
+            let texts = sample.strings.iter().map(|(k, s)| (first + k, s.clone()));
+            state.filling.strings.extend(texts);
+        }
         Ok(())
     }
 
@@ -776,14 +846,36 @@ mod tests {
                     values[k] = x as f64;
                 }
             }
+            // Every fifth row, two String values (a comma and quotes in one).
+            let strings = if n % 5 == 1 {
+                vec![(4, format!("row {n}, \"q\"")), (7, "plain".to_string())]
+            } else {
+                Vec::new()
+            };
             rec.sample(Sample {
                 step: n,
                 time: n as f64 * 1e-3,
                 values: &values,
                 exact: &exact,
+                strings: &strings,
             })?;
         }
         rec.finish(failure)
+    }
+
+    /// String values are written in quotes, their quotes doubled, and the
+    /// reader takes their columns as String columns.
+    #[test]
+    fn string_values_are_quoted_and_read_back() {
+        let mut text = Vec::new();
+        record(&mut CsvRecorder::new(&mut text), 3, None).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        let row = text.lines().nth(2).unwrap();
+        assert!(row.ends_with(r#","plain""#), "{text}");
+        assert!(row.contains(r#","row 1, ""q""","#), "{text}");
+        let results = Results::parse(&text).unwrap();
+        assert_eq!(results.texts_of("c4").unwrap()[1], r#"row 1, "q""#);
+        assert_eq!(results.texts_of("c7").unwrap()[1], "plain");
     }
 
     /// Integers a float rounds are written exactly, the other values of their
@@ -801,7 +893,8 @@ mod tests {
 
     /// The writer thread writes the same bytes as the caller's thread: no
     /// rows, one, exactly one block (910 rows of 9 numbers), and several
-    /// blocks with a failure at the end; exact integers among them.
+    /// blocks with a failure at the end; exact integers and String values
+    /// among them.
     #[test]
     fn background_writes_the_same_bytes() {
         for (rows, failure) in [
@@ -849,6 +942,7 @@ mod tests {
                     time: n as f64,
                     values: &[0.5],
                     exact: &[],
+                    strings: &[],
                 })
                 .unwrap();
             }
@@ -884,6 +978,7 @@ mod tests {
                 time: n as f64,
                 values: &[0.5],
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
         }
@@ -895,6 +990,7 @@ mod tests {
             time: 3.0,
             values: &[0.25],
             exact: &[],
+            strings: &[],
         })
         .unwrap();
         let text = eventually(&shared, |t| t.lines().count() == 5);
@@ -916,6 +1012,7 @@ mod tests {
                 time: n as f64,
                 values: &[0.5],
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
         }
@@ -977,6 +1074,7 @@ mod tests {
                 time: 0.0,
                 values: &[1.0],
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
             std::fs::remove_file(&path).unwrap();
@@ -1012,6 +1110,7 @@ mod tests {
                 time: 0.0,
                 values: &[0.1, 1.0 / 3.0, 0.5],
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
             rec.finish(Some("coupling diverged at t = 1")).unwrap();
@@ -1059,6 +1158,7 @@ mod tests {
                 time: 0.001,
                 values: &values,
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
             rec.sample(Sample {
@@ -1066,6 +1166,7 @@ mod tests {
                 time: 0.002,
                 values: &[f64::NAN, f64::INFINITY, f64::NEG_INFINITY],
                 exact: &[],
+                strings: &[],
             })
             .unwrap();
             rec.finish(None).unwrap();
