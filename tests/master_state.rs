@@ -197,3 +197,55 @@ fn a_restored_state_repeats_string_signals() {
         assert_eq!(other.strings(), row.as_slice());
     }
 }
+
+/// A String link whose text changes every step keeps only the texts it still
+/// holds: over 400 steps of distinct texts, the receiver gets each one and the
+/// saved state (which carries the link's table) stays the size it has after 70
+/// steps, when the table is first rebuilt.
+#[test]
+fn a_text_that_changes_every_step_keeps_the_state_small() {
+    let Some(ft) = tether_fmu_build::fixture_fmu("reference-fmus/fmi2/Feedthrough.fmu") else {
+        return;
+    };
+    let text = format!(
+        "[experiment]\nstop = 10.0\nstep = 0.01\n\n\
+         [[instance]]\nname = \"src\"\nfmu = {ft:?}\n\n\
+         [[instance]]\nname = \"dst\"\nfmu = {ft:?}\n\n\
+         [[connection]]\nfrom = \"src.String_output\"\nto = \"dst.String_input\"\n"
+    );
+    let spec = SystemSpec::from_toml(&text).expect("system");
+    let mut sim = Simulation::new(&spec).expect("simulation");
+    let state_bytes = |sim: &mut Simulation| {
+        let mut bytes = Out::default();
+        sim.save_state()
+            .expect("save")
+            .write(&mut bytes)
+            .expect("write the state");
+        bytes.0.len()
+    };
+    let mut sizes = Vec::new();
+    for n in 0..400 {
+        let label = tether_master::StartValue::String(format!("label {n:04}, \"step\""));
+        sim.set_parameter("src.String_input", &label).expect("set");
+        sim.step().expect("step");
+        sim.step().expect("step");
+        // src's output at T_N is what dst took over the step just made
+        // (held): dst reads back the text set before the step before.
+        let texts: Vec<&str> = sim.strings().iter().map(|(_, t)| t.as_str()).collect();
+        let want = format!("label {n:04}, \"step\"");
+        assert_eq!(texts, [want.as_str(), want.as_str()], "step pair {n}");
+        if n == 70 || n == 399 {
+            sizes.push(state_bytes(&mut sim));
+        }
+    }
+    eprintln!(
+        "saved state: {} bytes after 70 step pairs, {} after 400",
+        sizes[0], sizes[1]
+    );
+    assert!(
+        sizes[1] <= sizes[0] + 2 * 64 * 20,
+        "the saved state grew from {} to {} bytes",
+        sizes[0],
+        sizes[1]
+    );
+}

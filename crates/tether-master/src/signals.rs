@@ -13,8 +13,10 @@
 //!
 //! A String connection carries its values through the same machinery as a
 //! number: the index of the text in the link's table of the texts it has
-//! carried (each distinct text once, kept for the run), held over the step
-//! and compared for equality in loops.
+//! carried (each distinct text once), held over the step and compared for
+//! equality in loops. After an accepted step a table of more than
+//! [`TEXTS_KEPT`] texts is rebuilt from the texts the link still holds, so a
+//! text that changes every step costs no memory that grows with the run.
 
 use std::collections::HashMap;
 
@@ -32,6 +34,11 @@ use crate::MasterError;
 use tether_fmi::{Inputs, Int};
 
 use crate::observer::integer_value;
+
+/// A String link's table is rebuilt from the texts it holds once it has
+/// more than this many (its values at T_N, T_{N−1}, T_{N−2} and at its
+/// receiver's own last three communication points: seven at most).
+const TEXTS_KEPT: usize = 64;
 
 /// The FMI type a connection carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -747,11 +754,36 @@ impl Signals {
         Ok(())
     }
 
-    /// Start every history at the values at T_{N+1}.
+    /// Start every history at the values at T_{N+1} (the step is accepted).
     fn shift(&mut self) {
         for (h, &next) in self.history.iter_mut().zip(&self.next) {
             *h = [next, h[0], h[1]];
         }
+        for l in 0..self.texts.len() {
+            if self.texts[l].all.len() > TEXTS_KEPT {
+                self.keep_held_texts(l);
+            }
+        }
+    }
+
+    /// Rebuild String link `l`'s table from the texts its values still
+    /// stand for (the step is accepted: no other values of the link are
+    /// kept, a saved state has its own copy of the table), `""` first.
+    #[cold]
+    fn keep_held_texts(&mut self, l: usize) {
+        let old = std::mem::take(&mut self.texts[l]);
+        let mut kept = Texts::default();
+        kept.index_of(String::new());
+        let mut remap = |v: &mut f64| {
+            let text = old.all.get(*v as usize).cloned().unwrap_or_default();
+            *v = kept.index_of(text) as f64;
+        };
+        self.history[l].iter_mut().for_each(&mut remap);
+        if let Some(slot) = self.coarse[l] {
+            self.history[slot].iter_mut().for_each(&mut remap);
+        }
+        remap(&mut self.next[l]);
+        self.texts[l] = kept;
     }
 
     /// The sender's polynomial over the step, as link `l`'s receiver takes
