@@ -15,9 +15,9 @@ use anyhow::{bail, Context, Result};
 
 /// The first build's duration on 2 cores with a warm crates.io cache (the
 /// tether command in release mode and the workspace FMUs), for the message
-/// before it: the command alone took 6 min 18 s of CPU (8 min 11 s wall with
-/// other builds on the same 2 cores).
-const FIRST_BUILD: &str = "about 5 minutes on 2 cores";
+/// before it: the README's run command took 169 s from a fresh clone on an
+/// idle machine (`tools/clean-clone.sh run`).
+const FIRST_BUILD: &str = "about 3 minutes on 2 cores";
 
 /// `cargo run --release -p tether-cli -- <args>`, in `dir` if given; the exit
 /// code. Quiet once the tether command is built; its first build shows cargo's
@@ -141,7 +141,7 @@ mod tests {
         assert_eq!(
             first_build_notice(),
             "cargo tether: building the tether command and the workspace FMUs in release mode, \
-             once (about 5 minutes on 2 cores); cargo's progress follows, later runs start at once"
+             once (about 3 minutes on 2 cores); cargo's progress follows, later runs start at once"
         );
     }
 }
