@@ -507,14 +507,7 @@ fn bench_recording() {
         let n = 100_000;
         let clock = Instant::now();
         for i in 0..n {
-            rec.sample(Sample {
-                step: i,
-                time: i as f64 * 1e-3,
-                values: &row,
-                exact: &[],
-                strings: &[],
-            })
-            .unwrap();
+            rec.sample(Sample::reals(i, i as f64 * 1e-3, &row)).unwrap();
         }
         formatting.push(clock.elapsed().as_secs_f64() / n as f64);
         let file = std::fs::File::create(&path).expect("create the CSV file");
@@ -523,14 +516,7 @@ fn bench_recording() {
         let n = 100_000;
         let clock = Instant::now();
         for i in 0..n {
-            rec.sample(Sample {
-                step: i,
-                time: i as f64 * 1e-3,
-                values: &row,
-                exact: &[],
-                strings: &[],
-            })
-            .unwrap();
+            rec.sample(Sample::reals(i, i as f64 * 1e-3, &row)).unwrap();
         }
         rec.finish(None).unwrap();
         micro.push(clock.elapsed().as_secs_f64() / n as f64);

@@ -27,6 +27,20 @@ pub struct Sample<'a> {
     pub strings: &'a [(usize, String)],
 }
 
+impl<'a> Sample<'a> {
+    /// A sample of floats only (no exact integers, no texts), as an observer
+    /// fed by hand or a test builds one.
+    pub fn reals(step: u64, time: f64, values: &'a [f64]) -> Sample<'a> {
+        Sample {
+            step,
+            time,
+            values,
+            exact: &[],
+            strings: &[],
+        }
+    }
+}
+
 /// `x` as a float, and whether the float is exact.
 pub fn integer_value(x: Int) -> (f64, bool) {
     let v = x as f64;

@@ -937,14 +937,7 @@ mod tests {
             let mut rec = CsvRecorder::background(shared.clone());
             rec.start(&["x".into()]).unwrap();
             for n in 0..2000 {
-                rec.sample(Sample {
-                    step: n,
-                    time: n as f64,
-                    values: &[0.5],
-                    exact: &[],
-                    strings: &[],
-                })
-                .unwrap();
+                rec.sample(Sample::reals(n, n as f64, &[0.5])).unwrap();
             }
         }
         let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
@@ -973,26 +966,12 @@ mod tests {
         rec.start(&["x".into()]).unwrap();
         assert_eq!(&*shared.0.lock().unwrap(), b"time,x\n");
         for n in 0..3 {
-            rec.sample(Sample {
-                step: n,
-                time: n as f64,
-                values: &[0.5],
-                exact: &[],
-                strings: &[],
-            })
-            .unwrap();
+            rec.sample(Sample::reals(n, n as f64, &[0.5])).unwrap();
         }
         let text = eventually(&shared, |t| t.lines().count() == 4);
         assert_eq!(text, "time,x\n0.0,0.5\n1.0,0.5\n2.0,0.5\n");
         // And again for rows after the first interval.
-        rec.sample(Sample {
-            step: 3,
-            time: 3.0,
-            values: &[0.25],
-            exact: &[],
-            strings: &[],
-        })
-        .unwrap();
+        rec.sample(Sample::reals(3, 3.0, &[0.25])).unwrap();
         let text = eventually(&shared, |t| t.lines().count() == 5);
         assert!(text.ends_with("2.0,0.5\n3.0,0.25\n"), "{text}");
         rec.finish(None).unwrap();
@@ -1007,14 +986,7 @@ mod tests {
         let emergency = rec.emergency().expect("a writer thread");
         rec.start(&["x".into()]).unwrap();
         for n in 0..1500 {
-            rec.sample(Sample {
-                step: n,
-                time: n as f64,
-                values: &[0.5],
-                exact: &[],
-                strings: &[],
-            })
-            .unwrap();
+            rec.sample(Sample::reals(n, n as f64, &[0.5])).unwrap();
         }
         assert!(emergency.finish("exit(3) in fmi2DoStep", Duration::from_secs(30)));
         let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
@@ -1069,14 +1041,7 @@ mod tests {
             let file = std::fs::File::create(&path).unwrap();
             let mut rec = CsvRecorder::file_at(file, &path);
             rec.start(&["x".into()]).unwrap();
-            rec.sample(Sample {
-                step: 0,
-                time: 0.0,
-                values: &[1.0],
-                exact: &[],
-                strings: &[],
-            })
-            .unwrap();
+            rec.sample(Sample::reals(0, 0.0, &[1.0])).unwrap();
             std::fs::remove_file(&path).unwrap();
             if replace {
                 std::fs::write(&path, "another\n").unwrap();
@@ -1105,14 +1070,8 @@ mod tests {
             let mut rec = CsvRecorder::new(&mut buf);
             rec.start(&["a.x".into(), "c.lambda".into(), "b.R[1,2]".into()])
                 .unwrap();
-            rec.sample(Sample {
-                step: 0,
-                time: 0.0,
-                values: &[0.1, 1.0 / 3.0, 0.5],
-                exact: &[],
-                strings: &[],
-            })
-            .unwrap();
+            rec.sample(Sample::reals(0, 0.0, &[0.1, 1.0 / 3.0, 0.5]))
+                .unwrap();
             rec.finish(Some("coupling diverged at t = 1")).unwrap();
         }
         let text = String::from_utf8(buf).unwrap();
@@ -1153,21 +1112,12 @@ mod tests {
             let mut rec = CsvRecorder::new(&mut buf);
             let columns: Vec<String> = (0..values.len()).map(|i| format!("c{i}")).collect();
             rec.start(&columns).unwrap();
-            rec.sample(Sample {
-                step: 0,
-                time: 0.001,
-                values: &values,
-                exact: &[],
-                strings: &[],
-            })
-            .unwrap();
-            rec.sample(Sample {
-                step: 1,
-                time: 0.002,
-                values: &[f64::NAN, f64::INFINITY, f64::NEG_INFINITY],
-                exact: &[],
-                strings: &[],
-            })
+            rec.sample(Sample::reals(0, 0.001, &values)).unwrap();
+            rec.sample(Sample::reals(
+                1,
+                0.002,
+                &[f64::NAN, f64::INFINITY, f64::NEG_INFINITY],
+            ))
             .unwrap();
             rec.finish(None).unwrap();
         }
