@@ -12,16 +12,21 @@ use std::ffi::CString;
 
 use crate::error::{Error, Result};
 
-/// The log categories of `fmi2SetDebugLogging` / `fmi3SetDebugLogging` as C
-/// strings; one with a NUL byte is an error naming `function` and the instance.
-fn categories(categories: &[&str], function: &'static str, instance: &str) -> Result<Vec<CString>> {
-    categories
+/// `texts` as C strings (log categories, String values); one with a NUL byte
+/// is an error naming `function`, the instance and `what` it is.
+fn c_strings(
+    texts: &[&str],
+    what: &str,
+    function: &'static str,
+    instance: &str,
+) -> Result<Vec<CString>> {
+    texts
         .iter()
-        .map(|c| CString::new(*c))
+        .map(|t| CString::new(*t))
         .collect::<std::result::Result<_, _>>()
         .map_err(|_| Error::InvalidArgument {
             function,
             instance: instance.to_string(),
-            message: "a category name contains a NUL byte".into(),
+            message: format!("a {what} contains a NUL byte"),
         })
 }

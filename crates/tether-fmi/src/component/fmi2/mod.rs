@@ -297,7 +297,7 @@ impl RawComponent {
         categories: &[&str],
     ) -> Result<()> {
         const F: &str = "fmi2SetDebugLogging";
-        let owned = super::categories(categories, F, &self.name.to_string())?;
+        let owned = super::c_strings(categories, "category name", F, &self.name.to_string())?;
         let ptrs: Vec<fmi2String> = owned.iter().map(|c| c.as_ptr()).collect();
         // SAFETY: `ptrs` holds `ptrs.len()` valid C strings that outlive the call.
         self.call(F, |f, c| unsafe {

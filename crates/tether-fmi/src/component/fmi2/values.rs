@@ -1,9 +1,9 @@
 //! The get/set functions and the input/output derivative functions.
 
-use std::ffi::{CStr, CString};
+use std::ffi::CStr;
 
 use super::{boolean, RawComponent};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::raw::*;
 
 impl RawComponent {
@@ -132,15 +132,7 @@ impl RawComponent {
     ) -> Result<()> {
         const F: &str = "fmi2SetString";
         self.same_len(F, "the value slice", vrs.len(), values.len())?;
-        let owned: Vec<CString> = values
-            .iter()
-            .map(|v| CString::new(*v))
-            .collect::<std::result::Result<_, _>>()
-            .map_err(|_| Error::InvalidArgument {
-                function: F,
-                instance: self.name.to_string(),
-                message: "a string value contains a NUL byte".into(),
-            })?;
+        let owned = super::super::c_strings(values, "string value", F, &self.name.to_string())?;
         let ptrs: Vec<fmi2String> = owned.iter().map(|c| c.as_ptr()).collect();
         // SAFETY: both arrays hold `vrs.len()` elements; the strings outlive the call.
         self.call(F, |f, c| unsafe {

@@ -279,7 +279,7 @@ impl RawInstance3 {
         categories: &[&str],
     ) -> Result<()> {
         const F: &str = "fmi3SetDebugLogging";
-        let owned = super::categories(categories, F, &self.name.to_string())?;
+        let owned = super::c_strings(categories, "category name", F, &self.name.to_string())?;
         let ptrs: Vec<fmi3String> = owned.iter().map(|c| c.as_ptr()).collect();
         // SAFETY: `ptrs` holds `ptrs.len()` valid C strings that outlive the call.
         self.call(F, |f, c| unsafe {
@@ -416,15 +416,7 @@ impl RawInstance3 {
         values: &[&str],
     ) -> Result<()> {
         const F: &str = "fmi3SetString";
-        let owned: Vec<CString> = values
-            .iter()
-            .map(|v| CString::new(*v))
-            .collect::<std::result::Result<_, _>>()
-            .map_err(|_| Error::InvalidArgument {
-                function: F,
-                instance: self.name.to_string(),
-                message: "a string value contains a NUL byte".into(),
-            })?;
+        let owned = super::c_strings(values, "string value", F, &self.name.to_string())?;
         let ptrs: Vec<fmi3String> = owned.iter().map(|c| c.as_ptr()).collect();
         // SAFETY: `ptrs` holds `ptrs.len()` C strings that outlive the call, passed as
         // nValues.
