@@ -343,3 +343,54 @@ fn isolated_helper_ends_with_the_instance() {
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
     assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
 }
+
+/// The requests of a phase go to every host process before any reply is
+/// awaited, whatever `parallel` says: two isolated instances of the faults
+/// FMU in mode 16 must both be inside the step at t = 0.01 for either to
+/// finish it (each waits up to 5 s for the other, then ends its process).
+/// With `--parallel off` the isolated run meets there and completes; the same
+/// run in process, one instance stepped after the other on one thread, cannot.
+#[test]
+fn isolated_instances_step_at_once_without_threads() {
+    let s = Scratch::new();
+    let sys = system(s.path(), 16, ", at = 0.01");
+    let oscillator = tether_fmu_build::workspace_fmu("oscillator").unwrap();
+    let faults = tether_fmu_build::workspace_fmu("faults").unwrap();
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let mass1 = format!(
+        "fmu = {:?}\nparameters = {{ m = 1.0",
+        oscillator.display().to_string()
+    );
+    assert!(text.contains(&mass1));
+    let both = text.replace(
+        &mass1,
+        &format!(
+            "fmu = {:?}\nparameters = {{ mode = 16, at = 0.01, m = 1.0",
+            faults.display().to_string()
+        ),
+    );
+    std::fs::write(&sys, both).unwrap();
+    for (isolate, met) in [(true, true), (false, false)] {
+        let barrier = tempfile::tempdir().unwrap();
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "out.csv"];
+        args.extend(["--stop", "0.05", "--parallel", "off", "--quiet"]);
+        if isolate {
+            args.push("--isolate");
+        }
+        let out = s
+            .command(&args)
+            .env("TETHER_FAULTS_BARRIER", barrier.path())
+            .output()
+            .expect("run tether");
+        let text = stderr(&out);
+        if met {
+            assert_eq!(out.status.code(), Some(0), "{text}");
+            let csv = read_csv(&s.path().join("out.csv"));
+            assert_eq!(csv.trailer, None);
+            assert_eq!(last_time(&csv), 0.05);
+        } else {
+            assert_eq!(out.status.code(), Some(1), "{text}");
+            assert!(text.contains("exit"), "{text}");
+        }
+    }
+}
