@@ -332,6 +332,52 @@ fn a_log_flood_is_rate_limited() {
     assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);
 }
 
+/// FMU log lines written on a worker thread are whole and name their
+/// instance: mass 2 logs 5 warnings per `fmi2DoStep` from t = 0.5 on the one
+/// worker (mass 1 marked `parallel = false` stays on the main thread), every
+/// one shown.
+#[test]
+fn log_lines_from_a_worker_thread_are_whole_and_named() {
+    let s = Scratch::new();
+    let sys = system(s.path(), 6, ", flood = 5");
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let marked = text.replacen("name = \"mass1\"", "name = \"mass1\"\nparallel = false", 1);
+    std::fs::write(&sys, marked).unwrap();
+    let args = [
+        "--parallel",
+        "on",
+        "--threads",
+        "2",
+        "--fmu-log-limit",
+        "off",
+        "--stop",
+        "0.6",
+    ];
+    let out = s.run(&sys, "out.csv", &args);
+    let text = stderr(&out);
+    assert!(out.status.success(), "{text}");
+    let floods: Vec<&str> = text.lines().filter(|l| l.contains("flood")).collect();
+    // 100 steps from t = 0.5, each with its predictor, perturbed and
+    // corrector runs: at least 5 lines for each of them.
+    assert!(
+        floods.len() >= 5 * 100 * 3,
+        "{} lines: {text}",
+        floods.len()
+    );
+    for line in floods {
+        let (head, rest) = line
+            .split_once(" flood message ")
+            .unwrap_or_else(|| panic!("a cut line: {line:?}"));
+        assert_eq!(head, "[WARN  fmu::mass2] [logStatusWarning]", "{line:?}");
+        let (n, t) = rest.split_once(" at t = ").expect("the time");
+        assert!(n.parse::<u32>().is_ok_and(|n| n < 5), "{line:?}");
+        assert!(
+            t.parse::<f64>().is_ok_and(|t| (0.5..0.6).contains(&t)),
+            "{line:?}"
+        );
+    }
+}
+
 /// `--fmu-log-limit N` sets the messages shown per instance, category and
 /// second, in process and in an isolated instance's host; `off` shows every
 /// one; anything else is refused by name.
