@@ -553,61 +553,37 @@ fn a_full_stderr_or_a_broken_pipe_is_no_panic() {
 
 /// In-process, an endless loop cannot be stopped: with `--call-timeout` the
 /// watchdog ends the run, keeping every accepted row with the trailer naming
-/// the instance, the call and the time, and removing the folders.
+/// the instance, the call and the time, and removing the folders. The same on
+/// a worker thread: with mass 1 marked `parallel = false` (it stays on the
+/// main thread), mass 2's runs go to the one worker with `--parallel on`.
 #[test]
 fn in_process_endless_loop_is_ended_by_the_watchdog() {
-    let s = Scratch::new();
-    let out = s.run(
-        &system(s.path(), 5, ""),
-        "out.csv",
-        &["--call-timeout", "0.5"],
-    );
-    let text = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "{text}");
-    let reason = "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.5 s (the FMU runs in-process and cannot be stopped: the run ends)";
-    assert_eq!(
-        text.lines().last().unwrap_or_default(),
-        format!("error: run stopped; results so far kept in out.csv (marked incomplete): {reason}")
-    );
-    let csv = read_csv(&s.path().join("out.csv"));
-    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
-    assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
-    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
-}
-
-/// The same on a worker thread: mass 1 marked `parallel = false` stays on the
-/// main thread, so mass 2's runs go to the one worker with `--parallel on`;
-/// its stuck call ends the run with the same line, the same rows.
-#[test]
-fn an_endless_loop_on_a_worker_thread_is_ended_by_the_watchdog() {
-    let s = Scratch::new();
-    let sys = system(s.path(), 5, "");
-    let text = std::fs::read_to_string(&sys).unwrap();
-    let marked = text.replacen("name = \"mass1\"", "name = \"mass1\"\nparallel = false", 1);
-    assert_ne!(text, marked, "mass1 marked");
-    std::fs::write(&sys, marked).unwrap();
-    let out = s.run(
-        &sys,
-        "out.csv",
-        &[
-            "--call-timeout",
-            "0.5",
-            "--parallel",
-            "on",
-            "--threads",
-            "2",
-        ],
-    );
-    let text = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "{text}");
-    let reason = "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.5 s (the FMU runs in-process and cannot be stopped: the run ends)";
-    assert_eq!(
-        text.lines().last().unwrap_or_default(),
-        format!("error: run stopped; results so far kept in out.csv (marked incomplete): {reason}")
-    );
-    let csv = read_csv(&s.path().join("out.csv"));
-    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
-    assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
+    for on_a_worker in [false, true] {
+        let s = Scratch::new();
+        let sys = system(s.path(), 5, "");
+        let mut args = vec!["--call-timeout", "0.5"];
+        if on_a_worker {
+            let text = std::fs::read_to_string(&sys).unwrap();
+            let marked = text.replacen("name = \"mass1\"", "name = \"mass1\"\nparallel = false", 1);
+            assert_ne!(text, marked, "mass1 marked");
+            std::fs::write(&sys, marked).unwrap();
+            args.extend(["--parallel", "on", "--threads", "2"]);
+        }
+        let out = s.run(&sys, "out.csv", &args);
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        let reason = "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.5 s (the FMU runs in-process and cannot be stopped: the run ends)";
+        assert_eq!(
+            text.lines().last().unwrap_or_default(),
+            format!(
+                "error: run stopped; results so far kept in out.csv (marked incomplete): {reason}"
+            )
+        );
+        let csv = read_csv(&s.path().join("out.csv"));
+        assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+        assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    }
 }
 
 /// Ctrl-C during an endless loop, in-process and isolated: the first one names
