@@ -251,10 +251,13 @@ impl Runs {
     }
 
     /// Worker threads worth starting: one per thread beyond the main one,
-    /// no more than the instances that may leave the main thread.
+    /// no more than the instances that may leave the main thread (one fewer
+    /// when every instance may: the main thread takes one of them).
     fn workers(&self) -> usize {
         let capable = self.capable.iter().filter(|&&c| c).count();
-        (self.threads - 1).min(capable)
+        let pinned = self.capable.len() - capable;
+        let useful = if pinned > 0 { capable } else { capable.saturating_sub(1) };
+        (self.threads - 1).min(useful)
     }
 
     fn start(&mut self, instances: usize) -> Result<(), MasterError> {
