@@ -256,7 +256,11 @@ impl Runs {
     fn workers(&self) -> usize {
         let capable = self.capable.iter().filter(|&&c| c).count();
         let pinned = self.capable.len() - capable;
-        let useful = if pinned > 0 { capable } else { capable.saturating_sub(1) };
+        let useful = if pinned > 0 {
+            capable
+        } else {
+            capable.saturating_sub(1)
+        };
         (self.threads - 1).min(useful)
     }
 
