@@ -307,7 +307,6 @@ impl Slave {
         !self.backend.is_remote() && !cs.can_be_instantiated_only_once_per_process
     }
 
-    /// Whether any unknown drives this instance.
     /// Whether the input `vr` takes a polynomial over a step: FMI 2.0
     /// `canInterpolateInputs`, FMI 3.0 `providesIntermediateUpdate` and the input's
     /// `intermediateUpdate="true"`.
