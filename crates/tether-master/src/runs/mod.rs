@@ -105,6 +105,7 @@ impl Outputs<'_> {
 /// polynomials and outputs of its perturbed runs in group order; `how`
 /// splits the task of an instance in a host process ([`sent_apart`]) into
 /// its request and its reply. Returns whether a reply is awaited.
+#[inline]
 pub(crate) fn work<'p>(
     slave: &mut Slave,
     phase: Phase<'p>,
@@ -150,6 +151,7 @@ pub(crate) fn keep_first(failure: &mut Option<(usize, MasterError)>, s: usize, e
 }
 
 /// Instance `s`'s task of `phase` with its outputs in `outputs`.
+#[inline]
 fn work_in(
     slave: &mut Slave,
     s: usize,
@@ -161,6 +163,9 @@ fn work_in(
         Some(out) => &mut out[..],
         None => &mut [],
     };
+    if phase.perturbed.is_empty() {
+        return work(slave, phase, out, std::iter::empty(), how);
+    }
     let runs = group_slaves
         .iter()
         .zip(phase.perturbed)
@@ -185,7 +190,9 @@ pub(crate) struct Runs {
     pool: Option<Pool>,
     /// Macro steps begun.
     steps: u32,
-    /// Per instance: a host process's reply is due ([`sequential`]).
+    /// Some instance runs in a host process ([`with_hosts`]).
+    hosts: bool,
+    /// Per instance: a host process's reply is due ([`with_hosts`]).
     awaiting: Vec<bool>,
     /// Per instance: its tasks' time in this step, and the shortest step's.
     step_cost: Vec<Duration>,
@@ -231,6 +238,7 @@ impl Runs {
             capable,
             unknowns,
             pool: None,
+            hosts: slaves.iter().any(|s| s.backend.is_remote()),
             awaiting: vec![false; n],
             steps: 0,
             step_cost: vec![Duration::ZERO; n],
@@ -269,6 +277,7 @@ impl Runs {
             self.workers(),
             instances,
             (&self.group_slaves, self.unknowns),
+            self.hosts,
         )?;
         self.info.workers = pool.workers();
         self.pool = Some(pool);
@@ -344,7 +353,8 @@ impl Runs {
         let result = match &mut self.pool {
             Some(pool) => pool.run(slaves, phase, &mut outputs, &member, cost),
             None => {
-                let shape = (&self.group_slaves[..], &mut self.awaiting[..]);
+                let hosts = self.hosts.then_some(&mut self.awaiting[..]);
+                let shape = (&self.group_slaves[..], hosts);
                 sequential(slaves, phase, &mut outputs, shape, &member, cost)
             }
         };
@@ -506,24 +516,56 @@ fn split(
 }
 
 /// Every task of `phase` on the calling thread, in file order, each timed
-/// into `cost` when given: first the requests to host processes
-/// ([`sent_apart`]), then the instances in this process, then the hosts'
-/// replies (`awaiting`: per instance, a reply is due). Of several failures
-/// the first in file order is returned; every reply due is read.
-pub(crate) fn sequential(
+/// into `cost` when given; with instances in host processes (`hosts`),
+/// their requests first ([`with_hosts`]). Stops at the first failure.
+pub(crate) fn sequential<M: Fn(usize, &Slave) -> bool + ?Sized>(
+    slaves: &mut [Slave],
+    phase: Phase<'_>,
+    outputs: &mut Outputs<'_>,
+    (group_slaves, hosts): (&[Vec<usize>], Option<&mut [bool]>),
+    member: &M,
+    mut cost: Option<&mut [Duration]>,
+) -> Result<(), MasterError> {
+    if let Some(awaiting) = hosts {
+        return with_hosts(
+            slaves,
+            phase,
+            outputs,
+            (group_slaves, awaiting),
+            member,
+            cost,
+        );
+    }
+    for (s, slave) in slaves.iter_mut().enumerate() {
+        if !member(s, slave) {
+            continue;
+        }
+        let clock = cost.is_some().then(Instant::now);
+        work_in(slave, s, (phase, Batch::Whole), outputs, group_slaves)?;
+        if let (Some(cost), Some(clock)) = (cost.as_deref_mut(), clock) {
+            cost[s] += clock.elapsed();
+        }
+    }
+    Ok(())
+}
+
+/// [`sequential`] for a system with instances in host processes: first the
+/// requests to the hosts ([`sent_apart`]), then the instances in this
+/// process, then the hosts' replies (`awaiting`: per instance, a reply is
+/// due). Of several failures the first in file order is returned; every
+/// reply due is read.
+fn with_hosts<M: Fn(usize, &Slave) -> bool + ?Sized>(
     slaves: &mut [Slave],
     phase: Phase<'_>,
     outputs: &mut Outputs<'_>,
     (group_slaves, awaiting): (&[Vec<usize>], &mut [bool]),
-    member: &dyn Fn(usize, &Slave) -> bool,
+    member: &M,
     mut cost: Option<&mut [Duration]>,
 ) -> Result<(), MasterError> {
     let mut failure = None;
-    let mut any_apart = false;
     for (s, slave) in slaves.iter_mut().enumerate() {
         awaiting[s] = false;
         if member(s, slave) && sent_apart(slave, phase.task) {
-            any_apart = true;
             match work_in(slave, s, (phase, Batch::Send), outputs, group_slaves) {
                 Ok(sent) => awaiting[s] = sent,
                 Err(e) => keep_first(&mut failure, s, e),
@@ -534,7 +576,7 @@ pub(crate) fn sequential(
         if failure.is_some() {
             break;
         }
-        if !member(s, slave) || (any_apart && sent_apart(slave, phase.task)) {
+        if !member(s, slave) || sent_apart(slave, phase.task) {
             continue;
         }
         let clock = cost.is_some().then(Instant::now);

@@ -78,6 +78,8 @@ pub(crate) struct Pool {
     seats: Vec<Seat>,
     /// Per instance: whether this phase's task is its.
     member: Vec<bool>,
+    /// Some instance runs in a host process.
+    hosts: bool,
     /// Per instance: a host process's reply is due (phases without workers).
     awaiting: Vec<bool>,
     /// Per group, the instances its perturbed run steps.
@@ -87,11 +89,13 @@ pub(crate) struct Pool {
 impl Pool {
     /// Start `workers` threads for `instances` instances (all on the main
     /// thread until [`assign`](Self::assign)ed); `(group_slaves, unknowns)`
-    /// size the buffers of a phase's polynomials.
+    /// size the buffers of a phase's polynomials; `hosts`: some instance
+    /// runs in a host process.
     pub fn start(
         workers: usize,
         instances: usize,
         (group_slaves, unknowns): (&[Vec<usize>], usize),
+        hosts: bool,
     ) -> Result<Pool, MasterError> {
         let seats = (0..instances)
             .map(|s| Seat {
@@ -139,6 +143,7 @@ impl Pool {
             lane_of: vec![None; instances],
             seats,
             member: vec![false; instances],
+            hosts,
             awaiting: vec![false; instances],
             group_slaves: group_slaves.to_vec(),
         })
@@ -190,8 +195,8 @@ impl Pool {
         }
         let shared_out = (0..slaves.len()).any(|s| self.member[s] && self.lane_of[s].is_some());
         if !shared_out {
-            let awaiting = &mut self.awaiting;
-            let shape = (&self.group_slaves[..], &mut awaiting[..]);
+            let hosts = self.hosts.then_some(&mut self.awaiting[..]);
+            let shape = (&self.group_slaves[..], hosts);
             return sequential(slaves, phase, outputs, shape, member, cost);
         }
         // Every instance to its seat, the members with their buffers.
