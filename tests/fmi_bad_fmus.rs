@@ -411,14 +411,22 @@ fn an_fmi1_fmu_is_refused_by_version() {
     );
 }
 
+/// A model-exchange-only FMU is read (its description is valid): without a
+/// binary it is refused for the missing library, named after the
+/// model-exchange model identifier.
 #[test]
-fn a_model_exchange_only_fmu_is_refused() {
+fn a_model_exchange_only_fmu_is_read_and_needs_its_binary() {
     let dir = tempfile::tempdir().unwrap();
     let xml = model_description("2.0", "stub", false, true);
     let path = zip_with_description(dir.path(), "me.fmu", &xml);
     let err = open_err(&path);
-    assert!(matches!(err, Error::NotCoSimulation { .. }), "{err:?}");
-    assert_one_line_naming(&err, &[&shown(&path), "model-exchange-only", "'stub'"]);
+    match &err {
+        Error::MissingBinary { expected, .. } => {
+            assert_eq!(expected, &path.join("binaries/linux64/stub.so"))
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_one_line_naming(&err, &["binaries/linux64/stub.so", "'stub'"]);
 }
 
 #[test]

@@ -57,7 +57,7 @@ pub fn describe(md: &ModelDescription) -> String {
             line(format!("{label:<11} {v}"));
         }
     }
-    let cs = &md.co_simulation;
+    let cs = md.cs();
     line(String::new());
     line("Co-simulation".into());
     line(format!(
@@ -160,7 +160,7 @@ pub fn describe(md: &ModelDescription) -> String {
         ));
     }
     if md.model_exchange.is_some() {
-        line("  (also offers model exchange, which Tether does not use)".into());
+        line("  (also offers model exchange: see below)".into());
     }
     line(String::new());
     line("Tether methods".into());

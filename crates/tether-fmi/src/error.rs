@@ -213,8 +213,8 @@ pub enum Error {
         reason: String,
     },
 
-    /// The FMU implements model exchange only.
-    #[error("'{}' (model '{model}') is a model-exchange-only FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    /// The FMU implements model exchange only and was asked for co-simulation.
+    #[error("'{}' (model '{model}') is a model-exchange-only FMU: it has no co-simulation interface; run it as model exchange (tether simulate --fmi-type model-exchange)", path.display())]
     NotCoSimulation {
         /// The FMU.
         path: PathBuf,

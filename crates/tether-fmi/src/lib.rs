@@ -86,9 +86,9 @@ pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIM
 pub use model_description::{
     element_names, BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
     DependencyKind, Dimension, DisplayUnit, EnumerationItem, FmiStandard, Initial, IntegerType,
-    IntegerVariable, LogCategory, ModelDescription, ModelStructure, Quirk, RealType, RealVariable,
-    ScalarVariable, SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown, ValueReference,
-    ValueType, Values, Variability, VariableKind, VariableNamingConvention,
+    IntegerVariable, LogCategory, ModelDescription, ModelExchange, ModelStructure, Quirk, RealType,
+    RealVariable, ScalarVariable, SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown,
+    ValueReference, ValueType, Values, Variability, VariableKind, VariableNamingConvention,
 };
 pub use placement::{instantiate, Placement};
 pub use raw::Status;

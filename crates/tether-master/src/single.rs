@@ -214,7 +214,7 @@ impl SingleFmu {
         experiment: SingleExperiment,
     ) -> Result<SingleFmu, MasterError> {
         let md = fmu.model_description();
-        let name = &md.co_simulation.model_identifier;
+        let name = md.model_identifier();
         let mut instance =
             tether_fmi::instantiate(fmu, name, Default::default(), Placement::InProcess)?;
         // FMI 2.0: the experiment right after instantiation, then the start

@@ -164,7 +164,8 @@ impl Fmi3Instance {
                 ),
             });
         }
-        let cs = &md.co_simulation;
+        fmu.require_co_simulation()?;
+        let cs = md.cs();
         if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
             log::debug!(
                 "model '{}' offers event mode or early return; instance '{name}' runs without them",
@@ -210,6 +211,7 @@ impl Fmi3Instance {
                 early_return_allowed: false,
                 required_intermediate_variables: &polynomial_inputs,
                 intermediate_update,
+                model_exchange: false,
             },
         )?;
         raw.once = once;
@@ -667,9 +669,7 @@ impl FmuInstance for Fmi3Instance {
             let variable = self.variable("fmi3SetFloat64", vr)?;
             let name = variable.name.clone();
             let md = self.md();
-            let why = if md.co_simulation.provides_intermediate_update
-                && variable.intermediate_update
-            {
+            let why = if md.cs().provides_intermediate_update && variable.intermediate_update {
                 format!("instance '{}' was instantiated for values only (InstanceOptions::polynomial_inputs false: no intermediate update callback)", self.raw.name())
             } else {
                 format!("FMI 3.0 has no input derivatives, and model '{}' does not provide intermediate update for it (providesIntermediateUpdate and intermediateUpdate=\"true\")", md.model_name)
@@ -724,7 +724,7 @@ impl FmuInstance for Fmi3Instance {
 
     fn save(&mut self, slot: Slot) -> Result<()> {
         self.require(
-            self.md().co_simulation.can_get_and_set_fmu_state,
+            self.md().cs().can_get_and_set_fmu_state,
             "canGetAndSetFMUState",
             "saving an FMU state",
         )?;
@@ -751,7 +751,7 @@ impl FmuInstance for Fmi3Instance {
     }
     fn serialize(&mut self, slot: Slot, out: &mut Vec<u8>) -> Result<()> {
         self.require(
-            self.md().co_simulation.can_serialize_fmu_state,
+            self.md().cs().can_serialize_fmu_state,
             "canSerializeFMUState",
             "serializing an FMU state",
         )?;
@@ -763,7 +763,7 @@ impl FmuInstance for Fmi3Instance {
     }
     fn deserialize(&mut self, slot: Slot, bytes: &[u8]) -> Result<()> {
         self.require(
-            self.md().co_simulation.can_serialize_fmu_state,
+            self.md().cs().can_serialize_fmu_state,
             "canSerializeFMUState",
             "deserializing an FMU state",
         )?;

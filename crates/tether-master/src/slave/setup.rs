@@ -26,7 +26,7 @@ pub(crate) struct Capabilities {
 impl Capabilities {
     /// The capabilities `md` declares.
     pub(crate) fn of(md: &ModelDescription) -> Capabilities {
-        let cs = &md.co_simulation;
+        let cs = md.cs();
         Capabilities {
             can_interpolate_inputs: cs.can_interpolate_inputs || cs.provides_intermediate_update,
             max_output_derivative_order: cs.max_output_derivative_order,
@@ -319,7 +319,7 @@ impl Slave {
     /// The capability adaptive macro steps need that the FMU does not
     /// declare: rollback of a rejected step, and steps of varying size.
     pub(crate) fn cannot_vary_steps(&self) -> Option<&'static str> {
-        let cs = &self.fmu.model_description().co_simulation;
+        let cs = self.fmu.model_description().cs();
         if !cs.can_get_and_set_fmu_state {
             Some("canGetAndSetFMUstate")
         } else if !cs.can_handle_variable_communication_step_size {
@@ -332,7 +332,7 @@ impl Slave {
     /// Whether perturbed runs may go to other instances of the FMU: its state
     /// can be serialised and it may be instantiated more than once.
     pub(crate) fn can_run_in_parallel(&self) -> bool {
-        let cs = &self.fmu.model_description().co_simulation;
+        let cs = self.fmu.model_description().cs();
         cs.can_get_and_set_fmu_state
             && cs.can_serialize_fmu_state
             && !cs.can_be_instantiated_only_once_per_process

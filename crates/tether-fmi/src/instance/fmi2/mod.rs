@@ -160,7 +160,8 @@ impl Fmu {
                 ),
             });
         }
-        let once = if md.co_simulation.can_be_instantiated_only_once_per_process {
+        self.require_co_simulation()?;
+        let once = if md.cs().can_be_instantiated_only_once_per_process {
             Some(OnceGuard::acquire(&md.guid, &md.model_name, instance_name)?)
         } else {
             None
@@ -176,6 +177,7 @@ impl Fmu {
                 resource_location: &self.resource_location(),
                 visible: options.visible,
                 logging_on: options.logging_on || debug.is_some(),
+                model_exchange: false,
             },
         )?;
         raw.once = once;
@@ -364,10 +366,7 @@ impl Instance {
         values: &[f64],
     ) -> Result<()> {
         self.require(
-            self.fmu
-                .model_description
-                .co_simulation
-                .can_interpolate_inputs,
+            self.fmu.model_description.cs().can_interpolate_inputs,
             "canInterpolateInputs",
             "fmi2SetRealInputDerivatives",
         )?;
@@ -396,7 +395,7 @@ impl Instance {
         self.require(
             self.fmu
                 .model_description
-                .co_simulation
+                .cs()
                 .provides_directional_derivative,
             "providesDirectionalDerivative",
             "fmi2GetDirectionalDerivative",

@@ -52,10 +52,7 @@ impl Instance {
 
     fn require_get_set(&self, operation: &'static str) -> Result<()> {
         self.require(
-            self.fmu
-                .model_description
-                .co_simulation
-                .can_get_and_set_fmu_state,
+            self.fmu.model_description.cs().can_get_and_set_fmu_state,
             "canGetAndSetFMUstate",
             operation,
         )
@@ -64,10 +61,7 @@ impl Instance {
     fn require_serialize(&self, operation: &'static str) -> Result<()> {
         self.require_get_set(operation)?;
         self.require(
-            self.fmu
-                .model_description
-                .co_simulation
-                .can_serialize_fmu_state,
+            self.fmu.model_description.cs().can_serialize_fmu_state,
             "canSerializeFMUstate",
             operation,
         )
