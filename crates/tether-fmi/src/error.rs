@@ -336,6 +336,18 @@ pub enum Error {
         how: Option<String>,
     },
 
+    /// A model-exchange instance could not go on: NaN or infinite derivatives,
+    /// an integrator that cannot reach its tolerance, a chattering event.
+    #[error("model-exchange instance '{instance}' stopped at t = {time}: {cause}", time = crate::Time(*time))]
+    ModelExchange {
+        /// The instance name.
+        instance: String,
+        /// The time the instance reached.
+        time: f64,
+        /// What went wrong, in one line.
+        cause: String,
+    },
+
     /// A function returned `fmi2Error`.
     #[error(
         "{function} returned {}Error on instance '{instance}' at t={time}{messages}",

@@ -79,7 +79,10 @@ pub use error::{Error, FmuMessages, Result};
 pub use fmu::{
     set_debug_logging, special_file_kind, Fmu, InstanceOptions, OpenOptions, QUIRKS_TARGET,
 };
-pub use instance::{Fmi3Instance, FmuState, Instance, LocalInstance, StatusKind};
+pub use instance::{
+    Fmi3Instance, FmuState, Instance, Integrator, LocalInstance, MeInstance, Method, StatusKind,
+    MAX_EVENT_ITERATIONS,
+};
 pub use interface::{FmuInstance, Inputs, Int, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
 pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIMIT};

@@ -21,8 +21,9 @@ pub const PLATFORM_FMI3: &str = "x86_64-linux";
 pub(crate) trait Api: Sized {
     /// The model-exchange functions of this FMI version.
     type Me;
-    /// Resolves every function, naming the first one that is missing.
-    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self>;
+    /// Resolves every function, naming the first one that is missing (the
+    /// co-simulation ones only when `co_simulation`).
+    fn resolve(lib: &libloading::Library, path: &Path, co_simulation: bool) -> Result<Self>;
     /// Resolves the model-exchange functions; `Err` names the first missing one.
     fn resolve_me(lib: &libloading::Library) -> std::result::Result<Self::Me, &'static str>;
     /// Checks what the library says about itself (version, platform).
@@ -42,8 +43,8 @@ fn static_text(ptr: *const std::ffi::c_char) -> String {
 
 impl Api for Fmi2Functions {
     type Me = Fmi2MeFunctions;
-    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
-        Fmi2Functions::resolve(lib, path)
+    fn resolve(lib: &libloading::Library, path: &Path, co_simulation: bool) -> Result<Self> {
+        Fmi2Functions::resolve(lib, path, co_simulation)
     }
     fn resolve_me(lib: &libloading::Library) -> std::result::Result<Self::Me, &'static str> {
         Fmi2MeFunctions::resolve(lib)
@@ -75,8 +76,8 @@ impl Api for Fmi2Functions {
 
 impl Api for Fmi3Functions {
     type Me = Fmi3MeFunctions;
-    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
-        Fmi3Functions::resolve(lib, path)
+    fn resolve(lib: &libloading::Library, path: &Path, co_simulation: bool) -> Result<Self> {
+        Fmi3Functions::resolve(lib, path, co_simulation)
     }
     fn resolve_me(lib: &libloading::Library) -> std::result::Result<Self::Me, &'static str> {
         Fmi3MeFunctions::resolve(lib)
@@ -156,8 +157,10 @@ fn load_message(e: &libloading::Error) -> String {
 }
 
 impl<F: Api> Library<F> {
-    /// Loads `path` (binding all symbols now) and resolves every function of the API.
-    pub(crate) fn load(path: &Path) -> Result<Library<F>> {
+    /// Loads `path` (binding all symbols now) and resolves every function of the API
+    /// (the co-simulation functions required when `co_simulation`: the FMU declares
+    /// co-simulation), and the model-exchange ones where the library has them.
+    pub(crate) fn load(path: &Path, co_simulation: bool) -> Result<Library<F>> {
         use libloading::os::unix::{Library as UnixLibrary, RTLD_LOCAL, RTLD_NOW};
         // SAFETY: loading a library runs its initialisers; an FMU's shared library is
         // trusted code by the nature of co-simulation (we are about to call into it).
@@ -170,7 +173,7 @@ impl<F: Api> Library<F> {
                 }
             })?;
         let handle = libloading::Library::from(handle);
-        let functions = F::resolve(&handle, path)?;
+        let functions = F::resolve(&handle, path, co_simulation)?;
         functions.check_identity(path)?;
         let me = F::resolve_me(&handle);
         Ok(Library {

@@ -147,6 +147,25 @@ impl Fmi3Instance {
 
     /// Instantiates `fmu` (an FMI 3.0 co-simulation FMU) as `name`.
     pub fn new(fmu: &Fmu, name: &str, options: InstanceOptions) -> Result<Fmi3Instance> {
+        Fmi3Instance::new_as(fmu, name, options, false)
+    }
+
+    /// Instantiates `fmu` for model exchange (`fmi3InstantiateModelExchange`), for
+    /// [`MeInstance`](crate::MeInstance), which drives it.
+    pub(crate) fn new_model_exchange(
+        fmu: &Fmu,
+        name: &str,
+        options: InstanceOptions,
+    ) -> Result<Fmi3Instance> {
+        Fmi3Instance::new_as(fmu, name, options, true)
+    }
+
+    fn new_as(
+        fmu: &Fmu,
+        name: &str,
+        options: InstanceOptions,
+        model_exchange: bool,
+    ) -> Result<Fmi3Instance> {
         let shared = Arc::clone(fmu.shared());
         let md = &shared.model_description;
         let clocks: Vec<&str> = md
@@ -158,27 +177,47 @@ impl Fmi3Instance {
         if !clocks.is_empty() {
             return Err(Error::Unsupported {
                 model: md.model_name.clone(),
-                reason: format!(
-                    "it has clocks ({}), which need event mode; Tether runs FMI 3.0 co-simulation without event mode",
-                    clocks.join(", ")
-                ),
+                reason: if model_exchange {
+                    format!(
+                        "it has clocks ({}); Tether runs FMI 3.0 model exchange without clocks",
+                        clocks.join(", ")
+                    )
+                } else {
+                    format!(
+                        "it has clocks ({}), which need event mode; Tether runs FMI 3.0 co-simulation without event mode",
+                        clocks.join(", ")
+                    )
+                },
             });
         }
-        fmu.require_co_simulation()?;
         let cs = md.cs();
-        if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
-            log::debug!(
-                "model '{}' offers event mode or early return; instance '{name}' runs without them",
-                md.model_name
-            );
-        }
-        let once = if cs.can_be_instantiated_only_once_per_process {
+        let once_per_process = if model_exchange {
+            let Some(me) = &md.model_exchange else {
+                return Err(Error::Unsupported {
+                    model: md.model_name.clone(),
+                    reason: "it has no model-exchange interface (no <ModelExchange> element)"
+                        .into(),
+                });
+            };
+            me.can_be_instantiated_only_once_per_process
+        } else {
+            fmu.require_co_simulation()?;
+            if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
+                log::debug!(
+                    "model '{}' offers event mode or early return; instance '{name}' runs without them",
+                    md.model_name
+                );
+            }
+            cs.can_be_instantiated_only_once_per_process
+        };
+        let once = if once_per_process {
             Some(OnceGuard::acquire(&md.guid, &md.model_name, name)?)
         } else {
             None
         };
         let debug = crate::fmu::debug_logging();
-        let intermediate_update = cs.provides_intermediate_update && options.polynomial_inputs;
+        let intermediate_update =
+            !model_exchange && cs.provides_intermediate_update && options.polynomial_inputs;
         let polynomial_inputs: Vec<ValueReference> = if intermediate_update {
             md.model_variables
                 .iter()
@@ -211,7 +250,7 @@ impl Fmi3Instance {
                 early_return_allowed: false,
                 required_intermediate_variables: &polynomial_inputs,
                 intermediate_update,
-                model_exchange: false,
+                model_exchange,
             },
         )?;
         raw.once = once;
@@ -254,6 +293,11 @@ impl Fmi3Instance {
 
     fn md(&self) -> &ModelDescription {
         &self.fmu.model_description
+    }
+
+    /// The raw instance, for the model-exchange calls of [`crate::MeInstance`].
+    pub(crate) fn raw_mut(&mut self) -> &mut RawInstance3 {
+        &mut self.raw
     }
 
     fn invalid(&self, function: &'static str, message: String) -> Error {

@@ -30,12 +30,6 @@ impl RawComponent {
         self.call(function, |_, c| call(me, c))
     }
 
-    /// Whether the library has every model-exchange function (the error names
-    /// the first missing one).
-    pub(crate) fn has_model_exchange(&self) -> Result<()> {
-        self.library.me().map(drop)
-    }
-
     /// `fmi2EnterEventMode`.
     pub(crate) fn fmi2EnterEventMode(&mut self) -> Result<()> {
         // SAFETY: the component is live.

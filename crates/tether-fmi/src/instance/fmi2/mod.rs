@@ -149,6 +149,25 @@ impl Fmu {
     /// live instance per process, counted by GUID over every opened copy of it
     /// ([`Error::OnlyOncePerProcess`] otherwise).
     pub fn instantiate(&self, instance_name: &str, options: InstanceOptions) -> Result<Instance> {
+        self.instantiate_as(instance_name, options, false)
+    }
+
+    /// Creates a model-exchange instance of an FMI 2.0 FMU (`fmi2Instantiate` with
+    /// `fmi2ModelExchange`), for [`MeInstance`](crate::MeInstance), which drives it.
+    pub(crate) fn instantiate_model_exchange(
+        &self,
+        instance_name: &str,
+        options: InstanceOptions,
+    ) -> Result<Instance> {
+        self.instantiate_as(instance_name, options, true)
+    }
+
+    fn instantiate_as(
+        &self,
+        instance_name: &str,
+        options: InstanceOptions,
+        model_exchange: bool,
+    ) -> Result<Instance> {
         let md = &self.shared().model_description;
         if md.standard != crate::model_description::FmiStandard::Fmi2 {
             return Err(Error::InvalidArgument {
@@ -160,8 +179,21 @@ impl Fmu {
                 ),
             });
         }
-        self.require_co_simulation()?;
-        let once = if md.cs().can_be_instantiated_only_once_per_process {
+        let once_per_process = if model_exchange {
+            let Some(me) = &md.model_exchange else {
+                return Err(Error::Unsupported {
+                    model: md.model_name.clone(),
+                    reason: "it has no model-exchange interface (no <ModelExchange> element)"
+                        .into(),
+                });
+            };
+            self.shared().library()?.me()?;
+            me.can_be_instantiated_only_once_per_process
+        } else {
+            self.require_co_simulation()?;
+            md.cs().can_be_instantiated_only_once_per_process
+        };
+        let once = if once_per_process {
             Some(OnceGuard::acquire(&md.guid, &md.model_name, instance_name)?)
         } else {
             None
@@ -177,7 +209,7 @@ impl Fmu {
                 resource_location: &self.resource_location(),
                 visible: options.visible,
                 logging_on: options.logging_on || debug.is_some(),
-                model_exchange: false,
+                model_exchange,
             },
         )?;
         raw.once = once;
