@@ -359,7 +359,16 @@ pub(crate) fn integrate(
     if !p.z.is_empty() {
         rhs.fmu.get_mut().get_event_indicators(p.z)?;
     }
-    Ok((p.t0 + tau, stop))
+    // t0 + (t1 − t0) need not be t1 in floating point: the end is t1 exactly.
+    let t = if stop == Stop::Reached && tau == tau1 {
+        t1
+    } else {
+        p.t0 + tau
+    };
+    if t == t1 && t != p.t0 + tau {
+        rhs.fmu.get_mut().set_time(t1)?;
+    }
+    Ok((t, stop))
 }
 
 /// Sets the FMU to (t0 + tau, y) and `x` to the unscaled states.

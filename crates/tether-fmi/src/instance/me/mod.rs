@@ -73,6 +73,9 @@ pub struct MeInstance {
     /// The time of the last event and the event iterations made at it.
     event_time: f64,
     event_iterations: u32,
+    /// The events handled after initialization, and the time of the last.
+    events: u64,
+    last_event: Option<f64>,
 }
 
 impl MeInstance {
@@ -121,6 +124,8 @@ impl MeInstance {
             initialized: false,
             event_time: f64::NAN,
             event_iterations: 0,
+            events: 0,
+            last_event: None,
         })
     }
 
@@ -137,6 +142,12 @@ impl MeInstance {
     /// The event indicators now.
     pub fn event_indicators(&self) -> &[f64] {
         &self.z
+    }
+
+    /// The number of events (time, state and step events) handled since the
+    /// initialization, and the time of the last one.
+    pub fn events(&self) -> (u64, Option<f64>) {
+        (self.events, self.last_event)
     }
 
     /// The next time event the FMU announced, if any.
@@ -181,6 +192,10 @@ impl MeInstance {
         if t != self.event_time {
             self.event_time = t;
             self.event_iterations = 0;
+        }
+        if !initial {
+            self.events += 1;
+            self.last_event = Some(t);
         }
         let (_, update, _) = self.inner.names();
         let mut values_changed = initial;
@@ -411,6 +426,8 @@ impl FmuInstance for MeInstance {
         self.next_event = None;
         self.event_time = f64::NAN;
         self.event_iterations = 0;
+        self.events = 0;
+        self.last_event = None;
         Ok(())
     }
     fn terminate(&mut self) -> Result<()> {
