@@ -381,7 +381,7 @@ fn an_fmi4_fmu_is_refused_by_version() {
     assert_eq!(
         err.to_string(),
         format!(
-            "'{}' is an FMI 4.0 FMU; Tether supports FMI 2.0 and 3.0 co-simulation only",
+            "'{}' is an FMI 4.0 FMU; Tether supports FMI 2.0 and 3.0 (co-simulation and model exchange)",
             path.display()
         )
     );
@@ -406,7 +406,7 @@ fn an_fmi1_fmu_is_refused_by_version() {
         &[
             &shown(&path),
             "FMI 1.0",
-            "FMI 2.0 and 3.0 co-simulation only",
+            "FMI 2.0 and 3.0 (co-simulation and model exchange)",
         ],
     );
 }

@@ -184,7 +184,7 @@ pub enum Error {
     },
 
     /// The FMU is not an FMI 2.0 FMU.
-    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 and 3.0 (co-simulation and model exchange)", path.display())]
     UnsupportedFmiVersion {
         /// The FMU.
         path: PathBuf,
@@ -194,7 +194,7 @@ pub enum Error {
 
     /// An FMI 3.0 FMU offers no co-simulation (scheduled execution only, whose
     /// clocks need a scheduler Tether does not provide).
-    #[error("'{}' (model '{model}') offers {offers} only, no co-simulation; Tether imports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    #[error("'{}' (model '{model}') offers {offers} only, no co-simulation; Tether imports FMI 2.0 and 3.0 co-simulation and model exchange", path.display())]
     NotCoSimulationFmi3 {
         /// The FMU.
         path: PathBuf,
