@@ -1,9 +1,11 @@
-//! FMI 2.0 and FMI 3.0 co-simulation import.
+//! FMI 2.0 and FMI 3.0 import, co-simulation and model exchange.
 //!
 //! FMI 3.0 FMUs are opened by the same [`Fmu::open`] (binaries under
 //! `binaries/x86_64-linux/`), described by the same [`ModelDescription`] (see
 //! [`model_description`] for how FMI 3.0 maps onto it) and instantiated with
 //! [`instantiate`] as an [`Fmi3Instance`], an [`FmuInstance`] like the FMI 2.0 ones.
+//! A model-exchange FMU of either standard runs as a [`MeInstance`], also an
+//! [`FmuInstance`], which integrates it with its built-in [`Integrator`].
 //!
 //! # Layers
 //!

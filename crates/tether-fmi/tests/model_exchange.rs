@@ -205,3 +205,33 @@ fn an_integrator_that_cannot_go_on_is_one_error_line() {
         "{line}"
     );
 }
+
+/// FMI 3.0 clocks are refused for model exchange in one line, before the FMU
+/// is instantiated: the Reference BouncingBall with a clock added to its
+/// model description (unpacked into a temporary folder, its binary as
+/// shipped).
+#[test]
+fn fmi3_clocks_are_refused_in_one_line() {
+    let Some(path) = tether_fmu_build::fixture_fmu("reference-fmus/fmi3/BouncingBall.fmu") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut archive = zip::ZipArchive::new(std::fs::File::open(path).unwrap()).unwrap();
+    archive.extract(dir.path()).unwrap();
+    let xml_path = dir.path().join("modelDescription.xml");
+    let xml = std::fs::read_to_string(&xml_path).unwrap().replacen(
+        "<ModelVariables>",
+        r#"<ModelVariables>
+    <Clock name="tick" valueReference="100" causality="input" intervalVariability="triggered"/>"#,
+        1,
+    );
+    std::fs::write(&xml_path, xml).unwrap();
+    let fmu = Fmu::open(dir.path()).unwrap();
+    let e = MeInstance::new(&fmu, "bb", Default::default(), Integrator::default()).unwrap_err();
+    let line = e.to_string();
+    assert!(matches!(e, Error::Unsupported { .. }), "{e:?}");
+    assert!(
+        line.contains("clocks (tick)") && line.contains("model exchange") && !line.contains('\n'),
+        "{line}"
+    );
+}
