@@ -144,3 +144,17 @@ fn a_request_to_terminate_ends_at_the_event() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn saving_a_state_needs_the_model_exchange_capability() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = Fmu::open(sawtooth(dir.path())).unwrap();
+    let mut a = started(&fmu, 0);
+    let e = a.save(0).unwrap_err();
+    let line = e.to_string();
+    assert!(matches!(e, Error::MissingCapability { .. }), "{e:?}");
+    assert!(
+        line.contains("canGetAndSetFMUstate") && !line.contains('\n'),
+        "{line}"
+    );
+}

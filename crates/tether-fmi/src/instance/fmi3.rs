@@ -70,6 +70,8 @@ pub struct Fmi3Instance {
     plain_reals: bool,
     /// The inputs that take a polynomial over a step (intermediate update).
     polynomial_inputs: Vec<ValueReference>,
+    /// Made for model exchange: the `ModelExchange` flags say what it can do.
+    model_exchange: bool,
 }
 
 impl Fmi3Instance {
@@ -276,6 +278,7 @@ impl Fmi3Instance {
             structural: HashMap::new(),
             plain_reals,
             polynomial_inputs,
+            model_exchange,
         };
         if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
             let declared = &md.log_categories;
@@ -293,6 +296,19 @@ impl Fmi3Instance {
 
     fn md(&self) -> &ModelDescription {
         &self.fmu.model_description
+    }
+
+    /// `canGetAndSetFMUState` and `canSerializeFMUState` of the interface the
+    /// instance was made for.
+    fn state_flags(&self) -> (bool, bool) {
+        let md = self.md();
+        match (&md.model_exchange, self.model_exchange) {
+            (Some(me), true) => (me.can_get_and_set_fmu_state, me.can_serialize_fmu_state),
+            _ => (
+                md.cs().can_get_and_set_fmu_state,
+                md.cs().can_serialize_fmu_state,
+            ),
+        }
     }
 
     /// The raw instance, for the model-exchange calls of [`crate::MeInstance`].
@@ -768,7 +784,7 @@ impl FmuInstance for Fmi3Instance {
 
     fn save(&mut self, slot: Slot) -> Result<()> {
         self.require(
-            self.md().cs().can_get_and_set_fmu_state,
+            self.state_flags().0,
             "canGetAndSetFMUState",
             "saving an FMU state",
         )?;
@@ -795,7 +811,7 @@ impl FmuInstance for Fmi3Instance {
     }
     fn serialize(&mut self, slot: Slot, out: &mut Vec<u8>) -> Result<()> {
         self.require(
-            self.md().cs().can_serialize_fmu_state,
+            self.state_flags().1,
             "canSerializeFMUState",
             "serializing an FMU state",
         )?;
@@ -807,7 +823,7 @@ impl FmuInstance for Fmi3Instance {
     }
     fn deserialize(&mut self, slot: Slot, bytes: &[u8]) -> Result<()> {
         self.require(
-            self.md().cs().can_serialize_fmu_state,
+            self.state_flags().1,
             "canSerializeFMUState",
             "deserializing an FMU state",
         )?;

@@ -138,6 +138,8 @@ pub struct Instance {
     pub(crate) shared: Arc<Shared>,
     pub(crate) fmu: Arc<FmuShared>,
     name: Arc<str>,
+    /// Made for model exchange: the `ModelExchange` flags say what it can do.
+    pub(crate) model_exchange: bool,
 }
 
 impl Fmu {
@@ -214,6 +216,7 @@ impl Fmu {
         )?;
         raw.once = once;
         let mut instance = Instance::new(raw, Arc::clone(self.shared()));
+        instance.model_exchange = model_exchange;
         if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
             let declared = &md.log_categories;
             let mut categories = Vec::new();
@@ -246,6 +249,7 @@ impl Instance {
             shared: Arc::default(),
             fmu,
             name,
+            model_exchange: false,
         }
     }
 

@@ -32,8 +32,14 @@
 //! initial step and no history: a repeated step from the same point is
 //! bit-identical.
 //!
-//! What this part does not do yet: FMU states (save, restore, serialization),
-//! input derivatives, output derivatives and directional derivatives; an
+//! A saved state ([`FmuInstance::save`], where the FMU declares
+//! `canGetAndSetFMUstate` for model exchange) is the FMU's state and the
+//! instance's own: the continuous states, nominals, event indicators, the next
+//! time event and the event counts; a restore puts both back, so a step
+//! repeated after it gives the same bits.
+//!
+//! What this part does not do yet: serialized states, input derivatives,
+//! output derivatives and directional derivatives; an
 //! Integer, Boolean or String input set between steps is set in
 //! continuous-time mode, not in event mode.
 
@@ -48,12 +54,26 @@ use integrator::{Point, Settings, Stop};
 use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
 use crate::instance::{Fmi3Instance, LocalInstance};
-use crate::interface::{FmuInstance, Inputs, Int, Slot};
+use crate::interface::{FmuInstance, Inputs, Int, Slot, SLOTS};
 use crate::model_description::{FmiStandard, ModelDescription, ValueReference};
 
 /// The most event iterations at one time before the run ends (a chattering
 /// model).
 pub const MAX_EVENT_ITERATIONS: u32 = 100;
+
+/// What a saved state holds besides the FMU's own.
+#[derive(Debug, Clone, Default)]
+struct Saved {
+    time: f64,
+    x: Vec<f64>,
+    nominals: Vec<f64>,
+    z: Vec<f64>,
+    next_event: Option<f64>,
+    event_time: f64,
+    event_iterations: u32,
+    events: u64,
+    last_event: Option<f64>,
+}
 
 /// A model-exchange instance in this process with its built-in integrator.
 #[derive(Debug)]
@@ -76,6 +96,8 @@ pub struct MeInstance {
     /// The events handled after initialization, and the time of the last.
     events: u64,
     last_event: Option<f64>,
+    /// The instance's part of the states saved in each slot.
+    saved: [Option<Saved>; SLOTS],
 }
 
 impl MeInstance {
@@ -126,6 +148,7 @@ impl MeInstance {
             event_iterations: 0,
             events: 0,
             last_event: None,
+            saved: Default::default(),
         })
     }
 
@@ -405,14 +428,54 @@ impl FmuInstance for MeInstance {
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
         self.advance(t, h)
     }
-    fn save(&mut self, _slot: Slot) -> Result<()> {
-        Err(self.unsupported("save", "saving the state"))
-    }
-    fn restore(&mut self, _slot: Slot) -> Result<()> {
-        Err(self.unsupported("restore", "restoring a state"))
-    }
-    fn free(&mut self, _slot: Slot) -> Result<()> {
+    /// The FMU's state (needs `canGetAndSetFMUstate` in `ModelExchange`) and
+    /// the instance's: states, nominals, indicators, next time event.
+    fn save(&mut self, slot: Slot) -> Result<()> {
+        if !self.initialized {
+            return Err(Error::InvalidArgument {
+                function: "save",
+                instance: self.inner.name().to_owned(),
+                message: "the model-exchange instance is not initialized".into(),
+            });
+        }
+        self.inner.save(slot)?;
+        let saved = self.saved[slot].get_or_insert_with(Saved::default);
+        saved.time = self.time;
+        saved.x.clone_from(&self.x);
+        saved.nominals.clone_from(&self.nominals);
+        saved.z.clone_from(&self.z);
+        saved.next_event = self.next_event;
+        saved.event_time = self.event_time;
+        saved.event_iterations = self.event_iterations;
+        saved.events = self.events;
+        saved.last_event = self.last_event;
         Ok(())
+    }
+    fn restore(&mut self, slot: Slot) -> Result<()> {
+        let Some(saved) = self.saved.get(slot).and_then(Option::as_ref) else {
+            return Err(Error::InvalidArgument {
+                function: "restore",
+                instance: self.inner.name().to_owned(),
+                message: format!("no FMU state saved in slot {slot}"),
+            });
+        };
+        self.inner.restore(slot)?;
+        self.time = saved.time;
+        self.x.clone_from(&saved.x);
+        self.nominals.clone_from(&saved.nominals);
+        self.z.clone_from(&saved.z);
+        self.next_event = saved.next_event;
+        self.event_time = saved.event_time;
+        self.event_iterations = saved.event_iterations;
+        self.events = saved.events;
+        self.last_event = saved.last_event;
+        Ok(())
+    }
+    fn free(&mut self, slot: Slot) -> Result<()> {
+        if let Some(saved) = self.saved.get_mut(slot) {
+            *saved = None;
+        }
+        self.inner.free(slot)
     }
     fn serialize(&mut self, _slot: Slot, _out: &mut Vec<u8>) -> Result<()> {
         Err(self.unsupported("serialize", "serializing the state"))
