@@ -140,6 +140,7 @@ fn a_direct_feedthrough_loop_is_checked_at_setup() {
         fmu_on_host: None,
         resources: Default::default(),
         step: None,
+        parallel: None,
     });
     for (from, to) in [("mass2.a", "ctrl2.y"), ("ctrl2.u", "mass2.F_ext")] {
         spec.connections.push(tether_master::ConnectionSpec {

@@ -10,9 +10,11 @@
 //! * `recording`: what writing CSV every step adds;
 //! * `precision`: wall time to a max state error of 1e-6, index 2 against the
 //!   explicit method;
-//! * `parallel`: perturbed runs on a worker thread (`[coupling] parallel`)
-//!   against the sequential path, on a 3D joint with an expensive FMU step and
-//!   on the cheap oscillator pair.
+//! * `parallel`: the runs of a step on worker threads (`[coupling]
+//!   parallel`) against the sequential path, on a 3D joint with an expensive
+//!   FMU step and on the cheap oscillator pair; then 2, 4 and 8 expensive
+//!   bodies (joined pairs, and a ring of signals) with 1, 2, 4, … threads up
+//!   to the machine's cores.
 //!
 //! * `fmi3`: the macro step with the FMI 3.0 builds of the oscillator against the
 //!   FMI 2.0 builds of the same library (the master's FMI 3.0 instance path);
@@ -755,6 +757,7 @@ fn main() -> std::process::ExitCode {
     }
     if run("parallel") {
         bench_parallel();
+        bench_parallel_scaling();
     }
     if run("fmi3") {
         bench_fmi3();
@@ -1243,7 +1246,7 @@ fn parallel_cases() -> Vec<ParallelCase> {
 /// within the run) per macro step with parallel = off, on, auto, interleaved
 /// repetitions; ratios of medians from the same run.
 fn bench_parallel() {
-    println!("\n== parallel: perturbed runs on a worker thread (time per macro step) ==");
+    println!("\n== parallel: the runs of a step on worker threads (time per macro step) ==");
     let reps = reps();
     for case in parallel_cases() {
         let steps = case.spec.macro_steps() as f64;
@@ -1289,6 +1292,127 @@ fn bench_parallel() {
             info.parallel.as_secs_f64() * 1e6,
             info.trial_sequential.as_secs_f64() * 1e6,
             info.trial_parallel.as_secs_f64() * 1e6
+        );
+    }
+}
+
+/// `n` expensive body3d instances (each `fmi2DoStep` integrates with steps of
+/// at most `max_step`): `joined`, n/2 copies of examples/3d_revolute.toml's
+/// pair, each joined by its revolute joint; else free bodies in a ring of
+/// signal connections (Jacobi), body k's torque input from body k−1's energy
+/// (scaled by 1e-6: the ring couples without changing the motion much).
+fn scaling_system(n: usize, joined: bool, max_step: f64, steps: u32) -> SystemSpec {
+    tether_fmu_build::workspace_fmu("body3d").expect("package the body3d FMU");
+    let root = workspace_root();
+    let pair =
+        SystemSpec::from_file(&root.join("examples/3d_revolute.toml")).expect("3d_revolute.toml");
+    let mut spec = pair.clone();
+    spec.instances.clear();
+    spec.joints.clear();
+    for k in 0..n / 2 {
+        for instance in &pair.instances {
+            let mut instance = instance.clone();
+            instance.name = format!("p{k}_{}", instance.name);
+            if !joined {
+                instance.parameters.remove("joint");
+            }
+            instance
+                .parameters
+                .insert("max_step".into(), tether_master::StartValue::Real(max_step));
+            spec.instances.push(instance);
+        }
+        if joined {
+            for joint in &pair.joints {
+                let mut joint = joint.clone();
+                joint.name = format!("p{k}_{}", joint.name);
+                joint.i = format!("p{k}_{}", joint.i);
+                joint.j = format!("p{k}_{}", joint.j);
+                spec.joints.push(joint);
+            }
+        }
+    }
+    if !joined {
+        let names: Vec<String> = spec.instances.iter().map(|i| i.name.clone()).collect();
+        for (k, to) in names.iter().enumerate() {
+            let from = &names[(k + names.len() - 1) % names.len()];
+            spec.connections.push(tether_master::ConnectionSpec {
+                from: format!("{from}.E"),
+                to: format!("{to}.A.T[1]"),
+                gain: Some(1e-6),
+                offset: None,
+            });
+        }
+    }
+    spec.experiment.stop = f64::from(steps) * spec.experiment.step;
+    spec
+}
+
+/// The thread counts of the scaling table: 1, 2, 4, … and the machine's
+/// cores.
+fn thread_counts() -> Vec<usize> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut counts: Vec<usize> = std::iter::successors(Some(1usize), |n| n.checked_mul(2))
+        .take_while(|&n| n < cores)
+        .collect();
+    counts.push(cores);
+    counts
+}
+
+/// The scaling table: per system, the time per macro step with `parallel =
+/// "off"` and with `"on"` at each thread count, interleaved repetitions,
+/// off/on ratios of medians from the same run; beside them the ideal
+/// off/on from "auto"'s measured runs and hand-off (its predicted sequential
+/// over parallel time of a step).
+fn bench_parallel_scaling() {
+    println!("\n== parallel: expensive instances and threads (off/on, time per macro step) ==");
+    let reps = reps().min(5);
+    let counts = thread_counts();
+    let systems = [
+        (2, true, 1e-5, 100),
+        (4, true, 1e-5, 60),
+        (8, true, 1e-5, 30),
+        (2, false, 2e-6, 100),
+        (4, false, 2e-6, 60),
+        (8, false, 2e-6, 30),
+    ];
+    for (n, joined, max_step, steps) in systems {
+        let spec = scaling_system(n, joined, max_step, steps);
+        let mut off = Vec::new();
+        let mut on: Vec<Vec<f64>> = vec![Vec::new(); counts.len()];
+        let mut ideal = None;
+        let time = |spec: &SystemSpec| {
+            let mut sim = Simulation::new(spec).expect("simulation");
+            let clock = Instant::now();
+            let stats = sim.run(&mut [], &mut |_, _| {}).expect("run");
+            (clock.elapsed().as_secs_f64() / f64::from(steps), stats)
+        };
+        for _ in 0..reps {
+            let mut s = spec.clone();
+            s.coupling.parallel = Parallel::Off;
+            off.push(time(&s).0);
+            for (i, &threads) in counts.iter().enumerate() {
+                let mut s = spec.clone();
+                s.coupling.parallel = Parallel::On;
+                s.coupling.threads = Some(threads);
+                on[i].push(time(&s).0);
+            }
+            let mut s = spec.clone();
+            s.coupling.parallel = Parallel::Auto;
+            let info = time(&s).1.parallel;
+            ideal = Some(info.sequential.as_secs_f64() / info.parallel.as_secs_f64());
+        }
+        let off_median = median(off.clone());
+        let ratios: Vec<String> = counts
+            .iter()
+            .zip(&on)
+            .map(|(t, v)| format!("{t} thread(s) {:.2}x", off_median / median(v.clone())))
+            .collect();
+        println!(
+            "{n} bodies, {}, max_step = {max_step:e}: off {}; off/on {}; ideal (auto's measured runs and hand-off) {:.2}x",
+            if joined { "joined pairs (revolute)" } else { "signal ring (Jacobi)" },
+            us2(&off),
+            ratios.join(", "),
+            ideal.unwrap_or(f64::NAN),
         );
     }
 }

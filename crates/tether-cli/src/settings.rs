@@ -42,10 +42,14 @@ pub struct Settings {
     /// Finite-difference increment ε for the interface Jacobian.
     #[arg(long, allow_hyphen_values = true)]
     epsilon: Option<f64>,
-    /// Perturbed runs on other threads: auto (only when it pays), on or off
-    /// (overrides [coupling] parallel).
+    /// The runs of a step on worker threads: auto (only when it pays), on
+    /// or off (overrides [coupling] parallel).
     #[arg(long, value_parser = ["auto", "on", "off"])]
     parallel: Option<String>,
+    /// Threads the runs may use, the main thread included (overrides
+    /// [coupling] threads; default: the machine's available parallelism).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    threads: Option<u32>,
     /// Corrections per macro step, 1 = the paper's single correction
     /// (overrides [coupling] iterations).
     #[arg(long)]
@@ -91,6 +95,7 @@ impl Settings {
             epsilon: self.epsilon,
             divergence_factor: None,
             parallel: parse(&self.parallel)?,
+            threads: self.threads.map(|n| n as usize),
             iterations: self.iterations,
             iteration_tol: self.iteration_tol,
             jacobian: parse(&self.jacobian)?,

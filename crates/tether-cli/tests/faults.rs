@@ -332,6 +332,52 @@ fn a_log_flood_is_rate_limited() {
     assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 1001);
 }
 
+/// FMU log lines written on a worker thread are whole and name their
+/// instance: mass 2 logs 5 warnings per `fmi2DoStep` from t = 0.5 on the one
+/// worker (mass 1 marked `parallel = false` stays on the main thread), every
+/// one shown.
+#[test]
+fn log_lines_from_a_worker_thread_are_whole_and_named() {
+    let s = Scratch::new();
+    let sys = system(s.path(), 6, ", flood = 5");
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let marked = text.replacen("name = \"mass1\"", "name = \"mass1\"\nparallel = false", 1);
+    std::fs::write(&sys, marked).unwrap();
+    let args = [
+        "--parallel",
+        "on",
+        "--threads",
+        "2",
+        "--fmu-log-limit",
+        "off",
+        "--stop",
+        "0.6",
+    ];
+    let out = s.run(&sys, "out.csv", &args);
+    let text = stderr(&out);
+    assert!(out.status.success(), "{text}");
+    let floods: Vec<&str> = text.lines().filter(|l| l.contains("flood")).collect();
+    // 100 steps from t = 0.5, each with its predictor, perturbed and
+    // corrector runs: at least 5 lines for each of them.
+    assert!(
+        floods.len() >= 5 * 100 * 3,
+        "{} lines: {text}",
+        floods.len()
+    );
+    for line in floods {
+        let (head, rest) = line
+            .split_once(" flood message ")
+            .unwrap_or_else(|| panic!("a cut line: {line:?}"));
+        assert_eq!(head, "[WARN  fmu::mass2] [logStatusWarning]", "{line:?}");
+        let (n, t) = rest.split_once(" at t = ").expect("the time");
+        assert!(n.parse::<u32>().is_ok_and(|n| n < 5), "{line:?}");
+        assert!(
+            t.parse::<f64>().is_ok_and(|t| (0.5..0.6).contains(&t)),
+            "{line:?}"
+        );
+    }
+}
+
 /// `--fmu-log-limit N` sets the messages shown per instance, category and
 /// second, in process and in an isolated instance's host; `off` shows every
 /// one; anything else is refused by name.
@@ -507,26 +553,37 @@ fn a_full_stderr_or_a_broken_pipe_is_no_panic() {
 
 /// In-process, an endless loop cannot be stopped: with `--call-timeout` the
 /// watchdog ends the run, keeping every accepted row with the trailer naming
-/// the instance, the call and the time, and removing the folders.
+/// the instance, the call and the time, and removing the folders. The same on
+/// a worker thread: with mass 1 marked `parallel = false` (it stays on the
+/// main thread), mass 2's runs go to the one worker with `--parallel on`.
 #[test]
 fn in_process_endless_loop_is_ended_by_the_watchdog() {
-    let s = Scratch::new();
-    let out = s.run(
-        &system(s.path(), 5, ""),
-        "out.csv",
-        &["--call-timeout", "0.5"],
-    );
-    let text = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "{text}");
-    let reason = "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.5 s (the FMU runs in-process and cannot be stopped: the run ends)";
-    assert_eq!(
-        text.lines().last().unwrap_or_default(),
-        format!("error: run stopped; results so far kept in out.csv (marked incomplete): {reason}")
-    );
-    let csv = read_csv(&s.path().join("out.csv"));
-    assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
-    assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
-    assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    for on_a_worker in [false, true] {
+        let s = Scratch::new();
+        let sys = system(s.path(), 5, "");
+        let mut args = vec!["--call-timeout", "0.5"];
+        if on_a_worker {
+            let text = std::fs::read_to_string(&sys).unwrap();
+            let marked = text.replacen("name = \"mass1\"", "name = \"mass1\"\nparallel = false", 1);
+            assert_ne!(text, marked, "mass1 marked");
+            std::fs::write(&sys, marked).unwrap();
+            args.extend(["--parallel", "on", "--threads", "2"]);
+        }
+        let out = s.run(&sys, "out.csv", &args);
+        let text = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        let reason = "instance 'mass2': fmi2DoStep at t=0.5 did not return within the call time-out of 0.5 s (the FMU runs in-process and cannot be stopped: the run ends)";
+        assert_eq!(
+            text.lines().last().unwrap_or_default(),
+            format!(
+                "error: run stopped; results so far kept in out.csv (marked incomplete): {reason}"
+            )
+        );
+        let csv = read_csv(&s.path().join("out.csv"));
+        assert_eq!(csv.trailer, Some(format!("# incomplete: {reason}")));
+        assert_eq!(csv.rows.len(), 501, "t = 0 … 0.5");
+        assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
+    }
 }
 
 /// Ctrl-C during an endless loop, in-process and isolated: the first one names

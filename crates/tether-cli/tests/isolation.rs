@@ -343,3 +343,76 @@ fn isolated_helper_ends_with_the_instance() {
     assert!(s.leftovers().is_empty(), "{:?}", s.leftovers());
     assert!(processes_left(&s).is_empty(), "{:?}", processes_left(&s));
 }
+
+/// The oscillator example with both masses the faults FMU in `mode` (mass 2
+/// with `extra` parameters, mass 1 with `mass1`).
+fn both_faults(s: &Scratch, mode: i32, extra: &str, mass1: &str) -> std::path::PathBuf {
+    let sys = system(s.path(), mode, extra);
+    let oscillator = tether_fmu_build::workspace_fmu("oscillator").unwrap();
+    let faults = tether_fmu_build::workspace_fmu("faults").unwrap();
+    let text = std::fs::read_to_string(&sys).unwrap();
+    let was = format!(
+        "fmu = {:?}\nparameters = {{ m = 1.0",
+        oscillator.display().to_string()
+    );
+    assert!(text.contains(&was));
+    let now = format!(
+        "fmu = {:?}\nparameters = {{ mode = {mode}{mass1}, m = 1.0",
+        faults.display().to_string()
+    );
+    std::fs::write(&sys, text.replace(&was, &now)).unwrap();
+    sys
+}
+
+/// The requests of a phase go to every host process before any reply is
+/// awaited, whatever `parallel` says: two isolated instances of the faults
+/// FMU in mode 16 must both be inside the step at t = 0.01 for either to
+/// finish it (each waits up to 5 s for the other, then ends its process).
+/// With `--parallel off` the isolated run meets there and completes; the same
+/// run in process, one instance stepped after the other on one thread, cannot.
+#[test]
+fn isolated_instances_step_at_once_without_threads() {
+    let s = Scratch::new();
+    let sys = both_faults(&s, 16, ", at = 0.01", ", at = 0.01");
+    for (isolate, met) in [(true, true), (false, false)] {
+        let barrier = tempfile::tempdir().unwrap();
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "out.csv"];
+        args.extend(["--stop", "0.05", "--parallel", "off", "--quiet"]);
+        if isolate {
+            args.push("--isolate");
+        }
+        let out = s
+            .command(&args)
+            .env("TETHER_FAULTS_BARRIER", barrier.path())
+            .output()
+            .expect("run tether");
+        let text = stderr(&out);
+        if met {
+            assert_eq!(out.status.code(), Some(0), "{text}");
+            let csv = read_csv(&s.path().join("out.csv"));
+            assert_eq!(csv.trailer, None);
+            assert_eq!(last_time(&csv), 0.05);
+        } else {
+            assert_eq!(out.status.code(), Some(1), "{text}");
+            assert!(text.contains("exit"), "{text}");
+        }
+    }
+}
+
+/// Both isolated instances end their host in the same step (`exit(3)` at
+/// t = 0.5), their requests out at once: the run ends with the first in file
+/// order, mass 1, every row to t = 0.5 kept.
+#[test]
+fn of_two_hosts_failing_in_one_step_the_first_in_file_order_is_reported() {
+    let s = Scratch::new();
+    let sys = both_faults(&s, 4, "", "");
+    let out = s.run(&sys, "out.csv", &["--isolate", "--quiet"]);
+    let text = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    let reason = "instance 'mass1': its host process exited with code 3 during fmi2DoStep at t=0.5";
+    assert_eq!(
+        text.lines().last().unwrap_or_default(),
+        format!("error: run stopped; results up to t = 0.5 kept in out.csv (marked incomplete): {reason}")
+    );
+    assert_eq!(read_csv(&s.path().join("out.csv")).rows.len(), 501);
+}

@@ -198,6 +198,11 @@ pub trait FmuInstance: Debug + Send {
     fn round_trips(&self) -> u64 {
         0
     }
+    /// Whether the instance runs in a process of its own (isolated or on a
+    /// remote host), reached by requests.
+    fn is_remote(&self) -> bool {
+        false
+    }
     /// End the simulation (the instance is freed when dropped).
     fn terminate(&mut self) -> Result<()>;
 
@@ -243,5 +248,23 @@ pub trait FmuInstance: Debug + Send {
             rest = tail;
         }
         Ok(())
+    }
+
+    /// The first half of [`run_batch`](Self::run_batch) for an instance in
+    /// a process of its own ([`is_remote`](Self::is_remote)): the batch's
+    /// request sent, its reply not awaited, so that requests to several
+    /// hosts run at once. Returns whether a reply is awaited: then
+    /// [`receive_batch`](Self::receive_batch) with the same `runs` must
+    /// follow before any other call. An instance in this process sends
+    /// nothing and returns false; its batch is made by `run_batch`.
+    fn send_batch(&mut self, _runs: &[RunRequest<'_>]) -> Result<bool> {
+        Ok(false)
+    }
+
+    /// The second half of [`run_batch`](Self::run_batch): the reply to the
+    /// request [`send_batch`](Self::send_batch) sent for `runs`, its values
+    /// into `out`.
+    fn receive_batch(&mut self, runs: &[RunRequest<'_>], out: &mut [f64]) -> Result<()> {
+        self.run_batch(runs, out)
     }
 }

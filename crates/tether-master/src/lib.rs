@@ -30,6 +30,7 @@ mod method;
 mod observer;
 pub mod polynomial;
 pub mod polynomial_inputs;
+mod runs;
 mod signals;
 mod simulation;
 mod single;

@@ -25,6 +25,7 @@ use tether_fmi::{BaseType, Causality, ScalarVariable, ValueType};
 use crate::algorithm::step::{MacroStep, StepAt};
 use crate::linalg::solve::Solver;
 use crate::polynomial::{extrapolate, interpolate, Taylor};
+use crate::runs::{Outputs, Phase, Runs};
 use crate::slave::{Run, Slave};
 use crate::spec::names::{describe, find_instance, Element};
 use crate::spec::{ConnectionSpec, SignalScheme, SignalSolver, StartValue, SystemSpec};
@@ -88,6 +89,10 @@ pub(crate) struct Signals {
     order: usize,
     /// Gauss–Seidel: the signal-only instances, stepped in this order.
     sequence: Vec<usize>,
+    /// Gauss–Seidel's stages: runs of `sequence` in which no instance
+    /// receives from another, stepped together (on worker threads where
+    /// `[coupling] parallel` puts them).
+    stages: Vec<std::ops::Range<usize>>,
     scheme: SignalScheme,
     /// `[signals] tolerance`: relative, on the exchanged values.
     tolerance: f64,
@@ -208,7 +213,9 @@ impl Signals {
                 }
             }
         }
+        let stages = stages(&sequence, &links);
         Ok(Signals {
+            stages,
             loops,
             history: vec![[0.0; 3]; slots],
             coarse,
@@ -548,7 +555,7 @@ impl Signals {
         }
         let unknowns = system.history.clone();
         let state = method.save();
-        self.send(&mut system.slaves, at)?;
+        self.send((&mut system.slaves, &mut system.runs), at)?;
         method.step(system, at, stats, lap)?;
         self.read_next(&mut system.slaves)?;
         let mut v = self.next.clone();
@@ -574,7 +581,7 @@ impl Signals {
                 system.history.clone_from(&unknowns);
                 method.restore(&state);
                 self.next.copy_from_slice(v);
-                self.send(&mut system.slaves, at)?;
+                self.send((&mut system.slaves, &mut system.runs), at)?;
                 method.step(system, at, stats, lap)?;
                 self.read_next(&mut system.slaves)?;
                 g.copy_from_slice(&self.next);
@@ -655,7 +662,11 @@ impl Signals {
     /// Before the method's step T_N → T_{N+1}: set every receiving input.
     /// Gauss–Seidel first steps the signal-only instances one after another,
     /// each with the values at T_{N+1} of the senders stepped before it.
-    pub fn send(&mut self, slaves: &mut [Slave], at: StepAt) -> Result<(), MasterError> {
+    pub fn send(
+        &mut self,
+        (slaves, runs): (&mut Vec<Slave>, &mut Runs),
+        at: StepAt,
+    ) -> Result<(), MasterError> {
         if self.links.is_empty() {
             return match self.own_steps {
                 None => Ok(()),
@@ -663,22 +674,30 @@ impl Signals {
             };
         }
         self.fresh.fill(false);
-        for i in 0..self.sequence.len() {
-            let s = self.sequence[i];
-            for l in 0..self.links.len() {
-                if self.links[l].to == s {
-                    let poly = self.polynomial(l, at);
-                    self.set(slaves, l, poly)?;
+        for stage in 0..self.stages.len() {
+            let stage = self.stages[stage].clone();
+            for i in stage.clone() {
+                let s = self.sequence[i];
+                for l in 0..self.links.len() {
+                    if self.links[l].to == s {
+                        let poly = self.polynomial(l, at);
+                        self.set(slaves, l, poly)?;
+                    }
+                }
+                if self.save {
+                    slaves[s].save_state()?;
                 }
             }
-            if self.save {
-                slaves[s].save_state()?;
-            }
-            slaves[s].do_step(at.t, at.h)?;
-            self.fresh[s] = true;
-            for l in 0..self.links.len() {
-                if self.links[l].from == s {
-                    self.next[l] = self.read(slaves, l, Run::Signal)?;
+            let members = &self.sequence[stage.clone()];
+            let phase = Phase::step(at.t, at.h);
+            runs.phase(slaves, phase, Outputs::none(), |s, _| members.contains(&s))?;
+            for i in stage {
+                let s = self.sequence[i];
+                self.fresh[s] = true;
+                for l in 0..self.links.len() {
+                    if self.links[l].from == s {
+                        self.next[l] = self.read(slaves, l, Run::Signal)?;
+                    }
                 }
             }
         }
@@ -1091,6 +1110,25 @@ fn solve_loop(
 }
 
 /// `inst.variable` split at the first dot.
+/// Gauss–Seidel's stages: `sequence` cut into runs of consecutive
+/// instances, each cut before an instance that receives from one already
+/// in its run.
+fn stages(sequence: &[usize], links: &[Link]) -> Vec<std::ops::Range<usize>> {
+    let mut stages = Vec::new();
+    let mut begin = 0;
+    for (i, &s) in sequence.iter().enumerate() {
+        let stage = &sequence[begin..i];
+        if links.iter().any(|l| l.to == s && stage.contains(&l.from)) {
+            stages.push(begin..i);
+            begin = i;
+        }
+    }
+    if begin < sequence.len() {
+        stages.push(begin..sequence.len());
+    }
+    stages
+}
+
 fn split<'a>(name: &str, text: &'a str) -> Result<(&'a str, &'a str), MasterError> {
     text.split_once('.').ok_or_else(|| MasterError::Connection {
         connection: name.to_string(),

@@ -72,6 +72,11 @@ pub(crate) fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Override
                     o.iterations = Some(value.extract()?);
                 }
             }
+            "threads" => {
+                if !value.is_none() {
+                    o.threads = Some(value.extract()?);
+                }
+            }
             "index" => {
                 if !value.is_none() {
                     method.index = Some(value.extract()?);
@@ -130,7 +135,7 @@ pub(crate) fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Override
             other => {
                 return Err(PyTypeError::new_err(format!(
                 "unexpected override '{other}'; expected stop, step, method, beta, gamma, a, b, \
-                     mu, order, epsilon, parallel, divergence_factor, iterations, iteration_tol, step_rtol, step_atol, jacobian or \
+                     mu, order, epsilon, parallel, threads, divergence_factor, iterations, iteration_tol, step_rtol, step_atol, jacobian or \
                      parameters"
             )))
             }

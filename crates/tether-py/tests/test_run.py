@@ -12,6 +12,7 @@ VARIANTS = [
     {"method": "explicit", "mu": 5e-3, "step": 2e-3},
     {"beta": 5e-3, "gamma": 2e-6, "order": 2, "epsilon": 1e-6, "parameters": {"mass2.m": 3.0, "mass1.d": 0}},
     {"stop": 0.25, "order": 1, "parallel": "off", "parameters": {"mass1.m": 2}},
+    {"stop": 0.1, "parallel": "on", "threads": 2},
     {"method": "weighted", "index": 2, "iterations": 2, "jacobian": "reuse",
      "output_interval": 0.002, "output_variables": "mass1.*,link.g"},
     {"index": 3, "step_rtol": 1e-4, "step_atol": 1e-6, "stop": 0.1},
@@ -155,6 +156,26 @@ def test_system_built_in_code_runs_like_the_file(tmp_path, oscillator_toml, osci
     system.save(path)
     c = tether.run(path)
     assert same_bits(a.to_numpy().view(np.float64), c.to_numpy().view(np.float64))
+
+
+def test_threads_and_an_instance_kept_on_the_main_thread_from_the_builder(oscillator_toml, oscillator_fmu):
+    """``parallel=False`` on an instance and ``threads`` on the coupling: mass 1
+    stays on the main thread, mass 2 goes to the one worker, and the run is
+    the file's bit for bit."""
+    system = (
+        tether.System("two-mass oscillator")
+        .experiment(stop=0.2, step=1e-3)
+        .method("baumgarte", beta=2e-3, gamma=1e-6)
+        .coupling(order=0, epsilon=1e-5, parallel="on", threads=3)
+        .add_instance("mass1", oscillator_fmu, {"m": 1.0, "c": 1000.0, "d": 10.0, "x0": 0.0, "v0": 100.0},
+                      parallel=False)
+        .add_instance("mass2", oscillator_fmu, {"m": 2.0, "c": 1000.0, "d": 10.0, "x0": 0.0, "v0": 100.0})
+        .add_constraint("link", **LINK, initial="consistent")
+    )
+    a = tether.run(oscillator_toml, stop=0.2, parallel="off")
+    b = tether.run(system)
+    assert b.stats["parallel"]["workers"] == 1
+    assert same_bits(a.to_numpy().view(np.float64), b.to_numpy().view(np.float64))
 
 
 def test_system_without_experiment_is_an_error():

@@ -610,6 +610,7 @@ impl Reader {
             fmu_on_host: None,
             resources: Default::default(),
             step: None,
+            parallel: None,
         });
         Ok(())
     }

@@ -24,6 +24,7 @@ pub enum Mode {
     RestoreNoisy,
     OutputsDrift,
     AbortAtExit,
+    Barrier,
 }
 
 impl Mode {
@@ -46,6 +47,7 @@ impl Mode {
             13 => Mode::RestoreNoisy,
             14 => Mode::OutputsDrift,
             15 => Mode::AbortAtExit,
+            16 => Mode::Barrier,
             _ => return None,
         })
     }
@@ -58,6 +60,8 @@ pub struct Fault {
     pub delay: f64,
     pub pause: f64,
     pub flood: u32,
+    /// Mode 16: the instances that meet in the step from `at`.
+    pub peers: u32,
     /// Mode 13: the largest offset the step after a restore adds to every
     /// state.
     pub noise: f64,
@@ -111,6 +115,8 @@ impl Fault {
             }
             Mode::Helper if t < self.at + 0.5 * h => crate::start_helper(),
             Mode::AbortAtExit => crate::abort_at_exit(),
+            Mode::Barrier if t < self.at + 0.5 * h => crate::barrier(self.peers),
+            Mode::Barrier => {}
             Mode::Helper | Mode::RestoreIgnored | Mode::RestoreNoisy | Mode::OutputsDrift => {}
         }
     }

@@ -25,6 +25,7 @@
 //! | 13 | once the instance is at `at` or later, `fmi2SetFMUstate` restores the states (the outputs read back are the saved ones) but the next `fmi2DoStep` starts from them plus a pseudo-random offset in [-`noise`, `noise`] (default 0.01): a restore that is not deterministic |
 //! | 14 | once the instance is at `at` or later, every read of the outputs adds `noise` to the position: outputs that change without a step |
 //! | 15 | the library pins itself in the process (`RTLD_NODELETE`, as the loader pins a C++ library with unique symbols) and its destructor calls `abort()` at process exit, as pythonfmu3's runtime may (after a finished run; only from the step at `at`) |
+//! | 16 | a barrier: the step from `at` marks its arrival with a file in the folder `$TETHER_FAULTS_BARRIER` and waits until `peers` (default 2) files are there; after 5 s it ends its process with exit code 16. Instances that meet there must be stepped at once (each in a host process of its own), not one after another |
 //!
 //! `delay` (seconds, default 0) makes every `fmi2DoStep` sleep, in every mode, to
 //! slow a run down to wall-clock scales.
@@ -156,3 +157,30 @@ fn crash() -> ! {
 }
 
 export_fmu!(Faults);
+
+/// Mode 16: marks this instance's arrival in the step from `at` with a file
+/// of its own in the folder `$TETHER_FAULTS_BARRIER` and waits until `peers`
+/// files are there (instances of any process). A master that awaits one
+/// instance's step before it asks for the other's never lets them meet: after
+/// 5 s the process ends with exit code 16.
+fn barrier(peers: u32) {
+    static ARRIVALS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let Some(dir) = std::env::var_os("TETHER_FAULTS_BARRIER") else {
+        std::process::exit(16);
+    };
+    let dir = std::path::PathBuf::from(dir);
+    let n = ARRIVALS.fetch_add(1, Ordering::SeqCst);
+    let mine = dir.join(format!("{}-{n}", std::process::id()));
+    if std::fs::write(mine, b"").is_err() {
+        std::process::exit(16);
+    }
+    let start = std::time::Instant::now();
+    while start.elapsed() < std::time::Duration::from_secs(5) {
+        let arrived = std::fs::read_dir(&dir).map_or(0, |d| d.count());
+        if arrived >= peers as usize {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    std::process::exit(16);
+}

@@ -40,12 +40,15 @@ impl Model for Faults {
                 .description("Mode 13: the largest offset the fmi2DoStep after each fmi2SetFMUstate from `at` on adds to the states; mode 14: the drift of the position output per read"),
         ],
         integer_parameters: &[
-            Integer::new("mode", 0).min(0).max(15).description(
-                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise, 14 every read of the outputs adds noise (they change without a step), 15 the library stays loaded and aborts at process exit",
+            Integer::new("mode", 0).min(0).max(16).description(
+                "0 none, 1 segfault, 2 abort(), 3 exit(0), 4 exit(3), 5 endless loop, 6 log flood, 7 slow calls, 8 a helper process then segfault, 9 fork and the child calls exit(0), 10 fork with a lingering child then segfault, 11 a helper process, 12 fmi2SetFMUstate keeps the states, 13 the step after fmi2SetFMUstate adds noise, 14 every read of the outputs adds noise (they change without a step), 15 the library stays loaded and aborts at process exit, 16 the step from `at` waits for `peers` instances to reach it",
             ),
             Integer::new("flood", 2000)
                 .min(0)
                 .description("Mode 6: warnings logged by each fmi2DoStep from `at` on"),
+            Integer::new("peers", 2)
+                .min(1)
+                .description("Mode 16: the instances that must reach the step from `at` before it goes on"),
         ],
         boolean_parameters: &[declare::EXACT],
         inputs: &[declare::FORCE],
@@ -67,6 +70,7 @@ impl Model for Faults {
         let mode = p.integer("mode")?;
         let mode = Mode::from_index(mode).ok_or_else(|| format!("unknown mode {mode}"))?;
         let flood = p.integer("flood")?;
+        let peers = p.integer("peers")?;
         Ok(Faults {
             oscillator,
             fault: Fault {
@@ -76,6 +80,8 @@ impl Model for Faults {
                 pause: p.real("pause")?,
                 flood: u32::try_from(flood)
                     .map_err(|_| format!("flood must be >= 0, got {flood}"))?,
+                peers: u32::try_from(peers)
+                    .map_err(|_| format!("peers must be >= 1, got {peers}"))?,
                 noise: p.real("noise")?,
                 seed: std::cell::Cell::new(0x9E37_79B9_7F4A_7C15),
                 pending: std::cell::Cell::new(0.0),

@@ -110,6 +110,9 @@ pub struct RemoteInstance {
     writer: Option<File>,
     /// The calls waiting to be sent, as one request.
     out: Out,
+    /// A request sent whose reply is not read yet: the call it is blamed
+    /// on, and the error if it could not be written.
+    in_flight: Option<(Call, Option<io::Error>)>,
     /// What each waiting call is, for errors (its FMI function and time).
     calls: Vec<Call>,
     reply: Vec<u8>,
@@ -284,6 +287,7 @@ impl RemoteInstance {
             writer: Some(writer),
             out: Out::default(),
             calls: Vec::new(),
+            in_flight: None,
             reply: Vec::new(),
             name: crate::current::Name::new(name),
             fmu: fmu.clone(),
@@ -380,6 +384,13 @@ impl RemoteInstance {
     /// or timed out is blamed on the request's step if it has one (where an
     /// FMU spends its time), else on its last call.
     fn send(&mut self) -> Result<()> {
+        self.transmit()?;
+        self.await_reply()
+    }
+
+    /// Sends the queued calls as one request; [`await_reply`](Self::await_reply)
+    /// waits for its reply.
+    fn transmit(&mut self) -> Result<()> {
         let blamed = self
             .calls
             .iter()
@@ -404,6 +415,21 @@ impl RemoteInstance {
         }
         let entered = crate::current::Entered::new(blamed.function, &self.name, blamed.time);
         self.round_trips += 1;
+        let sent = match &mut self.writer {
+            Some(writer) => self.out.send(writer),
+            None => Err(io::ErrorKind::BrokenPipe.into()),
+        };
+        drop(entered);
+        self.out.clear();
+        self.in_flight = Some((blamed, sent.err()));
+        Ok(())
+    }
+
+    /// Waits for the reply to the request [`transmit`](Self::transmit) sent,
+    /// into `self.reply`.
+    fn await_reply(&mut self) -> Result<()> {
+        let (blamed, unsent) = self.in_flight.take().expect("await_reply follows transmit");
+        let entered = crate::current::Entered::new(blamed.function, &self.name, blamed.time);
         // The host enforces the time-out on each call; this is the backstop
         // for a host that cannot (stopped, or its watch never scheduled).
         let calls = u32::try_from(self.calls.len()).unwrap_or(u32::MAX);
@@ -411,15 +437,12 @@ impl RemoteInstance {
             t.saturating_mul(calls)
                 .saturating_add(Duration::from_secs(2))
         });
-        let received = match &mut self.writer {
-            Some(writer) => self.out.send(writer).and_then(|()| {
-                wait_readable(&self.reader, self.exit_watch.as_ref(), backstop)?;
-                protocol::receive(&mut self.reader, &mut self.reply)
-            }),
-            None => Err(io::ErrorKind::BrokenPipe.into()),
+        let received = match unsent {
+            Some(e) => Err(e),
+            None => wait_readable(&self.reader, self.exit_watch.as_ref(), backstop)
+                .and_then(|()| protocol::receive(&mut self.reader, &mut self.reply)),
         };
         drop(entered);
-        self.out.clear();
         let result = self.received(received, blamed);
         self.calls.clear();
         match result {
@@ -1025,6 +1048,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
     fn reset(&mut self) -> Result<()> {
         RemoteInstance::reset(self)
     }
+    fn is_remote(&self) -> bool {
+        true
+    }
     fn round_trips(&self) -> u64 {
         self.round_trips
     }
@@ -1036,6 +1062,12 @@ impl crate::interface::FmuInstance for RemoteInstance {
         runs: &[crate::interface::RunRequest<'_>],
         out: &mut [f64],
     ) -> Result<()> {
+        match self.send_batch(runs)? {
+            true => self.receive_batch(runs, out),
+            false => Ok(()),
+        }
+    }
+    fn send_batch(&mut self, runs: &[crate::interface::RunRequest<'_>]) -> Result<bool> {
         // Every call of every run, queued after those waiting; sent when
         // some run reads values.
         for run in runs {
@@ -1068,9 +1100,17 @@ impl crate::interface::FmuInstance for RemoteInstance {
             }
         }
         if runs.iter().all(|run| run.outputs_len() == 0) {
-            return Ok(());
+            return Ok(false);
         }
-        self.send()?;
+        self.transmit()?;
+        Ok(true)
+    }
+    fn receive_batch(
+        &mut self,
+        runs: &[crate::interface::RunRequest<'_>],
+        out: &mut [f64],
+    ) -> Result<()> {
+        self.await_reply()?;
         // The values, run after run, in the order they were asked for.
         let mut input = In::new(&self.reply[1..]);
         let mut rest = out;

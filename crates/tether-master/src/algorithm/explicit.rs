@@ -5,7 +5,8 @@
 
 use crate::algorithm::step::{MacroStep, StepAt};
 use crate::coupling::rows::RowLevel;
-use crate::slave::Run;
+use crate::runs::{Outputs, Phase};
+use crate::slave::{Run, Slave};
 use crate::stats::{Lap, RunStats};
 use crate::system::feedthrough::Feedthrough;
 use crate::system::System;
@@ -35,9 +36,11 @@ impl MacroStep for Explicit {
         lap: &mut Lap,
     ) -> Result<Option<f64>, MasterError> {
         // Every instance steps with u_N held as its inputs.
-        for slave in system.slaves.iter_mut().filter(|s| !s.stepped_ahead) {
-            slave.do_step(at.t, at.h)?;
-        }
+        let phase = Phase::step(at.t, at.h);
+        let stepped = |_, s: &Slave| !s.stepped_ahead;
+        system
+            .runs
+            .phase(&mut system.slaves, phase, Outputs::none(), stepped)?;
         lap.split_into(&mut stats.times.predictor);
         for hist in &mut system.history {
             *hist = [hist[0], hist[0], hist[1]];

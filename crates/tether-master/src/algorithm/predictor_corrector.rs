@@ -5,12 +5,12 @@
 
 use crate::algorithm::error_estimate::ErrorEstimate;
 use crate::algorithm::jacobian_reuse::Reuse;
-use crate::algorithm::runs::PerturbedRuns;
 use crate::algorithm::step::{MacroStep, MethodState, StepAt};
 use crate::coupling::rows::{Column, RowLevel, View};
 use crate::linalg::solve::{Jacobians, Solver};
 use crate::polynomial::{extrapolate, interpolate, Taylor};
-use crate::slave::{Run, Slave};
+use crate::runs::{Outputs, Phase, Task};
+use crate::slave::Slave;
 use crate::spec::CouplingSettings;
 use crate::spec::JacobianMode;
 use crate::state_bytes::{Pass, Passed};
@@ -52,8 +52,6 @@ pub(crate) struct PredictorCorrector {
     levels: Vec<RowLevel>,
     /// Per row: the same on every level (coupling variables and ports).
     algebraic_rows: Vec<bool>,
-    /// How the perturbed runs are executed.
-    runs: Box<dyn PerturbedRuns>,
     /// Each unknown's polynomial over the step: predictor, then corrector.
     polys: Vec<Taylor>,
     /// Extrapolated unknowns u^p at T_{N+1}.
@@ -94,12 +92,7 @@ pub(crate) struct PredictorCorrector {
 }
 
 impl PredictorCorrector {
-    pub fn new(
-        system: &System,
-        method: Method,
-        settings: &CouplingSettings,
-        runs: Box<dyn PerturbedRuns>,
-    ) -> Self {
+    pub fn new(system: &System, method: Method, settings: &CouplingSettings) -> Self {
         let nu = system.coupling.len();
         let mut levels = vec![RowLevel::Position];
         if method.needs_velocity() {
@@ -123,7 +116,6 @@ impl PredictorCorrector {
             algebraic_rows: (0..nu)
                 .map(|r| system.coupling.unknowns[r].is_algebraic())
                 .collect(),
-            runs,
             polys: vec![Taylor::default(); nu],
             u_pred: vec![0.0; nu],
             predicted: outputs.clone(),
@@ -168,15 +160,20 @@ impl PredictorCorrector {
         if perturb {
             self.perturbed_polynomials(system, at);
         }
-        let perturbed = perturb.then_some((&self.perturbed[..], &mut self.outputs[..]));
-        let slaves = &mut system.slaves;
-        self.runs.predict(
-            slaves,
-            (at.t, at.h),
-            &self.polys,
-            &mut self.predicted,
-            perturbed,
-        )?;
+        let phase = Phase {
+            task: Task::Predict,
+            t: at.t,
+            h: at.h,
+            polys: &self.polys,
+            perturbed: if perturb { &self.perturbed } else { &[] },
+        };
+        let outputs = Outputs {
+            own: &mut self.predicted,
+            perturbed: &mut self.outputs,
+        };
+        system
+            .runs
+            .phase(&mut system.slaves, phase, outputs, |_, _| true)?;
         let view = View::at(&self.predicted, &self.u_pred);
         let nu = system.coupling.len();
         for (&level, g) in self.levels.iter().zip(self.g.chunks_exact_mut(nu)) {
@@ -214,9 +211,20 @@ impl PredictorCorrector {
     fn perturb(&mut self, system: &mut System, at: StepAt, made: bool) -> Result<(), MasterError> {
         if !made {
             self.perturbed_polynomials(system, at);
-            let slaves = &mut system.slaves;
-            self.runs
-                .run(slaves, at.t, at.h, &self.perturbed, &mut self.outputs)?;
+            let phase = Phase {
+                task: Task::Perturb,
+                t: at.t,
+                h: at.h,
+                polys: &self.polys,
+                perturbed: &self.perturbed,
+            };
+            let outputs = Outputs {
+                own: &mut [],
+                perturbed: &mut self.outputs,
+            };
+            system
+                .runs
+                .phase(&mut system.slaves, phase, outputs, |_, s| s.is_coupled())?;
         }
         let nu = system.coupling.len();
         for (group, outputs) in system.groups.iter().zip(&self.outputs) {
@@ -317,14 +325,20 @@ impl PredictorCorrector {
                 at.past,
             );
         }
-        for (slave, out) in system.slaves.iter_mut().zip(&mut system.outputs) {
-            if slave.is_coupled() {
-                slave.correct(&self.polys, at.t, at.h, out)?;
-            } else {
-                slave.read_accepted(out, Run::Corrector)?;
-            }
-        }
-        Ok(())
+        let phase = Phase {
+            task: Task::Correct,
+            t: at.t,
+            h: at.h,
+            polys: &self.polys,
+            perturbed: &[],
+        };
+        let outputs = Outputs {
+            own: &mut system.outputs,
+            perturbed: &mut [],
+        };
+        system
+            .runs
+            .phase(&mut system.slaves, phase, outputs, |_, _| true)
     }
 
     /// Iterated correction (`[coupling] iterations`, beyond the paper): g
@@ -437,11 +451,17 @@ impl MacroStep for PredictorCorrector {
     ) -> Result<Option<f64>, MasterError> {
         if self.u_pred.is_empty() {
             // Nothing to solve for (signal connections only): every
-            // instance steps once, and that is the accepted point.
-            for slave in system.slaves.iter_mut().filter(|s| !s.stepped_ahead) {
-                slave.do_step(at.t, at.h)?;
-            }
-            system.read_accepted(Run::Corrector)?;
+            // instance steps once, and that is the accepted point, read.
+            let phase = Phase {
+                task: Task::StepAndRead,
+                ..Phase::step(at.t, at.h)
+            };
+            let outputs = Outputs {
+                own: &mut system.outputs,
+                perturbed: &mut [],
+            };
+            let slaves = &mut system.slaves;
+            system.runs.phase(slaves, phase, outputs, |_, _| true)?;
             return Ok(None);
         }
         // Beyond the paper: with Jacobian reuse, perturbed runs only when
@@ -515,16 +535,8 @@ impl MacroStep for PredictorCorrector {
         }
     }
 
-    fn report(&self, stats: &mut RunStats) {
-        self.runs.report(stats);
-    }
-
     fn control_steps(&mut self, system: &System, control: &StepControl) -> bool {
         self.estimate = Some(ErrorEstimate::new(system, &self.levels, control));
         true
-    }
-
-    fn terminate(&mut self) -> Result<(), MasterError> {
-        self.runs.terminate()
     }
 }

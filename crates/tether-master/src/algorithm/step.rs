@@ -83,14 +83,4 @@ pub(crate) trait MacroStep: Send {
 
     /// Back to a state of [`save`](Self::save).
     fn restore(&mut self, _state: &MethodState) {}
-
-    /// Add what the method's helpers did (FMI calls made on worker threads,
-    /// the parallel decision) to `stats`.
-    fn report(&self, _stats: &mut RunStats) {}
-
-    /// `fmi2Terminate` the instances the method's helpers made (the copies
-    /// of parallel perturbed runs), at a normal end of the run.
-    fn terminate(&mut self) -> Result<(), MasterError> {
-        Ok(())
-    }
 }

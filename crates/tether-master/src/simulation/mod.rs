@@ -18,7 +18,6 @@ pub use state::{MasterState, SystemState};
 use crate::algorithm::explicit::Explicit;
 use crate::algorithm::predictor_corrector::PredictorCorrector;
 use crate::algorithm::step::{MacroStep, StepAt};
-use crate::algorithm::threads;
 use crate::coupling::rows::RowLevel;
 use crate::observer::Observer;
 use crate::signals::Signals;
@@ -128,15 +127,7 @@ impl Simulation {
                 RowLevel::Stabilised(mu),
             ),
             _ => {
-                let runs = threads::strategy(
-                    settings.parallel,
-                    &system.slaves,
-                    &spec.instances,
-                    &system.group_slaves,
-                    system.coupling.len(),
-                    (exp.start, stop, exp.tolerance),
-                )?;
-                let pc = PredictorCorrector::new(&system, method, &settings, runs);
+                let pc = PredictorCorrector::new(&system, method, &settings);
                 (Box::new(pc), RowLevel::Acceleration)
             }
         };
@@ -413,7 +404,7 @@ impl Simulation {
         stats.failure = failure.cloned();
         stats.adaptive = self.grid.adaptive_stats();
         stats.instances = self.system.slaves.iter().map(Slave::counters).collect();
-        self.method.report(&mut stats);
+        self.system.runs.report(&mut stats);
         stats
     }
 
@@ -555,8 +546,7 @@ impl Simulation {
                 progress(self.grid.progress(), self.grid.total_steps());
             }
             // A normal end: fmi2Terminate before the instances are freed.
-            self.system.terminate()?;
-            self.method.terminate()
+            self.system.terminate()
         })();
         // The last accepted point is recorded even when it is off the output
         // grid (unless recording itself failed).
@@ -619,10 +609,11 @@ fn step_at(
     stats: &mut RunStats,
     lap: &mut Lap,
 ) -> Result<Option<f64>, MasterError> {
+    system.runs.begin_step()?;
     if signals.iterated() {
         return signals.step_iterated((method, system), at, stats, lap);
     }
-    signals.send(&mut system.slaves, at)?;
+    signals.send((&mut system.slaves, &mut system.runs), at)?;
     let error = method.step(system, at, stats, lap)?;
     if error.is_none_or(|e| e <= 1.0) {
         signals.receive(&mut system.slaves)?;

@@ -24,6 +24,7 @@ pub(crate) use check::RollbackCheck;
 use coupled::combine_inputs;
 pub(crate) use coupled::{Coupled, CoupledOutput};
 use recorded::Recorded;
+pub(crate) use runs::Batch;
 use runs::{recycle, Planned, Runs};
 pub(crate) use setup::Capabilities;
 
@@ -212,27 +213,30 @@ impl Slave {
             };
         }
         assert!(self.saved, "rerun is only called after save_state");
-        self.runs(&mut [Planned {
+        let run = Planned {
             step: Some((polys, t, h)),
             restore: true,
             out,
             record: false,
             run: Run::Perturbed,
-        }])
+        };
+        self.runs(&mut [run], Batch::Whole).map(drop)
     }
 
     /// The predictor's run (only the read of the coupled outputs for an
     /// instance the signals' sweep has stepped) and, with the same step, the
     /// perturbed runs from the saved state, one per `(polys, out)` of
     /// `perturbed`: handed to the instance together, since none depends on
-    /// another's outputs (docs/algorithm.md, Steps 2 and 3).
+    /// another's outputs (docs/algorithm.md, Steps 2 and 3). `how` as
+    /// [`Slave::runs`] takes it (returns whether a reply is awaited).
     pub(crate) fn predict_and_perturb<'p>(
         &mut self,
         polys: &[Taylor],
         (t, h): (f64, f64),
         out: &mut [f64],
         perturbed: impl Iterator<Item = (&'p [Taylor], &'p mut [f64])>,
-    ) -> Result<(), MasterError> {
+        how: Batch,
+    ) -> Result<bool, MasterError> {
         let predictor = Planned {
             step: (!self.stepped_ahead).then_some((polys, t, h)),
             restore: false,
@@ -242,11 +246,11 @@ impl Slave {
         };
         if self.check.verify_restore {
             // Each restore is checked on its own (its outputs read back).
-            self.runs(&mut [predictor])?;
+            self.runs(&mut [predictor], Batch::Whole)?;
             for (polys, out) in perturbed {
                 self.rerun(polys, t, h, Some(out))?;
             }
-            return Ok(());
+            return Ok(false);
         }
         let mut planned = recycle(std::mem::take(&mut self.runs.planned_buf));
         planned.push(predictor);
@@ -257,45 +261,59 @@ impl Slave {
             record: false,
             run: Run::Perturbed,
         }));
-        let ran = self.runs(&mut planned);
+        let ran = self.runs(&mut planned, how);
         self.runs.planned_buf = recycle(planned);
         ran
     }
 
     /// The corrector's run: from the saved state with the inputs from
     /// `polys` over the step, the coupled outputs into `out` and the recorded
-    /// outputs read at T_{N+1}, the accepted point.
+    /// outputs read at T_{N+1}, the accepted point. `how` as [`Slave::runs`]
+    /// takes it (returns whether a reply is awaited).
     pub(crate) fn correct(
         &mut self,
         polys: &[Taylor],
-        t: f64,
-        h: f64,
+        (t, h): (f64, f64),
         out: &mut [f64],
-    ) -> Result<(), MasterError> {
+        how: Batch,
+    ) -> Result<bool, MasterError> {
         if self.check.verify_restore {
             self.rerun(polys, t, h, None)?;
-            return self.read_accepted(out, Run::Corrector);
+            return self.read_accepted(out, Run::Corrector).map(|()| false);
         }
         assert!(self.saved, "correct is only called after save_state");
-        self.runs(&mut [Planned {
+        let run = Planned {
             step: Some((polys, t, h)),
             restore: true,
             out: Some(out),
             record: true,
             run: Run::Corrector,
-        }])
+        };
+        self.runs(&mut [run], how)
     }
 
     /// The coupled outputs into `out` and the recorded outputs, at an
     /// accepted point reached after `run`.
     pub(crate) fn read_accepted(&mut self, out: &mut [f64], run: Run) -> Result<(), MasterError> {
-        self.runs(&mut [Planned {
+        self.read_accepted_as(out, run, Batch::Whole).map(drop)
+    }
+
+    /// [`read_accepted`](Self::read_accepted) with `how` as [`Slave::runs`]
+    /// takes it (returns whether a reply is awaited).
+    pub(crate) fn read_accepted_as(
+        &mut self,
+        out: &mut [f64],
+        run: Run,
+        how: Batch,
+    ) -> Result<bool, MasterError> {
+        let read = Planned {
             step: None,
             restore: false,
             out: Some(out),
             record: true,
             run,
-        }])
+        };
+        self.runs(&mut [read], how)
     }
 
     /// Call counters, with the round trips to the instance's host process.

@@ -20,6 +20,8 @@ pub(super) struct Runs {
     /// The allocations of a batch's plan and requests.
     pub planned_buf: Vec<Planned<'static>>,
     pub request_buf: Vec<RunRequest<'static>>,
+    /// A batch sent ([`Batch::Send`]) awaits its reply.
+    pub awaiting: bool,
 }
 
 /// One run of an instance as a macro step plans it ([`Slave::runs`]).
@@ -34,6 +36,18 @@ pub(super) struct Planned<'a> {
     pub record: bool,
     /// What the outputs are read after, for messages.
     pub run: Run,
+}
+
+/// How a batch goes to the instance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Batch {
+    /// Made whole: requested and its reply read.
+    Whole,
+    /// An instance in a host process: the request sent, its reply awaited
+    /// later (after the requests to the other hosts went out).
+    Send,
+    /// The reply to the request of [`Batch::Send`] with the same runs.
+    Receive,
 }
 
 /// An empty vector with `v`'s allocation, for items of another lifetime, so
@@ -51,45 +65,18 @@ impl Slave {
     /// in order: each from the saved state when `restore`, with the inputs
     /// from its polynomials over its step, its coupled outputs read into its
     /// `out` (checked as read after its `run`) and, with `record`, the
-    /// recorded outputs.
-    pub(super) fn runs(&mut self, planned: &mut [Planned<'_>]) -> Result<(), MasterError> {
+    /// recorded outputs. `how` splits the batch of an instance in a host
+    /// process into its request and its reply; returns whether a reply is
+    /// awaited after [`Batch::Send`].
+    pub(super) fn runs(
+        &mut self,
+        planned: &mut [Planned<'_>],
+        how: Batch,
+    ) -> Result<bool, MasterError> {
+        if how != Batch::Receive {
+            self.prepare(planned);
+        }
         let driven = !self.coupled.inputs.is_empty();
-        if self.runs.inputs.len() < planned.len() {
-            self.runs
-                .inputs
-                .resize(planned.len(), self.coupled.input.clone());
-        }
-        // The runs' inputs, the length of their outputs, and the calls
-        // counted (whether or not the runs succeed).
-        let mut len = 0;
-        for (p, input) in planned.iter().zip(&mut self.runs.inputs) {
-            if p.restore {
-                self.counters.state_sets += 1;
-            }
-            if let Some((polys, _, _)) = p.step {
-                self.counters.do_steps += 1;
-                if driven {
-                    combine_inputs(
-                        &self.coupled.inputs,
-                        &self.coupled.input_positions,
-                        polys,
-                        &mut input.values,
-                        &mut input.derivatives,
-                    );
-                    self.counters.set_reals += 1;
-                    if !self.coupled.input.derivative_vrs.is_empty() {
-                        self.counters.set_input_derivatives += 1;
-                    }
-                }
-            }
-            if p.out.is_some() {
-                len += self.coupled.slots.len();
-            }
-            if p.record {
-                len += self.recorded.reals;
-            }
-        }
-        self.runs.batch_buf.resize(len, 0.0);
         let mut requests = recycle(std::mem::take(&mut self.runs.request_buf));
         // At an accepted point one call reads the coupled and the recorded
         // outputs, unless output derivatives are read between them.
@@ -134,9 +121,22 @@ impl Slave {
             .iter()
             .map(|r| u64::from(!r.outputs.is_empty()) + u64::from(!r.recorded.is_empty()))
             .sum();
-        let ran = self.backend.run_batch(&requests, &mut self.runs.batch_buf);
+        let ran = match how {
+            Batch::Whole => self.backend.run_batch(&requests, &mut self.runs.batch_buf),
+            Batch::Send => self.backend.send_batch(&requests).map(|sent| {
+                self.runs.awaiting = sent;
+            }),
+            Batch::Receive => {
+                self.runs.awaiting = false;
+                self.backend
+                    .receive_batch(&requests, &mut self.runs.batch_buf)
+            }
+        };
         self.runs.request_buf = recycle(requests);
         ran?;
+        if how == Batch::Send {
+            return Ok(self.runs.awaiting);
+        }
         self.counters.get_reals += reads;
         let batch = std::mem::take(&mut self.runs.batch_buf);
         let mut values = batch.as_slice();
@@ -154,7 +154,47 @@ impl Slave {
             Ok(())
         });
         self.runs.batch_buf = batch;
-        taken
+        taken.map(|()| false)
+    }
+
+    /// A batch's inputs from its runs' polynomials, the length of its
+    /// outputs, and its calls counted (whether or not the runs succeed).
+    fn prepare(&mut self, planned: &[Planned<'_>]) {
+        let driven = !self.coupled.inputs.is_empty();
+        if self.runs.inputs.len() < planned.len() {
+            self.runs
+                .inputs
+                .resize(planned.len(), self.coupled.input.clone());
+        }
+        let mut len = 0;
+        for (p, input) in planned.iter().zip(&mut self.runs.inputs) {
+            if p.restore {
+                self.counters.state_sets += 1;
+            }
+            if let Some((polys, _, _)) = p.step {
+                self.counters.do_steps += 1;
+                if driven {
+                    combine_inputs(
+                        &self.coupled.inputs,
+                        &self.coupled.input_positions,
+                        polys,
+                        &mut input.values,
+                        &mut input.derivatives,
+                    );
+                    self.counters.set_reals += 1;
+                    if !self.coupled.input.derivative_vrs.is_empty() {
+                        self.counters.set_input_derivatives += 1;
+                    }
+                }
+            }
+            if p.out.is_some() {
+                len += self.coupled.slots.len();
+            }
+            if p.record {
+                len += self.recorded.reals;
+            }
+        }
+        self.runs.batch_buf.resize(len, 0.0);
     }
 }
 

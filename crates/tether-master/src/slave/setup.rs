@@ -67,30 +67,6 @@ impl Slave {
         Slave::instantiate_as(fmu, spec, &spec.name, order, experiment)
     }
 
-    /// Another instance of this slave's FMU with the same start values and the
-    /// same coupled inputs and outputs, initialised like the original (for
-    /// perturbed runs on another thread; its state is later copied over).
-    pub(crate) fn duplicate(
-        &self,
-        spec: &InstanceSpec,
-        copy: usize,
-        experiment: Experiment,
-    ) -> Result<Slave, MasterError> {
-        let name = format!("{}#{copy}", spec.name);
-        let mut extra = Slave::instantiate_as(
-            self.fmu.clone(),
-            spec,
-            &name,
-            self.coupled.order,
-            experiment,
-        )?;
-        extra.coupled.inputs = self.coupled.inputs.clone();
-        extra.coupled.outputs = self.coupled.outputs.clone();
-        extra.finalize(self.coupled.order);
-        extra.initialize()?;
-        Ok(extra)
-    }
-
     /// FMI 2.0: `fmi2SetupExperiment` right after `fmi2Instantiate` (FMI 3.0
     /// keeps the experiment for `fmi3EnterInitializationMode`), then the start
     /// values, as FMPy and libcosim set them: FMUs of some modelling tools
@@ -276,13 +252,6 @@ impl Slave {
         self.check.readback = vec![0.0; self.coupled.outputs.len()];
     }
 
-    /// Initialise: initialization mode, entered and left (the experiment
-    /// was set up at instantiation).
-    pub(crate) fn initialize(&mut self) -> Result<(), MasterError> {
-        self.enter_initialization()?;
-        self.exit_initialization()
-    }
-
     /// Enter initialization mode, where inputs can be set and outputs read
     /// before the first step (a loop's values at T_0).
     pub(crate) fn enter_initialization(&mut self) -> Result<(), MasterError> {
@@ -329,13 +298,13 @@ impl Slave {
         }
     }
 
-    /// Whether perturbed runs may go to other instances of the FMU: its state
-    /// can be serialised and it may be instantiated more than once.
+    /// Whether the instance's runs may go to a worker thread: it runs in
+    /// this process (a host process's requests are sent without a thread)
+    /// and its FMU does not declare `canBeInstantiatedOnlyOncePerProcess`
+    /// (such an FMU may keep global state that one thread expects).
     pub(crate) fn can_run_in_parallel(&self) -> bool {
         let cs = self.fmu.model_description().cs();
-        cs.can_get_and_set_fmu_state
-            && cs.can_serialize_fmu_state
-            && !cs.can_be_instantiated_only_once_per_process
+        !self.backend.is_remote() && !cs.can_be_instantiated_only_once_per_process
     }
 
     /// Whether any unknown drives this instance.

@@ -1,6 +1,6 @@
 //! Saved states of an instance: the state saved at the start of each macro
-//! step (and restored for each repeated run), its serialized copy for the
-//! instances of parallel runs, and the whole system's saved state.
+//! step (and restored for each repeated run) and the whole system's saved
+//! state.
 
 use super::{Run, Slave, SAVED, SNAPSHOT};
 use crate::MasterError;
@@ -39,25 +39,6 @@ impl Slave {
             self.check.at_save = at_save;
             compared?;
         }
-        Ok(())
-    }
-
-    /// Serialise the state saved by [`save_state`](Self::save_state) into `out`
-    /// (its capacity is reused).
-    pub(crate) fn serialize_saved(&mut self, out: &mut Vec<u8>) -> Result<(), MasterError> {
-        assert!(
-            self.saved,
-            "serialize_saved is only called after save_state"
-        );
-        self.backend.serialize(SAVED, out)?;
-        Ok(())
-    }
-
-    /// Set the state from bytes of [`serialize_saved`](Self::serialize_saved)
-    /// (of another instance of the same FMU) and keep it as the saved state.
-    pub(crate) fn load_serialized(&mut self, bytes: &[u8]) -> Result<(), MasterError> {
-        self.backend.deserialize(SAVED, bytes)?;
-        self.saved = true;
         Ok(())
     }
 

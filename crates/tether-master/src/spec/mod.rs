@@ -253,8 +253,13 @@ pub struct CouplingSettings {
     /// A quantity whose magnitude exceeds this factor times its scale at the
     /// start (at least 1) counts as diverged.
     pub divergence_factor: f64,
-    /// Perturbed runs on other threads: auto, on or off (docs/algorithm.md).
+    /// The runs of a step on worker threads: auto, on or off
+    /// (docs/algorithm.md, "Parallel runs").
     pub parallel: Parallel,
+    /// Threads the runs may use, the main thread included (None: the
+    /// machine's available parallelism).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub threads: Option<usize>,
     /// When the rollback of the instances the method rolls back is checked
     /// (docs/reliability.md): at setup, at setup and every
     /// [`crate::RECHECK_EVERY`] macro steps (the default), also after every
@@ -361,6 +366,7 @@ impl Default for CouplingSettings {
             max_condition: 1e12,
             divergence_factor: 1e6,
             parallel: Parallel::Auto,
+            threads: None,
             check_rollback: CheckRollback::Periodic,
             residual_warning: 1e-3,
             residual_limit: ResidualLimit::DEFAULT,
@@ -416,6 +422,11 @@ pub struct InstanceSpec {
     /// macro step, docs/system-file.md "Per-instance steps"). None: H.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step: Option<f64>,
+    /// `false`: the instance's runs stay on the main thread (FMUs bound to
+    /// the thread that made them, such as Python-based ones); None: they
+    /// may go to a worker thread (`[coupling] parallel`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parallel: Option<bool>,
 }
 
 /// `resources`: a table of numbers, the error naming what is expected.

@@ -37,9 +37,12 @@ pub struct Overrides {
     /// The master's divergence bound (`[coupling] divergence_factor`).
     #[serde(default)]
     pub divergence_factor: Option<f64>,
-    /// Perturbed runs on other threads (`[coupling] parallel`).
+    /// The runs of a step on worker threads (`[coupling] parallel`).
     #[serde(default)]
     pub parallel: Option<Parallel>,
+    /// Threads the runs may use, the main thread included (`[coupling] threads`).
+    #[serde(default)]
+    pub threads: Option<usize>,
     /// Corrections per macro step (`[coupling] iterations`).
     #[serde(default)]
     pub iterations: Option<usize>,
@@ -177,6 +180,7 @@ impl Overrides {
             epsilon: over.epsilon.or(self.epsilon),
             divergence_factor: over.divergence_factor.or(self.divergence_factor),
             parallel: over.parallel.or(self.parallel),
+            threads: over.threads.or(self.threads),
             iterations: over.iterations.or(self.iterations),
             iteration_tol: over.iteration_tol.or(self.iteration_tol),
             jacobian: over.jacobian.or(self.jacobian),
@@ -208,6 +212,9 @@ impl Overrides {
         }
         if let Some(parallel) = self.parallel {
             spec.coupling.parallel = parallel;
+        }
+        if let Some(threads) = self.threads {
+            spec.coupling.threads = Some(threads);
         }
         if let Some(iterations) = self.iterations {
             spec.coupling.iterations = iterations;
@@ -533,6 +540,7 @@ mod tests {
             epsilon: Some(1e-6),
             divergence_factor: Some(1e3),
             parallel: Some(Parallel::Off),
+            threads: Some(3),
             iterations: Some(3),
             iteration_tol: Some(1e-8),
             step_atol: Some(1e-7),
@@ -547,6 +555,7 @@ mod tests {
         assert_eq!(spec.coupling.epsilon, 1e-6);
         assert_eq!(spec.coupling.divergence_factor, 1e3);
         assert_eq!(spec.coupling.parallel, Parallel::Off);
+        assert_eq!(spec.coupling.threads, Some(3));
         assert_eq!(spec.coupling.iterations, 3);
         assert_eq!(spec.coupling.iteration_tol, 1e-8);
         assert_eq!(spec.coupling.jacobian, JacobianMode::Reuse);

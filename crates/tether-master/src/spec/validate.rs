@@ -188,6 +188,13 @@ impl SystemSpec {
         if !c.epsilon.is_finite() || c.epsilon <= 0.0 || c.epsilon >= 1.0 {
             return Err(param("epsilon", c.epsilon, "a finite increment in (0, 1)"));
         }
+        if let Some(threads) = c.threads.filter(|&n| n == 0 || n > 1024) {
+            return Err(param(
+                "threads",
+                threads as f64,
+                "a number of threads from 1 (the main thread alone) to 1024",
+            ));
+        }
         if !c.max_condition.is_finite() || c.max_condition <= 1.0 {
             return Err(param(
                 "max_condition",

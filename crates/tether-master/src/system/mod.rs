@@ -15,6 +15,7 @@ use std::path::Path;
 use crate::coupling::touched::{Touched, MAX_INTERFACE_ENTRIES};
 use crate::coupling::Coupling;
 use crate::polynomial::Taylor;
+use crate::runs::Runs;
 use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, InitialMultiplier, SystemSpec};
 use crate::{MasterError, Method};
@@ -22,6 +23,9 @@ use crate::{MasterError, Method};
 /// The instances and their coupling, as every method sees them.
 pub(crate) struct System {
     pub slaves: Vec<Slave>,
+    /// How the runs of a step are made: on the main thread or shared with
+    /// worker threads (`[coupling] parallel`).
+    pub runs: Runs,
     pub coupling: Coupling,
     /// Coupled outputs of each instance at the last accepted point.
     pub outputs: Vec<Vec<f64>>,
@@ -82,7 +86,7 @@ impl System {
             }
         })?;
         let groups = perturbation_groups(&owners, slaves.len());
-        let group_slaves = groups
+        let group_slaves: Vec<Vec<usize>> = groups
             .iter()
             .map(|group| {
                 let mut members: Vec<usize> = group
@@ -94,6 +98,14 @@ impl System {
                 members
             })
             .collect();
+        let runs = Runs::new(
+            spec.coupling.parallel,
+            spec.coupling.threads,
+            &slaves,
+            &spec.instances,
+            &group_slaves,
+            coupling.len(),
+        )?;
         let every_step = spec.coupling.check_rollback == CheckRollback::EveryStep;
         for slave in &mut slaves {
             slave.enter_initialization()?;
@@ -111,6 +123,7 @@ impl System {
         Ok(System {
             outputs: slaves.iter().map(|s| vec![0.0; s.coupled_len()]).collect(),
             slaves,
+            runs,
             coupling,
             history,
             owners,

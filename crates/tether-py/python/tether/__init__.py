@@ -383,7 +383,8 @@ class System:
 
     def coupling(self, **settings: Any) -> "System":
         """Settings of every method: ``order`` (0, 1, 2), ``epsilon``,
-        ``max_condition``, ``divergence_factor``, ``parallel`` ("auto", "on", "off")."""
+        ``max_condition``, ``divergence_factor``, ``parallel`` ("auto", "on", "off"),
+        ``threads`` (the main thread included)."""
         self._data["coupling"].update(settings)
         return self
 
@@ -399,6 +400,7 @@ class System:
         fmu_on_host: Optional[str] = None,
         resources: Optional[Mapping[str, float]] = None,
         step: Optional[float] = None,
+        parallel: Optional[bool] = None,
     ) -> "System":
         """An FMU instance named ``name`` (the column prefix) with start values;
         ``step`` is its own communication step, a whole multiple of the
@@ -408,7 +410,9 @@ class System:
         ``host="tcp://ADDR:PORT"`` with ``token_file`` runs it on a ``tether
         host`` (docs/remote.md); ``fmu_on_host`` names an FMU already there.
         ``resources`` (``{"licence": 1}``) are what a Dask worker must have
-        to host the instance when :func:`run` is given ``client=``."""
+        to host the instance when :func:`run` is given ``client=``.
+        ``parallel=False`` keeps its runs on the main thread under
+        ``[coupling] parallel`` (an FMU bound to the thread that made it)."""
         inst: Dict[str, Any] = {"name": name, "fmu": os.path.abspath(os.fspath(fmu))}
         if parameters:
             inst["parameters"] = dict(parameters)
@@ -426,6 +430,8 @@ class System:
             inst["fmu_on_host"] = fmu_on_host
         if resources is not None:
             inst["resources"] = dict(resources)
+        if parallel is not None:
+            inst["parallel"] = bool(parallel)
         self._data["instance"].append(inst)
         return self
 
