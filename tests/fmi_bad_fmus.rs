@@ -381,7 +381,7 @@ fn an_fmi4_fmu_is_refused_by_version() {
     assert_eq!(
         err.to_string(),
         format!(
-            "'{}' is an FMI 4.0 FMU; Tether supports FMI 2.0 and 3.0 co-simulation only",
+            "'{}' is an FMI 4.0 FMU; Tether supports FMI 2.0 and 3.0 (co-simulation and model exchange)",
             path.display()
         )
     );
@@ -406,19 +406,27 @@ fn an_fmi1_fmu_is_refused_by_version() {
         &[
             &shown(&path),
             "FMI 1.0",
-            "FMI 2.0 and 3.0 co-simulation only",
+            "FMI 2.0 and 3.0 (co-simulation and model exchange)",
         ],
     );
 }
 
+/// A model-exchange-only FMU is read (its description is valid): without a
+/// binary it is refused for the missing library, named after the
+/// model-exchange model identifier.
 #[test]
-fn a_model_exchange_only_fmu_is_refused() {
+fn a_model_exchange_only_fmu_is_read_and_needs_its_binary() {
     let dir = tempfile::tempdir().unwrap();
     let xml = model_description("2.0", "stub", false, true);
     let path = zip_with_description(dir.path(), "me.fmu", &xml);
     let err = open_err(&path);
-    assert!(matches!(err, Error::NotCoSimulation { .. }), "{err:?}");
-    assert_one_line_naming(&err, &[&shown(&path), "model-exchange-only", "'stub'"]);
+    match &err {
+        Error::MissingBinary { expected, .. } => {
+            assert_eq!(expected, &path.join("binaries/linux64/stub.so"))
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_one_line_naming(&err, &["binaries/linux64/stub.so", "'stub'"]);
 }
 
 #[test]

@@ -1,11 +1,17 @@
 """Simulate an FMU with fmpy at a fixed step and write every step to CSV.
 
     python simulate.py FMU OUT.csv --stop T --step H [--start T0] [--set name=value ...]
+        [--fmi-type CoSimulation|ModelExchange] [--solver CVode|Euler]
+        [--relative-tolerance RTOL]
 
 The CSV has a `time` column followed by every output, values printed with full
 (round-trip) precision; an array output (FMI 3.0) is one column per element, named
 `y[1]`, `A[2,3]` (1-based, row-major) as Tether names them. Values of --set: true/false for Booleans, numbers otherwise;
 an array's values separated by spaces, row-major (`--set "A=1 0 0 1"`).
+
+With --fmi-type ModelExchange fmpy integrates the FMU itself (--solver, default
+CVode, at --relative-tolerance) and records the output grid and, at each event, a
+row before and a row after it (the same time twice).
 """
 
 import argparse
@@ -35,6 +41,9 @@ def main(argv):
     parser.add_argument("--step", type=float, required=True, help="communication step size")
     parser.add_argument("--start", type=float, default=0.0, help="start time")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="start value")
+    parser.add_argument("--fmi-type", default="CoSimulation", choices=["CoSimulation", "ModelExchange"])
+    parser.add_argument("--solver", default="CVode", choices=["CVode", "Euler"])
+    parser.add_argument("--relative-tolerance", type=float, default=None)
     args = parser.parse_args(argv)
 
     types = {v.name: v.type for v in read_model_description(args.fmu).modelVariables}
@@ -51,14 +60,18 @@ def main(argv):
         value = parse_value(value)
         start_values[name] = float(value) if real else value
 
+    options = {}
+    if args.fmi_type == "ModelExchange":
+        options = {"solver": args.solver, "relative_tolerance": args.relative_tolerance}
     result = simulate_fmu(
         args.fmu,
-        fmi_type="CoSimulation",
+        fmi_type=args.fmi_type,
         start_time=args.start,
         stop_time=args.stop,
         step_size=args.step,
         output_interval=args.step,
         start_values=start_values,
+        **options,
     )
     names = result.dtype.names
     columns = []  # (header, field name, index into the field or None)

@@ -39,7 +39,19 @@ pub fn describe(md: &ModelDescription) -> String {
     if let Some(d) = &md.description {
         line(format!("            {d}"));
     }
-    line(format!("FMI         {} co-simulation", md.fmi_version));
+    let interfaces: Vec<&str> = [
+        (md.co_simulation.is_some(), "co-simulation"),
+        (md.model_exchange.is_some(), "model exchange"),
+    ]
+    .iter()
+    .filter(|(has, _)| *has)
+    .map(|&(_, name)| name)
+    .collect();
+    line(format!(
+        "FMI         {} {}",
+        md.fmi_version,
+        interfaces.join(", ")
+    ));
     let fmi3 = md.standard == FmiStandard::Fmi3;
     line(format!(
         "{}{}",
@@ -57,117 +69,200 @@ pub fn describe(md: &ModelDescription) -> String {
             line(format!("{label:<11} {v}"));
         }
     }
-    let cs = &md.co_simulation;
+    let cs = md.cs();
     line(String::new());
     line("Co-simulation".into());
-    line(format!(
-        "  modelIdentifier                    {}",
-        cs.model_identifier
-    ));
-    if fmi3 {
-        for (name, value) in [
-            ("canGetAndSetFMUState", cs.can_get_and_set_fmu_state),
-            ("canSerializeFMUState", cs.can_serialize_fmu_state),
-            (
-                "canHandleVariableCommunicationStepSize",
-                cs.can_handle_variable_communication_step_size,
-            ),
-            (
-                "canBeInstantiatedOnlyOncePerProcess",
-                cs.can_be_instantiated_only_once_per_process,
-            ),
-            (
-                "providesDirectionalDerivatives",
-                cs.provides_directional_derivative,
-            ),
-            (
-                "providesAdjointDerivatives",
-                cs.provides_adjoint_derivatives,
-            ),
-            (
-                "providesPerElementDependencies",
-                cs.provides_per_element_dependencies,
-            ),
-            ("needsExecutionTool", cs.needs_execution_tool),
-            (
-                "providesIntermediateUpdate",
-                cs.provides_intermediate_update,
-            ),
-            (
-                "mightReturnEarlyFromDoStep",
-                cs.might_return_early_from_do_step,
-            ),
-            (
-                "canReturnEarlyAfterIntermediateUpdate",
-                cs.can_return_early_after_intermediate_update,
-            ),
-            ("hasEventMode", cs.has_event_mode),
-            (
-                "providesEvaluateDiscreteStates",
-                cs.provides_evaluate_discrete_states,
-            ),
-        ] {
-            line(format!("  {name:<38} {}", yes_no(value)));
-        }
-        line(format!(
-            "  {:<38} {}",
-            "maxOutputDerivativeOrder", cs.max_output_derivative_order
-        ));
-        line(format!(
-            "  {:<38} {}",
-            "fixedInternalStepSize",
-            cs.fixed_internal_step_size
-                .map_or_else(|| "-".to_string(), |h| h.to_string())
-        ));
-        line(format!(
-            "  {:<38} {}",
-            "recommendedIntermediateInputSmoothness", cs.recommended_intermediate_input_smoothness
-        ));
-        if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
-            line(
-                "  (Tether runs it without event mode and early return, as FMI 3.0 allows)".into(),
-            );
-        }
-    } else {
-        for (name, value) in [
-            ("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state),
-            ("canSerializeFMUstate", cs.can_serialize_fmu_state),
-            ("canInterpolateInputs", cs.can_interpolate_inputs),
-            (
-                "canHandleVariableCommunicationStepSize",
-                cs.can_handle_variable_communication_step_size,
-            ),
-            (
-                "canBeInstantiatedOnlyOncePerProcess",
-                cs.can_be_instantiated_only_once_per_process,
-            ),
-            (
-                "canNotUseMemoryManagementFunctions",
-                cs.can_not_use_memory_management_functions,
-            ),
-            (
-                "providesDirectionalDerivative",
-                cs.provides_directional_derivative,
-            ),
-            ("needsExecutionTool", cs.needs_execution_tool),
-            ("canRunAsynchronuously", cs.can_run_asynchronuously),
-        ] {
-            line(format!("  {name:<38} {}", yes_no(value)));
-        }
-        line(format!(
-            "  {:<38} {}",
-            "maxOutputDerivativeOrder", cs.max_output_derivative_order
-        ));
+    if md.co_simulation.is_none() {
+        line("  none: the FMU offers model exchange only".into());
     }
-    if md.model_exchange.is_some() {
-        line("  (also offers model exchange, which Tether does not use)".into());
+    if md.co_simulation.is_some() {
+        line(format!(
+            "  modelIdentifier                    {}",
+            cs.model_identifier
+        ));
+        if fmi3 {
+            for (name, value) in [
+                ("canGetAndSetFMUState", cs.can_get_and_set_fmu_state),
+                ("canSerializeFMUState", cs.can_serialize_fmu_state),
+                (
+                    "canHandleVariableCommunicationStepSize",
+                    cs.can_handle_variable_communication_step_size,
+                ),
+                (
+                    "canBeInstantiatedOnlyOncePerProcess",
+                    cs.can_be_instantiated_only_once_per_process,
+                ),
+                (
+                    "providesDirectionalDerivatives",
+                    cs.provides_directional_derivative,
+                ),
+                (
+                    "providesAdjointDerivatives",
+                    cs.provides_adjoint_derivatives,
+                ),
+                (
+                    "providesPerElementDependencies",
+                    cs.provides_per_element_dependencies,
+                ),
+                ("needsExecutionTool", cs.needs_execution_tool),
+                (
+                    "providesIntermediateUpdate",
+                    cs.provides_intermediate_update,
+                ),
+                (
+                    "mightReturnEarlyFromDoStep",
+                    cs.might_return_early_from_do_step,
+                ),
+                (
+                    "canReturnEarlyAfterIntermediateUpdate",
+                    cs.can_return_early_after_intermediate_update,
+                ),
+                ("hasEventMode", cs.has_event_mode),
+                (
+                    "providesEvaluateDiscreteStates",
+                    cs.provides_evaluate_discrete_states,
+                ),
+            ] {
+                line(format!("  {name:<38} {}", yes_no(value)));
+            }
+            line(format!(
+                "  {:<38} {}",
+                "maxOutputDerivativeOrder", cs.max_output_derivative_order
+            ));
+            line(format!(
+                "  {:<38} {}",
+                "fixedInternalStepSize",
+                cs.fixed_internal_step_size
+                    .map_or_else(|| "-".to_string(), |h| h.to_string())
+            ));
+            line(format!(
+                "  {:<38} {}",
+                "recommendedIntermediateInputSmoothness",
+                cs.recommended_intermediate_input_smoothness
+            ));
+            if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
+                line(
+                    "  (Tether runs it without event mode and early return, as FMI 3.0 allows)"
+                        .into(),
+                );
+            }
+        } else {
+            for (name, value) in [
+                ("canGetAndSetFMUstate", cs.can_get_and_set_fmu_state),
+                ("canSerializeFMUstate", cs.can_serialize_fmu_state),
+                ("canInterpolateInputs", cs.can_interpolate_inputs),
+                (
+                    "canHandleVariableCommunicationStepSize",
+                    cs.can_handle_variable_communication_step_size,
+                ),
+                (
+                    "canBeInstantiatedOnlyOncePerProcess",
+                    cs.can_be_instantiated_only_once_per_process,
+                ),
+                (
+                    "canNotUseMemoryManagementFunctions",
+                    cs.can_not_use_memory_management_functions,
+                ),
+                (
+                    "providesDirectionalDerivative",
+                    cs.provides_directional_derivative,
+                ),
+                ("needsExecutionTool", cs.needs_execution_tool),
+                ("canRunAsynchronuously", cs.can_run_asynchronuously),
+            ] {
+                line(format!("  {name:<38} {}", yes_no(value)));
+            }
+            line(format!(
+                "  {:<38} {}",
+                "maxOutputDerivativeOrder", cs.max_output_derivative_order
+            ));
+        }
+    }
+    if let Some(me) = &md.model_exchange {
+        line(String::new());
+        line("Model exchange".into());
+        line(format!(
+            "  modelIdentifier                    {}",
+            me.model_identifier
+        ));
+        let states = if fmi3 && me.number_of_continuous_states > 0 {
+            let elements: u64 = md
+                .model_structure
+                .derivatives
+                .iter()
+                .filter_map(|d| md.variable_by_index(d.index))
+                .map(|v| md.array_sizes(v).map_or(1, |s| s.iter().product::<u64>()))
+                .sum();
+            elements.to_string()
+        } else {
+            me.number_of_continuous_states.to_string()
+        };
+        line(format!("  {:<38} {states}", "continuous states"));
+        line(format!(
+            "  {:<38} {}",
+            "event indicators", me.number_of_event_indicators
+        ));
+        let flags: Vec<(&str, bool)> = if fmi3 {
+            vec![
+                (
+                    "needsCompletedIntegratorStep",
+                    me.needs_completed_integrator_step,
+                ),
+                ("canGetAndSetFMUState", me.can_get_and_set_fmu_state),
+                ("canSerializeFMUState", me.can_serialize_fmu_state),
+                (
+                    "providesDirectionalDerivatives",
+                    me.provides_directional_derivative,
+                ),
+                (
+                    "providesAdjointDerivatives",
+                    me.provides_adjoint_derivatives,
+                ),
+                (
+                    "providesEvaluateDiscreteStates",
+                    me.provides_evaluate_discrete_states,
+                ),
+                (
+                    "canBeInstantiatedOnlyOncePerProcess",
+                    me.can_be_instantiated_only_once_per_process,
+                ),
+                ("needsExecutionTool", me.needs_execution_tool),
+            ]
+        } else {
+            vec![
+                (
+                    "completedIntegratorStepNotNeeded",
+                    me.completed_integrator_step_not_needed,
+                ),
+                ("canGetAndSetFMUstate", me.can_get_and_set_fmu_state),
+                ("canSerializeFMUstate", me.can_serialize_fmu_state),
+                (
+                    "providesDirectionalDerivative",
+                    me.provides_directional_derivative,
+                ),
+                (
+                    "canBeInstantiatedOnlyOncePerProcess",
+                    me.can_be_instantiated_only_once_per_process,
+                ),
+                (
+                    "canNotUseMemoryManagementFunctions",
+                    me.can_not_use_memory_management_functions,
+                ),
+                ("needsExecutionTool", me.needs_execution_tool),
+            ]
+        };
+        for (name, value) in flags {
+            line(format!("  {name:<38} {}", yes_no(value)));
+        }
     }
     line(String::new());
     line("Tether methods".into());
     let rollback = cs.can_get_and_set_fmu_state;
     line(format!(
         "  predictor/corrector (baumgarte, weighted)  {}",
-        if rollback {
+        if md.co_simulation.is_none() {
+            "no: needs co-simulation"
+        } else if rollback {
             "yes"
         } else if fmi3 {
             "no: needs canGetAndSetFMUState"
@@ -179,7 +274,22 @@ pub fn describe(md: &ModelDescription) -> String {
         "  coupling polynomials k > 0                 {}",
         tether_master::polynomial_inputs::summary(md)
     ));
-    line("  explicit                                   yes".into());
+    line(format!(
+        "  explicit                                   {}",
+        if md.co_simulation.is_some() {
+            "yes"
+        } else {
+            "no: needs co-simulation"
+        }
+    ));
+    if md.model_exchange.is_some() {
+        line(
+            "  tether simulate --fmi-type model-exchange  yes: built-in integrator (rk45, dop853), \
+             time, state and step events"
+                .into(),
+        );
+        line("  model exchange coupled in a system         no: not yet".into());
+    }
     let markers = markers(md);
     if !markers.is_empty() {
         line(String::new());

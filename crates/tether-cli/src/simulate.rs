@@ -3,7 +3,9 @@
 //! against fmpy before it is coupled.
 //!
 //! The simulation is the master's ([`tether_master::SingleFmu`], shared with
-//! Python's `tether.simulate`): FMI 2.0 and FMI 3.0 FMUs, an array output one
+//! Python's `tether.simulate`): FMI 2.0 and FMI 3.0 FMUs, co-simulation or
+//! model exchange (`--fmi-type`, the built-in integrator's settings
+//! `--integrator`), an array output one
 //! column per element, `y[1]`, `A[2,3]` (1-based, row-major), every output checked
 //! for NaN, an FMU's request to end the simulation honoured. This file is the
 //! command line around it: arguments, the CSV file, messages.
@@ -12,9 +14,20 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use tether_fmi::Fmu;
+use tether_fmi::{Integrator, Method};
 use tether_master::{
-    CsvRecorder, MasterError, SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, StartValue,
+    CsvRecorder, FmiType, MasterError, SingleEnd, SingleExperiment, SingleFmu, SingleOutputs,
+    StartValue,
 };
+
+/// The interface `--fmi-type` names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Interface {
+    /// The FMU steps itself.
+    CoSimulation,
+    /// Tether integrates the FMU's derivatives (built-in integrator).
+    ModelExchange,
+}
 
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
@@ -30,9 +43,20 @@ pub struct Args {
     /// Communication step (default: DefaultExperiment stepSize, else (stop − start)/500).
     #[arg(long, allow_hyphen_values = true)]
     step: Option<f64>,
-    /// Tolerance for fmi2SetupExperiment (default: DefaultExperiment tolerance, if any).
+    /// Tolerance for fmi2SetupExperiment (default: DefaultExperiment tolerance, if any);
+    /// with model exchange also the integrator's relative tolerance (default 1e-6).
     #[arg(long, allow_hyphen_values = true)]
     tolerance: Option<f64>,
+    /// The FMU's interface to run (default: co-simulation where the FMU has it,
+    /// else model exchange).
+    #[arg(long, value_enum, value_name = "TYPE")]
+    fmi_type: Option<Interface>,
+    /// Model exchange: the built-in integrator's settings, KEY=VALUE separated by
+    /// commas: method (rk45, dop853; default rk45), rtol (default: --tolerance),
+    /// atol (relative to each state's nominal; default rtol), max_step (default:
+    /// the communication step).
+    #[arg(long, value_name = "KEY=VALUE,...")]
+    integrator: Option<String>,
     /// Start value of a parameter or input, repeatable: --set m=2 --set exact=true;
     /// an array element --set 'A[2,3]=1.5', a whole array --set 'x0=[1, 0]'.
     #[arg(long = "set", value_name = "NAME=VALUE")]
@@ -87,10 +111,80 @@ fn plot(
     Ok(())
 }
 
+/// The integrator settings of `--integrator method=rk45,rtol=1e-8,…`.
+fn integrator(text: &str) -> Result<Integrator> {
+    let mut settings = Integrator::default();
+    for item in text.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+        let Some((key, value)) = item.split_once('=') else {
+            anyhow::bail!("--integrator {text}: '{item}' is not KEY=VALUE");
+        };
+        let (key, value) = (key.trim(), value.trim());
+        if key == "method" {
+            settings.method = Method::parse(value).with_context(|| {
+                let known: Vec<&str> = Method::ALL.iter().map(|(n, _)| *n).collect();
+                format!(
+                    "--integrator {text}: unknown method '{value}' (known: {})",
+                    known.join(", ")
+                )
+            })?;
+            continue;
+        }
+        let number: f64 = value
+            .parse()
+            .ok()
+            .with_context(|| format!("--integrator {text}: {key} = '{value}' is not a number"))?;
+        match key {
+            "rtol" => settings.rtol = Some(number),
+            "atol" => settings.atol = Some(number),
+            "max_step" => settings.max_step = Some(number),
+            _ => anyhow::bail!(
+                "--integrator {text}: unknown key '{key}' (known: method, rtol, atol, max_step)"
+            ),
+        }
+    }
+    if let Err(why) = settings.check() {
+        anyhow::bail!("--integrator {text}: {why}");
+    }
+    Ok(settings)
+}
+
+/// The interface to run: as asked, else co-simulation where the FMU has it.
+fn fmi_type(args: &Args, fmu: &Fmu) -> Result<FmiType> {
+    let md = fmu.model_description();
+    let settings = args.integrator.as_deref().map(integrator).transpose()?;
+    let asked = match args.fmi_type {
+        Some(asked) => asked,
+        None if md.co_simulation.is_none() => Interface::ModelExchange,
+        None => Interface::CoSimulation,
+    };
+    match asked {
+        Interface::CoSimulation => {
+            if settings.is_some() {
+                anyhow::bail!(
+                    "--integrator applies to model exchange: add --fmi-type model-exchange"
+                );
+            }
+            fmu.require_co_simulation()?;
+            Ok(FmiType::CoSimulation)
+        }
+        Interface::ModelExchange => {
+            if md.model_exchange.is_none() {
+                anyhow::bail!(
+                    "--fmi-type model-exchange: '{}' (model '{}') has no model-exchange interface",
+                    args.fmu.display(),
+                    md.model_name
+                );
+            }
+            Ok(FmiType::ModelExchange(settings.unwrap_or_default()))
+        }
+    }
+}
+
 pub fn main(args: Args) -> Result<()> {
     crate::interrupt::install()?;
     let fmu = Fmu::open(&args.fmu)?;
     let md = fmu.model_description();
+    let fmi_type = fmi_type(&args, &fmu)?;
     let x = SingleExperiment::new(md, args.start, args.stop, args.step, args.tolerance)?;
     let (start, stop, step, steps) = (x.start, x.stop, x.step, x.steps);
     let x_end = x.end();
@@ -109,7 +203,7 @@ pub fn main(args: Args) -> Result<()> {
         start_values.push((var.trim().to_string(), StartValue::parse_cli(value.trim())));
     }
     // Start values come from --set: a name that does not fit says so.
-    let mut single = SingleFmu::new(&fmu, &start_values, x).map_err(|e| match e {
+    let mut single = SingleFmu::new_as(&fmu, &start_values, x, fmi_type).map_err(|e| match e {
         MasterError::UnknownVariable(mut u) if u.place == "parameters" => {
             u.place = format!("--set {}", u.name);
             MasterError::UnknownVariable(u)
@@ -184,10 +278,10 @@ pub fn main(args: Args) -> Result<()> {
         SingleEnd::Terminated { time: at } => crate::say!(
             "{name}: steps of {step} from {start}; the FMU requested the end of the simulation \
              at t = {at} ({}), before the stop time {stop}; results: {}",
-            if single.is_fmi3() {
-                "fmi3DoStep, terminateSimulation"
-            } else {
-                "fmi2Discard, fmi2Terminated"
+            match (single.is_model_exchange(), single.is_fmi3()) {
+                (true, _) => "model exchange, terminateSimulation",
+                (false, true) => "fmi3DoStep, terminateSimulation",
+                (false, false) => "fmi2Discard, fmi2Terminated",
             },
             out.display()
         ),

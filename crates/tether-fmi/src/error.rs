@@ -184,7 +184,7 @@ pub enum Error {
     },
 
     /// The FMU is not an FMI 2.0 FMU.
-    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    #[error("'{}' is an FMI {version} FMU; Tether supports FMI 2.0 and 3.0 (co-simulation and model exchange)", path.display())]
     UnsupportedFmiVersion {
         /// The FMU.
         path: PathBuf,
@@ -194,7 +194,7 @@ pub enum Error {
 
     /// An FMI 3.0 FMU offers no co-simulation (scheduled execution only, whose
     /// clocks need a scheduler Tether does not provide).
-    #[error("'{}' (model '{model}') offers {offers} only, no co-simulation; Tether imports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    #[error("'{}' (model '{model}') offers {offers} only, no co-simulation; Tether imports FMI 2.0 and 3.0 co-simulation and model exchange", path.display())]
     NotCoSimulationFmi3 {
         /// The FMU.
         path: PathBuf,
@@ -213,8 +213,8 @@ pub enum Error {
         reason: String,
     },
 
-    /// The FMU implements model exchange only.
-    #[error("'{}' (model '{model}') is a model-exchange-only FMU; Tether supports FMI 2.0 and 3.0 co-simulation only", path.display())]
+    /// The FMU implements model exchange only and was asked for co-simulation.
+    #[error("'{}' (model '{model}') is a model-exchange-only FMU: it has no co-simulation interface; run it as model exchange (tether simulate --fmi-type model-exchange)", path.display())]
     NotCoSimulation {
         /// The FMU.
         path: PathBuf,
@@ -334,6 +334,18 @@ pub enum Error {
         /// How the FMU asked, when not as FMI 2.0 does (`None`: fmi2DoStep returned
         /// fmi2Discard with fmi2Terminated = true).
         how: Option<String>,
+    },
+
+    /// A model-exchange instance could not go on: NaN or infinite derivatives,
+    /// an integrator that cannot reach its tolerance, a chattering event.
+    #[error("model-exchange instance '{instance}' stopped at t = {time}: {cause}", time = crate::Time(*time))]
+    ModelExchange {
+        /// The instance name.
+        instance: String,
+        /// The time the instance reached.
+        time: f64,
+        /// What went wrong, in one line.
+        cause: String,
     },
 
     /// A function returned `fmi2Error`.

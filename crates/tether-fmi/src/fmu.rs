@@ -69,7 +69,7 @@ pub(crate) fn debug_logging() -> Option<Vec<String>> {
         .clone()
 }
 
-/// An opened FMI 2.0 co-simulation FMU.
+/// An opened FMI 2.0 or FMI 3.0 FMU (co-simulation, model exchange or both).
 ///
 /// Dropping the `Fmu` does not invalidate instances made from it: they share the
 /// unpacked directory and the loaded library, which go away with the last holder.
@@ -89,7 +89,9 @@ impl Fmu {
     ///
     /// Checks, in order: the archive is a safe zip (see [`ExtractLimits`]);
     /// `modelDescription.xml` exists; its `fmiVersion` is 2.x (a cheap peek before the full
-    /// parse); it is well-formed and valid and declares `CoSimulation`;
+    /// parse); it is well-formed and valid and declares `CoSimulation` or
+    /// `ModelExchange` (the library is named after the co-simulation model
+    /// identifier, else the model-exchange one);
     /// `binaries/linux64/<modelIdentifier>.so` exists, loads, exports every FMI 2.0
     /// co-simulation function and reports version "2.0" and platform "default".
     pub fn open_with(path: impl AsRef<Path>, options: &OpenOptions) -> Result<Fmu> {
@@ -130,7 +132,7 @@ impl Fmu {
         report_quirks(&origin, &model_description);
         let so = binary_path(
             dir.root(),
-            &model_description.co_simulation.model_identifier,
+            model_description.model_identifier(),
             model_description.standard,
         );
         if !so.is_file() {
@@ -144,7 +146,12 @@ impl Fmu {
                 expected,
             });
         }
-        if model_description.co_simulation.needs_execution_tool {
+        let needs_tool = model_description.cs().needs_execution_tool
+            || model_description
+                .model_exchange
+                .as_ref()
+                .is_some_and(|me| me.needs_execution_tool);
+        if needs_tool {
             log::warn!(
                 "FMU '{}' declares needsExecutionTool=\"true\": it needs an external tool that Tether does not provide or check; it may fail to instantiate",
                 origin.display()
@@ -170,6 +177,19 @@ impl Fmu {
     /// The parsed model description.
     pub fn model_description(&self) -> &ModelDescription {
         &self.shared.model_description
+    }
+
+    /// [`Error::NotCoSimulation`] if the FMU has no co-simulation interface:
+    /// every co-simulation path asks this before it instantiates.
+    pub fn require_co_simulation(&self) -> Result<()> {
+        let md = self.model_description();
+        if md.co_simulation.is_some() {
+            return Ok(());
+        }
+        Err(Error::NotCoSimulation {
+            path: self.path().to_owned(),
+            model: md.model_name.clone(),
+        })
     }
 
     /// The path the FMU was opened from.

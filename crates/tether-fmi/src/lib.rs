@@ -1,9 +1,11 @@
-//! FMI 2.0 and FMI 3.0 co-simulation import.
+//! FMI 2.0 and FMI 3.0 import, co-simulation and model exchange.
 //!
 //! FMI 3.0 FMUs are opened by the same [`Fmu::open`] (binaries under
 //! `binaries/x86_64-linux/`), described by the same [`ModelDescription`] (see
 //! [`model_description`] for how FMI 3.0 maps onto it) and instantiated with
 //! [`instantiate`] as an [`Fmi3Instance`], an [`FmuInstance`] like the FMI 2.0 ones.
+//! A model-exchange FMU of either standard runs as a [`MeInstance`], also an
+//! [`FmuInstance`], which integrates it with its built-in [`Integrator`].
 //!
 //! # Layers
 //!
@@ -79,16 +81,19 @@ pub use error::{Error, FmuMessages, Result};
 pub use fmu::{
     set_debug_logging, special_file_kind, Fmu, InstanceOptions, OpenOptions, QUIRKS_TARGET,
 };
-pub use instance::{Fmi3Instance, FmuState, Instance, LocalInstance, StatusKind};
+pub use instance::{
+    Fmi3Instance, FmuState, Instance, Integrator, LocalInstance, MeInstance, Method, StatusKind,
+    MAX_EVENT_ITERATIONS,
+};
 pub use interface::{FmuInstance, Inputs, Int, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
 pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIMIT};
 pub use model_description::{
     element_names, BaseType, BaseUnit, BooleanVariable, Causality, CoSimulation, DefaultExperiment,
     DependencyKind, Dimension, DisplayUnit, EnumerationItem, FmiStandard, Initial, IntegerType,
-    IntegerVariable, LogCategory, ModelDescription, ModelStructure, Quirk, RealType, RealVariable,
-    ScalarVariable, SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown, ValueReference,
-    ValueType, Values, Variability, VariableKind, VariableNamingConvention,
+    IntegerVariable, LogCategory, ModelDescription, ModelExchange, ModelStructure, Quirk, RealType,
+    RealVariable, ScalarVariable, SimpleType, SimpleTypeKind, StringVariable, Unit, Unknown,
+    ValueReference, ValueType, Values, Variability, VariableKind, VariableNamingConvention,
 };
 pub use placement::{instantiate, Placement};
 pub use raw::Status;

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::error::{one_line, Error, Result};
 use crate::model_description::FmiStandard;
 use crate::raw::fmi3::Fmi3Functions;
-use crate::raw::Fmi2Functions;
+use crate::raw::{Fmi2Functions, Fmi2MeFunctions, Fmi3MeFunctions};
 
 /// The platform directory under `binaries/` this build loads FMI 2.0 FMUs from.
 pub const PLATFORM: &str = "linux64";
@@ -19,8 +19,13 @@ pub const PLATFORM_FMI3: &str = "x86_64-linux";
 
 /// A function table of one FMI version: resolved from a library, then checked.
 pub(crate) trait Api: Sized {
-    /// Resolves every function, naming the first one that is missing.
-    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self>;
+    /// The model-exchange functions of this FMI version.
+    type Me;
+    /// Resolves every function, naming the first one that is missing (the
+    /// co-simulation ones only when `co_simulation`).
+    fn resolve(lib: &libloading::Library, path: &Path, co_simulation: bool) -> Result<Self>;
+    /// Resolves the model-exchange functions; `Err` names the first missing one.
+    fn resolve_me(lib: &libloading::Library) -> std::result::Result<Self::Me, &'static str>;
     /// Checks what the library says about itself (version, platform).
     fn check_identity(&self, path: &Path) -> Result<()>;
 }
@@ -37,8 +42,12 @@ fn static_text(ptr: *const std::ffi::c_char) -> String {
 }
 
 impl Api for Fmi2Functions {
-    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
-        Fmi2Functions::resolve(lib, path)
+    type Me = Fmi2MeFunctions;
+    fn resolve(lib: &libloading::Library, path: &Path, co_simulation: bool) -> Result<Self> {
+        Fmi2Functions::resolve(lib, path, co_simulation)
+    }
+    fn resolve_me(lib: &libloading::Library) -> std::result::Result<Self::Me, &'static str> {
+        Fmi2MeFunctions::resolve(lib)
     }
 
     /// Checks `fmi2GetVersion` = "2.0" and `fmi2GetTypesPlatform` = "default".
@@ -66,8 +75,12 @@ impl Api for Fmi2Functions {
 }
 
 impl Api for Fmi3Functions {
-    fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
-        Fmi3Functions::resolve(lib, path)
+    type Me = Fmi3MeFunctions;
+    fn resolve(lib: &libloading::Library, path: &Path, co_simulation: bool) -> Result<Self> {
+        Fmi3Functions::resolve(lib, path, co_simulation)
+    }
+    fn resolve_me(lib: &libloading::Library) -> std::result::Result<Self::Me, &'static str> {
+        Fmi3MeFunctions::resolve(lib)
     }
 
     /// Checks that `fmi3GetVersion` is "3.x".
@@ -92,16 +105,18 @@ impl Api for Fmi3Functions {
 ///
 /// Shared (in an `Arc`) by the [`Fmu`](crate::Fmu) and every instance, so the code stays
 /// mapped while anything can still call it.
-pub(crate) struct Library<F = Fmi2Functions> {
+pub(crate) struct Library<F: Api = Fmi2Functions> {
     path: PathBuf,
     functions: F,
+    /// The model-exchange functions, or the first that is missing.
+    me: std::result::Result<F::Me, &'static str>,
     handle: ManuallyDrop<libloading::Library>,
     /// Set once any call returned fmi2Fatal: per the standard no further function of
     /// any instance of this FMU may be called.
     fatal: AtomicBool,
 }
 
-impl<F> std::fmt::Debug for Library<F> {
+impl<F: Api> std::fmt::Debug for Library<F> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Library")
             .field("path", &self.path)
@@ -142,8 +157,10 @@ fn load_message(e: &libloading::Error) -> String {
 }
 
 impl<F: Api> Library<F> {
-    /// Loads `path` (binding all symbols now) and resolves every function of the API.
-    pub(crate) fn load(path: &Path) -> Result<Library<F>> {
+    /// Loads `path` (binding all symbols now) and resolves every function of the API
+    /// (the co-simulation functions required when `co_simulation`: the FMU declares
+    /// co-simulation), and the model-exchange ones where the library has them.
+    pub(crate) fn load(path: &Path, co_simulation: bool) -> Result<Library<F>> {
         use libloading::os::unix::{Library as UnixLibrary, RTLD_LOCAL, RTLD_NOW};
         // SAFETY: loading a library runs its initialisers; an FMU's shared library is
         // trusted code by the nature of co-simulation (we are about to call into it).
@@ -156,21 +173,30 @@ impl<F: Api> Library<F> {
                 }
             })?;
         let handle = libloading::Library::from(handle);
-        let functions = F::resolve(&handle, path)?;
+        let functions = F::resolve(&handle, path, co_simulation)?;
         functions.check_identity(path)?;
+        let me = F::resolve_me(&handle);
         Ok(Library {
             path: path.to_owned(),
             functions,
+            me,
             handle: ManuallyDrop::new(handle),
             fatal: AtomicBool::new(false),
         })
     }
 }
 
-impl<F> Library<F> {
+impl<F: Api> Library<F> {
     /// The resolved function table.
     pub(crate) fn functions(&self) -> &F {
         &self.functions
+    }
+
+    /// The model-exchange functions, or the error naming the first missing one.
+    pub(crate) fn me(&self) -> Result<&F::Me> {
+        self.me
+            .as_ref()
+            .map_err(|symbol| crate::raw::missing_me_symbol(&self.path, symbol))
     }
 
     /// Records that a call returned fmi2Fatal.
@@ -184,7 +210,7 @@ impl<F> Library<F> {
     }
 }
 
-impl<F> Drop for Library<F> {
+impl<F: Api> Drop for Library<F> {
     fn drop(&mut self) {
         if self.is_fatal() {
             // A fatal FMU may have left threads or callbacks behind: keep its code mapped.

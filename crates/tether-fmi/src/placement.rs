@@ -36,6 +36,7 @@ pub fn instantiate(
     options: InstanceOptions,
     placement: Placement,
 ) -> Result<Box<dyn FmuInstance>> {
+    fmu.require_co_simulation()?;
     let fmi3 = fmu.model_description().standard == crate::model_description::FmiStandard::Fmi3;
     Ok(match placement {
         Placement::InProcess if fmi3 => {

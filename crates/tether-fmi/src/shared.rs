@@ -39,7 +39,8 @@ impl FmuShared {
         if let Some(library) = &*library {
             return Ok(Arc::clone(library));
         }
-        let loaded = Arc::new(Library::load(&self.so)?);
+        let co_simulation = self.model_description.co_simulation.is_some();
+        let loaded = Arc::new(Library::load(&self.so, co_simulation)?);
         *library = Some(Arc::clone(&loaded));
         Ok(loaded)
     }
@@ -53,7 +54,8 @@ impl FmuShared {
         if let Some(library) = &*library {
             return Ok(Arc::clone(library));
         }
-        let loaded = Arc::new(Library::<Fmi3Functions>::load(&self.so)?);
+        let co_simulation = self.model_description.co_simulation.is_some();
+        let loaded = Arc::new(Library::<Fmi3Functions>::load(&self.so, co_simulation)?);
         *library = Some(Arc::clone(&loaded));
         Ok(loaded)
     }

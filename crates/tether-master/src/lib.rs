@@ -51,7 +51,7 @@ pub use observer::{
 pub use simulation::{
     ExportKind, ExportVariable, MasterState, Simulation, SystemState, RECHECK_EVERY,
 };
-pub use single::{SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun};
+pub use single::{FmiType, SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun};
 pub use spec::overrides::{MethodChange, MethodKind, OverrideError, Overrides};
 pub use spec::Parallel;
 pub use spec::{

@@ -10,7 +10,7 @@ pub const NEEDS: &str = "k > 0 needs inputs that take polynomials";
 /// Why the FMU as a whole passes no polynomials, or `None` when it can
 /// (FMI 2.0: `canInterpolateInputs`; FMI 3.0: `providesIntermediateUpdate`).
 pub fn fmu_refusal(md: &ModelDescription) -> Option<String> {
-    let cs = &md.co_simulation;
+    let cs = md.cs();
     if md.standard == FmiStandard::Fmi3 {
         (!cs.provides_intermediate_update).then(|| {
             "the FMU does not provide intermediate update (providesIntermediateUpdate), \

@@ -29,8 +29,8 @@
 //! ```
 
 use tether_fmi::{
-    BaseType, Causality, FmiStandard, Fmu, FmuInstance, Int, ModelDescription, Placement,
-    ScalarVariable, ValueReference, ValueType,
+    BaseType, Causality, FmiStandard, Fmu, FmuInstance, Int, Integrator, MeInstance,
+    ModelDescription, Placement, ScalarVariable, ValueReference, ValueType,
 };
 
 use crate::observer::integer_value;
@@ -195,28 +195,76 @@ pub struct SingleRun {
     pub end: Result<SingleEnd, MasterError>,
 }
 
+/// Which interface of an FMU a single-FMU simulation runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FmiType {
+    /// Co-simulation: the FMU steps itself.
+    CoSimulation,
+    /// Model exchange, integrated by the instance's built-in integrator
+    /// ([`MeInstance`]); its relative tolerance is the experiment's unless
+    /// the integrator sets one.
+    ModelExchange(Integrator),
+}
+
+impl FmiType {
+    /// Co-simulation where the FMU has it, else model exchange (default
+    /// integrator).
+    pub fn default_for(md: &ModelDescription) -> FmiType {
+        if md.co_simulation.is_none() && md.model_exchange.is_some() {
+            FmiType::ModelExchange(Integrator::default())
+        } else {
+            FmiType::CoSimulation
+        }
+    }
+}
+
 /// An FMU instantiated in this process, its start values set and initialized:
 /// ready to [`run`](Self::run).
 #[derive(Debug)]
 pub struct SingleFmu {
     instance: Box<dyn FmuInstance>,
+    model_exchange: bool,
     experiment: SingleExperiment,
     arrays: Arrays,
     warnings: Vec<String>,
 }
 
 impl SingleFmu {
-    /// Instantiate `fmu` (named by its model identifier), set the start values
-    /// by variable name, in the given order, and initialize it for `experiment`.
+    /// Instantiate `fmu` (named by its model identifier) for co-simulation, set
+    /// the start values by variable name, in the given order, and initialize it
+    /// for `experiment`.
     pub fn new(
         fmu: &Fmu,
         start_values: &[(String, StartValue)],
         experiment: SingleExperiment,
     ) -> Result<SingleFmu, MasterError> {
+        SingleFmu::new_as(fmu, start_values, experiment, FmiType::CoSimulation)
+    }
+
+    /// As [`new`](Self::new), for the interface `fmi_type`.
+    pub fn new_as(
+        fmu: &Fmu,
+        start_values: &[(String, StartValue)],
+        experiment: SingleExperiment,
+        fmi_type: FmiType,
+    ) -> Result<SingleFmu, MasterError> {
         let md = fmu.model_description();
-        let name = &md.co_simulation.model_identifier;
-        let mut instance =
-            tether_fmi::instantiate(fmu, name, Default::default(), Placement::InProcess)?;
+        let (mut instance, model_exchange): (Box<dyn FmuInstance>, bool) = match fmi_type {
+            FmiType::CoSimulation => {
+                let name = &md.cs().model_identifier;
+                let instance =
+                    tether_fmi::instantiate(fmu, name, Default::default(), Placement::InProcess)?;
+                (instance, false)
+            }
+            FmiType::ModelExchange(integrator) => {
+                let name = md
+                    .model_exchange
+                    .as_ref()
+                    .map_or(md.model_identifier(), |me| me.model_identifier.as_str());
+                let instance = MeInstance::new(fmu, name, Default::default(), integrator)?;
+                (Box::new(instance), true)
+            }
+        };
         // FMI 2.0: the experiment right after instantiation, then the start
         // values, as FMPy and libcosim set them (docs/fmi-import.md).
         instance.setup(
@@ -232,6 +280,7 @@ impl SingleFmu {
         let warnings = crate::start::changed_parameters(instance.as_mut(), &exact, &[])?;
         Ok(SingleFmu {
             instance,
+            model_exchange,
             experiment,
             arrays,
             warnings,
@@ -252,6 +301,11 @@ impl SingleFmu {
     /// The instance name (the FMU's model identifier).
     pub fn name(&self) -> &str {
         self.instance.name()
+    }
+
+    /// Whether the simulation runs the FMU's model-exchange interface.
+    pub fn is_model_exchange(&self) -> bool {
+        self.model_exchange
     }
 
     /// Whether the FMU is an FMI 3.0 one.
@@ -276,7 +330,7 @@ impl SingleFmu {
                 end: Err(e.into()),
             };
         }
-        let mut recorder = Recorder::new(outputs, self.is_fmi3());
+        let mut recorder = Recorder::new(outputs, self.is_fmi3(), self.model_exchange);
         let instance = self.instance.as_mut();
         let x = self.experiment;
         // Every failure after the start, the FMU's or the observer's, finishes
@@ -331,6 +385,7 @@ impl SingleFmu {
 struct Recorder<'a> {
     outputs: &'a SingleOutputs,
     fmi3: bool,
+    model_exchange: bool,
     row: Vec<f64>,
     reals: Vec<f64>,
     ints: Vec<Int>,
@@ -340,10 +395,11 @@ struct Recorder<'a> {
 }
 
 impl<'a> Recorder<'a> {
-    fn new(outputs: &'a SingleOutputs, fmi3: bool) -> Recorder<'a> {
+    fn new(outputs: &'a SingleOutputs, fmi3: bool, model_exchange: bool) -> Recorder<'a> {
         Recorder {
             outputs,
             fmi3,
+            model_exchange,
             row: vec![0.0; outputs.columns.len()],
             reals: vec![0.0; outputs.real.columns.len()],
             ints: vec![0; outputs.int.columns.len()],
@@ -377,10 +433,11 @@ impl<'a> Recorder<'a> {
                 instance: instance.name().to_string(),
                 variable: o.columns[o.real.columns[k]].clone(),
                 value: self.reals[k],
-                call: match (n, self.fmi3) {
-                    (0, _) => "after initialization",
-                    (_, true) => "after fmi3DoStep",
-                    (_, false) => "after fmi2DoStep",
+                call: match (n, self.fmi3, self.model_exchange) {
+                    (0, _, _) => "after initialization",
+                    (_, _, true) => "after an integrator step",
+                    (_, true, _) => "after fmi3DoStep",
+                    (_, false, _) => "after fmi2DoStep",
                 },
                 time,
             });

@@ -21,7 +21,7 @@ pub(crate) fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, Py
     d.set_item("license", &md.license)?;
     d.set_item("generationTool", &md.generation_tool)?;
     d.set_item("generationDateAndTime", &md.generation_date_and_time)?;
-    let cs = &md.co_simulation;
+    let cs = md.cs();
     let c = PyDict::new(py);
     c.set_item("modelIdentifier", &cs.model_identifier)?;
     c.set_item("needsExecutionTool", cs.needs_execution_tool)?;
@@ -81,7 +81,12 @@ pub(crate) fn info<'py>(py: Python<'py>, fmu: PathBuf) -> PyResult<Bound<'py, Py
         )?;
     }
     d.set_item("coSimulation", c)?;
-    d.set_item("modelExchange", &md.model_exchange)?;
+    d.set_item(
+        "modelExchange",
+        md.model_exchange
+            .as_ref()
+            .map(|me| me.model_identifier.as_str()),
+    )?;
     match &md.default_experiment {
         Some(de) => {
             let e = PyDict::new(py);

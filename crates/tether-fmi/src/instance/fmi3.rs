@@ -70,6 +70,8 @@ pub struct Fmi3Instance {
     plain_reals: bool,
     /// The inputs that take a polynomial over a step (intermediate update).
     polynomial_inputs: Vec<ValueReference>,
+    /// Made for model exchange: the `ModelExchange` flags say what it can do.
+    model_exchange: bool,
 }
 
 impl Fmi3Instance {
@@ -147,6 +149,25 @@ impl Fmi3Instance {
 
     /// Instantiates `fmu` (an FMI 3.0 co-simulation FMU) as `name`.
     pub fn new(fmu: &Fmu, name: &str, options: InstanceOptions) -> Result<Fmi3Instance> {
+        Fmi3Instance::new_as(fmu, name, options, false)
+    }
+
+    /// Instantiates `fmu` for model exchange (`fmi3InstantiateModelExchange`), for
+    /// [`MeInstance`](crate::MeInstance), which drives it.
+    pub(crate) fn new_model_exchange(
+        fmu: &Fmu,
+        name: &str,
+        options: InstanceOptions,
+    ) -> Result<Fmi3Instance> {
+        Fmi3Instance::new_as(fmu, name, options, true)
+    }
+
+    fn new_as(
+        fmu: &Fmu,
+        name: &str,
+        options: InstanceOptions,
+        model_exchange: bool,
+    ) -> Result<Fmi3Instance> {
         let shared = Arc::clone(fmu.shared());
         let md = &shared.model_description;
         let clocks: Vec<&str> = md
@@ -158,26 +179,47 @@ impl Fmi3Instance {
         if !clocks.is_empty() {
             return Err(Error::Unsupported {
                 model: md.model_name.clone(),
-                reason: format!(
-                    "it has clocks ({}), which need event mode; Tether runs FMI 3.0 co-simulation without event mode",
-                    clocks.join(", ")
-                ),
+                reason: if model_exchange {
+                    format!(
+                        "it has clocks ({}); Tether runs FMI 3.0 model exchange without clocks",
+                        clocks.join(", ")
+                    )
+                } else {
+                    format!(
+                        "it has clocks ({}), which need event mode; Tether runs FMI 3.0 co-simulation without event mode",
+                        clocks.join(", ")
+                    )
+                },
             });
         }
-        let cs = &md.co_simulation;
-        if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
-            log::debug!(
-                "model '{}' offers event mode or early return; instance '{name}' runs without them",
-                md.model_name
-            );
-        }
-        let once = if cs.can_be_instantiated_only_once_per_process {
+        let cs = md.cs();
+        let once_per_process = if model_exchange {
+            let Some(me) = &md.model_exchange else {
+                return Err(Error::Unsupported {
+                    model: md.model_name.clone(),
+                    reason: "it has no model-exchange interface (no <ModelExchange> element)"
+                        .into(),
+                });
+            };
+            me.can_be_instantiated_only_once_per_process
+        } else {
+            fmu.require_co_simulation()?;
+            if cs.has_event_mode || cs.can_return_early_after_intermediate_update {
+                log::debug!(
+                    "model '{}' offers event mode or early return; instance '{name}' runs without them",
+                    md.model_name
+                );
+            }
+            cs.can_be_instantiated_only_once_per_process
+        };
+        let once = if once_per_process {
             Some(OnceGuard::acquire(&md.guid, &md.model_name, name)?)
         } else {
             None
         };
         let debug = crate::fmu::debug_logging();
-        let intermediate_update = cs.provides_intermediate_update && options.polynomial_inputs;
+        let intermediate_update =
+            !model_exchange && cs.provides_intermediate_update && options.polynomial_inputs;
         let polynomial_inputs: Vec<ValueReference> = if intermediate_update {
             md.model_variables
                 .iter()
@@ -210,6 +252,7 @@ impl Fmi3Instance {
                 early_return_allowed: false,
                 required_intermediate_variables: &polynomial_inputs,
                 intermediate_update,
+                model_exchange,
             },
         )?;
         raw.once = once;
@@ -235,6 +278,7 @@ impl Fmi3Instance {
             structural: HashMap::new(),
             plain_reals,
             polynomial_inputs,
+            model_exchange,
         };
         if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
             let declared = &md.log_categories;
@@ -252,6 +296,24 @@ impl Fmi3Instance {
 
     fn md(&self) -> &ModelDescription {
         &self.fmu.model_description
+    }
+
+    /// `canGetAndSetFMUState` and `canSerializeFMUState` of the interface the
+    /// instance was made for.
+    fn state_flags(&self) -> (bool, bool) {
+        let md = self.md();
+        match (&md.model_exchange, self.model_exchange) {
+            (Some(me), true) => (me.can_get_and_set_fmu_state, me.can_serialize_fmu_state),
+            _ => (
+                md.cs().can_get_and_set_fmu_state,
+                md.cs().can_serialize_fmu_state,
+            ),
+        }
+    }
+
+    /// The raw instance, for the model-exchange calls of [`crate::MeInstance`].
+    pub(crate) fn raw_mut(&mut self) -> &mut RawInstance3 {
+        &mut self.raw
     }
 
     fn invalid(&self, function: &'static str, message: String) -> Error {
@@ -667,9 +729,7 @@ impl FmuInstance for Fmi3Instance {
             let variable = self.variable("fmi3SetFloat64", vr)?;
             let name = variable.name.clone();
             let md = self.md();
-            let why = if md.co_simulation.provides_intermediate_update
-                && variable.intermediate_update
-            {
+            let why = if md.cs().provides_intermediate_update && variable.intermediate_update {
                 format!("instance '{}' was instantiated for values only (InstanceOptions::polynomial_inputs false: no intermediate update callback)", self.raw.name())
             } else {
                 format!("FMI 3.0 has no input derivatives, and model '{}' does not provide intermediate update for it (providesIntermediateUpdate and intermediateUpdate=\"true\")", md.model_name)
@@ -724,7 +784,7 @@ impl FmuInstance for Fmi3Instance {
 
     fn save(&mut self, slot: Slot) -> Result<()> {
         self.require(
-            self.md().co_simulation.can_get_and_set_fmu_state,
+            self.state_flags().0,
             "canGetAndSetFMUState",
             "saving an FMU state",
         )?;
@@ -751,7 +811,7 @@ impl FmuInstance for Fmi3Instance {
     }
     fn serialize(&mut self, slot: Slot, out: &mut Vec<u8>) -> Result<()> {
         self.require(
-            self.md().co_simulation.can_serialize_fmu_state,
+            self.state_flags().1,
             "canSerializeFMUState",
             "serializing an FMU state",
         )?;
@@ -763,7 +823,7 @@ impl FmuInstance for Fmi3Instance {
     }
     fn deserialize(&mut self, slot: Slot, bytes: &[u8]) -> Result<()> {
         self.require(
-            self.md().co_simulation.can_serialize_fmu_state,
+            self.state_flags().1,
             "canSerializeFMUState",
             "deserializing an FMU state",
         )?;

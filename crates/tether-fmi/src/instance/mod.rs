@@ -4,6 +4,8 @@
 
 pub(crate) mod fmi2;
 pub(crate) mod fmi3;
+pub(crate) mod me;
 
 pub use fmi2::{FmuState, Instance, LocalInstance, StatusKind};
 pub use fmi3::Fmi3Instance;
+pub use me::{Integrator, MeInstance, Method, MAX_EVENT_ITERATIONS};

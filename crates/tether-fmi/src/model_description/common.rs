@@ -35,7 +35,6 @@ pub(super) struct Header {
     pub generation_tool: Option<String>,
     pub generation_date_and_time: Option<String>,
     pub variable_naming_convention: VariableNamingConvention,
-    pub model_exchange: Option<String>,
     pub unit_definitions: Vec<Unit>,
     pub log_categories: Vec<LogCategory>,
     pub default_experiment: Option<DefaultExperiment>,
@@ -43,10 +42,6 @@ pub(super) struct Header {
 
 /// Reads the [`Header`] under `root`.
 pub(super) fn header(at: Attrs<'_>, root: &Element) -> Result<Header> {
-    let model_exchange = match root.child("ModelExchange") {
-        Some(me) => Some(at.required(me, "modelIdentifier")?),
-        None => None,
-    };
     let unit_definitions = match root.child("UnitDefinitions") {
         Some(units) => units
             .children_named("Unit")
@@ -94,7 +89,6 @@ pub(super) fn header(at: Attrs<'_>, root: &Element) -> Result<Header> {
         generation_tool: at.string(root, "generationTool"),
         generation_date_and_time: at.string(root, "generationDateAndTime"),
         variable_naming_convention: naming.unwrap_or_default(),
-        model_exchange,
         unit_definitions,
         log_categories,
         default_experiment,

@@ -12,11 +12,13 @@ use crate::xml::Element;
 pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDescription> {
     common::check_root(at, root)?;
     let co_simulation = match root.child("CoSimulation") {
-        Some(cs) => co_simulation(at, cs)?,
-        None => {
-            return Err(at.invalid(root, "no <CoSimulation> element"));
-        }
+        Some(cs) => Some(co_simulation(at, cs)?),
+        None => None,
     };
+    let me_element = root.child("ModelExchange");
+    if co_simulation.is_none() && me_element.is_none() {
+        return Err(at.invalid(root, "no <CoSimulation> or <ModelExchange> element"));
+    }
     let type_definitions: Vec<SimpleType> = match root.child("TypeDefinitions") {
         Some(types) => types
             .children_named("SimpleType")
@@ -35,11 +37,11 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
         generation_tool,
         generation_date_and_time,
         variable_naming_convention,
-        model_exchange,
         unit_definitions,
         log_categories,
         default_experiment,
     } = common::header(at, root)?;
+    let number_of_event_indicators: Option<u32> = at.parsed(root, "numberOfEventIndicators")?;
     let Some(variables_element) = root.child("ModelVariables") else {
         return Err(at.invalid(root, "no <ModelVariables> element"));
     };
@@ -48,6 +50,15 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
     let model_structure = match root.child("ModelStructure") {
         Some(s) => model_structure(at, s, &model_variables)?,
         None => return Err(at.invalid(root, "no <ModelStructure> element")),
+    };
+    let model_exchange = match me_element {
+        Some(me) => Some(model_exchange(
+            at,
+            me,
+            model_structure.derivatives.len(),
+            number_of_event_indicators.unwrap_or(0) as usize,
+        )?),
+        None => None,
     };
     Ok(ModelDescription {
         fmi_version,
@@ -62,7 +73,7 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
         generation_tool,
         generation_date_and_time,
         variable_naming_convention,
-        number_of_event_indicators: at.parsed(root, "numberOfEventIndicators")?,
+        number_of_event_indicators,
         co_simulation,
         model_exchange,
         unit_definitions,
@@ -102,6 +113,38 @@ fn co_simulation(at: Attrs<'_>, cs: &Element) -> Result<CoSimulation> {
         can_serialize_fmu_state: at.flag(cs, "canSerializeFMUstate", false)?,
         provides_directional_derivative: at.flag(cs, "providesDirectionalDerivative", false)?,
         ..CoSimulation::default()
+    })
+}
+
+fn model_exchange(
+    at: Attrs<'_>,
+    me: &Element,
+    states: usize,
+    event_indicators: usize,
+) -> Result<ModelExchange> {
+    let not_needed = at.flag(me, "completedIntegratorStepNotNeeded", false)?;
+    Ok(ModelExchange {
+        model_identifier: at.required(me, "modelIdentifier")?,
+        needs_execution_tool: at.flag(me, "needsExecutionTool", false)?,
+        completed_integrator_step_not_needed: not_needed,
+        needs_completed_integrator_step: !not_needed,
+        can_be_instantiated_only_once_per_process: at.flag(
+            me,
+            "canBeInstantiatedOnlyOncePerProcess",
+            false,
+        )?,
+        can_not_use_memory_management_functions: at.flag(
+            me,
+            "canNotUseMemoryManagementFunctions",
+            false,
+        )?,
+        can_get_and_set_fmu_state: at.flag(me, "canGetAndSetFMUstate", false)?,
+        can_serialize_fmu_state: at.flag(me, "canSerializeFMUstate", false)?,
+        provides_directional_derivative: at.flag(me, "providesDirectionalDerivative", false)?,
+        provides_adjoint_derivatives: false,
+        provides_evaluate_discrete_states: false,
+        number_of_continuous_states: states,
+        number_of_event_indicators: event_indicators,
     })
 }
 

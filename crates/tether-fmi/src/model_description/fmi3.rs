@@ -19,10 +19,14 @@ use crate::xml::Element;
 /// Builds the model description from the parsed root element of an FMI 3.0 file.
 pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDescription> {
     common::check_root(at, root)?;
-    let Some(cs) = root.child("CoSimulation") else {
-        return Err(at.invalid(root, "no <CoSimulation> element"));
+    let co_simulation = match root.child("CoSimulation") {
+        Some(cs) => Some(co_simulation(at, cs)?),
+        None => None,
     };
-    let co_simulation = co_simulation(at, cs)?;
+    let me_element = root.child("ModelExchange");
+    if co_simulation.is_none() && me_element.is_none() {
+        return Err(at.invalid(root, "no <CoSimulation> or <ModelExchange> element"));
+    }
     let type_definitions: Vec<SimpleType> = match root.child("TypeDefinitions") {
         Some(types) => types
             .children
@@ -42,7 +46,6 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
         generation_tool,
         generation_date_and_time,
         variable_naming_convention,
-        model_exchange,
         unit_definitions,
         log_categories,
         default_experiment,
@@ -134,6 +137,10 @@ pub(crate) fn model_description(at: Attrs<'_>, root: &Element) -> Result<ModelDe
         Some(s) => model_structure(at, s, &index_of)?,
         None => ModelStructure::default(),
     };
+    let model_exchange = match me_element {
+        Some(me) => Some(model_exchange(at, me, &model_structure)?),
+        None => None,
+    };
     Ok(ModelDescription {
         fmi_version,
         standard: FmiStandard::Fmi3,
@@ -198,6 +205,29 @@ fn co_simulation(at: Attrs<'_>, cs: &Element) -> Result<CoSimulation> {
         )?,
         has_event_mode: at.flag(cs, "hasEventMode", false)?,
         provides_evaluate_discrete_states: at.flag(cs, "providesEvaluateDiscreteStates", false)?,
+    })
+}
+
+fn model_exchange(at: Attrs<'_>, me: &Element, s: &ModelStructure) -> Result<ModelExchange> {
+    let needed = at.flag(me, "needsCompletedIntegratorStep", false)?;
+    Ok(ModelExchange {
+        model_identifier: at.required(me, "modelIdentifier")?,
+        needs_execution_tool: at.flag(me, "needsExecutionTool", false)?,
+        completed_integrator_step_not_needed: !needed,
+        needs_completed_integrator_step: needed,
+        can_be_instantiated_only_once_per_process: at.flag(
+            me,
+            "canBeInstantiatedOnlyOncePerProcess",
+            false,
+        )?,
+        can_not_use_memory_management_functions: false,
+        can_get_and_set_fmu_state: at.flag(me, "canGetAndSetFMUState", false)?,
+        can_serialize_fmu_state: at.flag(me, "canSerializeFMUState", false)?,
+        provides_directional_derivative: at.flag(me, "providesDirectionalDerivatives", false)?,
+        provides_adjoint_derivatives: at.flag(me, "providesAdjointDerivatives", false)?,
+        provides_evaluate_discrete_states: at.flag(me, "providesEvaluateDiscreteStates", false)?,
+        number_of_continuous_states: s.derivatives.len(),
+        number_of_event_indicators: s.event_indicators.len(),
     })
 }
 

@@ -1,5 +1,6 @@
-//! `modelDescription.xml`: a cheap version peek, the full co-simulation parse (FMI 2.0
-//! or FMI 3.0) with the standard's defaults applied, and variable look-up by name.
+//! `modelDescription.xml`: a cheap version peek, the full parse (FMI 2.0 or FMI 3.0,
+//! co-simulation and model exchange) with the standard's defaults applied, and
+//! variable look-up by name.
 
 mod attrs;
 mod common;
@@ -39,6 +40,40 @@ impl ModelDescription {
     pub fn from_bytes(bytes: &[u8]) -> Result<ModelDescription> {
         let file = Path::new("modelDescription.xml");
         parse_bytes(bytes, file, file)
+    }
+
+    /// The `CoSimulation` flags; all false (and no model identifier) for an
+    /// FMU without co-simulation, which the co-simulation paths refuse when
+    /// they instantiate it ([`Error::NotCoSimulation`]).
+    pub fn cs(&self) -> &CoSimulation {
+        self.co_simulation
+            .as_ref()
+            .unwrap_or(&types::NO_CO_SIMULATION)
+    }
+
+    /// The model identifier of the co-simulation interface, else of model
+    /// exchange (a model description has one or both).
+    pub fn model_identifier(&self) -> &str {
+        match (&self.co_simulation, &self.model_exchange) {
+            (Some(cs), _) => &cs.model_identifier,
+            (None, Some(me)) => &me.model_identifier,
+            (None, None) => "",
+        }
+    }
+
+    /// The value references of the continuous states, in the order of
+    /// `ModelStructure`'s derivatives (the order of the FMI state vector),
+    /// and of their derivatives.
+    pub fn continuous_states(&self) -> Vec<(ValueReference, ValueReference)> {
+        self.model_structure
+            .derivatives
+            .iter()
+            .filter_map(|d| {
+                let der = self.variable_by_index(d.index)?;
+                let state = self.variable_by_index(der.real()?.derivative?)?;
+                Some((state.value_reference, der.value_reference))
+            })
+            .collect()
     }
 
     /// The variable called `name`, or [`Error::UnknownVariable`] with close matches.
@@ -189,14 +224,9 @@ pub(crate) fn parse_bytes(bytes: &[u8], file: &Path, origin: &Path) -> Result<Mo
         }
     };
     let root = xml::parse(text, file, xml::Names::AsWritten)?;
-    if root.child("CoSimulation").is_none() && root.child("ModelExchange").is_some() {
-        return Err(Error::NotCoSimulation {
-            path: origin.to_owned(),
-            model: root.attr("modelName").unwrap_or("?").to_owned(),
-        });
-    }
     if standard == FmiStandard::Fmi3
         && root.child("CoSimulation").is_none()
+        && root.child("ModelExchange").is_none()
         && root.child("ScheduledExecution").is_some()
     {
         return Err(Error::NotCoSimulationFmi3 {

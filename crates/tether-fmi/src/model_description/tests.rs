@@ -52,7 +52,7 @@ fn full_description_is_parsed_with_defaults() {
         md.variable_naming_convention,
         VariableNamingConvention::Structured
     );
-    let cs = &md.co_simulation;
+    let cs = md.cs();
     assert_eq!(cs.model_identifier, "demo");
     assert!(
         cs.can_interpolate_inputs && cs.can_get_and_set_fmu_state && cs.can_serialize_fmu_state
@@ -131,9 +131,27 @@ fn other_fmi_versions_are_refused_by_the_peek() {
 }
 
 #[test]
-fn model_exchange_only_is_refused() {
+fn model_exchange_only_is_read() {
     let text = FULL.replace("<CoSimulation", "<ModelExchange");
-    assert!(matches!(parse(&text), Err(Error::NotCoSimulation { .. })));
+    let md = parse(&text).unwrap();
+    assert!(md.co_simulation.is_none());
+    let me = md.model_exchange.as_ref().unwrap();
+    assert_eq!(md.model_identifier(), me.model_identifier);
+    // The co-simulation flags of an FMU without co-simulation read as false.
+    assert!(!md.cs().can_get_and_set_fmu_state);
+    assert!(md.cs().model_identifier.is_empty());
+}
+
+#[test]
+fn neither_interface_is_refused_in_one_line() {
+    let start = FULL.find("<CoSimulation").unwrap();
+    let end = start + FULL[start..].find("/>").unwrap() + 2;
+    let text = format!("{}{}", &FULL[..start], &FULL[end..]);
+    let e = parse(&text).unwrap_err().to_string();
+    assert!(
+        e.contains("no <CoSimulation> or <ModelExchange> element") && !e.contains('\n'),
+        "{e}"
+    );
 }
 
 #[test]
@@ -260,7 +278,7 @@ fn fmi3_state_space_has_arrays_sized_by_structural_parameters() {
     let md = reference_fmi3("StateSpace");
     assert_eq!(md.standard, FmiStandard::Fmi3);
     assert_eq!(md.guid, "{D773325B-AB94-4630-BF85-643EB24FCB78}");
-    let cs = &md.co_simulation;
+    let cs = md.cs();
     assert!(cs.can_get_and_set_fmu_state && cs.can_serialize_fmu_state);
     assert!(cs.provides_intermediate_update && cs.can_return_early_after_intermediate_update);
     assert!(cs.has_event_mode && !cs.can_interpolate_inputs);
@@ -380,7 +398,7 @@ fn fmi3_units_types_and_every_reference_model_parse() {
     assert_eq!(md.model_structure.event_indicators.len(), 1);
     for model in ["Dahlquist", "Resource", "Stair", "VanDerPol", "Roberts"] {
         let md = reference_fmi3(model);
-        assert_eq!(md.co_simulation.model_identifier, model);
+        assert_eq!(md.cs().model_identifier, model);
     }
 }
 
@@ -410,4 +428,54 @@ fn element_names_are_row_major_and_one_based() {
         ["A[1,1]", "A[1,2]", "A[1,3]", "A[2,1]", "A[2,2]", "A[2,3]"]
     );
     assert!(element_names("z", &[0]).is_empty());
+}
+
+fn reference_fmi2(model: &str) -> ModelDescription {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/fixtures/reference-fmus/fmi2")
+        .join(format!("{model}.fmu"));
+    let file = std::fs::File::open(&path).unwrap();
+    let mut archive = zip::ZipArchive::new(file).unwrap();
+    let mut entry = archive.by_name("modelDescription.xml").unwrap();
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
+    ModelDescription::from_bytes(&bytes).unwrap()
+}
+
+#[test]
+fn model_exchange_of_the_reference_fmus_is_read() {
+    // (model, continuous states, event indicators), FMI 2.0 and FMI 3.0 alike.
+    let expected = [
+        ("BouncingBall", 2, 1),
+        ("Dahlquist", 1, 0),
+        ("Feedthrough", 0, 0),
+        ("Resource", 0, 0),
+        ("Stair", 0, 0),
+        ("VanDerPol", 2, 0),
+    ];
+    for (model, states, indicators) in expected {
+        for md in [reference_fmi2(model), reference_fmi3(model)] {
+            let me = md.model_exchange.as_ref().unwrap();
+            assert_eq!(me.model_identifier, model);
+            assert_eq!(me.number_of_continuous_states, states, "{model}");
+            assert_eq!(me.number_of_event_indicators, indicators, "{model}");
+            assert_eq!(md.continuous_states().len(), states, "{model}");
+            assert!(md.co_simulation.is_some());
+        }
+    }
+    let bb = reference_fmi2("BouncingBall");
+    let me = bb.model_exchange.as_ref().unwrap();
+    assert!(me.can_get_and_set_fmu_state && me.can_serialize_fmu_state);
+    assert!(me.can_not_use_memory_management_functions);
+    // FMI 2.0 default: the completed integrator step is needed.
+    assert!(!me.completed_integrator_step_not_needed && me.needs_completed_integrator_step);
+    // The state vector: h (vr 1) with der(h) (vr 2), v (vr 3) with der(v) (vr 4).
+    assert_eq!(bb.continuous_states(), [(1, 2), (3, 4)]);
+    let bb3 = reference_fmi3("BouncingBall");
+    let me3 = bb3.model_exchange.as_ref().unwrap();
+    // FMI 3.0 default: needsCompletedIntegratorStep false.
+    assert!(!me3.needs_completed_integrator_step && me3.completed_integrator_step_not_needed);
+    assert_eq!(bb3.continuous_states(), [(1, 2), (3, 4)]);
+    let ss = reference_fmi3("StateSpace");
+    assert!(ss.model_exchange.is_some());
 }

@@ -9,7 +9,7 @@
 //! `ModelStructure` turned into 1-based indices), and what FMI 2.0 has no place for is
 //! added beside them: [`ScalarVariable::value_type`] (the exact type),
 //! [`ScalarVariable::dimensions`], [`ScalarVariable::start_values`] and the FMI 3.0
-//! capability flags of [`CoSimulation`].
+//! capability flags of [`CoSimulation`] and [`ModelExchange`].
 
 /// An FMI value reference.
 pub type ValueReference = u32;
@@ -44,10 +44,11 @@ pub struct ModelDescription {
     pub variable_naming_convention: VariableNamingConvention,
     /// `numberOfEventIndicators`.
     pub number_of_event_indicators: Option<u32>,
-    /// The `CoSimulation` element.
-    pub co_simulation: CoSimulation,
-    /// `modelIdentifier` of the `ModelExchange` element, if the FMU has one.
-    pub model_exchange: Option<String>,
+    /// The `CoSimulation` element, if the FMU has one ([`cs`](Self::cs) reads
+    /// its flags as all false when it has not).
+    pub co_simulation: Option<CoSimulation>,
+    /// The `ModelExchange` element, if the FMU has one.
+    pub model_exchange: Option<ModelExchange>,
     /// `UnitDefinitions`.
     pub unit_definitions: Vec<Unit>,
     /// `TypeDefinitions`.
@@ -143,6 +144,67 @@ pub struct CoSimulation {
     /// FMI 3.0 `providesEvaluateDiscreteStates`.
     pub provides_evaluate_discrete_states: bool,
 }
+
+/// The `ModelExchange` element's capability flags, with the numbers of
+/// continuous states and event indicators the model description declares.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ModelExchange {
+    /// Name of the shared library (without extension) and prefix of the functions.
+    pub model_identifier: String,
+    /// `needsExecutionTool`.
+    pub needs_execution_tool: bool,
+    /// FMI 2.0 `completedIntegratorStepNotNeeded`; for FMI 3.0 the negation of
+    /// `needsCompletedIntegratorStep`.
+    pub completed_integrator_step_not_needed: bool,
+    /// FMI 3.0 `needsCompletedIntegratorStep` (FMI 2.0: the negation of
+    /// `completedIntegratorStepNotNeeded`).
+    pub needs_completed_integrator_step: bool,
+    /// `canBeInstantiatedOnlyOncePerProcess`.
+    pub can_be_instantiated_only_once_per_process: bool,
+    /// `canNotUseMemoryManagementFunctions` (FMI 2.0).
+    pub can_not_use_memory_management_functions: bool,
+    /// `canGetAndSetFMUstate` (FMI 3.0: `canGetAndSetFMUState`).
+    pub can_get_and_set_fmu_state: bool,
+    /// `canSerializeFMUstate` (FMI 3.0: `canSerializeFMUState`).
+    pub can_serialize_fmu_state: bool,
+    /// `providesDirectionalDerivative` (FMI 3.0: `providesDirectionalDerivatives`).
+    pub provides_directional_derivative: bool,
+    /// FMI 3.0 `providesAdjointDerivatives`.
+    pub provides_adjoint_derivatives: bool,
+    /// FMI 3.0 `providesEvaluateDiscreteStates`.
+    pub provides_evaluate_discrete_states: bool,
+    /// The number of continuous states: the `Derivatives` (FMI 3.0
+    /// `ContinuousStateDerivative`s) of `ModelStructure`.
+    pub number_of_continuous_states: usize,
+    /// The number of event indicators: FMI 2.0 `numberOfEventIndicators`
+    /// (default 0), FMI 3.0 the `EventIndicator`s of `ModelStructure`.
+    pub number_of_event_indicators: usize,
+}
+
+/// The flags of a model description without a `CoSimulation` element: every
+/// capability false, no model identifier.
+pub(crate) static NO_CO_SIMULATION: CoSimulation = CoSimulation {
+    model_identifier: String::new(),
+    needs_execution_tool: false,
+    can_handle_variable_communication_step_size: false,
+    can_interpolate_inputs: false,
+    max_output_derivative_order: 0,
+    can_run_asynchronuously: false,
+    can_be_instantiated_only_once_per_process: false,
+    can_not_use_memory_management_functions: false,
+    can_get_and_set_fmu_state: false,
+    can_serialize_fmu_state: false,
+    provides_directional_derivative: false,
+    provides_adjoint_derivatives: false,
+    provides_per_element_dependencies: false,
+    fixed_internal_step_size: None,
+    recommended_intermediate_input_smoothness: 0,
+    provides_intermediate_update: false,
+    might_return_early_from_do_step: false,
+    can_return_early_after_intermediate_update: false,
+    has_event_mode: false,
+    provides_evaluate_discrete_states: false,
+};
 
 /// A `Unit` of `UnitDefinitions`.
 #[derive(Debug, Clone, PartialEq)]

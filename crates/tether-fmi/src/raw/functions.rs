@@ -1,4 +1,5 @@
-//! The function-pointer table of the FMI 2.0 co-simulation API (common + CS functions).
+//! The function-pointer table of the FMI 2.0 co-simulation API (common + CS functions;
+//! the CS functions optional in the library of an FMU without co-simulation).
 
 use std::ffi::c_char;
 use std::path::Path;
@@ -7,7 +8,12 @@ use super::*;
 use crate::error::{Error, Result};
 
 macro_rules! fmi2_functions {
-    ($($name:ident: $ty:ty,)*) => {
+    (
+        $($name:ident: $ty:ty,)*
+        ; co_simulation {
+            $($cs:ident: ($($arg:ty),*) -> $ret:ty = $absent:expr,)*
+        }
+    ) => {
         /// Every function of the FMI 2.0 co-simulation API, resolved from the FMU's
         /// shared library. Field names are the C symbol names.
         #[derive(Clone, Copy)]
@@ -16,14 +22,27 @@ macro_rules! fmi2_functions {
                 #[doc = concat!("`", stringify!($name), "`.")]
                 pub $name: $ty,
             )*
+            $(
+                #[doc = concat!("`", stringify!($cs), "` (co-simulation only).")]
+                pub $cs: unsafe extern "C" fn($($arg),*) -> $ret,
+            )*
         }
 
         impl Fmi2Functions {
             /// The C symbol names, in table order.
-            pub const SYMBOLS: &'static [&'static str] = &[$(stringify!($name)),*];
+            pub const SYMBOLS: &'static [&'static str] =
+                &[$(stringify!($name),)* $(stringify!($cs)),*];
 
-            /// Resolves every function, naming the first one that is missing.
-            pub(crate) fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
+            /// Resolves every function, naming the first one that is missing. The
+            /// co-simulation functions are required when `co_simulation` (the FMU
+            /// declares co-simulation); otherwise a missing one is replaced by a
+            /// function returning fmi2Error, which is never called (co-simulation
+            /// instances of such an FMU are refused before they are made).
+            pub(crate) fn resolve(
+                lib: &libloading::Library,
+                path: &Path,
+                co_simulation: bool,
+            ) -> Result<Self> {
                 Ok(Fmi2Functions {
                     $(
                         $name: {
@@ -38,6 +57,29 @@ macro_rules! fmi2_functions {
                                 library: path.to_owned(),
                                 symbol: stringify!($name),
                             })?
+                        },
+                    )*
+                    $(
+                        $cs: {
+                            // SAFETY: as above.
+                            let symbol = unsafe {
+                                lib.get::<unsafe extern "C" fn($($arg),*) -> $ret>(stringify!($cs))
+                            };
+                            match symbol {
+                                Ok(symbol) => *symbol,
+                                Err(_) if co_simulation => {
+                                    return Err(Error::MissingSymbol {
+                                        library: path.to_owned(),
+                                        symbol: stringify!($cs),
+                                    })
+                                }
+                                Err(_) => {
+                                    unsafe extern "C" fn absent($(_: $arg),*) -> $ret {
+                                        $absent
+                                    }
+                                    absent
+                                }
+                            }
                         },
                     )*
                 })
@@ -83,15 +125,17 @@ fmi2_functions! {
     fmi2SerializeFMUstate: unsafe extern "C" fn(C, fmi2FMUstate, *mut fmi2Byte, usize) -> fmi2Status,
     fmi2DeSerializeFMUstate: unsafe extern "C" fn(C, *const fmi2Byte, usize, *mut fmi2FMUstate) -> fmi2Status,
     fmi2GetDirectionalDerivative: unsafe extern "C" fn(C, Vr, usize, Vr, usize, *const fmi2Real, *mut fmi2Real) -> fmi2Status,
-    fmi2SetRealInputDerivatives: unsafe extern "C" fn(C, Vr, usize, *const fmi2Integer, *const fmi2Real) -> fmi2Status,
-    fmi2GetRealOutputDerivatives: unsafe extern "C" fn(C, Vr, usize, *const fmi2Integer, *mut fmi2Real) -> fmi2Status,
-    fmi2DoStep: unsafe extern "C" fn(C, fmi2Real, fmi2Real, fmi2Boolean) -> fmi2Status,
-    fmi2CancelStep: unsafe extern "C" fn(C) -> fmi2Status,
-    fmi2GetStatus: unsafe extern "C" fn(C, fmi2StatusKind, *mut fmi2Status) -> fmi2Status,
-    fmi2GetRealStatus: unsafe extern "C" fn(C, fmi2StatusKind, *mut fmi2Real) -> fmi2Status,
-    fmi2GetIntegerStatus: unsafe extern "C" fn(C, fmi2StatusKind, *mut fmi2Integer) -> fmi2Status,
-    fmi2GetBooleanStatus: unsafe extern "C" fn(C, fmi2StatusKind, *mut fmi2Boolean) -> fmi2Status,
-    fmi2GetStringStatus: unsafe extern "C" fn(C, fmi2StatusKind, *mut fmi2String) -> fmi2Status,
+    ; co_simulation {
+        fmi2SetRealInputDerivatives: (C, Vr, usize, *const fmi2Integer, *const fmi2Real) -> fmi2Status = fmi2Error,
+        fmi2GetRealOutputDerivatives: (C, Vr, usize, *const fmi2Integer, *mut fmi2Real) -> fmi2Status = fmi2Error,
+        fmi2DoStep: (C, fmi2Real, fmi2Real, fmi2Boolean) -> fmi2Status = fmi2Error,
+        fmi2CancelStep: (C) -> fmi2Status = fmi2Error,
+        fmi2GetStatus: (C, fmi2StatusKind, *mut fmi2Status) -> fmi2Status = fmi2Error,
+        fmi2GetRealStatus: (C, fmi2StatusKind, *mut fmi2Real) -> fmi2Status = fmi2Error,
+        fmi2GetIntegerStatus: (C, fmi2StatusKind, *mut fmi2Integer) -> fmi2Status = fmi2Error,
+        fmi2GetBooleanStatus: (C, fmi2StatusKind, *mut fmi2Boolean) -> fmi2Status = fmi2Error,
+        fmi2GetStringStatus: (C, fmi2StatusKind, *mut fmi2String) -> fmi2Status = fmi2Error,
+    }
 }
 
 impl std::fmt::Debug for Fmi2Functions {

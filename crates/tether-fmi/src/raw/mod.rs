@@ -10,10 +10,13 @@
 
 pub mod fmi3;
 mod functions;
+mod me;
 
 use std::ffi::{c_char, c_int, c_uint, c_void};
 
 pub use functions::Fmi2Functions;
+pub(crate) use me::missing as missing_me_symbol;
+pub use me::{fmi2EventInfo, Fmi2MeFunctions, Fmi3MeFunctions};
 
 /// `fmi2Component`: the FMU's opaque instance pointer.
 pub type fmi2Component = *mut c_void;

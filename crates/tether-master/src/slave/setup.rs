@@ -26,7 +26,7 @@ pub(crate) struct Capabilities {
 impl Capabilities {
     /// The capabilities `md` declares.
     pub(crate) fn of(md: &ModelDescription) -> Capabilities {
-        let cs = &md.co_simulation;
+        let cs = md.cs();
         Capabilities {
             can_interpolate_inputs: cs.can_interpolate_inputs || cs.provides_intermediate_update,
             max_output_derivative_order: cs.max_output_derivative_order,
@@ -288,7 +288,7 @@ impl Slave {
     /// The capability adaptive macro steps need that the FMU does not
     /// declare: rollback of a rejected step, and steps of varying size.
     pub(crate) fn cannot_vary_steps(&self) -> Option<&'static str> {
-        let cs = &self.fmu.model_description().co_simulation;
+        let cs = self.fmu.model_description().cs();
         if !cs.can_get_and_set_fmu_state {
             Some("canGetAndSetFMUstate")
         } else if !cs.can_handle_variable_communication_step_size {
@@ -303,7 +303,7 @@ impl Slave {
     /// and its FMU does not declare `canBeInstantiatedOnlyOncePerProcess`
     /// (such an FMU may keep global state that one thread expects).
     pub(crate) fn can_run_in_parallel(&self) -> bool {
-        let cs = &self.fmu.model_description().co_simulation;
+        let cs = self.fmu.model_description().cs();
         !self.backend.is_remote() && !cs.can_be_instantiated_only_once_per_process
     }
 

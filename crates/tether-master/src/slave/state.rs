@@ -45,7 +45,7 @@ impl Slave {
     /// Save the current state as bytes into `out`, for the whole system's
     /// saved state (needs `canGetAndSetFMUstate` and `canSerializeFMUstate`).
     pub(crate) fn snapshot(&mut self, out: &mut Vec<u8>) -> Result<(), MasterError> {
-        let cs = &self.fmu.model_description().co_simulation;
+        let cs = self.fmu.model_description().cs();
         let lacking = if !cs.can_get_and_set_fmu_state {
             Some("canGetAndSetFMUstate")
         } else if !cs.can_serialize_fmu_state {

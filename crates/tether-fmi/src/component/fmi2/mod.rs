@@ -5,8 +5,11 @@ use std::ffi::{c_char, CStr, CString};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
+mod me;
 mod state;
 mod values;
+
+pub(crate) use me::EventInfo;
 
 use crate::archive::FmuDir;
 use crate::error::{Error, Result};
@@ -85,6 +88,8 @@ pub(crate) struct InstantiateArgs<'a> {
     pub resource_location: &'a str,
     pub visible: bool,
     pub logging_on: bool,
+    /// `fmi2ModelExchange` instead of `fmi2CoSimulation`.
+    pub model_exchange: bool,
 }
 
 pub(super) fn boolean(b: bool) -> fmi2Boolean {
@@ -96,7 +101,7 @@ pub(super) fn boolean(b: bool) -> fmi2Boolean {
 }
 
 impl RawComponent {
-    /// `fmi2Instantiate` for co-simulation.
+    /// `fmi2Instantiate` for co-simulation (or model exchange, as `args` says).
     pub(crate) fn fmi2Instantiate(
         library: Arc<Library>,
         dir: Arc<FmuDir>,
@@ -130,7 +135,11 @@ impl RawComponent {
         let component = unsafe {
             (library.functions().fmi2Instantiate)(
                 name_c.as_ptr(),
-                fmi2CoSimulation,
+                if args.model_exchange {
+                    fmi2ModelExchange
+                } else {
+                    fmi2CoSimulation
+                },
                 guid_c.as_ptr(),
                 location_c.as_ptr(),
                 &*callbacks,

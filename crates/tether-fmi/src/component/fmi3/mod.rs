@@ -9,6 +9,7 @@ use std::ffi::{c_char, CStr, CString};
 use std::sync::Arc;
 
 mod intermediate;
+mod me;
 
 use crate::archive::FmuDir;
 use crate::error::{Error, Result};
@@ -93,6 +94,9 @@ pub(crate) struct InstantiateArgs3<'a> {
     /// Pass the intermediate update callback (the FMU provides intermediate update
     /// and its inputs take polynomials).
     pub intermediate_update: bool,
+    /// `fmi3InstantiateModelExchange` instead (which takes no event mode, early
+    /// return, intermediate variables or intermediate update callback).
+    pub model_exchange: bool,
 }
 
 fn boolean(b: bool) -> fmi3Boolean {
@@ -128,15 +132,25 @@ macro_rules! numeric {
 }
 
 impl RawInstance3 {
-    /// `fmi3InstantiateCoSimulation`.
+    /// `fmi3InstantiateCoSimulation`, or `fmi3InstantiateModelExchange` when
+    /// `args.model_exchange`.
     pub(crate) fn fmi3InstantiateCoSimulation(
         library: Arc<Library<Fmi3Functions>>,
         dir: Arc<FmuDir>,
         args: &InstantiateArgs3<'_>,
     ) -> Result<RawInstance3> {
-        const F: &str = "fmi3InstantiateCoSimulation";
+        let function: &'static str = if args.model_exchange {
+            "fmi3InstantiateModelExchange"
+        } else {
+            "fmi3InstantiateCoSimulation"
+        };
+        let me_instantiate = if args.model_exchange {
+            Some(library.me()?.fmi3InstantiateModelExchange)
+        } else {
+            None
+        };
         let invalid = |what: &str| Error::InvalidArgument {
-            function: F,
+            function,
             instance: args.instance_name.to_owned(),
             message: format!("{what} contains a NUL byte"),
         };
@@ -148,43 +162,58 @@ impl RawInstance3 {
         let environment = env.pointer();
         if library.is_fatal() {
             return Err(Error::FmuDead {
-                function: F,
+                function,
                 instance: args.instance_name.to_owned(),
                 time: 0.0,
                 messages: Default::default(),
             });
         }
-        log::trace!(target: "tether_fmi::call", "{F}({})", args.instance_name);
+        log::trace!(target: "tether_fmi::call", "{function}({})", args.instance_name);
         let name = crate::current::Name::new(args.instance_name);
-        let entered = crate::current::Entered::new(F, &name, 0.0);
+        let entered = crate::current::Entered::new(function, &name, 0.0);
         let required = args.required_intermediate_variables;
-        // SAFETY: all strings are NUL-terminated and live across the call; `required`
-        // holds `required.len()` references; the environment is boxed and kept in the
-        // returned instance until after fmi3FreeInstance; the callbacks match
-        // fmi3LogMessageCallback and fmi3IntermediateUpdateCallback.
-        let instance = unsafe {
-            (library.functions().fmi3InstantiateCoSimulation)(
-                name_c.as_ptr(),
-                token_c.as_ptr(),
-                path_c.as_ptr(),
-                boolean(args.visible),
-                boolean(args.logging_on),
-                boolean(args.event_mode_used),
-                boolean(args.early_return_allowed),
-                if required.is_empty() {
-                    std::ptr::null()
-                } else {
-                    required.as_ptr()
-                },
-                required.len(),
-                environment,
-                Some(fmi3_log_message),
-                if args.intermediate_update {
-                    Some(intermediate_update)
-                } else {
-                    None
-                },
-            )
+        let instance = match me_instantiate {
+            // SAFETY: as for co-simulation below, without the intermediate variables
+            // and the intermediate update callback, which model exchange has not.
+            Some(instantiate) => unsafe {
+                instantiate(
+                    name_c.as_ptr(),
+                    token_c.as_ptr(),
+                    path_c.as_ptr(),
+                    boolean(args.visible),
+                    boolean(args.logging_on),
+                    environment,
+                    Some(fmi3_log_message),
+                )
+            },
+            // SAFETY: all strings are NUL-terminated and live across the call; `required`
+            // holds `required.len()` references; the environment is boxed and kept in the
+            // returned instance until after fmi3FreeInstance; the callbacks match
+            // fmi3LogMessageCallback and fmi3IntermediateUpdateCallback.
+            None => unsafe {
+                (library.functions().fmi3InstantiateCoSimulation)(
+                    name_c.as_ptr(),
+                    token_c.as_ptr(),
+                    path_c.as_ptr(),
+                    boolean(args.visible),
+                    boolean(args.logging_on),
+                    boolean(args.event_mode_used),
+                    boolean(args.early_return_allowed),
+                    if required.is_empty() {
+                        std::ptr::null()
+                    } else {
+                        required.as_ptr()
+                    },
+                    required.len(),
+                    environment,
+                    Some(fmi3_log_message),
+                    if args.intermediate_update {
+                        Some(intermediate_update)
+                    } else {
+                        None
+                    },
+                )
+            },
         };
         drop(entered);
         if instance.is_null() {

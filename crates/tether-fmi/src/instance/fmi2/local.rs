@@ -22,6 +22,11 @@ impl LocalInstance {
             states: Default::default(),
         }
     }
+
+    /// The instance, for the model-exchange calls of [`crate::MeInstance`].
+    pub(crate) fn instance_mut(&mut self) -> &mut Instance {
+        &mut self.instance
+    }
 }
 
 impl FmuInstance for LocalInstance {

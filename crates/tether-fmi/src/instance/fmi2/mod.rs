@@ -138,6 +138,8 @@ pub struct Instance {
     pub(crate) shared: Arc<Shared>,
     pub(crate) fmu: Arc<FmuShared>,
     name: Arc<str>,
+    /// Made for model exchange: the `ModelExchange` flags say what it can do.
+    pub(crate) model_exchange: bool,
 }
 
 impl Fmu {
@@ -149,6 +151,25 @@ impl Fmu {
     /// live instance per process, counted by GUID over every opened copy of it
     /// ([`Error::OnlyOncePerProcess`] otherwise).
     pub fn instantiate(&self, instance_name: &str, options: InstanceOptions) -> Result<Instance> {
+        self.instantiate_as(instance_name, options, false)
+    }
+
+    /// Creates a model-exchange instance of an FMI 2.0 FMU (`fmi2Instantiate` with
+    /// `fmi2ModelExchange`), for [`MeInstance`](crate::MeInstance), which drives it.
+    pub(crate) fn instantiate_model_exchange(
+        &self,
+        instance_name: &str,
+        options: InstanceOptions,
+    ) -> Result<Instance> {
+        self.instantiate_as(instance_name, options, true)
+    }
+
+    fn instantiate_as(
+        &self,
+        instance_name: &str,
+        options: InstanceOptions,
+        model_exchange: bool,
+    ) -> Result<Instance> {
         let md = &self.shared().model_description;
         if md.standard != crate::model_description::FmiStandard::Fmi2 {
             return Err(Error::InvalidArgument {
@@ -160,7 +181,21 @@ impl Fmu {
                 ),
             });
         }
-        let once = if md.co_simulation.can_be_instantiated_only_once_per_process {
+        let once_per_process = if model_exchange {
+            let Some(me) = &md.model_exchange else {
+                return Err(Error::Unsupported {
+                    model: md.model_name.clone(),
+                    reason: "it has no model-exchange interface (no <ModelExchange> element)"
+                        .into(),
+                });
+            };
+            self.shared().library()?.me()?;
+            me.can_be_instantiated_only_once_per_process
+        } else {
+            self.require_co_simulation()?;
+            md.cs().can_be_instantiated_only_once_per_process
+        };
+        let once = if once_per_process {
             Some(OnceGuard::acquire(&md.guid, &md.model_name, instance_name)?)
         } else {
             None
@@ -176,10 +211,12 @@ impl Fmu {
                 resource_location: &self.resource_location(),
                 visible: options.visible,
                 logging_on: options.logging_on || debug.is_some(),
+                model_exchange,
             },
         )?;
         raw.once = once;
         let mut instance = Instance::new(raw, Arc::clone(self.shared()));
+        instance.model_exchange = model_exchange;
         if let Some(wanted) = debug.filter(|c| !c.is_empty()) {
             let declared = &md.log_categories;
             let mut categories = Vec::new();
@@ -212,6 +249,7 @@ impl Instance {
             shared: Arc::default(),
             fmu,
             name,
+            model_exchange: false,
         }
     }
 
@@ -364,10 +402,7 @@ impl Instance {
         values: &[f64],
     ) -> Result<()> {
         self.require(
-            self.fmu
-                .model_description
-                .co_simulation
-                .can_interpolate_inputs,
+            self.fmu.model_description.cs().can_interpolate_inputs,
             "canInterpolateInputs",
             "fmi2SetRealInputDerivatives",
         )?;
@@ -396,7 +431,7 @@ impl Instance {
         self.require(
             self.fmu
                 .model_description
-                .co_simulation
+                .cs()
                 .provides_directional_derivative,
             "providesDirectionalDerivative",
             "fmi2GetDirectionalDerivative",

@@ -50,27 +50,26 @@ impl Instance {
         }
     }
 
+    /// `canGetAndSetFMUstate` and `canSerializeFMUstate` of the interface the
+    /// instance was made for.
+    fn state_flags(&self) -> (bool, bool) {
+        let md = &self.fmu.model_description;
+        match (&md.model_exchange, self.model_exchange) {
+            (Some(me), true) => (me.can_get_and_set_fmu_state, me.can_serialize_fmu_state),
+            _ => (
+                md.cs().can_get_and_set_fmu_state,
+                md.cs().can_serialize_fmu_state,
+            ),
+        }
+    }
+
     fn require_get_set(&self, operation: &'static str) -> Result<()> {
-        self.require(
-            self.fmu
-                .model_description
-                .co_simulation
-                .can_get_and_set_fmu_state,
-            "canGetAndSetFMUstate",
-            operation,
-        )
+        self.require(self.state_flags().0, "canGetAndSetFMUstate", operation)
     }
 
     fn require_serialize(&self, operation: &'static str) -> Result<()> {
         self.require_get_set(operation)?;
-        self.require(
-            self.fmu
-                .model_description
-                .co_simulation
-                .can_serialize_fmu_state,
-            "canSerializeFMUstate",
-            operation,
-        )
+        self.require(self.state_flags().1, "canSerializeFMUstate", operation)
     }
 
     /// `fmi2GetFMUstate` into a new state. Needs `canGetAndSetFMUstate`.

@@ -9,7 +9,12 @@ use super::*;
 use crate::error::{Error, Result};
 
 macro_rules! fmi3_functions {
-    ($($name:ident: $ty:ty,)*) => {
+    (
+        $($name:ident: $ty:ty,)*
+        ; co_simulation {
+            $($cs:ident: ($($arg:ty),*) -> $ret:ty = $absent:expr,)*
+        }
+    ) => {
         /// The FMI 3.0 functions Tether calls, resolved from the FMU's shared library.
         /// Field names are the C symbol names.
         #[derive(Clone, Copy)]
@@ -18,14 +23,28 @@ macro_rules! fmi3_functions {
                 #[doc = concat!("`", stringify!($name), "`.")]
                 pub $name: $ty,
             )*
+            $(
+                #[doc = concat!("`", stringify!($cs), "` (co-simulation only).")]
+                pub $cs: unsafe extern "C" fn($($arg),*) -> $ret,
+            )*
         }
 
         impl Fmi3Functions {
             /// The C symbol names, in table order.
-            pub const SYMBOLS: &'static [&'static str] = &[$(stringify!($name)),*];
+            pub const SYMBOLS: &'static [&'static str] =
+                &[$(stringify!($name),)* $(stringify!($cs)),*];
 
-            /// Resolves every function, naming the first one that is missing.
-            pub(crate) fn resolve(lib: &libloading::Library, path: &Path) -> Result<Self> {
+            /// Resolves every function, naming the first one that is missing. The
+            /// co-simulation functions are required when `co_simulation` (the FMU
+            /// declares co-simulation); otherwise a missing one is replaced by a
+            /// function returning an error (or NULL), which is never called
+            /// (co-simulation instances of such an FMU are refused before they are
+            /// made).
+            pub(crate) fn resolve(
+                lib: &libloading::Library,
+                path: &Path,
+                co_simulation: bool,
+            ) -> Result<Self> {
                 Ok(Fmi3Functions {
                     $(
                         $name: {
@@ -42,6 +61,29 @@ macro_rules! fmi3_functions {
                             })?
                         },
                     )*
+                    $(
+                        $cs: {
+                            // SAFETY: as above.
+                            let symbol = unsafe {
+                                lib.get::<unsafe extern "C" fn($($arg),*) -> $ret>(stringify!($cs))
+                            };
+                            match symbol {
+                                Ok(symbol) => *symbol,
+                                Err(_) if co_simulation => {
+                                    return Err(Error::MissingSymbol {
+                                        library: path.to_owned(),
+                                        symbol: stringify!($cs),
+                                    })
+                                }
+                                Err(_) => {
+                                    unsafe extern "C" fn absent($(_: $arg),*) -> $ret {
+                                        $absent
+                                    }
+                                    absent
+                                }
+                            }
+                        },
+                    )*
                 })
             }
         }
@@ -56,20 +98,6 @@ type S = fmi3Status;
 fmi3_functions! {
     fmi3GetVersion: unsafe extern "C" fn() -> *const c_char,
     fmi3SetDebugLogging: unsafe extern "C" fn(I, B, usize, *const fmi3String) -> S,
-    fmi3InstantiateCoSimulation: unsafe extern "C" fn(
-        fmi3String,
-        fmi3String,
-        fmi3String,
-        B,
-        B,
-        B,
-        B,
-        Vr,
-        usize,
-        fmi3InstanceEnvironment,
-        fmi3LogMessageCallback,
-        fmi3IntermediateUpdateCallback,
-    ) -> fmi3Instance,
     fmi3FreeInstance: unsafe extern "C" fn(I),
     fmi3EnterInitializationMode: unsafe extern "C" fn(I, B, f64, f64, B, f64) -> S,
     fmi3ExitInitializationMode: unsafe extern "C" fn(I) -> S,
@@ -109,8 +137,24 @@ fmi3_functions! {
     fmi3SerializedFMUStateSize: unsafe extern "C" fn(I, fmi3FMUState, *mut usize) -> S,
     fmi3SerializeFMUState: unsafe extern "C" fn(I, fmi3FMUState, *mut fmi3Byte, usize) -> S,
     fmi3DeserializeFMUState: unsafe extern "C" fn(I, *const fmi3Byte, usize, *mut fmi3FMUState) -> S,
-    fmi3GetOutputDerivatives: unsafe extern "C" fn(I, Vr, usize, *const i32, *mut f64, usize) -> S,
-    fmi3DoStep: unsafe extern "C" fn(I, f64, f64, B, *mut B, *mut B, *mut B, *mut f64) -> S,
+    ; co_simulation {
+        fmi3InstantiateCoSimulation: (
+            fmi3String,
+            fmi3String,
+            fmi3String,
+            B,
+            B,
+            B,
+            B,
+            Vr,
+            usize,
+            fmi3InstanceEnvironment,
+            fmi3LogMessageCallback,
+            fmi3IntermediateUpdateCallback
+        ) -> fmi3Instance = std::ptr::null_mut(),
+        fmi3GetOutputDerivatives: (I, Vr, usize, *const i32, *mut f64, usize) -> S = fmi3Error,
+        fmi3DoStep: (I, f64, f64, B, *mut B, *mut B, *mut B, *mut f64) -> S = fmi3Error,
+    }
 }
 
 impl std::fmt::Debug for Fmi3Functions {

@@ -1,0 +1,456 @@
+//! The built-in integrator of model-exchange instances: the explicit Runge–Kutta
+//! methods of the `ode_solvers` crate with error control (Dormand–Prince 5(4),
+//! `rk45`, and 8(5,3), `dop853`), over the states scaled by their nominals, so
+//! that the absolute tolerance of state i is `atol · nominal_i`.
+//!
+//! One call integrates from (t0, x0) towards t1 and stops after the first
+//! accepted step at which an event indicator changed sign (a state event) or
+//! `CompletedIntegratorStep` asked for event mode (a step event); the event
+//! time is then located by bisection, each probe integrated afresh from the
+//! last point before the event, to within `100·ε·max(|t|, h)`. Every call
+//! starts from its initial point with the same initial step (the integrator's
+//! own choice from (t0, x0)) and no history, so a repeated step is
+//! bit-identical.
+
+use std::cell::RefCell;
+
+use ode_solvers::dop_shared::{IntegrationError, OutputType};
+use ode_solvers::{DVector, Dop853, Dopri5, System};
+
+use super::calls::MeCalls;
+use crate::error::{Error, Result};
+
+/// The integration method of a model-exchange instance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Dormand–Prince 5(4) with error control (`ode_solvers::Dopri5`).
+    #[default]
+    Rk45,
+    /// Dormand–Prince 8(5,3) with error control (`ode_solvers::Dop853`).
+    Dop853,
+}
+
+impl Method {
+    /// Every method by its key name.
+    pub const ALL: [(&'static str, Method); 2] =
+        [("rk45", Method::Rk45), ("dop853", Method::Dop853)];
+
+    /// The method called `name` (`rk45`, `dop853`).
+    pub fn parse(name: &str) -> Option<Method> {
+        Method::ALL
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|&(_, m)| m)
+    }
+
+    /// The key name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Rk45 => "rk45",
+            Method::Dop853 => "dop853",
+        }
+    }
+}
+
+/// The integrator settings of a model-exchange instance.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Integrator {
+    /// The method.
+    pub method: Method,
+    /// Relative tolerance (default: the experiment's tolerance, else the
+    /// model's DefaultExperiment tolerance, else 1e-6).
+    pub rtol: Option<f64>,
+    /// Absolute tolerance, relative to each state's nominal: state i is held
+    /// to `atol · nominal_i` (default: `rtol`).
+    pub atol: Option<f64>,
+    /// The largest step (default: the communication step).
+    pub max_step: Option<f64>,
+}
+
+impl Integrator {
+    /// Checks the settings: every tolerance and the largest step finite and
+    /// positive; the error names the key.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        for (key, value) in [
+            ("rtol", self.rtol),
+            ("atol", self.atol),
+            ("max_step", self.max_step),
+        ] {
+            if let Some(v) = value {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(format!("{key} = {v}: expected a finite number > 0"));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How a call of [`integrate`] ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Stop {
+    /// At t1.
+    Reached,
+    /// At a located state event.
+    StateEvent,
+    /// `CompletedIntegratorStep` asked for event mode.
+    StepEvent,
+    /// `CompletedIntegratorStep` asked to end the simulation.
+    Terminate,
+}
+
+/// What the accepted steps are checked for, and what was found.
+struct Watch {
+    /// The event indicators at the last accepted point.
+    z_prev: Vec<f64>,
+    z: Vec<f64>,
+    needs_completed: bool,
+    tau_prev: f64,
+    y_prev: Vec<f64>,
+    found: Option<(Stop, f64)>,
+}
+
+/// The right-hand side over scaled states `y = x / nominal`, in time relative
+/// to `t0` (the solver's own time starts at 0 at every call).
+struct Rhs<'a> {
+    fmu: RefCell<&'a mut dyn MeCalls>,
+    t0: f64,
+    nominals: &'a [f64],
+    x: RefCell<Vec<f64>>,
+    dx: RefCell<Vec<f64>>,
+    failure: RefCell<Option<Error>>,
+    /// `None` while probing for an event time (no checks, no completed steps).
+    watch: Option<Watch>,
+}
+
+impl Rhs<'_> {
+    /// Sets (t0 + tau, y·nominal) in the FMU.
+    fn set(&self, tau: f64, y: &[f64]) -> Result<()> {
+        let mut x = self.x.borrow_mut();
+        for ((x, y), n) in x.iter_mut().zip(y).zip(self.nominals) {
+            *x = y * n;
+        }
+        let mut fmu = self.fmu.borrow_mut();
+        fmu.set_time(self.t0 + tau)?;
+        fmu.set_continuous_states(&x)
+    }
+
+    fn derivatives(&self, tau: f64, y: &[f64], dy: &mut [f64]) -> Result<()> {
+        self.set(tau, y)?;
+        let mut dx = self.dx.borrow_mut();
+        let mut fmu = self.fmu.borrow_mut();
+        fmu.get_derivatives(&mut dx)?;
+        if let Some(i) = dx.iter().position(|v| !v.is_finite()) {
+            let (function, _, _) = fmu.names();
+            return Err(Error::ModelExchange {
+                instance: fmu.name().to_owned(),
+                time: self.t0 + tau,
+                cause: format!(
+                    "{function} returned {} for the derivative of continuous state {} of {}",
+                    dx[i],
+                    i + 1,
+                    dx.len()
+                ),
+            });
+        }
+        for ((d, x), n) in dy.iter_mut().zip(dx.iter()).zip(self.nominals) {
+            *d = x / n;
+        }
+        Ok(())
+    }
+
+    fn fail(&self, e: Error) {
+        let mut failure = self.failure.borrow_mut();
+        if failure.is_none() {
+            *failure = Some(e);
+        }
+    }
+
+    /// After an accepted step to `tau`: a state event, a step event, a request
+    /// to terminate, or nothing (true: stop).
+    fn accepted(&mut self, tau: f64, y: &[f64]) -> Result<bool> {
+        if self.watch.is_none() {
+            return Ok(false);
+        }
+        self.set(tau, y)?;
+        let fmu = self.fmu.get_mut();
+        let Some(w) = self.watch.as_mut() else {
+            return Ok(false);
+        };
+        if !w.z.is_empty() {
+            fmu.get_event_indicators(&mut w.z)?;
+            if crossed(&w.z_prev, &w.z) {
+                w.found = Some((Stop::StateEvent, tau));
+                return Ok(true);
+            }
+        }
+        if w.needs_completed {
+            let (event, terminate) = fmu.completed_integrator_step()?;
+            if terminate {
+                w.found = Some((Stop::Terminate, tau));
+                return Ok(true);
+            }
+            if event {
+                w.found = Some((Stop::StepEvent, tau));
+                return Ok(true);
+            }
+        }
+        std::mem::swap(&mut w.z_prev, &mut w.z);
+        w.tau_prev = tau;
+        w.y_prev.clear();
+        w.y_prev.extend_from_slice(y);
+        Ok(false)
+    }
+}
+
+/// Whether an indicator changed from > 0 to ≤ 0 or back.
+pub(crate) fn crossed(before: &[f64], after: &[f64]) -> bool {
+    before
+        .iter()
+        .zip(after)
+        .any(|(b, a)| (*b > 0.0) != (*a > 0.0))
+}
+
+/// The solver borrows the right-hand side, which keeps what it found.
+impl System<f64, DVector<f64>> for &mut Rhs<'_> {
+    fn system(&self, tau: f64, y: &DVector<f64>, dy: &mut DVector<f64>) {
+        if self.failure.borrow().is_some() {
+            // The step is accepted with zero slopes and the call stops at once.
+            dy.fill(0.0);
+            return;
+        }
+        if let Err(e) = self.derivatives(tau, y.as_slice(), dy.as_mut_slice()) {
+            self.fail(e);
+            dy.fill(0.0);
+        }
+    }
+
+    fn solout(&mut self, tau: f64, y: &DVector<f64>, _dy: &DVector<f64>) -> bool {
+        if self.failure.borrow().is_some() {
+            return true;
+        }
+        match self.accepted(tau, y.as_slice()) {
+            Ok(stop) => stop,
+            Err(e) => {
+                self.fail(e);
+                true
+            }
+        }
+    }
+}
+
+/// One integration of `rhs` from (tau0, y0) to tau1 (or to where `solout`
+/// stopped it): the last point reached.
+fn solve(
+    settings: &Settings,
+    rhs: &mut Rhs<'_>,
+    tau0: f64,
+    tau1: f64,
+    y0: &[f64],
+) -> std::result::Result<(f64, Vec<f64>), IntegrationError> {
+    let y0 = DVector::from_column_slice(y0);
+    let h_max = settings.max_step.min(tau1 - tau0);
+    macro_rules! run {
+        ($solver:ident, $beta:expr, $fac_min:expr, $fac_max:expr) => {{
+            let mut solver = $solver::from_param(
+                rhs,
+                tau0,
+                tau1,
+                tau1 - tau0,
+                y0,
+                settings.rtol,
+                settings.atol,
+                0.9,
+                $beta,
+                $fac_min,
+                $fac_max,
+                h_max,
+                0.0,
+                100_000,
+                1000,
+                OutputType::Sparse,
+            );
+            solver.integrate().map(|_| {
+                let x = solver.x_out().last().copied().unwrap_or(tau0);
+                let y = solver
+                    .y_out()
+                    .last()
+                    .map_or_else(Vec::new, |y| y.as_slice().to_vec());
+                (x, y)
+            })
+        }};
+    }
+    match settings.method {
+        // Hairer's defaults of DOPRI5 and DOP853.
+        Method::Rk45 => run!(Dopri5, 0.04, 0.2, 10.0),
+        Method::Dop853 => run!(Dop853, 0.0, 0.333, 6.0),
+    }
+}
+
+/// The integrator settings in force for one call.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Settings {
+    pub method: Method,
+    pub rtol: f64,
+    pub atol: f64,
+    pub max_step: f64,
+}
+
+/// The state of an instance between calls: the states, their nominals, the
+/// event indicators at (t0, x).
+pub(crate) struct Point<'a> {
+    pub t0: f64,
+    pub x: &'a mut [f64],
+    pub nominals: &'a [f64],
+    pub z: &'a mut [f64],
+    pub needs_completed: bool,
+    /// The communication step, for the event time's resolution.
+    pub h: f64,
+}
+
+/// Integrates `fmu` from `p.t0` (where it is set) to `t1`; on return the FMU
+/// and `p.x`, `p.z` are at the time returned, with how the call stopped.
+pub(crate) fn integrate(
+    fmu: &mut dyn MeCalls,
+    settings: &Settings,
+    p: Point<'_>,
+    t1: f64,
+) -> Result<(f64, Stop)> {
+    let nx = p.x.len();
+    let y0: Vec<f64> = p.x.iter().zip(p.nominals).map(|(x, n)| x / n).collect();
+    let mut rhs = Rhs {
+        fmu: RefCell::new(fmu),
+        t0: p.t0,
+        nominals: p.nominals,
+        x: RefCell::new(vec![0.0; nx]),
+        dx: RefCell::new(vec![0.0; nx]),
+        failure: RefCell::new(None),
+        watch: Some(Watch {
+            z_prev: p.z.to_vec(),
+            z: vec![0.0; p.z.len()],
+            needs_completed: p.needs_completed,
+            tau_prev: 0.0,
+            y_prev: y0.clone(),
+            found: None,
+        }),
+    };
+    let tau1 = t1 - p.t0;
+    let result = if nx == 0 {
+        // No continuous states: one step to t1 without the integrator.
+        (&mut rhs).solout(tau1, &DVector::zeros(0), &DVector::zeros(0));
+        Ok((tau1, Vec::new()))
+    } else {
+        solve(settings, &mut rhs, 0.0, tau1, &y0)
+    };
+    if let Some(e) = rhs.failure.take() {
+        return Err(e);
+    }
+    let (tau_end, y_end) = result.map_err(|e| integration_error(&rhs, settings, e))?;
+    let found = rhs.watch.as_ref().and_then(|w| w.found);
+    let (stop, tau, y) = match found {
+        None => (Stop::Reached, tau_end, y_end),
+        Some((Stop::StateEvent, tau_hi)) => {
+            let (tau, y) = locate(settings, &mut rhs, tau_hi, &y_end, p.h)?;
+            (Stop::StateEvent, tau, y)
+        }
+        Some((stop, tau)) => (stop, tau, y_end),
+    };
+    set_point(&rhs, tau, &y, p.x)?;
+    if !p.z.is_empty() {
+        rhs.fmu.get_mut().get_event_indicators(p.z)?;
+    }
+    // t0 + (t1 − t0) need not be t1 in floating point: the end is t1 exactly.
+    let t = if stop == Stop::Reached && tau == tau1 {
+        t1
+    } else {
+        p.t0 + tau
+    };
+    if t == t1 && t != p.t0 + tau {
+        rhs.fmu.get_mut().set_time(t1)?;
+    }
+    Ok((t, stop))
+}
+
+/// Sets the FMU to (t0 + tau, y) and `x` to the unscaled states.
+fn set_point(rhs: &Rhs<'_>, tau: f64, y: &[f64], x: &mut [f64]) -> Result<()> {
+    rhs.set(tau, y)?;
+    for ((x, y), n) in x.iter_mut().zip(y).zip(rhs.nominals) {
+        *x = y * n;
+    }
+    Ok(())
+}
+
+/// The first time in (tau_prev, tau_hi] at which an indicator has changed
+/// sign, to within 100·ε·max(|t|, h), by bisection: each probe integrates
+/// afresh from the last point before the event. Returns the time just after
+/// the crossing and the state there.
+fn locate(
+    settings: &Settings,
+    rhs: &mut Rhs<'_>,
+    tau_hi: f64,
+    y_hi: &[f64],
+    h: f64,
+) -> Result<(f64, Vec<f64>)> {
+    let Some(watch) = rhs.watch.take() else {
+        return Ok((tau_hi, y_hi.to_vec()));
+    };
+    let (mut lo, mut y_lo) = (watch.tau_prev, watch.y_prev.clone());
+    let (mut hi, mut y_hi) = (tau_hi, y_hi.to_vec());
+    let resolution = 100.0 * f64::EPSILON * (rhs.t0 + tau_hi).abs().max(h);
+    let mut z = vec![0.0; watch.z_prev.len()];
+    let located = (|| {
+        while hi - lo > resolution {
+            let mid = lo + 0.5 * (hi - lo);
+            if mid <= lo || mid >= hi {
+                break;
+            }
+            let y_mid = if y_lo.is_empty() {
+                Vec::new()
+            } else {
+                let probed = solve(settings, rhs, lo, mid, &y_lo);
+                if let Some(e) = rhs.failure.take() {
+                    return Err(e);
+                }
+                probed.map_err(|e| integration_error(rhs, settings, e))?.1
+            };
+            rhs.set(mid, &y_mid)?;
+            rhs.fmu.get_mut().get_event_indicators(&mut z)?;
+            if crossed(&watch.z_prev, &z) {
+                (hi, y_hi) = (mid, y_mid);
+            } else {
+                (lo, y_lo) = (mid, y_mid);
+            }
+        }
+        Ok(())
+    })();
+    rhs.watch = Some(watch);
+    located.map(|()| (hi, y_hi))
+}
+
+/// The integrator's failure as one line naming the instance and the time.
+fn integration_error(rhs: &Rhs<'_>, settings: &Settings, e: IntegrationError) -> Error {
+    let (tau, what) = match e {
+        IntegrationError::MaxNumStepReached { x, n_step } => {
+            (x, format!("needs more than {n_step} steps"))
+        }
+        IntegrationError::StepSizeUnderflow { x } => (
+            x,
+            "cannot reach the tolerance: the step size fell below the resolution of time"
+                .to_string(),
+        ),
+        IntegrationError::StiffnessDetected { x } => (
+            x,
+            "the model became stiff for this explicit method".to_string(),
+        ),
+    };
+    Error::ModelExchange {
+        instance: rhs.fmu.borrow().name().to_owned(),
+        time: rhs.t0 + tau,
+        cause: format!(
+            "the integrator ({}, rtol {}, atol {} × nominals) {what}",
+            settings.method.name(),
+            settings.rtol,
+            settings.atol
+        ),
+    }
+}
