@@ -1,4 +1,4 @@
-//! With parallel perturbed runs the steady-state macro step still allocates
+//! With parallel runs the steady-state macro step still allocates
 //! nothing, on the main thread or the worker threads: counted by a global
 //! allocator over all threads (this binary holds a single test so that no other
 //! test's allocations mix in).

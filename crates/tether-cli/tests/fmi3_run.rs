@@ -149,8 +149,8 @@ fn a_pythonfmu3_mass_linked_to_the_oscillator_has_the_error_of_the_workspace_pai
     }
 }
 
-/// Isolation (the FMI 3.0 instance in a host process), parallel perturbed runs
-/// (its states serialized to the workers) and the rollback self-check at every step
+/// Isolation (the FMI 3.0 instance in a host process), parallel runs (the
+/// instance's runs on a worker thread) and the rollback self-check at every step
 /// change nothing: the same CSV bit for bit.
 #[test]
 fn fmi3_instances_isolated_parallel_and_self_checked_give_the_same_csv() {

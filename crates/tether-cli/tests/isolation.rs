@@ -149,8 +149,7 @@ fn isolated_log_flood_is_rate_limited() {
 
 /// Isolated instances give the in-process results bit for bit: every FMI call
 /// crosses with its numbers unchanged, FMU states included (the oscillator
-/// with k = 1 and parallel perturbed runs moves states between host processes
-/// as serialised bytes).
+/// with k = 1 and parallel runs too).
 #[test]
 fn isolated_runs_equal_in_process_runs_bit_for_bit() {
     let s = Scratch::new();

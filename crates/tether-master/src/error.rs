@@ -333,8 +333,8 @@ pub enum MasterError {
     /// `source`, so that a printed chain names it once.)
     #[error("recording results: {0}")]
     Recording(std::io::Error),
-    /// A worker thread for parallel perturbed runs could not be started.
-    #[error("cannot start a worker thread for parallel perturbed runs: {0}")]
+    /// A worker thread for parallel runs could not be started.
+    #[error("cannot start a worker thread for parallel runs: {0}")]
     Thread(String),
     /// A signal connection cannot be made (types, units, causality, a second
     /// sender, a direct-feedthrough loop).
@@ -345,9 +345,10 @@ pub enum MasterError {
         /// What is wrong, on one line.
         reason: String,
     },
-    /// A worker thread panicked during perturbed runs.
-    #[error("a worker thread panicked during parallel perturbed runs")]
-    Worker,
+    /// The master panicked while it made an instance's runs on a worker
+    /// thread (a defect of Tether: the run ends).
+    #[error("instance '{instance}': Tether failed while it made its runs on a worker thread (an internal error; the run ends)")]
+    Worker { instance: String },
     /// `[signals] strict = true`: an iterated macro step whose exchanged
     /// values did not converge within `[signals] iterations`.
     #[error("[signals] strict: the macro step from t = {time} did not converge in {iterations} iterations: |Δv| of connection {connection} is {residual:.1e} times the tolerance {tolerance:e} (raise iterations, loosen tolerance, or try solver = \"newton\")", time = crate::Time(*time))]
@@ -405,7 +406,7 @@ impl MasterError {
             MasterError::Thread(_) => "thread",
             MasterError::Connection { .. } => "connection",
             MasterError::SignalsNotConverged { .. } => "signals_not_converged",
-            MasterError::Worker => "worker",
+            MasterError::Worker { .. } => "worker",
         }
     }
 

@@ -275,7 +275,7 @@ pub struct RunStats {
     pub times: PhaseTimes,
     /// Total wall time of [`crate::Simulation::run`] and setup.
     pub wall: Duration,
-    /// Parallel perturbed runs: workers used and the measurements behind it.
+    /// Parallel runs: workers used and the measurements behind it.
     pub parallel: crate::ParallelInfo,
     /// Set when an instance asked to end the simulation before the stop time
     /// (fmi2Discard with `fmi2Terminated`): the run ended normally there.
@@ -1041,17 +1041,17 @@ impl Serialize for RunStats {
 pub struct ParallelInfo {
     /// Worker threads used (0: the runs stayed on the main thread).
     pub workers: usize,
-    /// Measured cost of one hand-off: serialising the states, waking the
-    /// worker, deserialising, waking the main thread ("auto" only; zero when
-    /// the run costs alone ruled the workers out and none was started).
+    /// Measured cost of one hand-off: waking every worker and being woken
+    /// back ("auto" only; zero when the runs' costs alone ruled the workers
+    /// out and none was started).
     pub handoff: Duration,
-    /// Predicted time of one step's perturbed runs, sequential.
+    /// Predicted time of one step's runs, sequential.
     pub sequential: Duration,
-    /// Predicted time of the same runs in parallel, hand-off included.
+    /// Predicted time of the same runs in parallel, hand-offs included.
     pub parallel: Duration,
-    /// "auto": shortest measured perturbed-run phase of the sequential steps.
+    /// "auto": shortest measured runs of a sequential step.
     pub trial_sequential: Duration,
-    /// "auto": shortest measured perturbed-run phase of the parallel trial steps.
+    /// "auto": shortest measured runs of a parallel trial step.
     pub trial_parallel: Duration,
 }
 

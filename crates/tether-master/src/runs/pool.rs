@@ -60,7 +60,14 @@ impl Seat {
         match outcome {
             Ok(Ok(awaiting)) => self.awaiting = awaiting,
             Ok(Err(e)) => self.error = Some(e),
-            Err(_) => self.error = Some(MasterError::Worker),
+            Err(_) => {
+                let instance = self
+                    .slave
+                    .as_ref()
+                    .map(|s| s.name.clone())
+                    .unwrap_or_default();
+                self.error = Some(MasterError::Worker { instance });
+            }
         }
         if let Some(clock) = clock {
             self.cost = clock.elapsed();

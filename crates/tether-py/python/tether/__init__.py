@@ -605,8 +605,9 @@ def run(
       ``beta``/``gamma`` (baumgarte), ``a``/``b`` (weighted), ``mu`` (explicit),
     - ``order``: degree k of the coupling polynomials (0, 1, 2),
     - ``epsilon``: finite-difference increment of the interface Jacobian,
-    - ``parallel``: perturbed runs on other threads, ``"auto"``, ``"on"``,
-      ``"off"`` (or True/False),
+    - ``parallel``: the runs of a step on worker threads, ``"auto"``,
+      ``"on"``, ``"off"`` (or True/False); ``threads``: how many, the main
+      thread included,
     - ``parameters``: FMU start values, ``{"mass1.m": 2.0}`` (``--set``),
     - ``index``: index level 1, 2 or 3 of baumgarte or weighted (``--index``),
     - ``iterations``, ``iteration_tol``, ``jacobian``: the corrections per
