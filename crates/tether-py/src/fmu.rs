@@ -204,8 +204,12 @@ pub(crate) fn start_object(py: Python<'_>, values: &Values) -> PyResult<Py<PyLis
 /// simulation, [`tether_master::SingleFmu`]): every non-String output at
 /// every step, an array one column per element. Returns `(columns, data,
 /// stats)`; a failure after the first row carries the rows so far.
+/// `fmi_type`: fmpy's `"CoSimulation"` or `"ModelExchange"` (also
+/// `tether simulate`'s `"co-simulation"`, `"model-exchange"`); None:
+/// co-simulation where the FMU has it.
 #[pyfunction]
-#[pyo3(signature = (fmu, start=None, stop=None, step=None, tolerance=None, parameters=None))]
+#[pyo3(signature = (fmu, start=None, stop=None, step=None, tolerance=None, parameters=None, fmi_type=None))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn simulate(
     py: Python<'_>,
     fmu: PathBuf,
@@ -214,7 +218,18 @@ pub(crate) fn simulate(
     step: Option<f64>,
     tolerance: Option<f64>,
     parameters: Option<&Bound<'_, PyDict>>,
+    fmi_type: Option<String>,
 ) -> PyResult<Py<PyAny>> {
+    let interface = match fmi_type.as_deref() {
+        None => None,
+        Some("CoSimulation" | "co-simulation") => Some(false),
+        Some("ModelExchange" | "model-exchange") => Some(true),
+        Some(other) => {
+            return Err(PyValueError::new_err(format!(
+                "fmi_type = {other:?}: give \"CoSimulation\" or \"ModelExchange\""
+            )))
+        }
+    };
     let mut values = BTreeMap::new();
     if let Some(parameters) = parameters {
         for (name, value) in parameters.iter() {
@@ -222,7 +237,8 @@ pub(crate) fn simulate(
         }
     }
     let values: Vec<(String, StartValue)> = values.into_iter().collect();
-    let outcome = py.detach(move || simulate_one(&fmu, start, stop, step, tolerance, &values));
+    let outcome =
+        py.detach(move || simulate_one(&fmu, (start, stop, step, tolerance), &values, interface));
     let (rows, run, warnings) = outcome.map_err(|e| master_failure(&e, None))?;
     match run.end {
         Err(e) => {
@@ -261,20 +277,35 @@ pub(crate) fn simulate_stats(
 }
 
 /// [`SingleFmu`] recording into memory, with Ctrl-C looked for before every
-/// step. An error is one before the first row (no partial result); a failure
-/// after it is in the run, with the rows so far.
+/// step; `model_exchange`: the interface asked for (None: co-simulation where
+/// the FMU has it). An error is one before the first row (no partial
+/// result); a failure after it is in the run, with the rows so far.
 pub(crate) fn simulate_one(
     path: &Path,
-    start: Option<f64>,
-    stop: Option<f64>,
-    step: Option<f64>,
-    tolerance: Option<f64>,
+    (start, stop, step, tolerance): (Option<f64>, Option<f64>, Option<f64>, Option<f64>),
     parameters: &[(String, StartValue)],
+    model_exchange: Option<bool>,
 ) -> Result<(Rows, SingleRun, Vec<String>), MasterError> {
     let fmu = Fmu::open(path)?;
     let md = fmu.model_description();
     let experiment = SingleExperiment::new(md, start, stop, step, tolerance)?;
-    let mut single = SingleFmu::new(&fmu, parameters, experiment)?;
+    let fmi_type = match model_exchange {
+        None => FmiType::default_for(md),
+        Some(false) => {
+            fmu.require_co_simulation()?;
+            FmiType::CoSimulation
+        }
+        Some(true) if md.model_exchange.is_none() => {
+            return Err(MasterError::MissingCapability {
+                instance: path.display().to_string(),
+                model: md.model_name.clone(),
+                capability: "ModelExchange",
+                needed_by: "fmi_type=\"ModelExchange\"".into(),
+            })
+        }
+        Some(true) => FmiType::ModelExchange(Default::default()),
+    };
+    let mut single = SingleFmu::new_as(&fmu, parameters, experiment, fmi_type)?;
     let outputs = SingleOutputs::all(md, single.arrays())?;
     let mut rows = Rows {
         columns: Vec::new(),

@@ -21,8 +21,9 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use tether_fmi::{Causality, FmiStandard, Fmu, Initial, Values, Variability, VariableKind};
 use tether_master::{
-    MasterError, MethodChange, Observer, OverrideError, Overrides, RunStats, Sample, Simulation,
-    SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun, StartValue, SystemSpec,
+    FmiType, MasterError, MethodChange, Observer, OverrideError, Overrides, RunStats, Sample,
+    Simulation, SingleEnd, SingleExperiment, SingleFmu, SingleOutputs, SingleRun, StartValue,
+    SystemSpec,
 };
 
 mod export;

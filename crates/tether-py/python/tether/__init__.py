@@ -575,6 +575,7 @@ def run(
     order: Optional[int] = None,
     epsilon: Optional[float] = None,
     parallel: Union[str, bool, None] = None,
+    threads: Optional[int] = None,
     divergence_factor: Optional[float] = None,
     parameters: Optional[Mapping[str, ParameterValue]] = None,
     progress: Optional[Callable[[int, int], Any]] = None,
@@ -649,7 +650,7 @@ def run(
     output_variables = _one_of("output_variables", output_variables, "output", output)
     kw = _overrides(
         stop=stop, step=step, method=method, beta=beta, gamma=gamma, a=a, b=b, mu=mu,
-        order=order, epsilon=epsilon, parallel=parallel,
+        order=order, epsilon=epsilon, parallel=parallel, threads=threads,
         divergence_factor=divergence_factor, parameters=parameters, index=index,
         iterations=iterations, iteration_tol=iteration_tol, jacobian=jacobian,
         step_rtol=step_rtol, step_atol=step_atol, isolate=isolate, call_timeout=call_timeout,
@@ -882,11 +883,15 @@ def simulate(
     step: Optional[float] = None,
     tolerance: Optional[float] = None,
     parameters: Optional[Mapping[str, ParameterValue]] = None,
+    fmi_type: Optional[str] = None,
 ) -> Result:
     """Run one FMU (FMI 2.0 or 3.0) at a fixed communication step, like
-    ``tether simulate`` (the same simulation) or fmpy's
-    ``simulate_fmu(..., fmi_type="CoSimulation")``: every non-String output at
-    every step, an array one column per element (``y[1]``, ``A[2,3]``).
+    ``tether simulate`` (the same simulation) or fmpy's ``simulate_fmu``:
+    every non-String output at every step, an array one column per element
+    (``y[1]``, ``A[2,3]``). ``fmi_type`` is fmpy's ``"CoSimulation"`` or
+    ``"ModelExchange"`` (default: co-simulation where the FMU has it); with
+    model exchange the built-in integrator (docs/fmi-import.md) takes
+    ``tolerance`` as its relative tolerance.
     ``start``, ``stop``, ``step`` and ``tolerance`` default to the FMU's
     DefaultExperiment (else 0, start + 1, (stop − start)/500); ``parameters``
     are start values by variable name. A NaN or infinite output raises
@@ -901,6 +906,7 @@ def simulate(
             step=step,
             tolerance=tolerance,
             parameters=dict(parameters) if parameters else None,
+            fmi_type=fmi_type,
         )
     except _tether.Failure as f:
         raise _error(f) from None
