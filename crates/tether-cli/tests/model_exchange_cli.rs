@@ -22,6 +22,15 @@ fn os(s: &str) -> &OsStr {
     OsStr::new(s)
 }
 
+/// The command succeeded (else its stderr is the failure).
+fn succeeded(out: &Output) {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// The one line of a failed command's stderr.
 fn error_line(out: &Output) -> String {
     assert!(!out.status.success());
@@ -84,11 +93,7 @@ fn a_model_exchange_only_fmu_runs_as_model_exchange_by_default() {
         os("--out"),
         csv.as_os_str(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("time,x,events"));
@@ -202,11 +207,7 @@ fn the_integrator_settings_are_used() {
         os("--out"),
         csv.as_os_str(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut worst: f64 = 0.0;
     for line in text.lines().skip(1) {
@@ -232,11 +233,7 @@ fn an_fmu_requesting_the_end_ends_the_model_exchange_run() {
         os("--out"),
         csv.as_os_str(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let said = String::from_utf8_lossy(&out.stderr);
     assert!(
         said.contains(
