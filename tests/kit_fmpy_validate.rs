@@ -1,5 +1,8 @@
-//! Every workspace FMU passes `fmpy validate`, and fmpy can simulate the oscillator
-//! (the reference importer accepts what the kit exports).
+//! Every workspace FMU passes `fmpy validate` (the FMI 2.0 and 3.0 builds;
+//! those of oscillator, link, body3d and lti with their model-exchange interface
+//! beside co-simulation), and fmpy can simulate the oscillator (the reference
+//! importer accepts what the kit exports; its model-exchange simulation:
+//! crates/tether-cli/tests/kit_model_exchange.rs).
 
 use std::ffi::OsStr;
 use std::fs;

@@ -211,6 +211,11 @@ pub struct Declaration {
     pub default_experiment: DefaultExperiment,
     /// The optional capabilities declared (default [`Capabilities::ALL`]).
     pub capabilities: Capabilities,
+    /// Whether the FMU also offers model exchange (`<ModelExchange>` beside
+    /// `<CoSimulation>`, in FMI 2.0 and 3.0): the importer integrates the
+    /// model's [`derivatives`](crate::Model::derivatives) itself. Default
+    /// `false`: co-simulation only.
+    pub model_exchange: bool,
 }
 
 impl Declaration {
@@ -232,6 +237,7 @@ impl Declaration {
             step_size: 1e-3,
         },
         capabilities: Capabilities::ALL,
+        model_exchange: false,
     };
 }
 

@@ -85,6 +85,10 @@ pub struct Instance<M: Model> {
     /// Made by `fmi3InstantiateCoSimulation`: log messages name the fmi3 functions,
     /// and `time` is a variable (value reference after the declared ones).
     pub fmi3: bool,
+    /// Made for model exchange (`fmi2Instantiate` with fmi2ModelExchange,
+    /// `fmi3InstantiateModelExchange`): the importer sets time and states
+    /// ([`crate::me`]); `fmi2DoStep` is refused.
+    pub me: bool,
     /// FMI 3.0 intermediate update mode (during the importer's callback): which
     /// of [`samples`](Self::samples) takes the input values set there.
     pub(crate) intermediate: Option<usize>,
@@ -117,6 +121,7 @@ impl<M: Model> Instance<M> {
             scratch: Scratch::default(),
             terminated: false,
             fmi3: false,
+            me: false,
             intermediate: None,
             samples: Default::default(),
         }
@@ -408,6 +413,9 @@ impl<M: Model> Instance<M> {
     /// unchanged (no accumulation of `t += h`), else `t_c + h` starts a new count.
     #[inline(always)]
     pub fn do_step(&mut self, t_c: f64, h: f64) -> Outcome {
+        if self.me {
+            return Err(Failure::usage("a model-exchange instance does not step"));
+        }
         let t = self.data.time;
         if !(h > 0.0 && h.is_finite() && t_c.is_finite()) {
             return Err(Failure::usage(format!(

@@ -17,6 +17,7 @@ pub mod instance;
 mod integrate;
 pub mod machine;
 pub mod marker;
+mod me;
 pub mod model;
 pub mod snapshot;
 pub mod xml;
@@ -31,8 +32,10 @@ pub use model::{Model, ParameterReset};
 
 /// Exports `$model` (a type implementing [`Model`]) as an FMI 2.0 and an FMI 3.0
 /// co-simulation FMU from one library: generates every `#[no_mangle] extern "C"`
-/// fmi2 function of the co-simulation interface, every fmi3 function of the common
-/// and co-simulation interfaces, and `tether_fmu_kit_model_description` and
+/// fmi2 function of the co-simulation and model-exchange interfaces, every fmi3
+/// function of the common, co-simulation and model-exchange interfaces (model
+/// exchange instantiates only for a model whose declaration sets
+/// [`model_exchange`](declaration::Declaration::model_exchange)), and `tether_fmu_kit_model_description` and
 /// `tether_fmu_kit_model_description_fmi3` (the packager puts one of the two in the
 /// archive). Use once per cdylib crate.
 #[macro_export]
@@ -316,6 +319,71 @@ macro_rules! export_fmu {
                 // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
                 unsafe { k::get_string_status::<M>(c, kind, v) }
             }
+
+            // Model exchange: refused unless the instance was made for it
+            // (fmi2Instantiate with fmi2ModelExchange, for a model that declares it).
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2SetTime(c: C, t: f64) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::set_time::<M>(c, t) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2SetContinuousStates(c: C, x: *const f64, n: usize) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::set_continuous_states::<M>(c, x, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetContinuousStates(c: C, x: *mut f64, n: usize) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_continuous_states::<M>(c, x, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetDerivatives(c: C, dx: *mut f64, n: usize) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_derivatives::<M>(c, dx, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetEventIndicators(c: C, z: *mut f64, n: usize) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_event_indicators::<M>(c, z, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetNominalsOfContinuousStates(
+                c: C,
+                v: *mut f64,
+                n: usize,
+            ) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_nominals::<M>(c, v, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2EnterEventMode(c: C) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::change_mode::<M>(c, "fmi2EnterEventMode") }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2NewDiscreteStates(
+                c: C,
+                info: *mut k::me::Fmi2EventInfo,
+            ) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::new_discrete_states::<M>(c, info) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2EnterContinuousTimeMode(c: C) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::change_mode::<M>(c, "fmi2EnterContinuousTimeMode") }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2CompletedIntegratorStep(
+                c: C,
+                _no_set_fmu_state_prior: B,
+                enter_event_mode: *mut B,
+                terminate: *mut B,
+            ) -> St {
+                // SAFETY: the FMI 2.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::completed_integrator_step::<M, B>(c, enter_event_mode, terminate) }
+            }
         }
 
         #[allow(non_snake_case, clippy::missing_safety_doc, clippy::too_many_arguments)]
@@ -573,22 +641,125 @@ macro_rules! export_fmu {
                 unsafe { k3::enter_step_mode::<M>(c) }
             }
 
-            $crate::fmi3_unsupported! { k3::unsupported::<M>; }
+            $crate::fmi3_unsupported_but_model_exchange! { k3::unsupported::<M>; }
 
-            // Model exchange and scheduled execution are not offered (the model
-            // description has only <CoSimulation>): no instance.
+            // Model exchange: refused unless the instance was made for it
+            // (fmi3InstantiateModelExchange, for a model that declares it).
             #[unsafe(no_mangle)]
-            pub extern "C" fn fmi3InstantiateModelExchange(
-                _name: Str,
-                _token: Str,
+            pub unsafe extern "C" fn fmi3InstantiateModelExchange(
+                name: Str,
+                token: Str,
                 _resources: Str,
                 _visible: B,
-                _logging_on: B,
-                _environment: *mut c_void,
-                _log_message: k3::Fmi3LogMessageCallback,
+                logging_on: B,
+                environment: *mut c_void,
+                log_message: k3::Fmi3LogMessageCallback,
             ) -> C {
-                std::ptr::null_mut()
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe {
+                    k3::instantiate_model_exchange::<M>(
+                        name,
+                        token,
+                        logging_on,
+                        environment,
+                        log_message,
+                    )
+                }
             }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SetTime(c: C, t: f64) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::set_time::<M>(c, t) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3SetContinuousStates(c: C, x: *const f64, n: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::set_continuous_states::<M>(c, x, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetContinuousStates(c: C, x: *mut f64, n: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_continuous_states::<M>(c, x, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetContinuousStateDerivatives(
+                c: C,
+                dx: *mut f64,
+                n: usize,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_derivatives::<M>(c, dx, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetEventIndicators(c: C, z: *mut f64, n: usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_event_indicators::<M>(c, z, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetNominalsOfContinuousStates(
+                c: C,
+                v: *mut f64,
+                n: usize,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_nominals::<M>(c, v, n) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetNumberOfContinuousStates(c: C, n: *mut usize) -> St {
+                let states = <M as $crate::Model>::DECLARATION.states.len();
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_number::<M>(c, "fmi3GetNumberOfContinuousStates", n, states) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3GetNumberOfEventIndicators(c: C, n: *mut usize) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::get_number::<M>(c, "fmi3GetNumberOfEventIndicators", n, 0) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3EnterEventMode(c: C) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::change_mode::<M>(c, "fmi3EnterEventMode") }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3UpdateDiscreteStates(
+                c: C,
+                needs_update: *mut B,
+                terminate: *mut B,
+                nominals_changed: *mut B,
+                values_changed: *mut B,
+                next_event_time_defined: *mut B,
+                next_event_time: *mut f64,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe {
+                    k::me::update_discrete_states::<M>(
+                        c,
+                        needs_update,
+                        terminate,
+                        nominals_changed,
+                        values_changed,
+                        next_event_time_defined,
+                        next_event_time,
+                    )
+                }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3EnterContinuousTimeMode(c: C) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::change_mode::<M>(c, "fmi3EnterContinuousTimeMode") }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi3CompletedIntegratorStep(
+                c: C,
+                _no_set_fmu_state_prior: B,
+                enter_event_mode: *mut B,
+                terminate: *mut B,
+            ) -> St {
+                // SAFETY: the FMI 3.0 contract; the kit checks every pointer for null.
+                unsafe { k::me::completed_integrator_step::<M, B>(c, enter_event_mode, terminate) }
+            }
+
+            // Scheduled execution is not offered: no instance.
             #[unsafe(no_mangle)]
             pub extern "C" fn fmi3InstantiateScheduledExecution(
                 _name: Str,
@@ -618,14 +789,37 @@ macro_rules! export_fmu {
 #[macro_export]
 macro_rules! fmi3_unsupported {
     ($refuse:path; $($name:ident($($arg:ty),*);)*) => {
-        $crate::__fmi3_refused! {
+        $crate::fmi3_unsupported_but_model_exchange! {
             $refuse;
             $($name($($arg),*);)*
             fmi3EnterEventMode();
+            fmi3UpdateDiscreteStates(*mut B, *mut B, *mut B, *mut B, *mut B, *mut f64);
+            fmi3EnterContinuousTimeMode();
+            fmi3CompletedIntegratorStep(B, *mut B, *mut B);
+            fmi3SetTime(f64);
+            fmi3SetContinuousStates(*const f64, usize);
+            fmi3GetContinuousStateDerivatives(*mut f64, usize);
+            fmi3GetEventIndicators(*mut f64, usize);
+            fmi3GetContinuousStates(*mut f64, usize);
+            fmi3GetNominalsOfContinuousStates(*mut f64, usize);
+            fmi3GetNumberOfEventIndicators(*mut usize);
+            fmi3GetNumberOfContinuousStates(*mut usize);
+        }
+    };
+}
+
+/// [`fmi3_unsupported!`] without the model-exchange functions (fmi3SetTime,
+/// fmi3EnterEventMode, …), which the kit's [`export_fmu!`] implements.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! fmi3_unsupported_but_model_exchange {
+    ($refuse:path; $($name:ident($($arg:ty),*);)*) => {
+        $crate::__fmi3_refused! {
+            $refuse;
+            $($name($($arg),*);)*
             fmi3EnterConfigurationMode();
             fmi3ExitConfigurationMode();
             fmi3EvaluateDiscreteStates();
-            fmi3UpdateDiscreteStates(*mut B, *mut B, *mut B, *mut B, *mut B, *mut f64);
             fmi3GetFloat32(Vr, usize, *mut f32, usize);
             fmi3GetInt8(Vr, usize, *mut i8, usize);
             fmi3GetUInt8(Vr, usize, *mut u8, usize);
@@ -661,16 +855,6 @@ macro_rules! fmi3_unsupported {
             fmi3SetShiftDecimal(Vr, usize, *const f64);
             fmi3SetShiftFraction(Vr, usize, *const u64, *const u64);
             fmi3ActivateModelPartition(u32, f64);
-            fmi3EnterContinuousTimeMode();
-            fmi3CompletedIntegratorStep(B, *mut B, *mut B);
-            fmi3SetTime(f64);
-            fmi3SetContinuousStates(*const f64, usize);
-            fmi3GetContinuousStateDerivatives(*mut f64, usize);
-            fmi3GetEventIndicators(*mut f64, usize);
-            fmi3GetContinuousStates(*mut f64, usize);
-            fmi3GetNominalsOfContinuousStates(*mut f64, usize);
-            fmi3GetNumberOfEventIndicators(*mut usize);
-            fmi3GetNumberOfContinuousStates(*mut usize);
         }
     };
 }

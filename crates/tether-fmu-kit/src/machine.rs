@@ -74,6 +74,17 @@ pub enum Call {
     GetStringStatus,
     /// An FMI 3.0 function the kit does not support (named): refused with an error.
     Unsupported(&'static str),
+    /// A model-exchange function (named) that reads the instance:
+    /// fmi2GetDerivatives, fmi2GetContinuousStates, … Model exchange has no
+    /// states of its own in the table: its event and continuous-time modes are
+    /// both `StepComplete` (the kit's models have no events).
+    MeGet(&'static str),
+    /// A model-exchange function (named) that sets the time or the states or
+    /// changes the mode: only after initialization (`StepComplete`).
+    MeSet(&'static str),
+    /// A model-exchange function (named) that answers from the declaration
+    /// (fmi3GetNumberOfContinuousStates, …): in any state but Fatal.
+    MeInfo(&'static str),
 }
 
 use MachineState::*;
@@ -137,7 +148,10 @@ impl Call {
             Call::GetIntegerStatus => "fmi2GetIntegerStatus",
             Call::GetBooleanStatus => "fmi2GetBooleanStatus",
             Call::GetStringStatus => "fmi2GetStringStatus",
-            Call::Unsupported(name) => name,
+            Call::Unsupported(name)
+            | Call::MeGet(name)
+            | Call::MeSet(name)
+            | Call::MeInfo(name) => name,
         }
     }
 
@@ -176,7 +190,10 @@ impl Call {
             | Call::GetIntegerStatus
             | Call::GetBooleanStatus
             | Call::GetStringStatus => self.name(),
-            Call::Unsupported(name) => name,
+            Call::Unsupported(name)
+            | Call::MeGet(name)
+            | Call::MeSet(name)
+            | Call::MeInfo(name) => name,
         }
     }
 
@@ -209,7 +226,9 @@ impl Call {
             | Call::GetIntegerStatus
             | Call::GetBooleanStatus
             | Call::GetStringStatus => STATUS,
-            Call::Unsupported(_) => NOT_FATAL,
+            Call::Unsupported(_) | Call::MeInfo(_) => NOT_FATAL,
+            Call::MeGet(_) => GETTABLE,
+            Call::MeSet(_) => StepComplete.bit(),
         }
     }
 

@@ -148,6 +148,15 @@ fn render(d: &Declaration, guid: &str) -> String {
         ),
         env!("CARGO_PKG_VERSION"),
     );
+    if d.model_exchange {
+        let _ = writeln!(
+            x,
+            r#"  <ModelExchange modelIdentifier="{}" needsExecutionTool="false" completedIntegratorStepNotNeeded="true" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="false" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
+            escape(d.model_identifier),
+            d.capabilities.can_get_and_set_fmu_state,
+            d.capabilities.can_get_and_set_fmu_state,
+        );
+    }
     let _ = writeln!(
         x,
         r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="{}" maxOutputDerivativeOrder="{}" canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="false" canGetAndSetFMUstate="{}" canSerializeFMUstate="{}" providesDirectionalDerivative="false"/>"#,
@@ -337,6 +346,15 @@ fn render3(d: &Declaration, token: &str) -> String {
         ),
         env!("CARGO_PKG_VERSION"),
     );
+    if d.model_exchange {
+        let _ = writeln!(
+            x,
+            r#"  <ModelExchange modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" needsCompletedIntegratorStep="false" providesEvaluateDiscreteStates="false"/>"#,
+            escape(d.model_identifier),
+            d.capabilities.can_get_and_set_fmu_state,
+            d.capabilities.can_get_and_set_fmu_state,
+        );
+    }
     let _ = writeln!(
         x,
         r#"  <CoSimulation modelIdentifier="{}" needsExecutionTool="false" canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="{}" canSerializeFMUState="{}" providesDirectionalDerivatives="false" providesAdjointDerivatives="false" providesPerElementDependencies="false" canHandleVariableCommunicationStepSize="true" maxOutputDerivativeOrder="{}" providesIntermediateUpdate="{}" canReturnEarlyAfterIntermediateUpdate="false" hasEventMode="false" providesEvaluateDiscreteStates="false"/>"#,
@@ -461,12 +479,31 @@ fn render3(d: &Declaration, token: &str) -> String {
             dependencies(d, y.depends_on, vr_of)
         );
     }
-    for i in 0..d.outputs.len() {
-        let _ = writeln!(
-            x,
-            r#"    <InitialUnknown valueReference="{}"/>"#,
-            vr_of(Slot::Output(i))
-        );
+    // Model exchange: the state derivatives, which depend on everything (no
+    // dependencies attribute), and the states and derivatives are initial
+    // unknowns (all `calculated`). Not written for co-simulation only, so that
+    // its model description (and instantiation token) stays as it was.
+    if d.model_exchange {
+        for i in 0..d.states.len() {
+            let _ = writeln!(
+                x,
+                r#"    <ContinuousStateDerivative valueReference="{}"/>"#,
+                vr_of(Slot::Derivative(i))
+            );
+        }
+    }
+    let mut initial: Vec<usize> = (0..d.outputs.len())
+        .map(Slot::Output)
+        .chain(
+            (0..d.states.len())
+                .filter(|_| d.model_exchange)
+                .flat_map(|i| [Slot::State(i), Slot::Derivative(i)]),
+        )
+        .map(vr_of)
+        .collect();
+    initial.sort_unstable();
+    for vr in initial {
+        let _ = writeln!(x, r#"    <InitialUnknown valueReference="{vr}"/>"#);
     }
     let _ = writeln!(x, "  </ModelStructure>");
     let _ = writeln!(x, "</fmiModelDescription>");

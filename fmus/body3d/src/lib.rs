@@ -396,6 +396,7 @@ impl Model for Body3d {
             stop_time: 1.0,
             step_size: 1e-3,
         },
+        model_exchange: true,
         ..Declaration::EMPTY
     };
 

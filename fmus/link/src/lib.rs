@@ -311,6 +311,7 @@ impl Model for Link {
             stop_time: 2.0,
             step_size: 1e-3,
         },
+        model_exchange: true,
         ..Declaration::EMPTY
     };
 

@@ -77,6 +77,7 @@ impl Model for Lti {
             step_size: 1e-3,
         },
         capabilities: Capabilities::ALL,
+        model_exchange: true,
         ..Declaration::EMPTY
     };
 

@@ -113,6 +113,63 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
     log_message: Fmi3LogMessageCallback,
     intermediate_update: Fmi3IntermediateUpdateCallback,
 ) -> Fmi3Instance {
+    // SAFETY: forwarded contract.
+    unsafe {
+        instantiate::<M>(
+            instance_name,
+            token,
+            logging_on,
+            environment,
+            log_message,
+            intermediate_update,
+            false,
+        )
+    }
+}
+
+/// fmi3InstantiateModelExchange: as [`instantiate_co_simulation`], for a model
+/// that declares model exchange ([`crate::declaration::Declaration::model_exchange`]);
+/// null (and an error logged) for one that does not.
+///
+/// # Safety
+/// Non-null string arguments must be NUL-terminated.
+pub unsafe fn instantiate_model_exchange<M: Model>(
+    instance_name: Fmi3String,
+    token: Fmi3String,
+    logging_on: Fmi3Boolean,
+    environment: *mut c_void,
+    log_message: Fmi3LogMessageCallback,
+) -> Fmi3Instance {
+    // SAFETY: forwarded contract.
+    unsafe {
+        instantiate::<M>(
+            instance_name,
+            token,
+            logging_on,
+            environment,
+            log_message,
+            None,
+            true,
+        )
+    }
+}
+
+/// # Safety
+/// Non-null string arguments must be NUL-terminated.
+unsafe fn instantiate<M: Model>(
+    instance_name: Fmi3String,
+    token: Fmi3String,
+    logging_on: Fmi3Boolean,
+    environment: *mut c_void,
+    log_message: Fmi3LogMessageCallback,
+    intermediate_update: Fmi3IntermediateUpdateCallback,
+    me: bool,
+) -> Fmi3Instance {
+    let function = if me {
+        "fmi3InstantiateModelExchange"
+    } else {
+        "fmi3InstantiateCoSimulation"
+    };
     let result = catch_unwind(|| {
         if instance_name.is_null() {
             return ptr::null_mut();
@@ -121,12 +178,20 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
         let name = unsafe { CStr::from_ptr(instance_name) }
             .to_string_lossy()
             .into_owned();
-        let instance = Instance::<M>::new(
+        let mut instance = Instance::<M>::new(
             &name,
             make_logger(log_message, environment),
             logging_on == TRUE,
         )
         .fmi3();
+        instance.me = me;
+        if me && !M::DECLARATION.model_exchange {
+            instance.log(
+                Status::Error,
+                &format!("{function}: this FMU supports co-simulation only"),
+            );
+            return ptr::null_mut();
+        }
         let expected = xml::model_guid::<M>();
         // SAFETY: non-null, and the caller guarantees a NUL-terminated string.
         let token = (!token.is_null()).then(|| unsafe { CStr::from_ptr(token) }.to_string_lossy());
@@ -134,7 +199,7 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             instance.log(
                 Status::Error,
                 &format!(
-                    "fmi3InstantiateCoSimulation: instantiationToken {token:?} does not match the model's {expected}"
+                    "{function}: instantiationToken {token:?} does not match the model's {expected}"
                 ),
             );
             return ptr::null_mut();

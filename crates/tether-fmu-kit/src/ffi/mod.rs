@@ -22,6 +22,7 @@ pub type Fmi2ValueReference = c_uint;
 pub type Fmi2String = *const c_char;
 
 const FMI2_TRUE: Fmi2Boolean = 1;
+const FMI2_MODEL_EXCHANGE: c_int = 0;
 const FMI2_COSIMULATION: c_int = 1;
 
 /// fmi2CallbackLogger: a C variadic function; the kit always passes "%s" and one
@@ -202,6 +203,17 @@ unsafe fn with_instance<M: Model>(
     }
 }
 
+/// Whether the instance behind `c` was made by the FMI 3.0 layer.
+///
+/// # Safety
+/// `c` must be a (non-null) pointer returned by this library's instantiate
+/// functions for the same `M` and not yet freed.
+unsafe fn is_fmi3<M: Model>(c: Fmi2Component) -> bool {
+    // SAFETY: per this function's contract, c is a live Box<Component<M>>; only a
+    // flag is read.
+    unsafe { &*c.cast::<Component<M>>() }.instance.fmi3
+}
+
 fn c_string(text: &str) -> CString {
     CString::new(text.replace('\0', " ")).unwrap_or_default()
 }
@@ -315,11 +327,16 @@ pub unsafe fn instantiate<M: Model>(
                     .into_owned(),
             )
         };
-        let problem = if fmu_type != FMI2_COSIMULATION {
-            Some(
+        let me = M::DECLARATION.model_exchange && fmu_type == FMI2_MODEL_EXCHANGE;
+        let mut instance = instance;
+        instance.me = me;
+        let problem = if fmu_type != FMI2_COSIMULATION && !me {
+            Some(if M::DECLARATION.model_exchange {
+                format!("fmuType {fmu_type} is neither fmi2ModelExchange nor fmi2CoSimulation")
+            } else {
                 "this FMU supports co-simulation only (fmuType must be fmi2CoSimulation)"
-                    .to_string(),
-            )
+                    .to_string()
+            })
         } else if guid.as_deref() != Some(expected) {
             Some(format!(
                 "GUID {guid:?} does not match the model's GUID {expected}"
@@ -451,6 +468,7 @@ unsafe fn set_values<M: Model, T>(
 }
 
 pub mod fmi3;
+pub mod me;
 mod state;
 mod values;
 

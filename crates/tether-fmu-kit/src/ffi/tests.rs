@@ -271,3 +271,151 @@ fn the_model_reaches_the_environments_logger_during_a_call() {
         "the model does not declare LOGS"
     );
 }
+
+/// The test model with model exchange declared (value references as `Decay`'s:
+/// k 0, x0 1, tolerance 2, u 3, y 4, z 5, x 6, der(x) 7).
+struct DecayMe(Decay);
+
+impl Model for DecayMe {
+    const DECLARATION: crate::declaration::Declaration = crate::declaration::Declaration {
+        model_exchange: true,
+        ..Decay::DECLARATION
+    };
+    fn new(p: &crate::declaration::Parameters) -> Result<Self, String> {
+        Decay::new(p).map(DecayMe)
+    }
+    fn initial_states(&self, x: &mut [f64]) {
+        self.0.initial_states(x);
+    }
+    fn derivatives(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        self.0.derivatives(t, x, u, dx);
+    }
+    fn outputs(&self, t: f64, x: &[f64], u: &[f64], y: &mut [f64]) {
+        self.0.outputs(t, x, u, y);
+    }
+    fn terminate(&self, _t: f64, x: &[f64]) -> bool {
+        x[0] > 100.0
+    }
+}
+
+fn me_instance(fmu_type: c_int) -> Fmi2Component {
+    let name = CString::new("decay").unwrap();
+    let guid = CString::new(xml::guid(&DecayMe::DECLARATION)).unwrap();
+    let functions = callbacks();
+    // SAFETY: valid NUL-terminated strings and a valid callback struct.
+    unsafe { instantiate::<DecayMe>(name.as_ptr(), fmu_type, guid.as_ptr(), &functions, 0) }
+}
+
+#[test]
+fn model_exchange_evaluates_the_model_at_the_importers_time_and_states() {
+    type E = DecayMe;
+    let c = me_instance(0);
+    assert!(!c.is_null());
+    let (mut x, mut dx, mut y) = ([0.0], [0.0], [0.0; 2]);
+    let (mut enter, mut end) = (7, 7);
+    let mut info = me::Fmi2EventInfo {
+        new_discrete_states_needed: 7,
+        terminate_simulation: 7,
+        nominals_of_continuous_states_changed: 7,
+        values_of_continuous_states_changed: 7,
+        next_event_time_defined: 7,
+        next_event_time: 7.0,
+    };
+    // SAFETY: c is a live instance of E; every array holds the count given.
+    unsafe {
+        assert_eq!(me::set_time::<E>(c, 0.5), ERROR, "before initialization");
+        assert_eq!(setup_experiment::<E>(c, 0, 0.0, 0.0, 0, 0.0), OK);
+        assert_eq!(enter_initialization_mode::<E>(c), OK);
+        assert_eq!(me::get_continuous_states::<E>(c, x.as_mut_ptr(), 1), OK);
+        assert_eq!(x, [1.0], "x0");
+        assert_eq!(exit_initialization_mode::<E>(c), OK);
+        assert_eq!(me::new_discrete_states::<E>(c, &mut info), OK);
+        assert_eq!(
+            (info.new_discrete_states_needed, info.terminate_simulation),
+            (0, 0)
+        );
+        assert_eq!(info.next_event_time_defined, 0);
+        assert_eq!(me::change_mode::<E>(c, "fmi2EnterContinuousTimeMode"), OK);
+        assert_eq!(set_real::<E>(c, [3].as_ptr(), 1, [2.0].as_ptr()), OK);
+        assert_eq!(me::set_time::<E>(c, 0.5), OK);
+        assert_eq!(me::set_continuous_states::<E>(c, [3.0].as_ptr(), 1), OK);
+        assert_eq!(me::get_derivatives::<E>(c, dx.as_mut_ptr(), 1), OK);
+        assert_eq!(dx, [2.0 - 3.0], "u - k x");
+        assert_eq!(get_real::<E>(c, [4, 5].as_ptr(), 2, y.as_mut_ptr()), OK);
+        assert_eq!(y, [3.0 + 2.0, 3.0], "y = x + u, z = x");
+        assert_eq!(get_real::<E>(c, [7].as_ptr(), 1, dx.as_mut_ptr()), OK);
+        assert_eq!(dx, [-1.0], "der(x) through fmi2GetReal");
+        assert_eq!(me::get_continuous_states::<E>(c, x.as_mut_ptr(), 1), OK);
+        assert_eq!(x, [3.0]);
+        assert_eq!(me::get_nominals::<E>(c, x.as_mut_ptr(), 1), OK);
+        assert_eq!(x, [1.0]);
+        assert_eq!(
+            me::completed_integrator_step::<E, Fmi2Boolean>(c, &mut enter, &mut end),
+            OK
+        );
+        assert_eq!((enter, end), (0, 0));
+        assert_eq!(me::get_event_indicators::<E>(c, ptr::null_mut(), 0), OK);
+        assert_eq!(me::get_event_indicators::<E>(c, x.as_mut_ptr(), 1), ERROR);
+        assert_eq!(me::get_derivatives::<E>(c, dx.as_mut_ptr(), 2), ERROR);
+        assert_eq!(me::set_continuous_states::<E>(c, ptr::null(), 1), ERROR);
+        assert_eq!(do_step::<E>(c, 0.5, 0.1, 0), ERROR, "no steps in ME");
+        // The model asks to end the simulation above x = 100.
+        assert_eq!(me::set_continuous_states::<E>(c, [101.0].as_ptr(), 1), OK);
+        assert_eq!(
+            me::completed_integrator_step::<E, Fmi2Boolean>(c, &mut enter, &mut end),
+            OK
+        );
+        assert_eq!((enter, end), (0, 1));
+        assert_eq!(terminate::<E>(c), OK);
+        free_instance::<E>(c);
+    }
+}
+
+#[test]
+fn model_exchange_needs_the_declaration_and_a_model_exchange_instance() {
+    let name = CString::new("decay").unwrap();
+    let guid = CString::new(xml::guid(&D::DECLARATION)).unwrap();
+    assert!(me_instance(2).is_null(), "neither ME nor CS");
+    let c = me_instance(1);
+    assert!(!c.is_null());
+    // SAFETY: c is a live co-simulation instance of DecayMe; the strings are valid.
+    unsafe {
+        assert_eq!(setup_experiment::<DecayMe>(c, 0, 0.0, 0.0, 0, 0.0), OK);
+        assert_eq!(enter_initialization_mode::<DecayMe>(c), OK);
+        assert_eq!(exit_initialization_mode::<DecayMe>(c), OK);
+        assert_eq!(me::set_time::<DecayMe>(c, 0.5), ERROR, "CS instance");
+        assert_eq!(do_step::<DecayMe>(c, 0.0, 0.1, 0), OK);
+        free_instance::<DecayMe>(c);
+        let none = fmi3::instantiate_model_exchange::<D>(
+            name.as_ptr(),
+            guid.as_ptr(),
+            0,
+            ptr::null_mut(),
+            None,
+        );
+        assert!(none.is_null(), "co-simulation only");
+        let me_guid = CString::new(xml::guid(&DecayMe::DECLARATION)).unwrap();
+        let c3 = fmi3::instantiate_model_exchange::<DecayMe>(
+            name.as_ptr(),
+            me_guid.as_ptr(),
+            0,
+            ptr::null_mut(),
+            None,
+        );
+        assert!(!c3.is_null());
+        let mut n = 9;
+        assert_eq!(me::get_number::<DecayMe>(c3, "n", &mut n, 1), OK);
+        assert_eq!(n, 1);
+        free_instance::<DecayMe>(c3);
+    }
+    let cs2 = xml::model_description(&D::DECLARATION).unwrap();
+    let cs3 = xml::model_description_fmi3(&D::DECLARATION).unwrap();
+    let me2 = xml::model_description(&DecayMe::DECLARATION).unwrap();
+    let me3 = xml::model_description_fmi3(&DecayMe::DECLARATION).unwrap();
+    assert!(!cs2.contains("<ModelExchange") && !cs3.contains("<ModelExchange"));
+    assert!(!cs3.contains("ContinuousStateDerivative"));
+    assert!(me2.contains(r#"<ModelExchange modelIdentifier="decay""#));
+    assert!(me2.contains(r#"completedIntegratorStepNotNeeded="true""#));
+    assert!(me3.contains(r#"needsCompletedIntegratorStep="false""#));
+    assert!(me3.contains(r#"<ContinuousStateDerivative valueReference="7"/>"#));
+}

@@ -219,6 +219,7 @@ impl Model for Oscillator {
         states: &declare::STATES,
         max_output_derivative_order: 2,
         default_experiment: declare::DEFAULT_EXPERIMENT,
+        model_exchange: true,
         ..Declaration::EMPTY
     };
 
