@@ -30,6 +30,9 @@
 //! `CI=true TETHER_PYTHON=/tmp/ci-venv/bin/python cargo test -p tether-cli --test fmpy_model_exchange -- --nocapture`
 //! to see the figures.
 
+mod common;
+
+use common::read_csv;
 use std::ffi::OsStr;
 use std::path::Path;
 use std::process::Command;
@@ -56,22 +59,6 @@ const MODELS: &[(&str, &str, f64, f64, f64, f64)] = &[
     ("fmi3", "VanDerPol", 20.0, 0.01, 1.5e-7, 0.0),
     ("fmi3", "StateSpace", 10.0, 0.02, 1e-8, 0.0),
 ];
-
-fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::to_string)
-        .collect();
-    let rows = lines
-        .filter(|l| !l.starts_with('#'))
-        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
-        .collect();
-    (header, rows)
-}
 
 /// The times fmpy recorded twice: its events.
 fn fmpy_events(rows: &[Vec<f64>]) -> Vec<f64> {

@@ -25,6 +25,9 @@
 //! to see the figures. Without fmpy the fmpy comparison is skipped (with the
 //! reason printed) unless `CI` is set: then it fails.
 
+mod common;
+
+use common::read_csv;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -42,30 +45,6 @@ const MODELS: &[(&str, &str, &str, f64, f64)] = &[
 /// compared absolutely, to [`ZERO_COLUMN_BOUND`].
 const ZERO_COLUMN: f64 = 1e-6;
 const ZERO_COLUMN_BOUND: f64 = 1e-8;
-
-fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let header = fields(lines.next().unwrap());
-    let rows = lines
-        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
-        .collect();
-    (header, rows)
-}
-
-/// The fields of a CSV header line: names with commas (`"A.R[1,1]"`) are quoted.
-fn fields(line: &str) -> Vec<String> {
-    let mut out = vec![String::new()];
-    let mut quoted = false;
-    for c in line.chars() {
-        match c {
-            '"' => quoted = !quoted,
-            ',' if !quoted => out.push(String::new()),
-            c => out.last_mut().unwrap().push(c),
-        }
-    }
-    out
-}
 
 fn tether(fmu: &Path, out: &Path, stop: &str, step: &str, extra: &[&str]) {
     let status = Command::new(env!("CARGO_BIN_EXE_tether"))

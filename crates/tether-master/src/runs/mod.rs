@@ -144,7 +144,7 @@ pub(crate) fn sent_apart(slave: &Slave, task: Task) -> bool {
 }
 
 /// Keep the failure of the instance first in file order.
-pub(crate) fn keep_first(failure: &mut Option<(usize, MasterError)>, s: usize, e: MasterError) {
+fn keep_first(failure: &mut Option<(usize, MasterError)>, s: usize, e: MasterError) {
     if failure.as_ref().is_none_or(|&(first, _)| s < first) {
         *failure = Some((s, e));
     }
