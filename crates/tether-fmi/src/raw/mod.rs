@@ -8,6 +8,37 @@
 
 #![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
 
+/// A co-simulation function of a function table (FMI 2.0 and 3.0 alike):
+/// resolved from `lib` by its name, required when `required` (the FMU
+/// declares co-simulation); otherwise a missing one is a function that
+/// returns `absent`, never called (co-simulation instances of such an FMU are
+/// refused before they are made).
+macro_rules! co_simulation_symbol {
+    ($lib:ident, $path:ident, $required:ident, $name:ident, ($($arg:ty),*) -> $ret:ty, $absent:expr) => {{
+        // SAFETY: the symbol is looked up by its standard name and given the
+        // signature the standard's header declares for that name (an FMU that
+        // exports another violates the standard, which no importer can
+        // detect); the pointer is only used while `lib` stays loaded (the
+        // `Library` owning it is held in an `Arc` by every instance).
+        let symbol = unsafe { $lib.get::<unsafe extern "C" fn($($arg),*) -> $ret>(stringify!($name)) };
+        match symbol {
+            Ok(symbol) => *symbol,
+            Err(_) if $required => {
+                return Err($crate::error::Error::MissingSymbol {
+                    library: $path.to_owned(),
+                    symbol: stringify!($name),
+                })
+            }
+            Err(_) => {
+                unsafe extern "C" fn absent($(_: $arg),*) -> $ret {
+                    $absent
+                }
+                absent
+            }
+        }
+    }};
+}
+
 pub mod fmi3;
 mod functions;
 mod me;

@@ -62,27 +62,9 @@ macro_rules! fmi3_functions {
                         },
                     )*
                     $(
-                        $cs: {
-                            // SAFETY: as above.
-                            let symbol = unsafe {
-                                lib.get::<unsafe extern "C" fn($($arg),*) -> $ret>(stringify!($cs))
-                            };
-                            match symbol {
-                                Ok(symbol) => *symbol,
-                                Err(_) if co_simulation => {
-                                    return Err(Error::MissingSymbol {
-                                        library: path.to_owned(),
-                                        symbol: stringify!($cs),
-                                    })
-                                }
-                                Err(_) => {
-                                    unsafe extern "C" fn absent($(_: $arg),*) -> $ret {
-                                        $absent
-                                    }
-                                    absent
-                                }
-                            }
-                        },
+                        $cs: co_simulation_symbol!(
+                            lib, path, co_simulation, $cs, ($($arg),*) -> $ret, $absent
+                        ),
                     )*
                 })
             }
