@@ -315,3 +315,54 @@ fn sparse_macro_steps_do_not_allocate() {
     }
     assert!(failures.is_empty(), "allocations per run: {failures:?}");
 }
+
+/// A model-exchange instance (rk45, the integrator's buffers kept by the
+/// instance) steps and rolls back without allocating: the kit's oscillator,
+/// and the Reference FMU BouncingBall through its state events (located by
+/// bisection) and event iterations.
+#[test]
+fn model_exchange_steps_do_not_allocate() {
+    use tether_fmi::{Fmu, FmuInstance, Integrator, MeInstance, Method};
+    let mut fmus = vec![(
+        tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU"),
+        "oscillator",
+    )];
+    if let Some(ball) = tether_fmu_build::fixture_fmu("reference-fmus/fmi2/BouncingBall.fmu") {
+        fmus.push((ball, "BouncingBall"));
+    }
+    for (path, name) in fmus {
+        let fmu = Fmu::open(&path).expect("open");
+        let integrator = Integrator {
+            method: Method::Rk45,
+            rtol: Some(1e-10),
+            ..Integrator::default()
+        };
+        let mut me = MeInstance::new(&fmu, name, Default::default(), integrator).expect(name);
+        me.setup(None, 0.0, Some(10.0)).unwrap();
+        me.enter_initialization().unwrap();
+        me.exit_initialization().unwrap();
+        let h = 1e-3;
+        // Each step is saved, made, restored and made again (a rollback).
+        let step = |me: &mut MeInstance, n: u32| {
+            let t = f64::from(n) * h;
+            me.save(0).unwrap();
+            me.step(t, h).unwrap();
+            me.restore(0).unwrap();
+            me.step(t, h).unwrap();
+        };
+        for n in 0..10 {
+            step(&mut me, n);
+        }
+        let before = allocations();
+        for n in 10..3000 {
+            step(&mut me, n);
+        }
+        let n = allocations() - before;
+        let (events, _) = me.events();
+        eprintln!("{name}: {n} allocations in 2990 steps ({events} events)");
+        assert_eq!(n, 0, "{name}: {n} allocations in 2990 steps");
+        if name == "BouncingBall" {
+            assert!(events >= 2, "the ball bounced {events} times");
+        }
+    }
+}

@@ -1,7 +1,8 @@
-//! The built-in integrator of model-exchange instances: the explicit Runge–Kutta
-//! methods of the `ode_solvers` crate with error control (Dormand–Prince 5(4),
-//! `rk45`, and 8(5,3), `dop853`), over the states scaled by their nominals, so
-//! that the absolute tolerance of state i is `atol · nominal_i`.
+//! The built-in integrator of model-exchange instances: explicit Runge–Kutta
+//! methods with error control — Dormand–Prince 5(4), `rk45` ([`dopri5`], in
+//! buffers the instance keeps, so a step allocates nothing), and 8(5,3),
+//! `dop853` (the `ode_solvers` crate) — over the states scaled by their
+//! nominals, so that the absolute tolerance of state i is `atol · nominal_i`.
 //!
 //! One call integrates from (t0, x0) towards t1 and stops after the first
 //! accepted step at which an event indicator changed sign (a state event) or
@@ -15,15 +16,16 @@
 use std::cell::RefCell;
 
 use ode_solvers::dop_shared::{IntegrationError, OutputType};
-use ode_solvers::{DVector, Dop853, Dopri5, System};
+use ode_solvers::{DVector, Dop853, System};
 
 use super::calls::MeCalls;
+use super::dopri5::{self, Dopri5, Failure};
 use crate::error::{Error, Result};
 
 /// The integration method of a model-exchange instance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
-    /// Dormand–Prince 5(4) with error control (`ode_solvers::Dopri5`).
+    /// Dormand–Prince 5(4) with error control ([`dopri5`]).
     #[default]
     Rk45,
     /// Dormand–Prince 8(5,3) with error control (`ode_solvers::Dop853`).
@@ -168,7 +170,7 @@ impl Rhs<'_> {
 
     /// After an accepted step to `tau`: a state event, a step event, a request
     /// to terminate, or nothing (true: stop).
-    fn accepted(&mut self, tau: f64, y: &[f64]) -> Result<bool> {
+    fn check_accepted(&mut self, tau: f64, y: &[f64]) -> Result<bool> {
         if self.watch.is_none() {
             return Ok(false);
         }
@@ -229,7 +231,7 @@ impl System<f64, DVector<f64>> for &mut Rhs<'_> {
         if self.failure.borrow().is_some() {
             return true;
         }
-        match self.accepted(tau, y.as_slice()) {
+        match self.check_accepted(tau, y.as_slice()) {
             Ok(stop) => stop,
             Err(e) => {
                 self.fail(e);
@@ -239,53 +241,135 @@ impl System<f64, DVector<f64>> for &mut Rhs<'_> {
     }
 }
 
-/// One integration of `rhs` from (tau0, y0) to tau1 (or to where `solout`
-/// stopped it): the last point reached.
+impl dopri5::Problem for Rhs<'_> {
+    fn rhs(&mut self, tau: f64, y: &[f64], dy: &mut [f64]) -> bool {
+        match self.derivatives(tau, y, dy) {
+            Ok(()) => true,
+            Err(e) => {
+                self.fail(e);
+                false
+            }
+        }
+    }
+
+    fn accepted(&mut self, tau: f64, y: &[f64]) -> bool {
+        match self.check_accepted(tau, y) {
+            Ok(stop) => stop,
+            Err(e) => {
+                self.fail(e);
+                true
+            }
+        }
+    }
+}
+
+/// The buffers of the integration, kept by the instance between steps.
+#[derive(Debug, Default)]
+pub(crate) struct Buffers {
+    dopri5: Dopri5,
+    y0: Vec<f64>,
+    y: Vec<f64>,
+    x: Vec<f64>,
+    dx: Vec<f64>,
+    z: Vec<f64>,
+    z_prev: Vec<f64>,
+    y_prev: Vec<f64>,
+    /// The bisection's two ends and probe of an event time.
+    y_lo: Vec<f64>,
+    y_mid: Vec<f64>,
+    z_probe: Vec<f64>,
+}
+
+impl Buffers {
+    /// Sizes every buffer for `nx` states and `nz` event indicators, so that
+    /// no step allocates, not even the first event's.
+    pub(crate) fn prepare(&mut self, nx: usize, nz: usize) {
+        self.dopri5.resize(nx);
+        for v in [
+            &mut self.y0,
+            &mut self.y,
+            &mut self.x,
+            &mut self.dx,
+            &mut self.y_prev,
+            &mut self.y_lo,
+            &mut self.y_mid,
+        ] {
+            v.resize(nx, 0.0);
+        }
+        for v in [&mut self.z, &mut self.z_prev, &mut self.z_probe] {
+            v.resize(nz, 0.0);
+        }
+    }
+}
+
+/// One integration of `rhs` from (tau0, y0) to tau1 (or to where an accepted
+/// step stopped it): the time reached, the state there in `y`.
 fn solve(
     settings: &Settings,
     rhs: &mut Rhs<'_>,
-    tau0: f64,
-    tau1: f64,
+    dopri5: &mut Dopri5,
+    (tau0, tau1): (f64, f64),
     y0: &[f64],
-) -> std::result::Result<(f64, Vec<f64>), IntegrationError> {
-    let y0 = DVector::from_column_slice(y0);
+    y: &mut Vec<f64>,
+) -> Result<f64> {
     let h_max = settings.max_step.min(tau1 - tau0);
-    macro_rules! run {
-        ($solver:ident, $beta:expr, $fac_min:expr, $fac_max:expr) => {{
-            let mut solver = $solver::from_param(
-                rhs,
+    let failure = match settings.method {
+        Method::Rk45 => {
+            let options = dopri5::Options {
+                rtol: settings.rtol,
+                atol: settings.atol,
+                h_max,
+                n_max: N_MAX,
+            };
+            match dopri5.integrate(rhs, &options, tau0, tau1, y0, y) {
+                Ok(tau) => return rhs.failure.take().map_or(Ok(tau), Err),
+                Err(failure) => failure,
+            }
+        }
+        // Hairer's defaults of DOP853.
+        Method::Dop853 => {
+            let mut solver = Dop853::from_param(
+                &mut *rhs,
                 tau0,
                 tau1,
                 tau1 - tau0,
-                y0,
+                DVector::from_column_slice(y0),
                 settings.rtol,
                 settings.atol,
                 0.9,
-                $beta,
-                $fac_min,
-                $fac_max,
+                0.0,
+                0.333,
+                6.0,
                 h_max,
                 0.0,
-                100_000,
+                N_MAX,
                 1000,
                 OutputType::Sparse,
             );
-            solver.integrate().map(|_| {
-                let x = solver.x_out().last().copied().unwrap_or(tau0);
-                let y = solver
-                    .y_out()
-                    .last()
-                    .map_or_else(Vec::new, |y| y.as_slice().to_vec());
-                (x, y)
-            })
-        }};
-    }
-    match settings.method {
-        // Hairer's defaults of DOPRI5 and DOP853.
-        Method::Rk45 => run!(Dopri5, 0.04, 0.2, 10.0),
-        Method::Dop853 => run!(Dop853, 0.0, 0.333, 6.0),
-    }
+            let result = solver.integrate();
+            y.clear();
+            if let Some(last) = solver.y_out().last() {
+                y.extend_from_slice(last.as_slice());
+            }
+            let tau = solver.x_out().last().copied().unwrap_or(tau0);
+            match result {
+                Ok(_) => return rhs.failure.take().map_or(Ok(tau), Err),
+                Err(IntegrationError::MaxNumStepReached { x, n_step }) => {
+                    Failure::MaxSteps { tau: x, n_step }
+                }
+                Err(IntegrationError::StepSizeUnderflow { x }) => Failure::Underflow { tau: x },
+                Err(IntegrationError::StiffnessDetected { x }) => Failure::Stiff { tau: x },
+            }
+        }
+    };
+    Err(rhs
+        .failure
+        .take()
+        .unwrap_or_else(|| integration_error(rhs, settings, failure)))
 }
+
+/// The most steps of one integration.
+const N_MAX: u32 = 100_000;
 
 /// The integrator settings in force for one call.
 #[derive(Debug, Clone, Copy)]
@@ -315,47 +399,73 @@ pub(crate) fn integrate(
     settings: &Settings,
     p: Point<'_>,
     t1: f64,
+    b: &mut Buffers,
 ) -> Result<(f64, Stop)> {
     let nx = p.x.len();
-    let y0: Vec<f64> = p.x.iter().zip(p.nominals).map(|(x, n)| x / n).collect();
+    b.y0.clear();
+    b.y0.extend(p.x.iter().zip(p.nominals).map(|(x, n)| x / n));
+    b.x.resize(nx, 0.0);
+    b.dx.resize(nx, 0.0);
+    b.z.resize(p.z.len(), 0.0);
+    b.z_prev.clear();
+    b.z_prev.extend_from_slice(p.z);
+    b.y_prev.clone_from(&b.y0);
     let mut rhs = Rhs {
         fmu: RefCell::new(fmu),
         t0: p.t0,
         nominals: p.nominals,
-        x: RefCell::new(vec![0.0; nx]),
-        dx: RefCell::new(vec![0.0; nx]),
+        x: RefCell::new(std::mem::take(&mut b.x)),
+        dx: RefCell::new(std::mem::take(&mut b.dx)),
         failure: RefCell::new(None),
         watch: Some(Watch {
-            z_prev: p.z.to_vec(),
-            z: vec![0.0; p.z.len()],
+            z_prev: std::mem::take(&mut b.z_prev),
+            z: std::mem::take(&mut b.z),
             needs_completed: p.needs_completed,
             tau_prev: 0.0,
-            y_prev: y0.clone(),
+            y_prev: std::mem::take(&mut b.y_prev),
             found: None,
         }),
     };
-    let tau1 = t1 - p.t0;
-    let result = if nx == 0 {
-        // No continuous states: one step to t1 without the integrator.
-        (&mut rhs).solout(tau1, &DVector::zeros(0), &DVector::zeros(0));
-        Ok((tau1, Vec::new()))
-    } else {
-        solve(settings, &mut rhs, 0.0, tau1, &y0)
-    };
-    if let Some(e) = rhs.failure.take() {
-        return Err(e);
+    let result = finish(&mut rhs, settings, p, t1, b);
+    // The buffers go back to the instance, whatever happened.
+    b.x = rhs.x.into_inner();
+    b.dx = rhs.dx.into_inner();
+    if let Some(w) = rhs.watch {
+        (b.z_prev, b.z, b.y_prev) = (w.z_prev, w.z, w.y_prev);
     }
-    let (tau_end, y_end) = result.map_err(|e| integration_error(&rhs, settings, e))?;
-    let found = rhs.watch.as_ref().and_then(|w| w.found);
-    let (stop, tau, y) = match found {
-        None => (Stop::Reached, tau_end, y_end),
-        Some((Stop::StateEvent, tau_hi)) => {
-            let (tau, y) = locate(settings, &mut rhs, tau_hi, &y_end, p.h)?;
-            (Stop::StateEvent, tau, y)
+    result
+}
+
+/// The integration of [`integrate`], its event located.
+fn finish(
+    rhs: &mut Rhs<'_>,
+    settings: &Settings,
+    p: Point<'_>,
+    t1: f64,
+    b: &mut Buffers,
+) -> Result<(f64, Stop)> {
+    let tau1 = t1 - p.t0;
+    let tau_end = if p.x.is_empty() {
+        // No continuous states: one step to t1 without the integrator.
+        b.y.clear();
+        dopri5::Problem::accepted(rhs, tau1, &[]);
+        match rhs.failure.take() {
+            Some(e) => return Err(e),
+            None => tau1,
         }
-        Some((stop, tau)) => (stop, tau, y_end),
+    } else {
+        solve(settings, rhs, &mut b.dopri5, (0.0, tau1), &b.y0, &mut b.y)?
     };
-    set_point(&rhs, tau, &y, p.x)?;
+    let found = rhs.watch.as_ref().and_then(|w| w.found);
+    let (stop, tau) = match found {
+        None => (Stop::Reached, tau_end),
+        Some((Stop::StateEvent, tau_hi)) => {
+            let tau = locate(settings, rhs, b, tau_hi, p.h)?;
+            (Stop::StateEvent, tau)
+        }
+        Some((stop, tau)) => (stop, tau),
+    };
+    set_point(rhs, tau, &b.y, p.x)?;
     if !p.z.is_empty() {
         rhs.fmu.get_mut().get_event_indicators(p.z)?;
     }
@@ -383,63 +493,64 @@ fn set_point(rhs: &Rhs<'_>, tau: f64, y: &[f64], x: &mut [f64]) -> Result<()> {
 /// The first time in (tau_prev, tau_hi] at which an indicator has changed
 /// sign, to within 100·ε·max(|t|, h), by bisection: each probe integrates
 /// afresh from the last point before the event. Returns the time just after
-/// the crossing and the state there.
+/// the crossing, the state there in `b.y` (the state at `tau_hi` on entry).
 fn locate(
     settings: &Settings,
     rhs: &mut Rhs<'_>,
+    b: &mut Buffers,
     tau_hi: f64,
-    y_hi: &[f64],
     h: f64,
-) -> Result<(f64, Vec<f64>)> {
+) -> Result<f64> {
     let Some(watch) = rhs.watch.take() else {
-        return Ok((tau_hi, y_hi.to_vec()));
+        return Ok(tau_hi);
     };
-    let (mut lo, mut y_lo) = (watch.tau_prev, watch.y_prev.clone());
-    let (mut hi, mut y_hi) = (tau_hi, y_hi.to_vec());
+    let (mut lo, mut hi) = (watch.tau_prev, tau_hi);
+    let (mut y_lo, mut y_mid, mut z) = (
+        std::mem::take(&mut b.y_lo),
+        std::mem::take(&mut b.y_mid),
+        std::mem::take(&mut b.z_probe),
+    );
+    y_lo.clone_from(&watch.y_prev);
+    z.resize(watch.z_prev.len(), 0.0);
     let resolution = 100.0 * f64::EPSILON * (rhs.t0 + tau_hi).abs().max(h);
-    let mut z = vec![0.0; watch.z_prev.len()];
     let located = (|| {
         while hi - lo > resolution {
             let mid = lo + 0.5 * (hi - lo);
             if mid <= lo || mid >= hi {
                 break;
             }
-            let y_mid = if y_lo.is_empty() {
-                Vec::new()
-            } else {
-                let probed = solve(settings, rhs, lo, mid, &y_lo);
-                if let Some(e) = rhs.failure.take() {
-                    return Err(e);
-                }
-                probed.map_err(|e| integration_error(rhs, settings, e))?.1
-            };
+            if !y_lo.is_empty() {
+                solve(settings, rhs, &mut b.dopri5, (lo, mid), &y_lo, &mut y_mid)?;
+            }
             rhs.set(mid, &y_mid)?;
             rhs.fmu.get_mut().get_event_indicators(&mut z)?;
             if crossed(&watch.z_prev, &z) {
-                (hi, y_hi) = (mid, y_mid);
+                hi = mid;
+                std::mem::swap(&mut b.y, &mut y_mid);
             } else {
-                (lo, y_lo) = (mid, y_mid);
+                lo = mid;
+                std::mem::swap(&mut y_lo, &mut y_mid);
             }
         }
         Ok(())
     })();
     rhs.watch = Some(watch);
-    located.map(|()| (hi, y_hi))
+    (b.y_lo, b.y_mid, b.z_probe) = (y_lo, y_mid, z);
+    located.map(|()| hi)
 }
 
 /// The integrator's failure as one line naming the instance and the time.
-fn integration_error(rhs: &Rhs<'_>, settings: &Settings, e: IntegrationError) -> Error {
-    let (tau, what) = match e {
-        IntegrationError::MaxNumStepReached { x, n_step } => {
-            (x, format!("needs more than {n_step} steps"))
-        }
-        IntegrationError::StepSizeUnderflow { x } => (
-            x,
+fn integration_error(rhs: &Rhs<'_>, settings: &Settings, failure: Failure) -> Error {
+    let (tau, what) = match failure {
+        Failure::Rhs { tau } => (tau, "could not evaluate the derivatives".to_string()),
+        Failure::MaxSteps { tau, n_step } => (tau, format!("needs more than {n_step} steps")),
+        Failure::Underflow { tau } => (
+            tau,
             "cannot reach the tolerance: the step size fell below the resolution of time"
                 .to_string(),
         ),
-        IntegrationError::StiffnessDetected { x } => (
-            x,
+        Failure::Stiff { tau } => (
+            tau,
             "the model became stiff for this explicit method".to_string(),
         ),
     };

@@ -44,12 +44,13 @@
 //! continuous-time mode, not in event mode.
 
 mod calls;
+mod dopri5;
 mod integrator;
 
 pub use integrator::{Integrator, Method};
 
 use calls::MeCalls;
-use integrator::{Point, Settings, Stop};
+use integrator::{Buffers, Point, Settings, Stop};
 
 use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
@@ -98,6 +99,8 @@ pub struct MeInstance {
     last_event: Option<f64>,
     /// The instance's part of the states saved in each slot.
     saved: [Option<Saved>; SLOTS],
+    /// The integrator's buffers, kept between steps.
+    buffers: Buffers,
 }
 
 impl MeInstance {
@@ -149,6 +152,7 @@ impl MeInstance {
             events: 0,
             last_event: None,
             saved: Default::default(),
+            buffers: Buffers::default(),
         })
     }
 
@@ -318,6 +322,7 @@ impl MeInstance {
                     h,
                 },
                 target,
+                &mut self.buffers,
             )?;
             now = reached;
             self.time = now;
@@ -382,6 +387,7 @@ impl FmuInstance for MeInstance {
         self.x = vec![0.0; nx];
         self.nominals = vec![1.0; nx];
         self.z = vec![0.0; nz];
+        self.buffers.prepare(nx, nz);
         let t = self.time;
         self.event_iteration(t, true)?;
         self.initialized = true;
