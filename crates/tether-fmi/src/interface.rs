@@ -116,11 +116,53 @@ impl RunRequest<'_> {
     }
 }
 
+/// What an instance can do, as the master asks it
+/// ([`FmuInstance::capabilities`]): for a co-simulation instance what its
+/// FMU's `CoSimulation` element declares, for a model-exchange instance what
+/// the instance with its integrator does.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Capabilities {
+    /// A state can be saved and restored ([`FmuInstance::save`],
+    /// [`FmuInstance::restore`]): `canGetAndSetFMUstate`.
+    pub rollback: bool,
+    /// A saved state can be serialized ([`FmuInstance::serialize`]):
+    /// `canSerializeFMUstate` besides rollback.
+    pub serialization: bool,
+    /// The inputs take polynomials over a step ([`Inputs`] with
+    /// derivatives): FMI 2.0 `canInterpolateInputs`, FMI 3.0
+    /// `providesIntermediateUpdate` (for the inputs declared
+    /// `intermediateUpdate="true"`).
+    pub polynomial_inputs: bool,
+    /// Steps may change size: `canHandleVariableCommunicationStepSize`.
+    pub variable_steps: bool,
+    /// The highest order of output derivatives
+    /// ([`FmuInstance::get_output_derivatives`]): `maxOutputDerivativeOrder`.
+    pub output_derivative_order: u32,
+}
+
+impl Capabilities {
+    /// What the `CoSimulation` element of `md` declares (nothing without one).
+    pub fn co_simulation(md: &ModelDescription) -> Capabilities {
+        let cs = md.cs();
+        Capabilities {
+            rollback: cs.can_get_and_set_fmu_state,
+            serialization: cs.can_get_and_set_fmu_state && cs.can_serialize_fmu_state,
+            polynomial_inputs: cs.can_interpolate_inputs || cs.provides_intermediate_update,
+            variable_steps: cs.can_handle_variable_communication_step_size,
+            output_derivative_order: cs.max_output_derivative_order,
+        }
+    }
+}
+
 /// An FMU instance as a master drives it: the life cycle, values, the
 /// inputs' polynomial over a step, the step, saved states, and runs.
 pub trait FmuInstance: Debug + Send {
     /// The instance name.
     fn name(&self) -> &str;
+
+    /// What the instance can do; the master asks this, not the model
+    /// description.
+    fn capabilities(&self) -> Capabilities;
 
     /// The FMU's model description.
     fn model_description(&self) -> &ModelDescription;
@@ -266,5 +308,54 @@ pub trait FmuInstance: Debug + Send {
     /// into `out`.
     fn receive_batch(&mut self, runs: &[RunRequest<'_>], out: &mut [f64]) -> Result<()> {
         self.run_batch(runs, out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn capabilities(version: &str, cs: &str) -> Capabilities {
+        let token = if version == "2.0" {
+            "guid"
+        } else {
+            "instantiationToken"
+        };
+        let xml = format!(
+            r#"<?xml version="1.0"?>
+<fmiModelDescription fmiVersion="{version}" modelName="m" {token}="{{g}}">
+  <CoSimulation modelIdentifier="m" {cs}/>
+  <ModelVariables/>
+  <ModelStructure/>
+</fmiModelDescription>"#
+        );
+        Capabilities::co_simulation(&ModelDescription::from_xml(&xml).unwrap())
+    }
+
+    /// FMI 2.0 takes polynomials with canInterpolateInputs, FMI 3.0 with
+    /// intermediate update; serialization needs rollback too; the standard's
+    /// defaults are false and 0.
+    #[test]
+    fn co_simulation_capabilities_are_what_the_fmu_declares() {
+        assert_eq!(capabilities("2.0", ""), Capabilities::default());
+        let declared = capabilities(
+            "2.0",
+            r#"canInterpolateInputs="true" maxOutputDerivativeOrder="2" canGetAndSetFMUstate="true"
+               canSerializeFMUstate="true" canHandleVariableCommunicationStepSize="true""#,
+        );
+        assert_eq!(
+            declared,
+            Capabilities {
+                rollback: true,
+                serialization: true,
+                polynomial_inputs: true,
+                variable_steps: true,
+                output_derivative_order: 2,
+            }
+        );
+        let fmi3 = capabilities("3.0", r#"providesIntermediateUpdate="true""#);
+        assert!(fmi3.polynomial_inputs && !fmi3.rollback);
+        let unserializable = capabilities("2.0", r#"canSerializeFMUstate="true""#);
+        assert!(!unserializable.serialization);
     }
 }

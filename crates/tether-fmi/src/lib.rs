@@ -85,7 +85,7 @@ pub use instance::{
     Fmi3Instance, FmuState, Instance, Integrator, LocalInstance, MeInstance, Method, StatusKind,
     MAX_EVENT_ITERATIONS,
 };
-pub use interface::{FmuInstance, Inputs, Int, RunRequest, Slot, SLOTS};
+pub use interface::{Capabilities, FmuInstance, Inputs, Int, RunRequest, Slot, SLOTS};
 pub use library::{PLATFORM, PLATFORM_FMI3};
 pub use logger::{parse_rate_limit, rate_limit_from_env, set_rate_limit, RATE_LIMIT};
 pub use model_description::{

@@ -271,3 +271,79 @@ fn a_restored_state_repeats_the_steps_bit_for_bit() {
         assert!(e.contains("no FMU state saved in slot 0"), "{e}");
     }
 }
+
+/// A model-exchange instance answers what it can do from its `ModelExchange`
+/// element and its integrator, not from `CoSimulation`: rollback as
+/// `ModelExchange` declares it, steps of any size; no serialized states
+/// (BouncingBall's co-simulation interface declares them), input
+/// polynomials or output derivatives yet.
+#[test]
+fn a_model_exchange_instance_says_what_it_can_do() {
+    for standard in ["fmi2", "fmi3"] {
+        let Some((fmu, a)) = open(standard, "BouncingBall", Integrator::default()) else {
+            return;
+        };
+        let me = fmu.model_description().model_exchange.as_ref().unwrap();
+        let caps = a.capabilities();
+        assert_eq!(caps.rollback, me.can_get_and_set_fmu_state, "{standard}");
+        assert!(caps.rollback, "{standard}: the Reference FMUs roll back");
+        assert!(caps.variable_steps, "{standard}");
+        assert!(!caps.polynomial_inputs && !caps.serialization, "{standard}");
+        assert!(fmu.model_description().cs().can_serialize_fmu_state);
+        assert_eq!(caps.output_derivative_order, 0, "{standard}");
+    }
+}
+
+/// Integer, Boolean, String and discrete Real inputs are set in event mode
+/// after the initialization, as the standard requires (the Reference FMUs
+/// refuse `SetInteger` in continuous-time mode): a changed value is one event
+/// and reaches the discrete outputs; an unchanged one, or a continuous input,
+/// is no event.
+#[test]
+fn discrete_inputs_are_set_in_event_mode() {
+    for standard in ["fmi2", "fmi3"] {
+        let Some((fmu, mut a)) = open(standard, "Feedthrough", Integrator::default()) else {
+            return;
+        };
+        initialize(&mut a, None, 1.0);
+        a.step(0.0, 0.1).unwrap();
+        let events = |a: &MeInstance| a.events().0;
+        let n = events(&a);
+        let (int_in, int_out) = (vr(&fmu, "Int32_input"), vr(&fmu, "Int32_output"));
+        a.set_integers(&[int_in], &[5]).unwrap();
+        assert_eq!(
+            events(&a),
+            n + 1,
+            "{standard}: a changed Integer is an event"
+        );
+        a.set_integers(&[int_in], &[5]).unwrap();
+        assert_eq!(events(&a), n + 1, "{standard}: the same Integer is none");
+        let (cont_in, disc_in, disc_out) = (
+            vr(&fmu, "Float64_continuous_input"),
+            vr(&fmu, "Float64_discrete_input"),
+            vr(&fmu, "Float64_discrete_output"),
+        );
+        a.set_reals(&[cont_in], &[2.0]).unwrap();
+        assert_eq!(events(&a), n + 1, "{standard}: a continuous input is none");
+        a.set_reals(&[cont_in, disc_in], &[2.5, 3.0]).unwrap();
+        assert_eq!(events(&a), n + 2, "{standard}: a discrete Real is an event");
+        let (bool_in, bool_out) = (vr(&fmu, "Boolean_input"), vr(&fmu, "Boolean_output"));
+        a.set_booleans(&[bool_in], &[true]).unwrap();
+        let (str_in, str_out) = (vr(&fmu, "String_input"), vr(&fmu, "String_output"));
+        a.set_strings(&[str_in], &["tethered"]).unwrap();
+        assert_eq!(events(&a), n + 4, "{standard}");
+        a.step(0.1, 0.1).unwrap();
+        let mut i = [0];
+        a.get_integers(&[int_out], &mut i).unwrap();
+        let mut b = [false];
+        a.get_booleans(&[bool_out], &mut b).unwrap();
+        let mut s = [String::new()];
+        a.get_strings(&[str_out], &mut s).unwrap();
+        assert_eq!(
+            (i[0], real(&mut a, disc_out), b[0], s[0].as_str()),
+            (5, 3.0, true, "tethered"),
+            "{standard}"
+        );
+        a.terminate().unwrap();
+    }
+}

@@ -269,7 +269,7 @@ impl Signals {
         if !self.iterated() {
             return Ok(());
         }
-        match slaves.iter().find(|s| !s.caps.can_get_and_set_state) {
+        match slaves.iter().find(|s| !s.caps.rollback) {
             None => Ok(()),
             Some(slave) => Err(MasterError::MissingCapability {
                 instance: slave.name.clone(),

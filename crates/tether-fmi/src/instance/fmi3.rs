@@ -534,6 +534,9 @@ impl FmuInstance for Fmi3Instance {
     fn name(&self) -> &str {
         self.raw.name()
     }
+    fn capabilities(&self) -> crate::interface::Capabilities {
+        crate::interface::Capabilities::co_simulation(self.model_description())
+    }
     fn model_description(&self) -> &ModelDescription {
         self.md()
     }

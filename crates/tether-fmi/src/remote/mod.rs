@@ -955,6 +955,9 @@ impl crate::interface::FmuInstance for RemoteInstance {
     fn name(&self) -> &str {
         self.name.as_str()
     }
+    fn capabilities(&self) -> crate::interface::Capabilities {
+        crate::interface::Capabilities::co_simulation(self.model_description())
+    }
     fn model_description(&self) -> &ModelDescription {
         self.fmu.model_description()
     }

@@ -290,10 +290,7 @@ impl Simulation {
     /// (`canGetAndSetFMUstate` and `canSerializeFMUstate`), which
     /// [`Simulation::save_state`] needs.
     pub fn can_save_state(&self) -> bool {
-        self.system.slaves.iter().all(|s| {
-            let cs = s.fmu.model_description().cs();
-            cs.can_get_and_set_fmu_state && cs.can_serialize_fmu_state
-        })
+        self.system.slaves.iter().all(|s| s.caps.serialization)
     }
 }
 

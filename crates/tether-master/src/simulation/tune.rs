@@ -81,7 +81,7 @@ impl Simulation {
         let Some(slave) = self.system.slaves.iter_mut().find(|s| s.name == instance) else {
             return Ok(());
         };
-        if derivatives.is_empty() || !slave.caps.can_interpolate_inputs {
+        if derivatives.is_empty() || !slave.caps.polynomial_inputs {
             return Ok(());
         }
         let Ok(var) = slave.fmu.model_description().variable(variable) else {

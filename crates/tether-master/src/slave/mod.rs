@@ -26,7 +26,6 @@ pub(crate) use coupled::{Coupled, CoupledOutput};
 use recorded::Recorded;
 pub(crate) use runs::Batch;
 use runs::{recycle, Planned, Runs};
-pub(crate) use setup::Capabilities;
 
 use crate::polynomial::Taylor;
 use crate::stats::InstanceCounters;
@@ -86,8 +85,9 @@ pub struct Slave {
     /// reaches it only through [`FmuInstance`].
     pub(crate) backend: Box<dyn FmuInstance>,
     pub(crate) fmu: Fmu,
-    /// What the FMU declares it can do.
-    pub(crate) caps: Capabilities,
+    /// What the instance can do ([`FmuInstance::capabilities`], asked once
+    /// it is instantiated).
+    pub(crate) caps: tether_fmi::Capabilities,
     /// Whether [`SAVED`] holds a state.
     saved: bool,
     /// The coupled inputs and outputs and their buffers.

@@ -2,38 +2,13 @@
 //! the start values, the coupling's buffers once the coupling is known, and
 //! initialization; what the FMU declares it can do.
 
-use tether_fmi::{Fmu, ModelDescription, Placement};
+use tether_fmi::{Fmu, Placement};
 
 use super::coupled::UNUSED;
 use super::{Experiment, Slave};
 use crate::spec::{InstanceSpec, Isolation, StartValue};
 use crate::stats::InstanceCounters;
 use crate::MasterError;
-
-/// What an instance's FMU declares it can do, as the coupling needs it.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub(crate) struct Capabilities {
-    /// Inputs take polynomials over a step: FMI 2.0 `canInterpolateInputs`,
-    /// FMI 3.0 intermediate update (for the inputs declared
-    /// `intermediateUpdate="true"`, [`Slave::interpolates`]).
-    pub can_interpolate_inputs: bool,
-    /// `maxOutputDerivativeOrder`.
-    pub max_output_derivative_order: u32,
-    /// `canGetAndSetFMUstate`.
-    pub can_get_and_set_state: bool,
-}
-
-impl Capabilities {
-    /// The capabilities `md` declares.
-    pub(crate) fn of(md: &ModelDescription) -> Capabilities {
-        let cs = md.cs();
-        Capabilities {
-            can_interpolate_inputs: cs.can_interpolate_inputs || cs.provides_intermediate_update,
-            max_output_derivative_order: cs.max_output_derivative_order,
-            can_get_and_set_state: cs.can_get_and_set_fmu_state,
-        }
-    }
-}
 
 impl Slave {
     /// Instantiate the FMU of `spec` and apply the start values. Instances of
@@ -79,7 +54,6 @@ impl Slave {
         experiment: Experiment,
     ) -> Result<Slave, MasterError> {
         let md = fmu.model_description();
-        let caps = Capabilities::of(md);
         let model_name = md.model_name.clone();
         let counters = InstanceCounters {
             name: name.to_string(),
@@ -107,6 +81,7 @@ impl Slave {
         };
         let options = tether_fmi::InstanceOptions::default().with_polynomial_inputs(order > 0);
         let mut backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
+        let caps = backend.capabilities();
         let (start, stop, tolerance) = experiment;
         backend.setup(tolerance, start, Some(stop))?;
         let exact_parameters = crate::start::exact_parameters(
@@ -288,10 +263,9 @@ impl Slave {
     /// The capability adaptive macro steps need that the FMU does not
     /// declare: rollback of a rejected step, and steps of varying size.
     pub(crate) fn cannot_vary_steps(&self) -> Option<&'static str> {
-        let cs = self.fmu.model_description().cs();
-        if !cs.can_get_and_set_fmu_state {
+        if !self.caps.rollback {
             Some("canGetAndSetFMUstate")
-        } else if !cs.can_handle_variable_communication_step_size {
+        } else if !self.caps.variable_steps {
             Some("canHandleVariableCommunicationStepSize")
         } else {
             None
@@ -312,55 +286,12 @@ impl Slave {
     /// `intermediateUpdate="true"`.
     pub(crate) fn interpolates(&self, vr: u32) -> bool {
         let md = self.fmu.model_description();
-        self.caps.can_interpolate_inputs
+        self.caps.polynomial_inputs
             && (md.standard != tether_fmi::FmiStandard::Fmi3
                 || md.model_variables.iter().any(|v| {
                     v.value_reference == vr
                         && v.causality == tether_fmi::Causality::Input
                         && v.intermediate_update
                 }))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn capabilities(version: &str, cs: &str) -> Capabilities {
-        let token = if version == "2.0" {
-            "guid"
-        } else {
-            "instantiationToken"
-        };
-        let xml = format!(
-            r#"<?xml version="1.0"?>
-<fmiModelDescription fmiVersion="{version}" modelName="m" {token}="{{g}}">
-  <CoSimulation modelIdentifier="m" {cs}/>
-  <ModelVariables/>
-  <ModelStructure/>
-</fmiModelDescription>"#
-        );
-        Capabilities::of(&ModelDescription::from_xml(&xml).unwrap())
-    }
-
-    /// FMI 2.0 interpolates inputs with canInterpolateInputs, FMI 3.0 with
-    /// intermediate update; the standard's defaults are false and 0.
-    #[test]
-    fn capabilities_are_what_the_fmu_declares() {
-        assert_eq!(capabilities("2.0", ""), Capabilities::default());
-        let declared = capabilities(
-            "2.0",
-            r#"canInterpolateInputs="true" maxOutputDerivativeOrder="2" canGetAndSetFMUstate="true""#,
-        );
-        assert_eq!(
-            declared,
-            Capabilities {
-                can_interpolate_inputs: true,
-                max_output_derivative_order: 2,
-                can_get_and_set_state: true,
-            }
-        );
-        let fmi3 = capabilities("3.0", r#"providesIntermediateUpdate="true""#);
-        assert!(fmi3.can_interpolate_inputs && !fmi3.can_get_and_set_state);
     }
 }

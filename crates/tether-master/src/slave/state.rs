@@ -45,10 +45,9 @@ impl Slave {
     /// Save the current state as bytes into `out`, for the whole system's
     /// saved state (needs `canGetAndSetFMUstate` and `canSerializeFMUstate`).
     pub(crate) fn snapshot(&mut self, out: &mut Vec<u8>) -> Result<(), MasterError> {
-        let cs = self.fmu.model_description().cs();
-        let lacking = if !cs.can_get_and_set_fmu_state {
+        let lacking = if !self.caps.rollback {
             Some("canGetAndSetFMUstate")
-        } else if !cs.can_serialize_fmu_state {
+        } else if !self.caps.serialization {
             Some("canSerializeFMUstate")
         } else {
             None

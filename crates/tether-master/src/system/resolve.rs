@@ -526,8 +526,11 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                 needs: crate::polynomial_inputs::NEEDS,
                 reason,
             };
-            if let Some(reason) = crate::polynomial_inputs::fmu_refusal(md) {
-                return Err(refusal(reason));
+            if !slave.caps.polynomial_inputs {
+                return Err(refusal(
+                    crate::polynomial_inputs::fmu_refusal(md)
+                        .unwrap_or_else(|| "the instance takes no input polynomials".into()),
+                ));
             }
             for input in &slave.coupled.inputs {
                 let Some(var) = md.variable_by_vr(input.vr) else {
@@ -538,7 +541,7 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                 }
             }
         }
-        if method.needs_rollback() && !slave.caps.can_get_and_set_state {
+        if method.needs_rollback() && !slave.caps.rollback {
             return Err(capability(
                 "canGetAndSetFMUstate",
                 format!(
@@ -572,7 +575,7 @@ fn output_level(
                 expected: "a Real output".into(),
             });
         }
-        if term.derivative_order > slave.caps.max_output_derivative_order {
+        if term.derivative_order > slave.caps.output_derivative_order {
             return Err(MasterError::MissingCapability {
                 instance: slave.name.clone(),
                 model: slave.model_name.clone(),

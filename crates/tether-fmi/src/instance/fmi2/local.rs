@@ -33,6 +33,9 @@ impl FmuInstance for LocalInstance {
     fn name(&self) -> &str {
         self.instance.name()
     }
+    fn capabilities(&self) -> crate::interface::Capabilities {
+        crate::interface::Capabilities::co_simulation(self.model_description())
+    }
     fn model_description(&self) -> &ModelDescription {
         self.instance.model_description()
     }

@@ -38,10 +38,14 @@
 //! time event and the event counts; a restore puts both back, so a step
 //! repeated after it gives the same bits.
 //!
+//! Values set after the initialization: continuous Real inputs at once; any
+//! other value (Integer, Boolean, String and discrete Real inputs,
+//! parameters) only in event mode, as the standard requires — when one
+//! changes, the instance enters event mode, sets it and runs the event
+//! iteration at its time (an event like any other).
+//!
 //! What this part does not do yet: serialized states, input derivatives,
-//! output derivatives and directional derivatives; an
-//! Integer, Boolean or String input set between steps is set in
-//! continuous-time mode, not in event mode.
+//! output derivatives and directional derivatives.
 
 mod calls;
 mod dopri5;
@@ -55,8 +59,10 @@ use integrator::{Buffers, Point, Settings, Stop};
 use crate::error::{Error, Result};
 use crate::fmu::{Fmu, InstanceOptions};
 use crate::instance::{Fmi3Instance, LocalInstance};
-use crate::interface::{FmuInstance, Inputs, Int, Slot, SLOTS};
-use crate::model_description::{FmiStandard, ModelDescription, ValueReference};
+use crate::interface::{Capabilities, FmuInstance, Inputs, Int, Slot, SLOTS};
+use crate::model_description::{
+    Causality, FmiStandard, ModelDescription, ValueReference, Variability,
+};
 
 /// The most event iterations at one time before the run ends (a chattering
 /// model).
@@ -101,6 +107,13 @@ pub struct MeInstance {
     saved: [Option<Saved>; SLOTS],
     /// The integrator's buffers, kept between steps.
     buffers: Buffers,
+    /// The continuous Real inputs, sorted: the only values set outside event
+    /// mode after the initialization.
+    continuous_inputs: Vec<ValueReference>,
+    /// The values of discrete inputs read to see whether a set changes them.
+    reals: Vec<f64>,
+    integers: Vec<Int>,
+    booleans: Vec<bool>,
 }
 
 impl MeInstance {
@@ -132,6 +145,13 @@ impl MeInstance {
             .model_exchange
             .as_ref()
             .is_some_and(|me| me.needs_completed_integrator_step);
+        let mut continuous_inputs: Vec<ValueReference> = md
+            .model_variables
+            .iter()
+            .filter(|v| v.causality == Causality::Input && v.variability == Variability::Continuous)
+            .map(|v| v.value_reference)
+            .collect();
+        continuous_inputs.sort_unstable();
         let start = md
             .default_experiment
             .and_then(|d| d.start_time)
@@ -153,6 +173,10 @@ impl MeInstance {
             last_event: None,
             saved: Default::default(),
             buffers: Buffers::default(),
+            continuous_inputs,
+            reals: Vec::new(),
+            integers: Vec::new(),
+            booleans: Vec::new(),
         })
     }
 
@@ -346,6 +370,25 @@ impl MeInstance {
         Ok(())
     }
 
+    /// Sets values the standard lets change only in event mode (discrete
+    /// inputs, parameters) after the initialization: event mode, `set`, the
+    /// event iteration at the instance's time, continuous-time mode.
+    fn set_in_event_mode(
+        &mut self,
+        set: impl FnOnce(&mut dyn MeCalls) -> Result<()>,
+    ) -> Result<()> {
+        self.inner.enter_event_mode()?;
+        set(&mut *self.inner)?;
+        let t = self.time;
+        self.event_iteration(t, false)
+    }
+
+    /// Whether every value reference in `vrs` is a continuous input.
+    fn all_continuous(&self, vrs: &[ValueReference]) -> bool {
+        vrs.iter()
+            .all(|vr| self.continuous_inputs.binary_search(vr).is_ok())
+    }
+
     fn unsupported(&self, function: &'static str, what: &str) -> Error {
         Error::InvalidArgument {
             function,
@@ -358,6 +401,19 @@ impl MeInstance {
 impl FmuInstance for MeInstance {
     fn name(&self) -> &str {
         self.inner.name()
+    }
+    /// Rollback where `ModelExchange` declares `canGetAndSetFMUstate` (the
+    /// FMU's state with the instance's states); steps of any size; no
+    /// serialized states, input polynomials or output derivatives yet.
+    fn capabilities(&self) -> Capabilities {
+        let me = self.inner.model_description().model_exchange.as_ref();
+        Capabilities {
+            rollback: me.is_some_and(|me| me.can_get_and_set_fmu_state),
+            serialization: false,
+            polynomial_inputs: false,
+            variable_steps: true,
+            output_derivative_order: 0,
+        }
     }
     fn model_description(&self) -> &ModelDescription {
         self.inner.model_description()
@@ -396,32 +452,85 @@ impl FmuInstance for MeInstance {
     fn get_reals(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
         self.inner.get_reals(vrs, out)
     }
+    /// Continuous inputs are set at once; after the initialization any other
+    /// Real (a discrete input, a parameter) is set in event mode when a value
+    /// changes, as the standard requires.
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        self.inner.set_reals(vrs, values)
+        if !self.initialized || self.all_continuous(vrs) {
+            return self.inner.set_reals(vrs, values);
+        }
+        let mut now = std::mem::take(&mut self.reals);
+        now.resize(vrs.len(), 0.0);
+        let read = self.inner.get_reals(vrs, &mut now);
+        let changed = now
+            .iter()
+            .zip(values)
+            .any(|(a, b)| a.to_bits() != b.to_bits());
+        self.reals = now;
+        read?;
+        if !changed {
+            return Ok(());
+        }
+        self.set_in_event_mode(|fmu| fmu.set_reals(vrs, values))
     }
     fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()> {
         self.inner.get_integers(vrs, out)
     }
+    /// After the initialization in event mode, when a value changes.
     fn set_integers(&mut self, vrs: &[ValueReference], values: &[Int]) -> Result<()> {
-        self.inner.set_integers(vrs, values)
+        if !self.initialized {
+            return self.inner.set_integers(vrs, values);
+        }
+        let mut now = std::mem::take(&mut self.integers);
+        now.resize(vrs.len(), 0);
+        let read = self.inner.get_integers(vrs, &mut now);
+        let changed = now[..] != values[..];
+        self.integers = now;
+        read?;
+        if !changed {
+            return Ok(());
+        }
+        self.set_in_event_mode(|fmu| fmu.set_integers(vrs, values))
     }
     fn get_booleans(&mut self, vrs: &[ValueReference], out: &mut [bool]) -> Result<()> {
         self.inner.get_booleans(vrs, out)
     }
+    /// After the initialization in event mode, when a value changes.
     fn set_booleans(&mut self, vrs: &[ValueReference], values: &[bool]) -> Result<()> {
-        self.inner.set_booleans(vrs, values)
+        if !self.initialized {
+            return self.inner.set_booleans(vrs, values);
+        }
+        let mut now = std::mem::take(&mut self.booleans);
+        now.resize(vrs.len(), false);
+        let read = self.inner.get_booleans(vrs, &mut now);
+        let changed = now[..] != values[..];
+        self.booleans = now;
+        read?;
+        if !changed {
+            return Ok(());
+        }
+        self.set_in_event_mode(|fmu| fmu.set_booleans(vrs, values))
     }
     fn get_strings(&mut self, vrs: &[ValueReference], out: &mut [String]) -> Result<()> {
         self.inner.get_strings(vrs, out)
     }
+    /// After the initialization in event mode, when a value changes.
     fn set_strings(&mut self, vrs: &[ValueReference], values: &[&str]) -> Result<()> {
-        self.inner.set_strings(vrs, values)
+        if !self.initialized {
+            return self.inner.set_strings(vrs, values);
+        }
+        let mut now = vec![String::new(); vrs.len()];
+        self.inner.get_strings(vrs, &mut now)?;
+        if now.iter().zip(values).all(|(a, b)| a == b) {
+            return Ok(());
+        }
+        self.set_in_event_mode(|fmu| fmu.set_strings(vrs, values))
     }
     fn set_inputs(&mut self, inputs: &Inputs<'_>) -> Result<()> {
         if !inputs.derivative_vrs.is_empty() {
             return Err(self.unsupported("set_inputs", "an input polynomial (k > 0)"));
         }
-        self.inner.set_reals(inputs.vrs, inputs.values)
+        self.set_reals(inputs.vrs, inputs.values)
     }
     fn get_output_derivatives(
         &mut self,
