@@ -274,13 +274,15 @@ pub fn extract_archive(
         ));
     }
     if zip.has_duplicate_names() {
-        // The zip reader keeps one of the entries with the same name: find the name.
-        let entry = duplicated_name(archive, zip.central_directory_start())
-            .unwrap_or_else(|| "(unknown)".into());
-        return Err(unsupported(
-            &entry,
-            "duplicate entry (the archive has two entries of this name)",
-        ));
+        // The zip reader keeps one of the entries with the same name: that is
+        // safe only when every copy is the same (as in the Reference FMU
+        // Roberts, which lists its `extra/` folder twice).
+        if let Some(entry) = differing_duplicate(archive) {
+            return Err(unsupported(
+                &entry,
+                "duplicate entry (the archive has two entries of this name)",
+            ));
+        }
     }
 
     // Pass 1: validate every entry and the declared sizes before writing anything.
@@ -480,8 +482,12 @@ impl Header {
     }
 }
 
+/// What a central directory header says of its entry, besides the name:
+/// compression method, CRC-32, compressed and uncompressed size.
+type Listing = (u16, u32, u32, u32);
+
 /// Walks the central directory of `archive`, bytes `start..end`, handing each
-/// header's name to `visit` until it returns `Some`. `Err` is the first header
+/// header's name and [`Listing`] to `visit` until it returns `Some`. `Err` is the first header
 /// whose fields do not fit the directory (or its extra field's blocks do not fit
 /// the extra field); `Ok(None)` if every header was visited. Linear in the
 /// directory.
@@ -489,7 +495,7 @@ fn walk_central_directory<T>(
     archive: &Path,
     start: u64,
     end: u64,
-    mut visit: impl FnMut(&[u8]) -> Option<T>,
+    mut visit: impl FnMut(&[u8], Listing) -> Option<T>,
 ) -> io::Result<Result<Option<T>, Header>> {
     let mut file = BufReader::new(fs::File::open(archive)?);
     file.seek(SeekFrom::Start(start))?;
@@ -526,7 +532,11 @@ fn walk_central_directory<T>(
             rest = &rest[4 + size..];
         }
         file.seek_relative(comment_len as i64)?;
-        if let Some(found) = visit(name.as_deref().unwrap_or_default()) {
+        let word = |at: usize| {
+            u32::from_le_bytes([header[at], header[at + 1], header[at + 2], header[at + 3]])
+        };
+        let listing = (field(10) as u16, word(16), word(20), word(24));
+        if let Some(found) = visit(name.as_deref().unwrap_or_default(), listing) {
             return Ok(Ok(Some(found)));
         }
     }
@@ -534,16 +544,24 @@ fn walk_central_directory<T>(
 }
 
 /// The first name that appears twice in the central directory of `archive`
-/// starting at byte `start` (the zip reader keeps one entry per name), or `None`
-/// if the directory cannot be read.
-fn duplicated_name(archive: &Path, start: u64) -> Option<String> {
-    let end = fs::metadata(archive).ok()?.len();
-    let mut seen = std::collections::HashSet::new();
-    let found = walk_central_directory(archive, start, end, |name| {
-        (!seen.insert(name.to_vec()))
-            .then(|| String::from_utf8_lossy(name).escape_default().to_string())
+/// starting at byte `start` with copies that differ in compression method,
+/// CRC-32 or sizes (the zip reader keeps one entry per name), `None` if every
+/// copy of every name is the same; "(unknown)" if the directory cannot be
+/// read.
+fn differing_duplicate(archive: &Path) -> Option<String> {
+    let unknown = || Some("(unknown)".to_string());
+    let Some((start, end)) = central_directory(archive) else {
+        return unknown();
+    };
+    let mut seen = HashMap::new();
+    let found = walk_central_directory(archive, start, end, |name, listing| {
+        let first = *seen.entry(name.to_vec()).or_insert(listing);
+        (first != listing).then(|| String::from_utf8_lossy(name).escape_default().to_string())
     });
-    found.ok()?.ok()?
+    match found {
+        Ok(Ok(found)) => found,
+        _ => unknown(),
+    }
 }
 
 /// The central directory header the zip reader could not read, for an archive it
@@ -551,6 +569,16 @@ fn duplicated_name(archive: &Path, start: u64) -> Option<String> {
 /// that record is missing (the file is no zip, or is truncated), is ZIP64, or
 /// every header reads.
 fn broken_header(archive: &Path) -> Option<Header> {
+    let (start, end) = central_directory(archive)?;
+    walk_central_directory(archive, start, end, |_, _| None::<()>)
+        .ok()?
+        .err()
+}
+
+/// Where the central directory of `archive` starts and ends, from the
+/// end-of-central-directory record (clipped to the file); `None` if that
+/// record is missing (the file is no zip, or is truncated) or is ZIP64.
+fn central_directory(archive: &Path) -> Option<(u64, u64)> {
     let mut file = fs::File::open(archive).ok()?;
     let len = file.metadata().ok()?.len();
     // The record (22 bytes) and its comment (at most 65 535) end the file.
@@ -570,9 +598,7 @@ fn broken_header(archive: &Path) -> Option<Header> {
         return None;
     }
     let (start, end) = (u64::from(start), u64::from(start) + u64::from(size));
-    walk_central_directory(archive, start, end.min(len), |_| None::<()>)
-        .ok()?
-        .err()
+    Some((start, end.min(len)))
 }
 
 /// Copies at most `max` bytes, returning how many were copied.
@@ -758,6 +784,22 @@ mod tests {
                  duplicate entry (the archive has two entries of this name)",
                 path.display()
             )
+        );
+        // The same entry twice (name, method, CRC-32, sizes: as the Reference
+        // FMU Roberts lists its `extra/` folder) is extracted once.
+        zip_of(
+            &path,
+            &[
+                ("SystemStructure.ssd", b"<a/>"),
+                ("SystemStructure.ssX", b"<a/>"),
+            ],
+        );
+        patch(&path, b"SystemStructure.ssX", b"SystemStructure.ssd");
+        let extracted =
+            extract_archive(&path, ArchiveKind::Ssp, &ExtractLimits::default()).unwrap();
+        assert_eq!(
+            fs::read(extracted.root().join("SystemStructure.ssd")).unwrap(),
+            b"<a/>"
         );
         // Two names for one path.
         zip_of(
