@@ -29,7 +29,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use crate::error::{Error, Result};
-use crate::fmu::{Fmu, InstanceOptions};
+use crate::fmu::{Fmu, InstanceOptions, Interface};
 use crate::interface::Int;
 use crate::model_description::{ModelDescription, ValueReference};
 use protocol::{op, In, Out};
@@ -118,6 +118,8 @@ pub struct RemoteInstance {
     reply: Vec<u8>,
     name: crate::current::Name,
     fmu: Fmu,
+    /// Made for model exchange: the host integrates it.
+    model_exchange: bool,
     time: f64,
     fatal: bool,
     /// How the host process ended, once it did.
@@ -291,6 +293,7 @@ impl RemoteInstance {
             reply: Vec::new(),
             name: crate::current::Name::new(name),
             fmu: fmu.clone(),
+            model_exchange: matches!(options.interface, Interface::ModelExchange(_)),
             time: 0.0,
             fatal: false,
             ended: None,
@@ -341,6 +344,7 @@ impl RemoteInstance {
         for category in &categories {
             out.str(category);
         }
+        out.interface(&options.interface);
         remote.send()?;
         Ok(remote)
     }
@@ -351,7 +355,7 @@ impl RemoteInstance {
         let standard = self.fmu.model_description().standard;
         self.calls.push(Call {
             code,
-            function: protocol::op_function(code, standard),
+            function: protocol::op_function_for(code, standard, self.model_exchange),
             time: self.time,
         });
         self.out.call(code)
