@@ -209,7 +209,8 @@ pub fn assert_one_line_naming(error: &dyn std::fmt::Display, fragments: &[&str])
 /// `tests/fixtures/fmi/me_sawtooth.c` (x' = −1 from 1, reset to 1 by the state
 /// event at x = 0; parameter `mode` 1 chatters, 2 fails in fmi2GetDerivatives
 /// after t = 0.5, 3 asks to terminate at the first event, 4 returns NaN
-/// derivatives after t = 0.5, 5 runs to infinity at t = 0.9), compiled now.
+/// derivatives after t = 0.5, 5 runs to infinity at t = 0.9, 6 sleeps 30 s in
+/// fmi2GetDerivatives after t = 0.5), compiled now.
 pub fn me_sawtooth_fmu(dir: &Path) -> PathBuf {
     let root = dir.join("sawtooth");
     let binaries = root.join("binaries").join("linux64");

@@ -122,8 +122,9 @@ fn watch_hangup(requests: &File) {
 }
 
 /// The instance being served and what its calls need: the instance is made by
-/// [`tether_fmi::instantiate`] in this process, an FMI 2.0 or FMI 3.0 one, and
-/// keeps its FMU states in its own slots.
+/// [`tether_fmi::instantiate`] in this process, an FMI 2.0 or FMI 3.0 one, for
+/// co-simulation or for model exchange (integrated here), and keeps its FMU
+/// states in its own slots.
 #[derive(Default)]
 struct Host {
     instance: Option<Box<dyn FmuInstance>>,
@@ -232,10 +233,10 @@ impl CallClock {
 }
 
 /// Enforces `call_timeout` on every FMI call: a call still running past it is
-/// answered with [`Error::CallTimeout`] naming it (the function of the
-/// instance's FMI standard and interface: `function`), and the host ends with its process group (the
-/// FMU cannot be stopped otherwise). The watch wakes about once per time-out,
-/// not per call.
+/// answered with [`Error::CallTimeout`] naming it (`function` of its
+/// operation: the instance's FMI standard and interface say which), and the
+/// host ends with its process group (the FMU cannot be stopped otherwise).
+/// The watch wakes about once per time-out, not per call.
 fn watch_calls(
     clock: &Arc<CallClock>,
     writer: &Arc<Mutex<File>>,

@@ -459,3 +459,26 @@ fn a_remote_model_exchange_instance_integrates_on_its_host() {
     assert!(matches!(remote_error, Error::ModelExchange { .. }));
     assert_eq!(remote_error.to_string(), local_error.to_string());
 }
+
+/// An isolated model-exchange step that hangs in fmi2GetDerivatives (mode 6,
+/// from t = 0.5) is ended by the call time-out; the line names the
+/// derivatives (an ME FMU has no fmi2DoStep) and the step's start.
+#[test]
+fn a_hanging_isolated_step_is_ended_by_the_call_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu = Fmu::open(sawtooth(dir.path())).unwrap();
+    let timeout = Some(std::time::Duration::from_millis(500));
+    let mut a = started(&fmu, 6, Placement::Process { timeout }).unwrap();
+    let started_at = std::time::Instant::now();
+    let e = run(&mut *a).expect("the step from 0.5 hangs");
+    assert!(started_at.elapsed().as_secs() < 10, "ended by the time-out");
+    assert!(matches!(e, Error::CallTimeout { .. }), "{e:?}");
+    assert_naming(
+        &e,
+        &[
+            "instance 'saw'",
+            "fmi2GetDerivatives at t=0.5 did not return within the call time-out of 0.5 s",
+        ],
+    );
+    assert!(!e.to_string().contains('\n'));
+}

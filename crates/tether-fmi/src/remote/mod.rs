@@ -12,6 +12,10 @@
 //! names the one that failed; it enforces `call_timeout` on each call itself.
 //! The inherent methods (`do_step`, `save_state`, …) make one round trip each.
 //!
+//! An instance made for model exchange ([`crate::Interface::ModelExchange`])
+//! is a [`MeInstance`](crate::MeInstance) in the host, which integrates it
+//! there: its step is one call, as a co-simulation step is.
+//!
 //! The host executable is found by [`host_command`] (docs/reliability.md).
 
 pub mod protocol;
