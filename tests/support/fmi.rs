@@ -205,31 +205,12 @@ pub fn assert_one_line_naming(error: &dyn std::fmt::Display, fragments: &[&str])
     }
 }
 
-const SAWTOOTH_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="sawtooth" guid="{sawtooth}"
-  numberOfEventIndicators="1">
-  <ModelExchange modelIdentifier="sawtooth" completedIntegratorStepNotNeeded="true"/>
-  <ModelVariables>
-    <ScalarVariable name="x" valueReference="0" causality="output" variability="continuous"
-      initial="exact"><Real start="1"/></ScalarVariable>
-    <ScalarVariable name="der(x)" valueReference="1" causality="local"
-      variability="continuous"><Real derivative="1"/></ScalarVariable>
-    <ScalarVariable name="mode" valueReference="2" causality="parameter" variability="fixed"
-      initial="exact"><Integer start="0"/></ScalarVariable>
-    <ScalarVariable name="events" valueReference="3" causality="output" variability="discrete"
-      initial="exact"><Integer start="0"/></ScalarVariable>
-  </ModelVariables>
-  <ModelStructure>
-    <Outputs><Unknown index="1"/><Unknown index="4"/></Outputs>
-    <Derivatives><Unknown index="2"/></Derivatives>
-  </ModelStructure>
-</fmiModelDescription>
-"#;
-
 /// A model-exchange-only FMI 2.0 FMU, unpacked in `dir`: the sawtooth of
 /// `tests/fixtures/fmi/me_sawtooth.c` (x' = −1 from 1, reset to 1 by the state
 /// event at x = 0; parameter `mode` 1 chatters, 2 fails in fmi2GetDerivatives
-/// after t = 0.5, 3 asks to terminate at the first event), compiled now.
+/// after t = 0.5, 3 asks to terminate at the first event, 4 returns NaN
+/// derivatives after t = 0.5, 5 runs to infinity at t = 0.9, 6 sleeps 30 s in
+/// fmi2GetDerivatives after t = 0.5), compiled now.
 pub fn me_sawtooth_fmu(dir: &Path) -> PathBuf {
     let root = dir.join("sawtooth");
     let binaries = root.join("binaries").join("linux64");
@@ -237,6 +218,10 @@ pub fn me_sawtooth_fmu(dir: &Path) -> PathBuf {
     std::fs::create_dir_all(root.join("resources")).unwrap();
     let source = include_str!("../fixtures/fmi/me_sawtooth.c");
     compile_shared_library(&binaries, "sawtooth", source, &[]);
-    std::fs::write(root.join("modelDescription.xml"), SAWTOOTH_DESCRIPTION).unwrap();
+    std::fs::write(
+        root.join("modelDescription.xml"),
+        include_str!("../fixtures/fmi/me_sawtooth.xml"),
+    )
+    .unwrap();
     root
 }

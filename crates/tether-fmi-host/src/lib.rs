@@ -23,7 +23,7 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
 use tether_fmi::remote::protocol::{self, op, In, Out};
-use tether_fmi::{Error, FmiStandard, Fmu, FmuInstance, Inputs, InstanceOptions, Placement};
+use tether_fmi::{Error, Fmu, FmuInstance, Inputs, InstanceOptions, Interface, Placement};
 
 /// The exit code of a host process that ended on an error of its own (a
 /// request it refused, a broken connection), said on its standard error.
@@ -122,8 +122,9 @@ fn watch_hangup(requests: &File) {
 }
 
 /// The instance being served and what its calls need: the instance is made by
-/// [`tether_fmi::instantiate`] in this process, an FMI 2.0 or FMI 3.0 one, and
-/// keeps its FMU states in its own slots.
+/// [`tether_fmi::instantiate`] in this process, an FMI 2.0 or FMI 3.0 one, for
+/// co-simulation or for model exchange (integrated here), and keeps its FMU
+/// states in its own slots.
 #[derive(Default)]
 struct Host {
     instance: Option<Box<dyn FmuInstance>>,
@@ -139,6 +140,8 @@ struct Host {
     bytes: Vec<u8>,
     /// `call_timeout` of the instance, sent with `INSTANTIATE`.
     timeout: Option<Duration>,
+    /// The instance is made for model exchange (the integrator runs here).
+    model_exchange: bool,
 }
 
 /// The environment variable by which `tether host` bounds the requests of a
@@ -184,7 +187,9 @@ fn serve(requests: File, writer: File) -> std::io::Result<()> {
         }
         if let (Some(timeout), Some(instance), false) = (host.timeout, &host.instance, watching) {
             let standard = instance.model_description().standard;
-            watch_calls(&clock, &writer, timeout, instance.name(), standard);
+            let model_exchange = host.model_exchange;
+            let function = move |code| protocol::op_function_for(code, standard, model_exchange);
+            watch_calls(&clock, &writer, timeout, instance.name(), function);
             watching = true;
         }
         out.send(&mut *lock(&writer))?;
@@ -228,16 +233,16 @@ impl CallClock {
 }
 
 /// Enforces `call_timeout` on every FMI call: a call still running past it is
-/// answered with [`Error::CallTimeout`] naming it (the function of the
-/// instance's FMI `standard`), and the host ends with its process group (the
-/// FMU cannot be stopped otherwise). The watch wakes about once per time-out,
-/// not per call.
+/// answered with [`Error::CallTimeout`] naming it (`function` of its
+/// operation: the instance's FMI standard and interface say which), and the
+/// host ends with its process group (the FMU cannot be stopped otherwise).
+/// The watch wakes about once per time-out, not per call.
 fn watch_calls(
     clock: &Arc<CallClock>,
     writer: &Arc<Mutex<File>>,
     timeout: Duration,
     instance: &str,
-    standard: FmiStandard,
+    function: impl Fn(u8) -> &'static str + Send + 'static,
 ) {
     let (clock, writer) = (Arc::clone(clock), Arc::clone(writer));
     let instance = instance.to_string();
@@ -260,7 +265,7 @@ fn watch_calls(
             continue;
         }
         let error = Error::CallTimeout {
-            function: protocol::op_function(clock.code.load(Ordering::Relaxed), standard),
+            function: function(clock.code.load(Ordering::Relaxed)),
             instance: instance.clone(),
             time: f64::from_bits(clock.time.load(Ordering::Relaxed)),
             seconds: timeout.as_secs_f64(),
@@ -322,10 +327,11 @@ impl Host {
             op::INSTANTIATE => {
                 let dir = input.str()?;
                 let name = input.str()?;
-                let options = InstanceOptions {
+                let mut options = InstanceOptions {
                     logging_on: input.bool()?,
                     visible: input.bool()?,
                     polynomial_inputs: input.bool()?,
+                    ..InstanceOptions::default()
                 };
                 let timeout = input.f64()?;
                 self.timeout = (timeout > 0.0).then(|| Duration::from_secs_f64(timeout));
@@ -336,6 +342,19 @@ impl Host {
                     categories.push(input.str()?.to_string());
                 }
                 tether_fmi::set_debug_logging(debug.then_some(categories));
+                // The interface: model exchange is integrated here.
+                options.interface = match input.interface() {
+                    Ok(interface) => interface,
+                    Err(e) => {
+                        return Ok(Err(Error::Host {
+                            instance: name.to_string(),
+                            message: format!(
+                                "instance '{name}': its host refused the instantiate request: {e}"
+                            ),
+                        }))
+                    }
+                };
+                self.model_exchange = matches!(options.interface, Interface::ModelExchange(_));
                 Fmu::open(dir)
                     .and_then(|fmu| {
                         tether_fmi::instantiate(&fmu, name, options, Placement::InProcess)

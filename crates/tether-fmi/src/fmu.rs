@@ -5,6 +5,7 @@ use std::sync::{Arc, PoisonError, RwLock};
 
 use crate::archive::{self, ExtractLimits, FmuDir};
 use crate::error::{Error, Result};
+use crate::instance::Integrator;
 use crate::library::binary_path;
 use crate::model_description::{self, ModelDescription};
 use crate::shared::FmuShared;
@@ -17,8 +18,20 @@ pub struct OpenOptions {
     pub limits: ExtractLimits,
 }
 
-/// Options for [`Fmu::instantiate`].
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+/// The FMI interface an instance is made for ([`crate::instantiate`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub enum Interface {
+    /// Co-simulation: the FMU steps itself.
+    #[default]
+    CoSimulation,
+    /// Model exchange: a [`MeInstance`](crate::MeInstance) integrates the
+    /// FMU with this integrator where the FMU is loaded (in the host process
+    /// for an isolated or remote instance).
+    ModelExchange(Integrator),
+}
+
+/// Options for [`crate::instantiate`] and [`Fmu::instantiate`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct InstanceOptions {
     /// `loggingOn` of `fmi2Instantiate`: whether the FMU sends debug messages.
     pub logging_on: bool,
@@ -30,12 +43,22 @@ pub struct InstanceOptions {
     /// k = 0 its calls would set nothing); FMI 2.0 instances take input
     /// derivatives either way.
     pub polynomial_inputs: bool,
+    /// The interface [`crate::instantiate`] makes the instance for (default
+    /// co-simulation); [`Fmu::instantiate`] makes a co-simulation instance
+    /// whatever it says.
+    pub interface: Interface,
 }
 
 impl InstanceOptions {
     /// Options with FMU debug logging switched on.
     pub fn with_logging(mut self, logging_on: bool) -> Self {
         self.logging_on = logging_on;
+        self
+    }
+
+    /// Options for an instance of `interface`.
+    pub fn with_interface(mut self, interface: Interface) -> Self {
+        self.interface = interface;
         self
     }
 
@@ -189,6 +212,20 @@ impl Fmu {
         Err(Error::NotCoSimulation {
             path: self.path().to_owned(),
             model: md.model_name.clone(),
+        })
+    }
+
+    /// [`Error::Unsupported`] if the FMU has no model-exchange interface (no
+    /// `ModelExchange` element): [`crate::instantiate`] asks this before it
+    /// makes a model-exchange instance in any placement.
+    pub fn require_model_exchange(&self) -> Result<()> {
+        let md = self.model_description();
+        if md.model_exchange.is_some() {
+            return Ok(());
+        }
+        Err(Error::Unsupported {
+            model: md.model_name.clone(),
+            reason: "it has no model-exchange interface (no <ModelExchange> element)".into(),
         })
     }
 

@@ -79,7 +79,8 @@ pub use archive::{remove_extractions_now, sweep_leftovers, ArchiveKind, ExtractL
 pub use current::{calls_in_progress, current_call, CallInProgress, CurrentCall};
 pub use error::{Error, FmuMessages, Result};
 pub use fmu::{
-    set_debug_logging, special_file_kind, Fmu, InstanceOptions, OpenOptions, QUIRKS_TARGET,
+    set_debug_logging, special_file_kind, Fmu, InstanceOptions, Interface, OpenOptions,
+    QUIRKS_TARGET,
 };
 pub use instance::{
     Fmi3Instance, FmuState, Instance, Integrator, LocalInstance, MeInstance, Method, StatusKind,

@@ -4,8 +4,8 @@
 use std::time::Duration;
 
 use crate::error::Result;
-use crate::fmu::{Fmu, InstanceOptions};
-use crate::instance::LocalInstance;
+use crate::fmu::{Fmu, InstanceOptions, Interface};
+use crate::instance::{LocalInstance, MeInstance};
 use crate::interface::FmuInstance;
 
 /// Where an instance runs.
@@ -29,20 +29,43 @@ pub enum Placement {
     },
 }
 
-/// Instantiates `fmu` as `name` where `placement` says.
+/// Instantiates `fmu` as `name` where `placement` says, for the interface
+/// `options.interface` says. A model-exchange instance is a [`MeInstance`]
+/// where the FMU is loaded: in this process, or in the host process, which
+/// integrates it there (each step one call, as a co-simulation step).
 pub fn instantiate(
     fmu: &Fmu,
     name: &str,
     options: InstanceOptions,
     placement: Placement,
 ) -> Result<Box<dyn FmuInstance>> {
-    fmu.require_co_simulation()?;
+    match options.interface {
+        Interface::CoSimulation => fmu.require_co_simulation()?,
+        Interface::ModelExchange(integrator) => {
+            fmu.require_model_exchange()?;
+            // Refused here as in process, before a host is started.
+            integrator
+                .check()
+                .map_err(|message| crate::Error::InvalidArgument {
+                    function: "the integrator",
+                    instance: name.to_owned(),
+                    message,
+                })?;
+        }
+    }
     let fmi3 = fmu.model_description().standard == crate::model_description::FmiStandard::Fmi3;
     Ok(match placement {
-        Placement::InProcess if fmi3 => {
-            Box::new(crate::instance::Fmi3Instance::new(fmu, name, options)?)
-        }
-        Placement::InProcess => Box::new(LocalInstance::new(fmu.instantiate(name, options)?)),
+        Placement::InProcess => match options.interface {
+            Interface::ModelExchange(integrator) => {
+                Box::new(MeInstance::new(fmu, name, options, integrator)?)
+            }
+            Interface::CoSimulation if fmi3 => {
+                Box::new(crate::instance::Fmi3Instance::new(fmu, name, options)?)
+            }
+            Interface::CoSimulation => {
+                Box::new(LocalInstance::new(fmu.instantiate(name, options)?))
+            }
+        },
         // The host makes its instance with this function, in its process.
         Placement::Process { timeout } => Box::new(crate::remote::RemoteInstance::new(
             fmu, name, options, timeout,

@@ -12,6 +12,10 @@
 //! names the one that failed; it enforces `call_timeout` on each call itself.
 //! The inherent methods (`do_step`, `save_state`, …) make one round trip each.
 //!
+//! An instance made for model exchange ([`crate::Interface::ModelExchange`])
+//! is a [`MeInstance`](crate::MeInstance) in the host, which integrates it
+//! there: its step is one call, as a co-simulation step is.
+//!
 //! The host executable is found by [`host_command`] (docs/reliability.md).
 
 pub mod protocol;
@@ -29,7 +33,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use crate::error::{Error, Result};
-use crate::fmu::{Fmu, InstanceOptions};
+use crate::fmu::{Fmu, InstanceOptions, Interface};
 use crate::interface::Int;
 use crate::model_description::{ModelDescription, ValueReference};
 use protocol::{op, In, Out};
@@ -118,6 +122,8 @@ pub struct RemoteInstance {
     reply: Vec<u8>,
     name: crate::current::Name,
     fmu: Fmu,
+    /// Made for model exchange: the host integrates it.
+    model_exchange: bool,
     time: f64,
     fatal: bool,
     /// How the host process ended, once it did.
@@ -291,6 +297,7 @@ impl RemoteInstance {
             reply: Vec::new(),
             name: crate::current::Name::new(name),
             fmu: fmu.clone(),
+            model_exchange: matches!(options.interface, Interface::ModelExchange(_)),
             time: 0.0,
             fatal: false,
             ended: None,
@@ -341,6 +348,7 @@ impl RemoteInstance {
         for category in &categories {
             out.str(category);
         }
+        out.interface(&options.interface);
         remote.send()?;
         Ok(remote)
     }
@@ -351,7 +359,7 @@ impl RemoteInstance {
         let standard = self.fmu.model_description().standard;
         self.calls.push(Call {
             code,
-            function: protocol::op_function(code, standard),
+            function: protocol::op_function_for(code, standard, self.model_exchange),
             time: self.time,
         });
         self.out.call(code)

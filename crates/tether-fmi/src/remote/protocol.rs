@@ -12,11 +12,14 @@
 use std::io::{self, Read, Write};
 
 use crate::error::{Error, FmuMessages};
+use crate::fmu::Interface;
+use crate::instance::{Integrator, Method};
 use crate::interface::Int;
 use crate::model_description::FmiStandard;
 
-/// Changes whenever a message changes: master and host must agree.
-pub const VERSION: u32 = 7;
+/// Changes whenever a message changes: master and host must agree (8: the
+/// interface in `INSTANTIATE`, model-exchange errors and function names).
+pub const VERSION: u32 = 8;
 
 /// Operation codes of the requests.
 #[allow(missing_docs)]
@@ -97,7 +100,18 @@ const FUNCTIONS: &[&str] = &[
     "fmi2GetDirectionalDerivative",
     "fmi2SetDebugLogging",
     "fmi2FreeInstance",
+    "fmi2SetTime",
+    "fmi2SetContinuousStates",
+    "fmi2GetDerivatives",
+    "fmi2GetEventIndicators",
+    "fmi2GetContinuousStates",
+    "fmi2GetNominalsOfContinuousStates",
+    "fmi2EnterEventMode",
+    "fmi2NewDiscreteStates",
+    "fmi2EnterContinuousTimeMode",
+    "fmi2CompletedIntegratorStep",
     "fmi3InstantiateCoSimulation",
+    "fmi3InstantiateModelExchange",
     "fmi3EnterConfigurationMode",
     "fmi3ExitConfigurationMode",
     "fmi3EnterInitializationMode",
@@ -140,12 +154,35 @@ const FUNCTIONS: &[&str] = &[
     "fmi3DeserializeFMUState",
     "fmi3SetDebugLogging",
     "fmi3FreeInstance",
+    "fmi3SetTime",
+    "fmi3SetContinuousStates",
+    "fmi3GetContinuousStateDerivatives",
+    "fmi3GetEventIndicators",
+    "fmi3GetContinuousStates",
+    "fmi3GetNominalsOfContinuousStates",
+    "fmi3GetNumberOfContinuousStates",
+    "fmi3GetNumberOfEventIndicators",
+    "fmi3EnterEventMode",
+    "fmi3UpdateDiscreteStates",
+    "fmi3EnterContinuousTimeMode",
+    "fmi3CompletedIntegratorStep",
 ];
 
-/// The FMI function operation `code` calls on an instance of FMI `standard`,
-/// for errors and time-outs.
+/// The FMI function operation `code` calls on a co-simulation instance of
+/// FMI `standard`, for errors and time-outs.
 pub fn op_function(code: u8, standard: FmiStandard) -> &'static str {
+    op_function_for(code, standard, false)
+}
+
+/// [`op_function`] for an instance made for model exchange if
+/// `model_exchange`: its instantiation, and for a step the derivatives, the
+/// function the integrator calls most.
+pub fn op_function_for(code: u8, standard: FmiStandard, model_exchange: bool) -> &'static str {
     let (fmi2, fmi3) = match code {
+        op::INSTANTIATE if model_exchange => ("fmi2Instantiate", "fmi3InstantiateModelExchange"),
+        op::DO_STEP if model_exchange => {
+            ("fmi2GetDerivatives", "fmi3GetContinuousStateDerivatives")
+        }
         op::INSTANTIATE => ("fmi2Instantiate", "fmi3InstantiateCoSimulation"),
         // FMI 3.0 passes the experiment to fmi3EnterInitializationMode.
         op::SETUP_EXPERIMENT => ("fmi2SetupExperiment", "fmi3EnterInitializationMode"),
@@ -299,6 +336,21 @@ impl Out {
         });
         self
     }
+    /// The interface of an `INSTANTIATE` request: 0 co-simulation; 1 model
+    /// exchange, the integration method's name and rtol, atol, max_step,
+    /// each a flag (given) and a real.
+    pub fn interface(&mut self, interface: &Interface) -> &mut Out {
+        match interface {
+            Interface::CoSimulation => self.u8(0),
+            Interface::ModelExchange(integrator) => {
+                self.u8(1).str(integrator.method.name());
+                for value in [integrator.rtol, integrator.atol, integrator.max_step] {
+                    self.bool(value.is_some()).f64(value.unwrap_or(0.0));
+                }
+                self
+            }
+        }
+    }
     /// An error of a call (status errors keep their kind, others their message).
     pub fn error(&mut self, e: &Error) -> &mut Out {
         let none = FmuMessages::default();
@@ -362,6 +414,13 @@ impl Out {
                     .f64(*time)
                     .bool(how.is_some())
                     .str(how.as_deref().unwrap_or(""));
+            }
+            Error::ModelExchange {
+                instance,
+                time,
+                cause,
+            } => {
+                return self.u8(9).str(instance).f64(*time).str(cause);
             }
             other => {
                 return self.u8(6).str(&crate::error::one_line(&other.to_string()));
@@ -568,6 +627,37 @@ impl<'a> In<'a> {
         }
         Ok(())
     }
+    /// The interface written by [`Out::interface`]; an unknown kind or
+    /// method is an error that names it.
+    pub fn interface(&mut self) -> io::Result<Interface> {
+        match self.u8()? {
+            0 => Ok(Interface::CoSimulation),
+            1 => {
+                let name = self.str()?;
+                let method = Method::parse(name).ok_or_else(|| {
+                    io::Error::new(
+                        io::ErrorKind::InvalidData,
+                        format!("an unknown integration method '{}'", name.escape_debug()),
+                    )
+                })?;
+                let mut value = || -> io::Result<Option<f64>> {
+                    let given = self.bool()?;
+                    let value = self.f64()?;
+                    Ok(given.then_some(value))
+                };
+                Ok(Interface::ModelExchange(Integrator {
+                    method,
+                    rtol: value()?,
+                    atol: value()?,
+                    max_step: value()?,
+                }))
+            }
+            kind => Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                format!("an unknown interface {kind}"),
+            )),
+        }
+    }
     /// An error written by [`Out::error`]; `instance` names the instance for
     /// errors that crossed as messages.
     pub fn error(&mut self, instance: &str) -> io::Result<Error> {
@@ -584,6 +674,13 @@ impl<'a> In<'a> {
                 instance: self.str()?.to_string(),
                 time: self.f64()?,
                 seconds: self.f64()?,
+            });
+        }
+        if kind == 9 {
+            return Ok(Error::ModelExchange {
+                instance: self.str()?.to_string(),
+                time: self.f64()?,
+                cause: self.str()?.to_string(),
             });
         }
         if kind == 8 {
@@ -796,5 +893,98 @@ mod tests {
             }
         }
         assert_eq!(op_function(op::DO_STEP, FmiStandard::Fmi3), "fmi3DoStep");
+        for standard in [FmiStandard::Fmi2, FmiStandard::Fmi3] {
+            for code in [op::INSTANTIATE, op::DO_STEP] {
+                let name = op_function_for(code, standard, true);
+                assert_eq!(function_name(name), name, "{code}");
+            }
+        }
+        assert_eq!(
+            op_function_for(op::DO_STEP, FmiStandard::Fmi2, true),
+            "fmi2GetDerivatives"
+        );
+    }
+
+    /// Every function a model-exchange instance calls keeps its name when
+    /// its error crosses, and a model-exchange error crosses as itself.
+    #[test]
+    fn model_exchange_errors_cross_as_such() {
+        for name in [
+            "fmi2SetTime",
+            "fmi2SetContinuousStates",
+            "fmi2GetDerivatives",
+            "fmi2GetEventIndicators",
+            "fmi2GetContinuousStates",
+            "fmi2GetNominalsOfContinuousStates",
+            "fmi2EnterEventMode",
+            "fmi2NewDiscreteStates",
+            "fmi2EnterContinuousTimeMode",
+            "fmi2CompletedIntegratorStep",
+            "fmi3InstantiateModelExchange",
+            "fmi3SetTime",
+            "fmi3SetContinuousStates",
+            "fmi3GetContinuousStateDerivatives",
+            "fmi3GetEventIndicators",
+            "fmi3GetContinuousStates",
+            "fmi3GetNominalsOfContinuousStates",
+            "fmi3GetNumberOfContinuousStates",
+            "fmi3GetNumberOfEventIndicators",
+            "fmi3EnterEventMode",
+            "fmi3UpdateDiscreteStates",
+            "fmi3EnterContinuousTimeMode",
+            "fmi3CompletedIntegratorStep",
+        ] {
+            assert_eq!(function_name(name), name);
+        }
+        let sent = Error::ModelExchange {
+            instance: "saw".into(),
+            time: 0.625,
+            cause: "fmi2GetDerivatives returned NaN".into(),
+        };
+        let mut out = Out::default();
+        out.start(ERR).error(&sent);
+        let mut wire = Vec::new();
+        out.send(&mut wire).unwrap();
+        let mut buf = Vec::new();
+        assert!(receive(&mut wire.as_slice(), &mut buf).unwrap());
+        let mut input = In::new(&buf[1..]);
+        let received = input.error("other").unwrap();
+        assert_eq!(format!("{received:?}"), format!("{sent:?}"));
+        assert!(input.is_empty());
+    }
+
+    /// The interface of an instantiate request crosses bit for bit; an
+    /// unknown interface or method is an error naming it, not a panic.
+    #[test]
+    fn interfaces_cross_and_unknown_ones_are_named() {
+        let sent = [
+            Interface::CoSimulation,
+            Interface::ModelExchange(Integrator::default()),
+            Interface::ModelExchange(Integrator {
+                method: Method::Dop853,
+                rtol: Some(1e-10),
+                atol: None,
+                max_step: Some(0.05),
+            }),
+        ];
+        let mut out = Out::default();
+        out.start(op::INSTANTIATE);
+        for interface in &sent {
+            out.interface(interface);
+        }
+        let mut input = In::new(&out.0[5..]);
+        for interface in &sent {
+            assert_eq!(input.interface().unwrap(), *interface);
+        }
+        assert!(input.is_empty());
+        let e = In::new(&[7]).interface().unwrap_err();
+        assert_eq!(e.to_string(), "an unknown interface 7");
+        let mut out = Out::default();
+        out.start(op::INSTANTIATE).u8(1).str("euler\n");
+        let e = In::new(&out.0[5..]).interface().unwrap_err();
+        assert_eq!(e.to_string(), "an unknown integration method 'euler\\n'");
+        // Truncated after the method: malformed, not a panic.
+        out.bool(true);
+        assert!(In::new(&out.0[5..]).interface().is_err());
     }
 }
