@@ -217,7 +217,8 @@ fn an_isolated_step_is_one_round_trip() {
 
 /// The Reference BouncingBall (FMI 2.0 and 3.0) integrated in a host process
 /// gives the bits it gives in process, across its first bounce, and a state
-/// saved and restored in the host repeats the steps bit for bit.
+/// saved and restored in the host repeats the steps bit for bit; it answers
+/// the model-exchange capabilities in both placements.
 #[test]
 fn isolated_results_and_rollback_equal_in_process_bit_for_bit() {
     for standard in ["fmi2", "fmi3"] {
@@ -235,6 +236,12 @@ fn isolated_results_and_rollback_equal_in_process_bit_for_bit() {
         let mut runs = Vec::new();
         for placement in placements() {
             let mut a = instantiate(&fmu, "bb", model_exchange(), placement).unwrap();
+            // The instance in the host says what the one in process says.
+            assert_eq!(
+                a.capabilities(),
+                tether_fmi::Capabilities::model_exchange(md),
+                "{standard}"
+            );
             a.setup(Some(1e-8), 0.0, Some(3.0)).unwrap();
             a.enter_initialization().unwrap();
             a.exit_initialization().unwrap();

@@ -152,6 +152,21 @@ impl Capabilities {
             output_derivative_order: cs.max_output_derivative_order,
         }
     }
+    /// What a model-exchange instance of `md` can do with the built-in
+    /// integrator: rollback where `ModelExchange` declares
+    /// `canGetAndSetFMUstate` (the FMU's state with the instance's states),
+    /// steps of any size; no serialized states, input polynomials or output
+    /// derivatives yet.
+    pub fn model_exchange(md: &ModelDescription) -> Capabilities {
+        let me = md.model_exchange.as_ref();
+        Capabilities {
+            rollback: me.is_some_and(|me| me.can_get_and_set_fmu_state),
+            serialization: false,
+            polynomial_inputs: false,
+            variable_steps: true,
+            output_derivative_order: 0,
+        }
+    }
 }
 
 /// An FMU instance as a master drives it: the life cycle, values, the

@@ -963,8 +963,14 @@ impl crate::interface::FmuInstance for RemoteInstance {
     fn name(&self) -> &str {
         self.name.as_str()
     }
+    /// What the instance in the host can do: it is made as in process.
     fn capabilities(&self) -> crate::interface::Capabilities {
-        crate::interface::Capabilities::co_simulation(self.model_description())
+        let md = self.model_description();
+        if self.model_exchange {
+            crate::interface::Capabilities::model_exchange(md)
+        } else {
+            crate::interface::Capabilities::co_simulation(md)
+        }
     }
     fn model_description(&self) -> &ModelDescription {
         self.fmu.model_description()

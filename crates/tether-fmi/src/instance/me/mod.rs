@@ -402,18 +402,8 @@ impl FmuInstance for MeInstance {
     fn name(&self) -> &str {
         self.inner.name()
     }
-    /// Rollback where `ModelExchange` declares `canGetAndSetFMUstate` (the
-    /// FMU's state with the instance's states); steps of any size; no
-    /// serialized states, input polynomials or output derivatives yet.
     fn capabilities(&self) -> Capabilities {
-        let me = self.inner.model_description().model_exchange.as_ref();
-        Capabilities {
-            rollback: me.is_some_and(|me| me.can_get_and_set_fmu_state),
-            serialization: false,
-            polynomial_inputs: false,
-            variable_steps: true,
-            output_derivative_order: 0,
-        }
+        Capabilities::model_exchange(self.inner.model_description())
     }
     fn model_description(&self) -> &ModelDescription {
         self.inner.model_description()
