@@ -132,15 +132,7 @@ fn a_direct_feedthrough_loop_is_checked_at_setup() {
     spec.instances.push(tether_master::InstanceSpec {
         name: "ctrl2".into(),
         fmu: ctrl,
-        parameters: Default::default(),
-        isolation: Default::default(),
-        call_timeout: None,
-        host: None,
-        token_file: None,
-        fmu_on_host: None,
-        resources: Default::default(),
-        step: None,
-        parallel: None,
+        ..Default::default()
     });
     for (from, to) in [("mass2.a", "ctrl2.y"), ("ctrl2.u", "mass2.F_ext")] {
         spec.connections.push(tether_master::ConnectionSpec {

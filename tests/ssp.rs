@@ -161,8 +161,8 @@ fn unsupported_elements_are_errors_naming_element_and_line() {
         ),
         (
             r#"source="resources/controller.fmu""#,
-            r#"source="resources/controller.fmu" implementation="ModelExchange""#,
-            "implementation=\"ModelExchange\" is not supported",
+            r#"source="resources/controller.fmu" implementation="ScheduledExecution""#,
+            "implementation=\"ScheduledExecution\" is not supported",
         ),
     ];
     let dir = fixture();
@@ -186,6 +186,53 @@ fn unsupported_elements_are_errors_naming_element_and_line() {
             text = text.replacen(from, to, 1);
         }
     }
+}
+
+/// SSP's `implementation` of a component is its `fmi_type`: read, run
+/// (the oscillator through its model-exchange interface) and written back.
+#[test]
+fn a_component_s_implementation_is_its_fmi_type() {
+    let dir = fixture();
+    let ssd = dir.path().join("SystemStructure.ssd");
+    let text = std::fs::read_to_string(&ssd).unwrap();
+    let from = r#"source="resources/oscillator.fmu">"#;
+    assert!(text.contains(from));
+    let text = text.replacen(
+        from,
+        r#"source="resources/oscillator.fmu" implementation="ModelExchange">"#,
+        1,
+    );
+    std::fs::write(&ssd, text).unwrap();
+    let loaded = tether_ssp::read(dir.path(), Some(1e-3), Some(0.1)).unwrap();
+    let kinds: Vec<_> = loaded
+        .spec
+        .instances
+        .iter()
+        .map(|i| (i.name.as_str(), i.fmi_type))
+        .collect();
+    assert!(
+        kinds.contains(&("mass", tether_master::InterfaceChoice::ModelExchange)),
+        "{kinds:?}"
+    );
+    assert!(
+        kinds
+            .iter()
+            .filter(|(n, _)| *n != "mass")
+            .all(|(_, k)| *k == tether_master::InterfaceChoice::Auto),
+        "{kinds:?}"
+    );
+    let mut sim = tether_master::Simulation::new(&loaded.spec).unwrap();
+    sim.run(&mut [], &mut |_, _| {}).unwrap();
+    let out = dir.path().join("again.ssp");
+    tether_ssp::write(&loaded.spec, &out).unwrap();
+    let again = tether_ssp::read(&out, Some(1e-3), Some(0.1)).unwrap();
+    let kinds_again: Vec<_> = again
+        .spec
+        .instances
+        .iter()
+        .map(|i| (i.name.as_str(), i.fmi_type))
+        .collect();
+    assert_eq!(kinds, kinds_again);
 }
 
 /// The paper's oscillator pair under PI control (a joint-free constraint, a

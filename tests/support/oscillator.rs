@@ -27,6 +27,12 @@ pub fn reference(t: f64) -> (f64, f64, f64) {
 }
 
 pub fn system(method: &str, order: usize, h: f64, stop: f64) -> SystemSpec {
+    system_with(method, order, h, stop, "")
+}
+
+/// [`system`] with `keys` (TOML lines) added to both instances, such as
+/// `fmi_type = "model_exchange"`.
+pub fn system_with(method: &str, order: usize, h: f64, stop: f64, keys: &str) -> SystemSpec {
     let fmu = tether_fmu_build::workspace_fmu("oscillator").expect("package the oscillator FMU");
     let text = format!(
         r#"
@@ -44,11 +50,13 @@ pub fn system(method: &str, order: usize, h: f64, stop: f64) -> SystemSpec {
         name = "mass1"
         fmu = "{fmu}"
         parameters = {{ m = {M1}, c = {C}, d = {D}, x0 = 0.0, v0 = {V0}, exact = true }}
+        {keys}
 
         [[instance]]
         name = "mass2"
         fmu = "{fmu}"
         parameters = {{ m = {M2}, c = {C}, d = {D}, x0 = 0.0, v0 = {V0}, exact = true }}
+        {keys}
 
         [[constraint]]
         name = "link"

@@ -155,14 +155,15 @@ impl Capabilities {
     /// What a model-exchange instance of `md` can do with the built-in
     /// integrator: rollback where `ModelExchange` declares
     /// `canGetAndSetFMUstate` (the FMU's state with the instance's states),
-    /// steps of any size; no serialized states, input polynomials or output
-    /// derivatives yet.
+    /// steps of any size, input polynomials of any degree on every Real
+    /// input (evaluated at every time the model is); no serialized states or
+    /// output derivatives yet.
     pub fn model_exchange(md: &ModelDescription) -> Capabilities {
         let me = md.model_exchange.as_ref();
         Capabilities {
             rollback: me.is_some_and(|me| me.can_get_and_set_fmu_state),
             serialization: false,
-            polynomial_inputs: false,
+            polynomial_inputs: true,
             variable_steps: true,
             output_derivative_order: 0,
         }

@@ -57,8 +57,8 @@ pub use spec::Parallel;
 pub use spec::{
     CheckRollback, ConnectionSpec, ConstraintSpec, CouplingSettings, CouplingVariableSpec,
     Experiment, ExportLink, ExportSource, ExportSpec, InitialMultiplier, InstanceSpec,
-    JacobianMode, JointInitial, JointSpec, OutputSpec, ResidualLimit, SignalScheme, SignalSettings,
-    SignalSolver, StartValue, SystemSpec,
+    IntegratorSpec, InterfaceChoice, JacobianMode, JointInitial, JointSpec, OutputSpec,
+    ResidualLimit, SignalScheme, SignalSettings, SignalSolver, StartValue, SystemSpec,
 };
 pub use start::{apply_start_value, apply_start_values, Arrays};
 pub use stats::{

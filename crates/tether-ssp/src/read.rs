@@ -6,8 +6,8 @@ use std::path::{Component, Path, PathBuf};
 use tether_fmi::archive::{extract_archive, ArchiveKind, ExtractLimits, FmuDir};
 use tether_fmi::xml::{self, Element as Node, Names};
 use tether_master::{
-    ConnectionSpec, Experiment, ExportLink, ExportSource, ExportSpec, InstanceSpec, StartValue,
-    SystemSpec,
+    ConnectionSpec, Experiment, ExportLink, ExportSource, ExportSpec, InstanceSpec,
+    InterfaceChoice, StartValue, SystemSpec,
 };
 
 use crate::{Annotation, SspError, ANNOTATION_TYPE, NAMESPACES};
@@ -565,12 +565,21 @@ impl Reader {
                 format!("<ssd:Component> type=\"{kind}\" is not supported: Tether runs FMUs"),
             ));
         }
-        if node.attr("implementation") == Some("ModelExchange") {
-            return Err(self.at(
-                node,
-                "<ssd:Component> implementation=\"ModelExchange\" is not supported: Tether runs co-simulation FMUs",
-            ));
-        }
+        // SSP's implementation: which FMI interface runs (`fmi_type`).
+        let fmi_type = match node.attr("implementation") {
+            None | Some("any") => InterfaceChoice::Auto,
+            Some("CoSimulation") => InterfaceChoice::CoSimulation,
+            Some("ModelExchange") => InterfaceChoice::ModelExchange,
+            Some(other) => {
+                return Err(self.at(
+                    node,
+                    format!(
+                        "<ssd:Component> implementation=\"{other}\" is not supported: Tether runs \
+                         \"any\", \"CoSimulation\" or \"ModelExchange\""
+                    ),
+                ))
+            }
+        };
         let source = self.required(node, "source")?;
         let fmu = self.source(node, source)?;
         let name = flat_name(&path);
@@ -611,6 +620,8 @@ impl Reader {
             resources: Default::default(),
             step: None,
             parallel: None,
+            fmi_type,
+            integrator: None,
         });
         Ok(())
     }

@@ -7,7 +7,7 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use tether_fmi::{BaseType, Causality, ModelDescription};
-use tether_master::{StartValue, SystemSpec};
+use tether_master::{InterfaceChoice, StartValue, SystemSpec};
 
 use crate::read::{Loaded, OSP_NAMESPACE, OSP_TYPE};
 use crate::NAMESPACES;
@@ -113,9 +113,15 @@ fn ssd(
     let _ = writeln!(x, r#"  <ssd:System name="{}">"#, esc(&name));
     let _ = writeln!(x, "    <ssd:Elements>");
     for (i, inst) in spec.instances.iter().enumerate() {
+        // `fmi_type` as SSP's implementation ("any" is the default).
+        let implementation = match inst.fmi_type {
+            InterfaceChoice::Auto => "",
+            InterfaceChoice::CoSimulation => r#" implementation="CoSimulation""#,
+            InterfaceChoice::ModelExchange => r#" implementation="ModelExchange""#,
+        };
         let _ = writeln!(
             x,
-            r#"      <ssd:Component name="{}" type="application/x-fmu-sharedlibrary" source="{}">"#,
+            r#"      <ssd:Component name="{}" type="application/x-fmu-sharedlibrary" source="{}"{implementation}>"#,
             esc(&inst.name),
             esc(&sources[i])
         );

@@ -107,7 +107,12 @@ impl Simulation {
             let md = slave.fmu.model_description();
             slave.counters.functions = crate::stats::CallNames::of(md, &set);
         }
-        let notes = signals.loop_notes(&system.slaves);
+        let mut notes: Vec<String> = system
+            .slaves
+            .iter()
+            .filter_map(|s| s.interface_note.clone())
+            .collect();
+        notes.extend(signals.loop_notes(&system.slaves));
         for (k, connections) in signals.loop_connections().iter().enumerate() {
             log::info!("direct-feedthrough loop {}: {connections}", k + 1);
         }
@@ -276,6 +281,7 @@ impl Simulation {
     }
 
     /// Lines for the user before the run, each a note (not a warning): the
+    /// instances `fmi_type = "auto"` ran through model exchange, and why; the
     /// direct-feedthrough loops closed only at macro points.
     pub fn notes(&self) -> &[String] {
         &self.notes

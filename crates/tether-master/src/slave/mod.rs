@@ -13,6 +13,7 @@
 
 mod check;
 mod coupled;
+pub(crate) mod interface;
 mod recorded;
 mod runs;
 mod setup;
@@ -88,6 +89,10 @@ pub struct Slave {
     /// What the instance can do ([`FmuInstance::capabilities`], asked once
     /// it is instantiated).
     pub(crate) caps: tether_fmi::Capabilities,
+    /// Whether the instance runs the FMU's model-exchange interface.
+    pub(crate) model_exchange: bool,
+    /// Why `fmi_type = "auto"` took model exchange, for the user.
+    pub(crate) interface_note: Option<String>,
     /// Whether [`SAVED`] holds a state.
     saved: bool,
     /// The coupled inputs and outputs and their buffers.

@@ -4,6 +4,8 @@
 
 use tether_fmi::{Fmu, Placement};
 
+use super::interface::Needs;
+
 use super::coupled::UNUSED;
 use super::{Experiment, Slave};
 use crate::spec::{InstanceSpec, Isolation, StartValue};
@@ -22,6 +24,7 @@ impl Slave {
         opened: &mut Vec<(std::path::PathBuf, Fmu)>,
         order: usize,
         experiment: Experiment,
+        needs: &Needs,
     ) -> Result<Slave, MasterError> {
         let fmu = match opened.iter().find(|(path, _)| *path == spec.fmu) {
             Some((_, fmu)) => fmu.clone(),
@@ -39,7 +42,7 @@ impl Slave {
                 fmu
             }
         };
-        Slave::instantiate_as(fmu, spec, &spec.name, order, experiment)
+        Slave::instantiate_as(fmu, spec, &spec.name, order, experiment, needs)
     }
 
     /// FMI 2.0: `fmi2SetupExperiment` right after `fmi2Instantiate` (FMI 3.0
@@ -52,8 +55,10 @@ impl Slave {
         name: &str,
         order: usize,
         experiment: Experiment,
+        needs: &Needs,
     ) -> Result<Slave, MasterError> {
         let md = fmu.model_description();
+        let (interface, interface_note) = super::interface::choose(spec, md, needs);
         let model_name = md.model_name.clone();
         let counters = InstanceCounters {
             name: name.to_string(),
@@ -79,7 +84,9 @@ impl Slave {
             (_, _, Isolation::Process) => Placement::Process { timeout },
             (_, _, Isolation::None) => Placement::InProcess,
         };
-        let options = tether_fmi::InstanceOptions::default().with_polynomial_inputs(order > 0);
+        let options = tether_fmi::InstanceOptions::default()
+            .with_polynomial_inputs(order > 0)
+            .with_interface(interface);
         let mut backend = tether_fmi::instantiate(&fmu, name, options, placement)?;
         let caps = backend.capabilities();
         let (start, stop, tolerance) = experiment;
@@ -94,6 +101,8 @@ impl Slave {
             backend,
             fmu,
             caps,
+            model_exchange: matches!(interface, tether_fmi::Interface::ModelExchange(_)),
+            interface_note,
             saved: false,
             coupled: Default::default(),
             runs: Default::default(),
@@ -283,11 +292,12 @@ impl Slave {
 
     /// Whether the input `vr` takes a polynomial over a step: FMI 2.0
     /// `canInterpolateInputs`, FMI 3.0 `providesIntermediateUpdate` and the input's
-    /// `intermediateUpdate="true"`.
+    /// `intermediateUpdate="true"`; every input of a model-exchange instance.
     pub(crate) fn interpolates(&self, vr: u32) -> bool {
         let md = self.fmu.model_description();
         self.caps.polynomial_inputs
-            && (md.standard != tether_fmi::FmiStandard::Fmi3
+            && (self.model_exchange
+                || md.standard != tether_fmi::FmiStandard::Fmi3
                 || md.model_variables.iter().any(|v| {
                     v.value_reference == vr
                         && v.causality == tether_fmi::Causality::Input

@@ -379,7 +379,7 @@ impl Default for CouplingSettings {
 }
 
 /// One FMU instance.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct InstanceSpec {
     /// Instance name, used as the column prefix and in constraint expressions.
@@ -427,6 +427,107 @@ pub struct InstanceSpec {
     /// may go to a worker thread (`[coupling] parallel`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub parallel: Option<bool>,
+    /// Which FMI interface the instance runs (docs/system-file.md, "Model
+    /// exchange"): `auto` (default) keeps co-simulation and takes model
+    /// exchange only where co-simulation would be refused.
+    #[serde(default, skip_serializing_if = "InterfaceChoice::is_auto")]
+    pub fmi_type: InterfaceChoice,
+    /// The built-in integrator of a model-exchange instance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub integrator: Option<IntegratorSpec>,
+}
+
+/// `fmi_type` of an instance: the FMI interface it runs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InterfaceChoice {
+    /// Co-simulation where it runs the system's method; model exchange where
+    /// co-simulation would be refused for a capability the method needs and
+    /// the FMU offers model exchange.
+    #[default]
+    Auto,
+    /// The FMU's co-simulation interface.
+    CoSimulation,
+    /// The FMU's model-exchange interface, integrated by the instance.
+    ModelExchange,
+}
+
+impl InterfaceChoice {
+    /// Every accepted spelling: Tether's and fmpy's (`fmi_type=` of
+    /// `fmpy.simulate_fmu`) and SSP's `implementation`.
+    pub const NAMES: [(&'static str, InterfaceChoice); 7] = [
+        ("auto", InterfaceChoice::Auto),
+        ("any", InterfaceChoice::Auto),
+        ("co_simulation", InterfaceChoice::CoSimulation),
+        ("CoSimulation", InterfaceChoice::CoSimulation),
+        ("model_exchange", InterfaceChoice::ModelExchange),
+        ("ModelExchange", InterfaceChoice::ModelExchange),
+        ("model-exchange", InterfaceChoice::ModelExchange),
+    ];
+
+    /// The interface called `name`.
+    pub fn parse(name: &str) -> Option<InterfaceChoice> {
+        InterfaceChoice::NAMES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|&(_, t)| t)
+    }
+
+    fn is_auto(&self) -> bool {
+        *self == InterfaceChoice::Auto
+    }
+}
+
+impl<'de> Deserialize<'de> for InterfaceChoice {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        InterfaceChoice::parse(&name).ok_or_else(|| {
+            serde::de::Error::custom(format!(
+                "fmi_type = \"{name}\": expected \"auto\", \"co_simulation\" or \"model_exchange\" \
+                 (fmpy's \"CoSimulation\" and \"ModelExchange\" too)"
+            ))
+        })
+    }
+}
+
+/// `integrator = { method, rtol, atol, max_step }` of a model-exchange
+/// instance (each optional; docs/fmi-import.md, "The integrator").
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IntegratorSpec {
+    /// The method by its key name (`tether_fmi::Method::ALL`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub method: Option<String>,
+    /// Relative tolerance (default: the experiment's tolerance, else 1e-6).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rtol: Option<f64>,
+    /// Absolute tolerance relative to the states' nominals (default: rtol).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub atol: Option<f64>,
+    /// The largest step (default: the communication step).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_step: Option<f64>,
+}
+
+impl IntegratorSpec {
+    /// The integrator settings, or why they are wrong (naming the key).
+    pub fn integrator(&self) -> Result<tether_fmi::Integrator, String> {
+        let method = match &self.method {
+            None => tether_fmi::Method::default(),
+            Some(name) => tether_fmi::Method::parse(name).ok_or_else(|| {
+                let known: Vec<&str> = tether_fmi::Method::ALL.iter().map(|(n, _)| *n).collect();
+                format!("method = \"{name}\": unknown (known: {})", known.join(", "))
+            })?,
+        };
+        let integrator = tether_fmi::Integrator {
+            method,
+            rtol: self.rtol,
+            atol: self.atol,
+            max_step: self.max_step,
+        };
+        integrator.check()?;
+        Ok(integrator)
+    }
 }
 
 /// `resources`: a table of numbers, the error naming what is expected.

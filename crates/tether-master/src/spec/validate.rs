@@ -260,6 +260,17 @@ impl SystemSpec {
                     ));
                 }
             }
+            if let Some(integrator) = &i.integrator {
+                integrator
+                    .integrator()
+                    .map_err(|reason| remote("integrator", reason))?;
+                if i.fmi_type == crate::spec::InterfaceChoice::CoSimulation {
+                    return Err(remote(
+                        "integrator",
+                        "applies to model exchange, and fmi_type is \"co_simulation\"".into(),
+                    ));
+                }
+            }
             if let Some(t) = i.call_timeout.filter(|t| !t.is_finite() || *t <= 0.0) {
                 return Err(param(
                     &format!("{}.call_timeout", i.name),

@@ -16,6 +16,7 @@ use crate::coupling::touched::{Touched, MAX_INTERFACE_ENTRIES};
 use crate::coupling::Coupling;
 use crate::polynomial::Taylor;
 use crate::runs::Runs;
+use crate::slave::interface::Needs;
 use crate::slave::{Run, Slave};
 use crate::spec::{CheckRollback, InitialMultiplier, SystemSpec};
 use crate::{MasterError, Method};
@@ -58,7 +59,8 @@ impl System {
             .iter()
             .map(|instance| {
                 let experiment = (spec.experiment.start, stop, spec.experiment.tolerance);
-                Slave::instantiate(instance, &mut opened, order, experiment)
+                let needs = Needs::of(spec, instance)?;
+                Slave::instantiate(instance, &mut opened, order, experiment, &needs)
                     .map_err(|e| against_system_folder(e, spec, &instance.fmu))
             })
             .collect::<Result<Vec<_>, _>>()?;

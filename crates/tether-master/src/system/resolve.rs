@@ -532,7 +532,13 @@ fn check_capabilities(slaves: &[Slave], method: &Method, order: usize) -> Result
                         .unwrap_or_else(|| "the instance takes no input polynomials".into()),
                 ));
             }
-            for input in &slave.coupled.inputs {
+            // A model-exchange instance follows the polynomial on every input.
+            for input in slave
+                .coupled
+                .inputs
+                .iter()
+                .filter(|_| !slave.model_exchange)
+            {
                 let Some(var) = md.variable_by_vr(input.vr) else {
                     continue;
                 };

@@ -20,6 +20,7 @@ use ode_solvers::{DVector, Dop853, System};
 
 use super::calls::MeCalls;
 use super::dopri5::{self, Dopri5, Failure};
+use super::inputs::InputPolynomial;
 use crate::error::{Error, Result};
 
 /// The integration method of a model-exchange instance.
@@ -116,6 +117,8 @@ struct Watch {
 /// to `t0` (the solver's own time starts at 0 at every call).
 struct Rhs<'a> {
     fmu: RefCell<&'a mut dyn MeCalls>,
+    /// The inputs' polynomial, set with the time.
+    inputs: &'a InputPolynomial,
     t0: f64,
     nominals: &'a [f64],
     x: RefCell<Vec<f64>>,
@@ -126,7 +129,8 @@ struct Rhs<'a> {
 }
 
 impl Rhs<'_> {
-    /// Sets (t0 + tau, y·nominal) in the FMU.
+    /// Sets (t0 + tau, y·nominal) in the FMU, the inputs' polynomial at
+    /// that time.
     fn set(&self, tau: f64, y: &[f64]) -> Result<()> {
         let mut x = self.x.borrow_mut();
         for ((x, y), n) in x.iter_mut().zip(y).zip(self.nominals) {
@@ -134,6 +138,7 @@ impl Rhs<'_> {
         }
         let mut fmu = self.fmu.borrow_mut();
         fmu.set_time(self.t0 + tau)?;
+        self.inputs.set(&mut **fmu, self.t0 + tau)?;
         fmu.set_continuous_states(&x)
     }
 
@@ -390,6 +395,8 @@ pub(crate) struct Point<'a> {
     pub needs_completed: bool,
     /// The communication step, for the event time's resolution.
     pub h: f64,
+    /// The inputs' polynomial over the step.
+    pub inputs: &'a InputPolynomial,
 }
 
 /// Integrates `fmu` from `p.t0` (where it is set) to `t1`; on return the FMU
@@ -412,6 +419,7 @@ pub(crate) fn integrate(
     b.y_prev.clone_from(&b.y0);
     let mut rhs = Rhs {
         fmu: RefCell::new(fmu),
+        inputs: p.inputs,
         t0: p.t0,
         nominals: p.nominals,
         x: RefCell::new(std::mem::take(&mut b.x)),
@@ -476,7 +484,9 @@ fn finish(
         p.t0 + tau
     };
     if t == t1 && t != p.t0 + tau {
-        rhs.fmu.get_mut().set_time(t1)?;
+        let fmu = rhs.fmu.get_mut();
+        fmu.set_time(t1)?;
+        rhs.inputs.set(&mut **fmu, t1)?;
     }
     Ok((t, stop))
 }

@@ -49,11 +49,13 @@
 
 mod calls;
 mod dopri5;
+mod inputs;
 mod integrator;
 
 pub use integrator::{Integrator, Method};
 
 use calls::MeCalls;
+use inputs::InputPolynomial;
 use integrator::{Buffers, Point, Settings, Stop};
 
 use crate::error::{Error, Result};
@@ -107,6 +109,9 @@ pub struct MeInstance {
     saved: [Option<Saved>; SLOTS],
     /// The integrator's buffers, kept between steps.
     buffers: Buffers,
+    /// The inputs' polynomial over the coming step (coupling polynomials of
+    /// degree k > 0), evaluated at every time the model is.
+    inputs: InputPolynomial,
     /// The continuous Real inputs, sorted: the only values set outside event
     /// mode after the initialization.
     continuous_inputs: Vec<ValueReference>,
@@ -173,6 +178,7 @@ impl MeInstance {
             last_event: None,
             saved: Default::default(),
             buffers: Buffers::default(),
+            inputs: InputPolynomial::default(),
             continuous_inputs,
             reals: Vec::new(),
             integers: Vec::new(),
@@ -309,6 +315,7 @@ impl MeInstance {
         let resolution = 100.0 * f64::EPSILON * end.abs().max(h);
         // The step starts from the instance's own point: states, indicators.
         self.inner.set_time(t)?;
+        self.inputs.set(&mut *self.inner, t)?;
         if !self.x.is_empty() {
             self.inner.set_continuous_states(&self.x)?;
         }
@@ -321,6 +328,7 @@ impl MeInstance {
             if let Some(te) = time_event.filter(|&te| te <= now + resolution) {
                 // A time event now (the FMU is at `now`).
                 self.inner.set_time(te.max(now))?;
+                self.inputs.set(&mut *self.inner, te.max(now))?;
                 self.inner.enter_event_mode()?;
                 self.event_iteration(now, false)?;
                 continue;
@@ -344,6 +352,7 @@ impl MeInstance {
                     z: &mut self.z,
                     needs_completed: self.needs_completed,
                     h,
+                    inputs: &self.inputs,
                 },
                 target,
                 &mut self.buffers,
@@ -516,9 +525,17 @@ impl FmuInstance for MeInstance {
         }
         self.set_in_event_mode(|fmu| fmu.set_strings(vrs, values))
     }
+    /// The values at the step's start; with derivatives, the polynomial
+    /// they make, which the next step follows at every time it evaluates
+    /// the model.
     fn set_inputs(&mut self, inputs: &Inputs<'_>) -> Result<()> {
-        if !inputs.derivative_vrs.is_empty() {
-            return Err(self.unsupported("set_inputs", "an input polynomial (k > 0)"));
+        let t = self.time;
+        if let Err(vr) = self.inputs.take(t, inputs) {
+            return Err(Error::InvalidArgument {
+                function: "set_inputs",
+                instance: self.inner.name().to_owned(),
+                message: format!("a derivative of value reference {vr}, which has no value"),
+            });
         }
         self.set_reals(inputs.vrs, inputs.values)
     }
