@@ -145,16 +145,43 @@ fn a_request_to_terminate_ends_at_the_event() {
     }
 }
 
+/// Without FMU states (the sawtooth declares none) a saved state is the
+/// instance's own: time, continuous states, indicators. Going back repeats a
+/// step bit for bit while no event fell inside it (the FMU declares
+/// `completedIntegratorStepNotNeeded`); after the event at t = 1 the FMU's
+/// discrete state has moved and going back is one error line naming the
+/// instance, the times and the cause. No serialized state.
 #[test]
-fn saving_a_state_needs_the_model_exchange_capability() {
+fn without_fmu_states_a_step_is_repeated_until_an_event() {
     let dir = tempfile::tempdir().unwrap();
     let fmu = Fmu::open(sawtooth(dir.path())).unwrap();
     let mut a = started(&fmu, 0);
-    let e = a.save(0).unwrap_err();
+    assert!(a.capabilities().rollback && !a.capabilities().serialization);
+    let x = |a: &mut MeInstance| {
+        let mut out = [0.0];
+        a.get_reals(&[1], &mut out).unwrap();
+        out[0].to_bits()
+    };
+    a.step(0.0, 0.5).unwrap();
+    a.save(0).unwrap();
+    a.step(0.5, 0.25).unwrap();
+    let first = x(&mut a);
+    a.restore(0).unwrap();
+    a.step(0.5, 0.25).unwrap();
+    assert_eq!(x(&mut a), first);
+    a.save(0).unwrap();
+    a.step(0.75, 0.5).unwrap();
+    let e = a.restore(0).unwrap_err();
     let line = e.to_string();
-    assert!(matches!(e, Error::MissingCapability { .. }), "{e:?}");
+    assert!(matches!(e, Error::ModelExchange { .. }), "{e:?}");
     assert!(
-        line.contains("canGetAndSetFMUstate") && !line.contains('\n'),
+        line.contains("'saw'")
+            && line.contains("cannot go back to t = 0.75")
+            && line.contains("an event at t = 1")
+            && line.contains("canGetAndSetFMUstate")
+            && !line.contains('\n'),
         "{line}"
     );
+    let mut bytes = Vec::new();
+    assert!(a.serialize(0, &mut bytes).is_err());
 }

@@ -80,3 +80,116 @@ fn the_oscillator_pair_on_model_exchange_has_the_co_simulation_errors() {
     // Stable on both: every variant at k = 0, index 1 at k = 1 and 2.
     assert_eq!(compared, [18, 5, 2], "{table}");
 }
+
+/// The FMU `name` of the workspace with `canGetAndSetFMUstate="false"` in
+/// both its interfaces, as Modelica tools often export them.
+fn without_fmu_states(dir: &std::path::Path, name: &str) -> std::path::PathBuf {
+    let fmu = tether_fmu_build::workspace_fmu(name).expect("package the FMU");
+    tether_tests::faulty::edited_fmu(&fmu, dir, &format!("{name}_stateless"), |xml| {
+        xml.replace(
+            r#"canGetAndSetFMUstate="true""#,
+            r#"canGetAndSetFMUstate="false""#,
+        )
+    })
+}
+
+/// A rigid link between two instances of an FMU without FMU states: with
+/// `fmi_type = "auto"` both run model exchange (the predictor/corrector
+/// method repeats every step, which their co-simulation interface cannot),
+/// say so in a note, and roll back through their continuous states alone
+/// (the kit's model needs no completed integrator steps and has no events):
+/// the co-simulation build's errors against the closed form, as above.
+/// Forced to co-simulation the system is refused.
+#[test]
+fn a_rigid_link_between_fmus_without_fmu_states_runs_through_model_exchange() {
+    let dir = tempfile::tempdir().unwrap();
+    let stateless = without_fmu_states(dir.path(), "oscillator");
+    let keys = "integrator = { method = \"rk45\", rtol = 1e-12 }";
+    for (name, method) in [VARIANTS[0], VARIANTS[3]] {
+        for order in [0, 1] {
+            let mut spec = system_with(method, order, 1e-3, 1.0, keys);
+            for i in &mut spec.instances {
+                i.fmu = stateless.clone();
+            }
+            let sim = tether_master::Simulation::new(&spec).unwrap();
+            let notes = sim.notes().join("\n");
+            assert!(
+                notes.contains("'mass1' runs model exchange (fmi_type = \"auto\"): its co-simulation interface lacks canGetAndSetFMUstate, which the predictor/corrector method")
+                    && notes.contains("'mass2' runs model exchange"),
+                "{notes}"
+            );
+            drop(sim);
+            let me = errors(&run(&spec).unwrap());
+            let cs = errors(&run(&system(method, order, 1e-3, 1.0)).unwrap());
+            eprintln!(
+                "{name}, k = {order}: CS {cs:?}\n{:>width$}ME {me:?}",
+                "",
+                width = name.len() + 9
+            );
+            for (what, a, b) in [
+                ("x1", me.x, cs.x),
+                ("v1", me.v, cs.v),
+                ("λ", me.lambda, cs.lambda),
+            ] {
+                assert!(agree(a, b), "{name}, k = {order}: {what} {a:e} vs {b:e}");
+            }
+            for i in &mut spec.instances {
+                i.fmi_type = tether_master::InterfaceChoice::CoSimulation;
+                i.integrator = None;
+            }
+            let err = tether_master::Simulation::new(&spec)
+                .err()
+                .expect("refused")
+                .to_string();
+            assert!(err.contains("canGetAndSetFMUstate"), "{err}");
+        }
+    }
+}
+
+/// A loop of signals iterated at every macro step (`[signals] iterations`:
+/// every instance repeats the step) between FMUs without FMU states: with
+/// `fmi_type = "auto"` they run model exchange and the loop converges to what
+/// the co-simulation builds with FMU states give, to 1e-9 (1.2e-15 measured).
+#[test]
+fn an_iterated_signal_loop_of_fmus_without_fmu_states_runs_through_model_exchange() {
+    let dir = tempfile::tempdir().unwrap();
+    let stateless = without_fmu_states(dir.path(), "lti");
+    let root = tether_fmu_build::workspace_root().expect("workspace root");
+    let file = root.join("tests/validation/loop_iterated_2.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace("iterations = 2", "iterations = 200")
+        .replace(
+            "fmu = \"../../target/fmus/lti.fmu\"",
+            "fmu = \"../../target/fmus/lti.fmu\"\nintegrator = { method = \"rk45\", rtol = 1e-12 }",
+        );
+    let mut cs = tether_master::SystemSpec::from_toml(&text).unwrap();
+    for i in &mut cs.instances {
+        i.fmu = tether_fmu_build::workspace_fmu("lti").unwrap();
+    }
+    let mut me = cs.clone();
+    for i in &mut me.instances {
+        i.fmu = stateless.clone();
+    }
+    let sim = tether_master::Simulation::new(&me).unwrap();
+    let notes = sim.notes().join("\n");
+    assert!(
+        notes.contains("'plant' runs model exchange (fmi_type = \"auto\"): its co-simulation interface lacks canGetAndSetFMUstate, which [signals] iterations needs"),
+        "{notes}"
+    );
+    drop(sim);
+    let (a, b) = (run(&cs).unwrap(), run(&me).unwrap());
+    let (ya, yb) = (a.series("plant.y").unwrap(), b.series("plant.y").unwrap());
+    assert_eq!(ya.len(), yb.len());
+    let worst = ya
+        .iter()
+        .zip(&yb)
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f64::max);
+    eprintln!("plant.y, model exchange without FMU states against co-simulation: {worst:e}");
+    assert!(worst < 1e-9, "{worst:e}");
+    assert!(
+        worst > 0.0,
+        "two integrators agree exactly only by accident"
+    );
+}

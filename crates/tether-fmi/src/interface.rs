@@ -153,16 +153,19 @@ impl Capabilities {
         }
     }
     /// What a model-exchange instance of `md` can do with the built-in
-    /// integrator: rollback where `ModelExchange` declares
-    /// `canGetAndSetFMUstate` (the FMU's state with the instance's states),
-    /// steps of any size, input polynomials of any degree on every Real
-    /// input (evaluated at every time the model is); no serialized states or
-    /// output derivatives yet.
+    /// integrator: rollback (the instance owns the continuous states; with
+    /// `canGetAndSetFMUstate` the FMU's state is saved too, without it a
+    /// step is repeated only while no event and no completed integrator
+    /// step fell inside it), serialized states where `ModelExchange`
+    /// declares `canGetAndSetFMUstate` and `canSerializeFMUstate`, steps of
+    /// any size, input polynomials of any degree on every Real input
+    /// (evaluated at every time the model is); no output derivatives.
     pub fn model_exchange(md: &ModelDescription) -> Capabilities {
         let me = md.model_exchange.as_ref();
         Capabilities {
-            rollback: me.is_some_and(|me| me.can_get_and_set_fmu_state),
-            serialization: false,
+            rollback: me.is_some(),
+            serialization: me
+                .is_some_and(|me| me.can_get_and_set_fmu_state && me.can_serialize_fmu_state),
             polynomial_inputs: true,
             variable_steps: true,
             output_derivative_order: 0,

@@ -30,9 +30,9 @@ pub(crate) trait MeCalls: FmuInstance {
     fn update_discrete_states(&mut self) -> Result<EventInfo>;
     /// `EnterContinuousTimeMode`.
     fn enter_continuous_time_mode(&mut self) -> Result<()>;
-    /// `CompletedIntegratorStep` (no FMU state is set back before this point):
+    /// `CompletedIntegratorStep` with `noSetFMUStatePriorToCurrentPoint`:
     /// (enter event mode, terminate simulation).
-    fn completed_integrator_step(&mut self) -> Result<(bool, bool)>;
+    fn completed_integrator_step(&mut self, no_set_prior: bool) -> Result<(bool, bool)>;
     /// The function names, for messages: (derivatives, new discrete states,
     /// completed integrator step).
     fn names(&self) -> (&'static str, &'static str, &'static str);
@@ -79,8 +79,10 @@ impl MeCalls for LocalInstance {
     fn enter_continuous_time_mode(&mut self) -> Result<()> {
         self.instance_mut().raw().fmi2EnterContinuousTimeMode()
     }
-    fn completed_integrator_step(&mut self) -> Result<(bool, bool)> {
-        self.instance_mut().raw().fmi2CompletedIntegratorStep(true)
+    fn completed_integrator_step(&mut self, no_set_prior: bool) -> Result<(bool, bool)> {
+        self.instance_mut()
+            .raw()
+            .fmi2CompletedIntegratorStep(no_set_prior)
     }
     fn names(&self) -> (&'static str, &'static str, &'static str) {
         (
@@ -128,8 +130,8 @@ impl MeCalls for Fmi3Instance {
     fn enter_continuous_time_mode(&mut self) -> Result<()> {
         self.raw_mut().fmi3EnterContinuousTimeMode()
     }
-    fn completed_integrator_step(&mut self) -> Result<(bool, bool)> {
-        self.raw_mut().fmi3CompletedIntegratorStep(true)
+    fn completed_integrator_step(&mut self, no_set_prior: bool) -> Result<(bool, bool)> {
+        self.raw_mut().fmi3CompletedIntegratorStep(no_set_prior)
     }
     fn names(&self) -> (&'static str, &'static str, &'static str) {
         (

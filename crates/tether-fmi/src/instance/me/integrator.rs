@@ -108,6 +108,8 @@ struct Watch {
     z_prev: Vec<f64>,
     z: Vec<f64>,
     needs_completed: bool,
+    /// `noSetFMUStatePriorToCurrentPoint` of `CompletedIntegratorStep`.
+    no_set_prior: bool,
     tau_prev: f64,
     y_prev: Vec<f64>,
     found: Option<(Stop, f64)>,
@@ -192,7 +194,7 @@ impl Rhs<'_> {
             }
         }
         if w.needs_completed {
-            let (event, terminate) = fmu.completed_integrator_step()?;
+            let (event, terminate) = fmu.completed_integrator_step(w.no_set_prior)?;
             if terminate {
                 w.found = Some((Stop::Terminate, tau));
                 return Ok(true);
@@ -393,6 +395,9 @@ pub(crate) struct Point<'a> {
     pub nominals: &'a [f64],
     pub z: &'a mut [f64],
     pub needs_completed: bool,
+    /// No state before this point will be restored (false while a saved
+    /// state may be).
+    pub no_set_prior: bool,
     /// The communication step, for the event time's resolution.
     pub h: f64,
     /// The inputs' polynomial over the step.
@@ -429,6 +434,7 @@ pub(crate) fn integrate(
             z_prev: std::mem::take(&mut b.z_prev),
             z: std::mem::take(&mut b.z),
             needs_completed: p.needs_completed,
+            no_set_prior: p.no_set_prior,
             tau_prev: 0.0,
             y_prev: std::mem::take(&mut b.y_prev),
             found: None,

@@ -51,6 +51,7 @@ mod calls;
 mod dopri5;
 mod inputs;
 mod integrator;
+mod state;
 
 pub use integrator::{Integrator, Method};
 
@@ -82,6 +83,9 @@ struct Saved {
     event_iterations: u32,
     events: u64,
     last_event: Option<f64>,
+    completed_calls: u64,
+    /// Whether the FMU's own state was saved with it.
+    fmu_state: bool,
 }
 
 /// A model-exchange instance in this process with its built-in integrator.
@@ -98,6 +102,13 @@ pub struct MeInstance {
     next_event: Option<f64>,
     time: f64,
     needs_completed: bool,
+    /// `canGetAndSetFMUstate` of `ModelExchange`: the FMU's state is saved
+    /// with the instance's.
+    fmu_states: bool,
+    /// `canSerializeFMUstate` besides.
+    serializable: bool,
+    /// The integrations made with `CompletedIntegratorStep` calls.
+    completed_calls: u64,
     initialized: bool,
     /// The time of the last event and the event iterations made at it.
     event_time: f64,
@@ -146,10 +157,10 @@ impl MeInstance {
             )),
             FmiStandard::Fmi3 => Box::new(Fmi3Instance::new_model_exchange(fmu, name, options)?),
         };
-        let needs_completed = md
-            .model_exchange
-            .as_ref()
-            .is_some_and(|me| me.needs_completed_integrator_step);
+        let me = md.model_exchange.as_ref();
+        let needs_completed = me.is_some_and(|me| me.needs_completed_integrator_step);
+        let fmu_states = me.is_some_and(|me| me.can_get_and_set_fmu_state);
+        let serializable = fmu_states && me.is_some_and(|me| me.can_serialize_fmu_state);
         let mut continuous_inputs: Vec<ValueReference> = md
             .model_variables
             .iter()
@@ -171,6 +182,9 @@ impl MeInstance {
             next_event: None,
             time: start,
             needs_completed,
+            fmu_states,
+            serializable,
+            completed_calls: 0,
             initialized: false,
             event_time: f64::NAN,
             event_iterations: 0,
@@ -351,6 +365,7 @@ impl MeInstance {
                     nominals: &self.nominals,
                     z: &mut self.z,
                     needs_completed: self.needs_completed,
+                    no_set_prior: self.saved.iter().all(Option::is_none),
                     h,
                     inputs: &self.inputs,
                 },
@@ -359,6 +374,9 @@ impl MeInstance {
             )?;
             now = reached;
             self.time = now;
+            if self.needs_completed {
+                self.completed_calls += 1;
+            }
             match stop {
                 Stop::Reached => {}
                 Stop::StateEvent | Stop::StepEvent => {
@@ -396,6 +414,16 @@ impl MeInstance {
     fn all_continuous(&self, vrs: &[ValueReference]) -> bool {
         vrs.iter()
             .all(|vr| self.continuous_inputs.binary_search(vr).is_ok())
+    }
+
+    fn unsupported_state(&self, function: &'static str) -> Error {
+        Error::InvalidArgument {
+            function,
+            instance: self.inner.name().to_owned(),
+            message: "a serialized state needs canGetAndSetFMUstate and canSerializeFMUstate in \
+                      the FMU's ModelExchange element"
+                .into(),
+        }
     }
 
     fn unsupported(&self, function: &'static str, what: &str) -> Error {
@@ -550,8 +578,9 @@ impl FmuInstance for MeInstance {
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
         self.advance(t, h)
     }
-    /// The FMU's state (needs `canGetAndSetFMUstate` in `ModelExchange`) and
-    /// the instance's: states, nominals, indicators, next time event.
+    /// The instance's part (time, states, nominals, indicators, next time
+    /// event, event counts) and, where `ModelExchange` declares
+    /// `canGetAndSetFMUstate`, the FMU's state.
     fn save(&mut self, slot: Slot) -> Result<()> {
         if !self.initialized {
             return Err(Error::InvalidArgument {
@@ -560,7 +589,9 @@ impl FmuInstance for MeInstance {
                 message: "the model-exchange instance is not initialized".into(),
             });
         }
-        self.inner.save(slot)?;
+        if self.fmu_states {
+            self.inner.save(slot)?;
+        }
         let saved = self.saved[slot].get_or_insert_with(Saved::default);
         saved.time = self.time;
         saved.x.clone_from(&self.x);
@@ -571,8 +602,14 @@ impl FmuInstance for MeInstance {
         saved.event_iterations = self.event_iterations;
         saved.events = self.events;
         saved.last_event = self.last_event;
+        saved.completed_calls = self.completed_calls;
+        saved.fmu_state = self.fmu_states;
         Ok(())
     }
+    /// Back to a saved state. Without the FMU's state this is exact only
+    /// while the FMU's discrete part has not moved: no event since the save
+    /// and no `CompletedIntegratorStep` (the FMU declares it not needed);
+    /// otherwise one error naming the time and what happened.
     fn restore(&mut self, slot: Slot) -> Result<()> {
         let Some(saved) = self.saved.get(slot).and_then(Option::as_ref) else {
             return Err(Error::InvalidArgument {
@@ -581,7 +618,39 @@ impl FmuInstance for MeInstance {
                 message: format!("no FMU state saved in slot {slot}"),
             });
         };
-        self.inner.restore(slot)?;
+        if saved.fmu_state {
+            self.inner.restore(slot)?;
+        } else {
+            let why = if self.events != saved.events {
+                Some(format!(
+                    "an event at t = {} changed its discrete state",
+                    self.last_event.unwrap_or(self.time)
+                ))
+            } else if self.completed_calls != saved.completed_calls {
+                Some(
+                    "it was told of completed integrator steps (it needs CompletedIntegratorStep)"
+                        .into(),
+                )
+            } else {
+                None
+            };
+            if let Some(why) = why {
+                return Err(Error::ModelExchange {
+                    instance: self.inner.name().to_owned(),
+                    time: self.time,
+                    cause: format!(
+                        "cannot go back to t = {}: {why}, and its ModelExchange declares no \
+                         canGetAndSetFMUstate to restore it",
+                        saved.time
+                    ),
+                });
+            }
+            // The continuous part is the instance's: set it back.
+            self.inner.set_time(saved.time)?;
+            if !saved.x.is_empty() {
+                self.inner.set_continuous_states(&saved.x)?;
+            }
+        }
         self.time = saved.time;
         self.x.clone_from(&saved.x);
         self.nominals.clone_from(&saved.nominals);
@@ -591,19 +660,64 @@ impl FmuInstance for MeInstance {
         self.event_iterations = saved.event_iterations;
         self.events = saved.events;
         self.last_event = saved.last_event;
+        self.completed_calls = saved.completed_calls;
         Ok(())
     }
     fn free(&mut self, slot: Slot) -> Result<()> {
-        if let Some(saved) = self.saved.get_mut(slot) {
-            *saved = None;
+        let had_fmu_state = self
+            .saved
+            .get_mut(slot)
+            .and_then(Option::take)
+            .is_some_and(|s| s.fmu_state);
+        if had_fmu_state {
+            self.inner.free(slot)?;
         }
-        self.inner.free(slot)
+        Ok(())
     }
-    fn serialize(&mut self, _slot: Slot, _out: &mut Vec<u8>) -> Result<()> {
-        Err(self.unsupported("serialize", "serializing the state"))
+    /// The saved state in `slot` as bytes: the instance's part, then the
+    /// FMU's serialized state (needs `canSerializeFMUstate`).
+    fn serialize(&mut self, slot: Slot, out: &mut Vec<u8>) -> Result<()> {
+        let Some(saved) = self.saved.get(slot).and_then(Option::as_ref) else {
+            return Err(Error::InvalidArgument {
+                function: "serialize",
+                instance: self.inner.name().to_owned(),
+                message: format!("no state saved in slot {slot}"),
+            });
+        };
+        if !(self.serializable && saved.fmu_state) {
+            return Err(self.unsupported_state("serialize"));
+        }
+        out.clear();
+        state::write(saved, out);
+        let mut fmu = Vec::new();
+        self.inner.serialize(slot, &mut fmu)?;
+        out.extend_from_slice(&(fmu.len() as u64).to_le_bytes());
+        out.extend_from_slice(&fmu);
+        Ok(())
     }
-    fn deserialize(&mut self, _slot: Slot, _bytes: &[u8]) -> Result<()> {
-        Err(self.unsupported("deserialize", "deserializing a state"))
+    /// A state of [`serialize`](FmuInstance::serialize) into `slot`; bytes
+    /// of another shape are refused in one line.
+    fn deserialize(&mut self, slot: Slot, bytes: &[u8]) -> Result<()> {
+        if !self.serializable {
+            return Err(self.unsupported_state("deserialize"));
+        }
+        let nx = self.x.len();
+        let nz = self.z.len();
+        let Some((mut saved, rest)) = state::read(bytes, nx, nz) else {
+            return Err(Error::InvalidArgument {
+                function: "deserialize",
+                instance: self.inner.name().to_owned(),
+                message: format!(
+                    "the bytes are no saved state of a model-exchange instance with {nx} \
+                     continuous states and {nz} event indicators"
+                ),
+            });
+        };
+        self.inner.deserialize(slot, rest)?;
+        saved.fmu_state = true;
+        saved.completed_calls = self.completed_calls;
+        self.saved[slot] = Some(saved);
+        Ok(())
     }
     fn reset(&mut self) -> Result<()> {
         self.inner.reset()?;
