@@ -193,3 +193,56 @@ fn an_iterated_signal_loop_of_fmus_without_fmu_states_runs_through_model_exchang
         "two integrators agree exactly only by accident"
     );
 }
+
+/// The paper's double pendulum (two link FMUs, an atpoint joint) on the
+/// link's model-exchange build (rk45, rtol 1e-12) has the co-simulation
+/// build's marker-position errors against the monolithic reference, for
+/// Method 1 and 2 at index 1, k = 0, 1, 2, H = 4e-3, 2e-3, 1e-3 (the paper's
+/// Fig. 16–17 range): within 1 %, or unstable on both.
+#[test]
+fn the_double_pendulum_on_model_exchange_has_the_co_simulation_errors() {
+    use tether_tests::planar::{example, max_error, with, BAUMGARTE_INDEX1, WEIGHTED_INDEX1};
+    use tether_tests::reference::double_pendulum;
+    let error = |spec: &tether_master::SystemSpec| -> Result<f64, tether_master::MasterError> {
+        let rec = tether_tests::planar::run(spec)?;
+        let reference = double_pendulum::reference(&rec.times);
+        Ok(max_error(
+            &rec,
+            &["link1.B.r[1]", "link1.B.r[2]", "link2.B.r[1]", "link2.B.r[2]"],
+            |k, name| reference[k].column(name).expect("reference column"),
+        ))
+    };
+    let mut table = String::from("method      k  H      error CS      error ME\n");
+    let mut failures = Vec::new();
+    let mut compared = 0;
+    for (label, method) in [("M1 index 1", BAUMGARTE_INDEX1), ("M2 index 1", WEIGHTED_INDEX1)] {
+        for order in [0, 1, 2] {
+            for h in [4e-3, 2e-3, 1e-3] {
+                let cs = with(example("double_pendulum.toml"), method, order, h, 1.0);
+                let mut me = cs.clone();
+                for i in &mut me.instances {
+                    i.fmi_type = tether_master::InterfaceChoice::ModelExchange;
+                    i.integrator = Some(tether_master::IntegratorSpec {
+                        method: Some("rk45".into()),
+                        rtol: Some(1e-12),
+                        ..Default::default()
+                    });
+                }
+                match (error(&cs), error(&me)) {
+                    (Ok(a), Ok(b)) => {
+                        compared += 1;
+                        table += &format!("{label}  {order}  {h:.0e}  {a:.6e}  {b:.6e}\n");
+                        if !agree(b, a) {
+                            failures.push(format!("{label}, k = {order}, H = {h:e}: {b:e} vs {a:e}"));
+                        }
+                    }
+                    (Err(_), Err(_)) => table += &format!("{label}  {order}  {h:.0e}  unstable in both\n"),
+                    (a, b) => failures.push(format!("{label}, k = {order}, H = {h:e}: {a:?} / {b:?}")),
+                }
+            }
+        }
+    }
+    eprintln!("{table}");
+    assert!(failures.is_empty(), "{failures:#?}\n{table}");
+    assert!(compared >= 6, "{table}");
+}
