@@ -208,14 +208,22 @@ fn the_double_pendulum_on_model_exchange_has_the_co_simulation_errors() {
         let reference = double_pendulum::reference(&rec.times);
         Ok(max_error(
             &rec,
-            &["link1.B.r[1]", "link1.B.r[2]", "link2.B.r[1]", "link2.B.r[2]"],
+            &[
+                "link1.B.r[1]",
+                "link1.B.r[2]",
+                "link2.B.r[1]",
+                "link2.B.r[2]",
+            ],
             |k, name| reference[k].column(name).expect("reference column"),
         ))
     };
     let mut table = String::from("method      k  H      error CS      error ME\n");
     let mut failures = Vec::new();
     let mut compared = 0;
-    for (label, method) in [("M1 index 1", BAUMGARTE_INDEX1), ("M2 index 1", WEIGHTED_INDEX1)] {
+    for (label, method) in [
+        ("M1 index 1", BAUMGARTE_INDEX1),
+        ("M2 index 1", WEIGHTED_INDEX1),
+    ] {
         for order in [0, 1, 2] {
             for h in [4e-3, 2e-3, 1e-3] {
                 let cs = with(example("double_pendulum.toml"), method, order, h, 1.0);
@@ -233,11 +241,16 @@ fn the_double_pendulum_on_model_exchange_has_the_co_simulation_errors() {
                         compared += 1;
                         table += &format!("{label}  {order}  {h:.0e}  {a:.6e}  {b:.6e}\n");
                         if !agree(b, a) {
-                            failures.push(format!("{label}, k = {order}, H = {h:e}: {b:e} vs {a:e}"));
+                            failures
+                                .push(format!("{label}, k = {order}, H = {h:e}: {b:e} vs {a:e}"));
                         }
                     }
-                    (Err(_), Err(_)) => table += &format!("{label}  {order}  {h:.0e}  unstable in both\n"),
-                    (a, b) => failures.push(format!("{label}, k = {order}, H = {h:e}: {a:?} / {b:?}")),
+                    (Err(_), Err(_)) => {
+                        table += &format!("{label}  {order}  {h:.0e}  unstable in both\n")
+                    }
+                    (a, b) => {
+                        failures.push(format!("{label}, k = {order}, H = {h:e}: {a:?} / {b:?}"))
+                    }
                 }
             }
         }

@@ -167,3 +167,38 @@ fn progress_is_optional_and_sees_every_step() {
     assert_eq!(with.times, without.times);
     assert_eq!(with.rows, without.rows);
 }
+
+/// The same force step on model-exchange instances (rk45, rtol 1e-12): the
+/// new input holds from the next step on and the response follows the closed
+/// form to the integrator's tolerance.
+#[test]
+fn a_force_step_on_model_exchange_instances_follows_the_closed_form() {
+    let mut spec = system();
+    for i in &mut spec.instances {
+        i.fmi_type = tether_master::InterfaceChoice::ModelExchange;
+        i.integrator = Some(tether_master::IntegratorSpec {
+            method: Some("rk45".into()),
+            rtol: Some(1e-12),
+            ..Default::default()
+        });
+    }
+    let mut sim = Simulation::new(&spec).unwrap();
+    while sim.time() < 0.2 - 1e-12 {
+        sim.step().unwrap();
+    }
+    let (t1, x1, v1) = (
+        sim.time(),
+        sim.value("mass3.x").unwrap(),
+        sim.value("mass3.v").unwrap(),
+    );
+    let f = 40.0;
+    sim.set_parameter("mass3.F", &StartValue::Real(f)).unwrap();
+    let mut worst: f64 = 0.0;
+    while sim.time() < 0.5 - 1e-12 {
+        sim.step().unwrap();
+        let x = sim.value("mass3.x").unwrap();
+        worst = worst.max((x - forced(f, x1, v1, sim.time() - t1)).abs());
+    }
+    eprintln!("model exchange: max |x - closed form| = {worst:e}");
+    assert!(worst < 1e-9, "max |x - closed form| = {worst:e}");
+}

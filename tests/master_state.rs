@@ -79,6 +79,19 @@ fn a_restored_state_repeats_the_oscillator_bit_for_bit() {
     repeat_after_restore(&example("oscillator.toml"), 20, 30);
 }
 
+/// Model-exchange instances (the kit's builds): the saved state holds each
+/// instance's time, continuous states and the FMU's serialized state; the
+/// double pendulum at k = 2 on them repeats bit for bit, also through bytes.
+#[test]
+fn a_restored_state_repeats_model_exchange_instances_bit_for_bit() {
+    let mut spec = example("double_pendulum.toml");
+    spec.coupling.order = 2;
+    for i in &mut spec.instances {
+        i.fmi_type = tether_master::InterfaceChoice::ModelExchange;
+    }
+    repeat_after_restore(&spec, 10, 20);
+}
+
 #[test]
 fn a_restored_state_repeats_the_polynomials_past_points_bit_for_bit() {
     // k = 2: the polynomials run through the two past points.

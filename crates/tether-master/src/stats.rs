@@ -63,6 +63,9 @@ pub struct CallNames {
     pub set_int: &'static str,
     /// FMI 3.0: the integer type read.
     pub get_int: &'static str,
+    /// A model-exchange instance: its steps are integrations, its states
+    /// saved and restored by the instance (with the FMU's where it has them).
+    pub model_exchange: bool,
 }
 
 impl Default for CallNames {
@@ -73,6 +76,7 @@ impl Default for CallNames {
             get_float: "Float64",
             set_int: "Int32",
             get_int: "Int32",
+            model_exchange: false,
         }
     }
 }
@@ -133,6 +137,7 @@ impl CallNames {
             get_float,
             set_int,
             get_int,
+            model_exchange: false,
         }
     }
 }
@@ -179,10 +184,28 @@ impl InstanceCounters {
         } else {
             "fmi2GetRealOutputDerivatives"
         };
+        let (step, save, restore) = if n.model_exchange {
+            (
+                "steps integrated".to_string(),
+                "states saved".to_string(),
+                "states restored".to_string(),
+            )
+        } else {
+            (
+                format!("{v}DoStep"),
+                format!("{v}Get{state}"),
+                format!("{v}Set{state}"),
+            )
+        };
+        let derivatives_in = if n.model_exchange {
+            "input polynomials".to_string()
+        } else {
+            derivatives_in
+        };
         [
-            (format!("{v}DoStep"), self.do_steps),
-            (format!("{v}Get{state}"), self.state_gets),
-            (format!("{v}Set{state}"), self.state_sets),
+            (step, self.do_steps),
+            (save, self.state_gets),
+            (restore, self.state_sets),
             (set_real, self.set_reals),
             (get_real, self.get_reals),
             (set_int, self.set_integers),

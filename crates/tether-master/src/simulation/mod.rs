@@ -105,7 +105,10 @@ impl Simulation {
             let mut set: Vec<u32> = slave.coupled.inputs.iter().map(|i| i.vr).collect();
             set.extend(signals.receivers(s));
             let md = slave.fmu.model_description();
-            slave.counters.functions = crate::stats::CallNames::of(md, &set);
+            slave.counters.functions = crate::stats::CallNames {
+                model_exchange: slave.model_exchange,
+                ..crate::stats::CallNames::of(md, &set)
+            };
         }
         let mut notes: Vec<String> = system
             .slaves
