@@ -231,3 +231,27 @@ def test_a_vanished_client_ends_its_hosts(cluster, oscillator_fmu):
         if all(found == [] for found in hosts(pids).values()) and licences(client, licensed) == 1:
             break
     assert_no_host_left(client, licensed, pids)
+
+
+def test_model_exchange_instances_on_workers_are_bit_for_bit(cluster, oscillator_fmu):
+    """Model-exchange instances placed on Dask workers: the integrator runs
+    in the worker's host, the results are the in-process run's bits."""
+    client, licensed, pids = cluster
+    me = {"fmi_type": "model_exchange", "integrator": {"method": "rk45", "rtol": 1e-10}}
+
+    def system():
+        return (
+            tether.System("two-mass oscillator")
+            .experiment(stop=0.5, step=1e-3)
+            .method("baumgarte", beta=2e-3, gamma=1e-6)
+            .add_instance("mass1", oscillator_fmu, {"m": 1.0, **MASS}, **me)
+            .add_instance("mass2", oscillator_fmu, {"m": 2.0, **MASS}, resources={"licence": 1}, **me)
+            .add_constraint("link", **LINK, initial="consistent")
+        )
+
+    local = tether.run(system())
+    placed = tether.run(system(), client=client)
+    assert placed.complete and placed.columns == local.columns
+    assert placed.placement["mass2"]["worker"] == licensed
+    assert same_bits(placed.to_numpy().view(np.float64), local.to_numpy().view(np.float64))
+    assert_no_host_left(client, licensed, pids)

@@ -401,6 +401,8 @@ class System:
         resources: Optional[Mapping[str, float]] = None,
         step: Optional[float] = None,
         parallel: Optional[bool] = None,
+        fmi_type: Optional[str] = None,
+        integrator: Optional[Mapping[str, Any]] = None,
     ) -> "System":
         """An FMU instance named ``name`` (the column prefix) with start values;
         ``step`` is its own communication step, a whole multiple of the
@@ -412,7 +414,12 @@ class System:
         ``resources`` (``{"licence": 1}``) are what a Dask worker must have
         to host the instance when :func:`run` is given ``client=``.
         ``parallel=False`` keeps its runs on the main thread under
-        ``[coupling] parallel`` (an FMU bound to the thread that made it)."""
+        ``[coupling] parallel`` (an FMU bound to the thread that made it).
+        ``fmi_type`` is the FMI interface it runs: ``"auto"`` (default),
+        ``"co_simulation"`` or ``"model_exchange"`` (fmpy's ``"CoSimulation"``
+        and ``"ModelExchange"`` too); ``integrator`` the model-exchange
+        integrator's settings, e.g. ``{"method": "bdf", "rtol": 1e-8}``
+        (docs/system-file.md, "Model exchange")."""
         inst: Dict[str, Any] = {"name": name, "fmu": os.path.abspath(os.fspath(fmu))}
         if parameters:
             inst["parameters"] = dict(parameters)
@@ -432,6 +439,10 @@ class System:
             inst["resources"] = dict(resources)
         if parallel is not None:
             inst["parallel"] = bool(parallel)
+        if fmi_type is not None:
+            inst["fmi_type"] = fmi_type
+        if integrator is not None:
+            inst["integrator"] = dict(integrator)
         self._data["instance"].append(inst)
         return self
 
