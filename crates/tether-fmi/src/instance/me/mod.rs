@@ -416,6 +416,28 @@ impl MeInstance {
             .all(|vr| self.continuous_inputs.binary_search(vr).is_ok())
     }
 
+    /// Sets Real values: continuous inputs at once; after the
+    /// initialization any other Real (a discrete input, a parameter) in
+    /// event mode when a value changes, as the standard requires.
+    fn set_values(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
+        if !self.initialized || self.all_continuous(vrs) {
+            return self.inner.set_reals(vrs, values);
+        }
+        let mut now = std::mem::take(&mut self.reals);
+        now.resize(vrs.len(), 0.0);
+        let read = self.inner.get_reals(vrs, &mut now);
+        let changed = now
+            .iter()
+            .zip(values)
+            .any(|(a, b)| a.to_bits() != b.to_bits());
+        self.reals = now;
+        read?;
+        if !changed {
+            return Ok(());
+        }
+        self.set_in_event_mode(|fmu| fmu.set_reals(vrs, values))
+    }
+
     fn unsupported_state(&self, function: &'static str) -> Error {
         Error::InvalidArgument {
             function,
@@ -479,26 +501,12 @@ impl FmuInstance for MeInstance {
     fn get_reals(&mut self, vrs: &[ValueReference], out: &mut [f64]) -> Result<()> {
         self.inner.get_reals(vrs, out)
     }
-    /// Continuous inputs are set at once; after the initialization any other
-    /// Real (a discrete input, a parameter) is set in event mode when a value
-    /// changes, as the standard requires.
+    /// Plain values (an input set so follows no polynomial any more):
+    /// continuous inputs at once, any other Real after the initialization in
+    /// event mode when a value changes.
     fn set_reals(&mut self, vrs: &[ValueReference], values: &[f64]) -> Result<()> {
-        if !self.initialized || self.all_continuous(vrs) {
-            return self.inner.set_reals(vrs, values);
-        }
-        let mut now = std::mem::take(&mut self.reals);
-        now.resize(vrs.len(), 0.0);
-        let read = self.inner.get_reals(vrs, &mut now);
-        let changed = now
-            .iter()
-            .zip(values)
-            .any(|(a, b)| a.to_bits() != b.to_bits());
-        self.reals = now;
-        read?;
-        if !changed {
-            return Ok(());
-        }
-        self.set_in_event_mode(|fmu| fmu.set_reals(vrs, values))
+        self.inputs.forget(vrs);
+        self.set_values(vrs, values)
     }
     fn get_integers(&mut self, vrs: &[ValueReference], out: &mut [Int]) -> Result<()> {
         self.inner.get_integers(vrs, out)
@@ -565,7 +573,7 @@ impl FmuInstance for MeInstance {
                 message: format!("a derivative of value reference {vr}, which has no value"),
             });
         }
-        self.set_reals(inputs.vrs, inputs.values)
+        self.set_values(inputs.vrs, inputs.values)
     }
     fn get_output_derivatives(
         &mut self,
