@@ -6,6 +6,7 @@ use crate::component::fmi2::EventInfo;
 use crate::error::Result;
 use crate::instance::{Fmi3Instance, LocalInstance};
 use crate::interface::FmuInstance;
+use crate::model_description::ValueReference;
 
 /// The model-exchange calls of one instance (its values and life cycle are
 /// those of [`FmuInstance`]).
@@ -33,6 +34,16 @@ pub(crate) trait MeCalls: FmuInstance {
     /// `CompletedIntegratorStep` (no FMU state is set back before this point):
     /// (enter event mode, terminate simulation).
     fn completed_integrator_step(&mut self) -> Result<(bool, bool)>;
+    /// `GetDirectionalDerivative` of scalar variables: `sensitivity =
+    /// ∂unknowns/∂knowns · seed` (the FMU declares
+    /// `providesDirectionalDerivative(s)`).
+    fn get_directional_derivative(
+        &mut self,
+        unknowns: &[ValueReference],
+        knowns: &[ValueReference],
+        seed: &[f64],
+        sensitivity: &mut [f64],
+    ) -> Result<()>;
     /// The function names, for messages: (derivatives, new discrete states,
     /// completed integrator step).
     fn names(&self) -> (&'static str, &'static str, &'static str);
@@ -82,6 +93,17 @@ impl MeCalls for LocalInstance {
     fn completed_integrator_step(&mut self) -> Result<(bool, bool)> {
         self.instance_mut().raw().fmi2CompletedIntegratorStep(true)
     }
+    fn get_directional_derivative(
+        &mut self,
+        unknowns: &[ValueReference],
+        knowns: &[ValueReference],
+        seed: &[f64],
+        sensitivity: &mut [f64],
+    ) -> Result<()> {
+        self.instance_mut()
+            .raw()
+            .fmi2GetDirectionalDerivative(unknowns, knowns, seed, sensitivity)
+    }
     fn names(&self) -> (&'static str, &'static str, &'static str) {
         (
             "fmi2GetDerivatives",
@@ -130,6 +152,16 @@ impl MeCalls for Fmi3Instance {
     }
     fn completed_integrator_step(&mut self) -> Result<(bool, bool)> {
         self.raw_mut().fmi3CompletedIntegratorStep(true)
+    }
+    fn get_directional_derivative(
+        &mut self,
+        unknowns: &[ValueReference],
+        knowns: &[ValueReference],
+        seed: &[f64],
+        sensitivity: &mut [f64],
+    ) -> Result<()> {
+        self.raw_mut()
+            .fmi3GetDirectionalDerivative(unknowns, knowns, seed, sensitivity)
     }
     fn names(&self) -> (&'static str, &'static str, &'static str) {
         (

@@ -11,6 +11,10 @@
 //! starts from its initial point with the same initial step (the integrator's
 //! own choice from (t0, x0)) and no history, so a repeated step is
 //! bit-identical.
+//!
+//! `bdf` (the default) and `esdirk`, the implicit methods of the `diffsol`
+//! crate, are in [`implicit`]: the same scaled states, tolerances, callback
+//! after each accepted step and restarts.
 
 use std::cell::RefCell;
 
@@ -20,11 +24,19 @@ use ode_solvers::{DVector, Dop853, Dopri5, System};
 use super::calls::MeCalls;
 use crate::error::{Error, Result};
 
+mod implicit;
+
 /// The integration method of a model-exchange instance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
-    /// Dormand–Prince 5(4) with error control (`ode_solvers::Dopri5`).
+    /// Variable-order BDF (NDF) with a Newton iteration, for stiff models
+    /// (`diffsol::Bdf`).
     #[default]
+    Bdf,
+    /// The ESDIRK34 singly diagonally implicit Runge–Kutta method, order 3
+    /// with an embedded error estimate (`diffsol::Sdirk`).
+    Esdirk,
+    /// Dormand–Prince 5(4) with error control (`ode_solvers::Dopri5`).
     Rk45,
     /// Dormand–Prince 8(5,3) with error control (`ode_solvers::Dop853`).
     Dop853,
@@ -32,10 +44,14 @@ pub enum Method {
 
 impl Method {
     /// Every method by its key name.
-    pub const ALL: [(&'static str, Method); 2] =
-        [("rk45", Method::Rk45), ("dop853", Method::Dop853)];
+    pub const ALL: [(&'static str, Method); 4] = [
+        ("bdf", Method::Bdf),
+        ("esdirk", Method::Esdirk),
+        ("rk45", Method::Rk45),
+        ("dop853", Method::Dop853),
+    ];
 
-    /// The method called `name` (`rk45`, `dop853`).
+    /// The method called `name` (`bdf`, `esdirk`, `rk45`, `dop853`).
     pub fn parse(name: &str) -> Option<Method> {
         Method::ALL
             .iter()
@@ -46,6 +62,8 @@ impl Method {
     /// The key name.
     pub fn name(self) -> &'static str {
         match self {
+            Method::Bdf => "bdf",
+            Method::Esdirk => "esdirk",
             Method::Rk45 => "rk45",
             Method::Dop853 => "dop853",
         }
@@ -284,6 +302,10 @@ fn solve(
         // Hairer's defaults of DOPRI5 and DOP853.
         Method::Rk45 => run!(Dopri5, 0.04, 0.2, 10.0),
         Method::Dop853 => run!(Dop853, 0.0, 0.333, 6.0),
+        // diffsol's failures are left in `rhs.failure`, as the FMU's are.
+        Method::Bdf | Method::Esdirk => {
+            Ok(implicit::solve(settings, rhs, tau0, tau1, y0.as_slice()))
+        }
     }
 }
 

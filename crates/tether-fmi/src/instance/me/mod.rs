@@ -38,8 +38,12 @@
 //! time event and the event counts; a restore puts both back, so a step
 //! repeated after it gives the same bits.
 //!
+//! The implicit methods (`bdf`, the default, and `esdirk`) take the Jacobian
+//! of the derivatives from the FMU's directional derivatives where its
+//! `ModelExchange` element declares them, else from finite differences.
+//!
 //! What this part does not do yet: serialized states, input derivatives,
-//! output derivatives and directional derivatives; an
+//! output derivatives and directional derivatives for the caller; an
 //! Integer, Boolean or String input set between steps is set in
 //! continuous-time mode, not in event mode.
 
