@@ -283,11 +283,11 @@ pub fn describe(md: &ModelDescription) -> String {
         }
     ));
     if md.model_exchange.is_some() {
-        line(
-            "  tether simulate --fmi-type model-exchange  yes: built-in integrator (rk45, dop853), \
-             time, state and step events"
-                .into(),
-        );
+        line(format!(
+            "  tether simulate --fmi-type model-exchange  yes: built-in integrator ({}), \
+                 time, state and step events",
+            tether_fmi::Method::ALL.map(|(name, _)| name).join(", ")
+        ));
         line("  model exchange coupled in a system         no: not yet".into());
     }
     let markers = markers(md);

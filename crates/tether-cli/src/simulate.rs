@@ -52,7 +52,8 @@ pub struct Args {
     #[arg(long, value_enum, value_name = "TYPE")]
     fmi_type: Option<Interface>,
     /// Model exchange: the built-in integrator's settings, KEY=VALUE separated by
-    /// commas: method (rk45, dop853; default rk45), rtol (default: --tolerance),
+    /// commas: method (bdf, esdirk, rk45, dop853; default bdf), rtol (default:
+    /// --tolerance),
     /// atol (relative to each state's nominal; default rtol), max_step (default:
     /// the communication step).
     #[arg(long, value_name = "KEY=VALUE,...")]
@@ -111,7 +112,7 @@ fn plot(
     Ok(())
 }
 
-/// The integrator settings of `--integrator method=rk45,rtol=1e-8,…`.
+/// The integrator settings of `--integrator method=bdf,rtol=1e-8,…`.
 fn integrator(text: &str) -> Result<Integrator> {
     let mut settings = Integrator::default();
     for item in text.split(',').map(str::trim).filter(|i| !i.is_empty()) {

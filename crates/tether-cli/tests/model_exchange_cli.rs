@@ -57,7 +57,7 @@ fn info_shows_what_each_interface_allows() {
             "continuous states                      2\n",
             "event indicators                       1\n",
             flag,
-            "tether simulate --fmi-type model-exchange  yes: built-in integrator (rk45, dop853)",
+            "tether simulate --fmi-type model-exchange  yes: built-in integrator (bdf, esdirk, rk45, dop853)",
             "model exchange coupled in a system         no: not yet",
         ] {
             assert!(
@@ -155,9 +155,9 @@ fn the_integrator_settings_are_checked_in_one_line() {
     let csv = dir.path().join("d.csv");
     for (setting, fmi_type, expected) in [
         (
-            "method=bdf",
+            "method=radau",
             "model-exchange",
-            "unknown method 'bdf' (known: rk45, dop853)",
+            "unknown method 'radau' (known: bdf, esdirk, rk45, dop853)",
         ),
         ("rtol=x", "model-exchange", "rtol = 'x' is not a number"),
         (

@@ -30,14 +30,21 @@ fn real(i: &mut dyn FmuInstance, vr: u32) -> f64 {
     out[0]
 }
 
-/// Dahlquist, x' = −k·x, x(0) = 1: x(t) = e^(−t) within the tolerance, rk45
-/// and dop853, FMI 2.0 and 3.0: at rtol 1e-10 the largest error on the grid
-/// (0.1 … 10) is 3.0e-12 with rk45 and 2.5e-16 with dop853, alike for both
-/// standards.
+/// Dahlquist, x' = −k·x, x(0) = 1: x(t) = e^(−t) within the tolerance, every
+/// method, FMI 2.0 and 3.0: at rtol 1e-10 the largest error on the grid
+/// (0.1 … 10) is 5.1e-11 with bdf, 1.2e-9 with esdirk (third order, its
+/// local error held to the tolerance at each of the 100 restarts), 3.0e-12
+/// with rk45 and 2.5e-16 with dop853, alike for both standards; asserted at
+/// about three times that (1e-11 for rk45 and dop853).
 #[test]
 fn dahlquist_follows_the_exponential() {
     for standard in ["fmi2", "fmi3"] {
-        for method in [Method::Rk45, Method::Dop853] {
+        for (method, bound) in [
+            (Method::Bdf, 1.5e-10),
+            (Method::Esdirk, 4e-9),
+            (Method::Rk45, 1e-11),
+            (Method::Dop853, 1e-11),
+        ] {
             let integrator = Integrator {
                 method,
                 ..Integrator::default()
@@ -53,7 +60,8 @@ fn dahlquist_follows_the_exponential() {
                 let t = (n + 1) as f64 * 0.1;
                 worst = worst.max((real(&mut a, x) - (-t).exp()).abs());
             }
-            assert!(worst < 1e-11, "{standard} {method:?}: {worst:e}");
+            eprintln!("{standard} {method:?}: largest error {worst:.1e}");
+            assert!(worst < bound, "{standard} {method:?}: {worst:e}");
             assert!(worst > 0.0, "an integrator is exact only by accident");
             a.terminate().unwrap();
         }
@@ -62,12 +70,25 @@ fn dahlquist_follows_the_exponential() {
 
 /// BouncingBall: the first bounce is a state event at √(2·h0/|g|) =
 /// 0.451523641… s, located to 100·ε·max(|t|, h); after it v = −e·v⁻. The ball
-/// velocity after the step over the bounce is the closed form's to 6.6e-14
-/// (rk45, rtol 1e-10; asserted to 1e-12), FMI 2.0 and 3.0 alike.
+/// velocity after the step over the bounce is the closed form's, at rtol
+/// 1e-10, to 6.6e-14 with rk45 (exact for the ball's polynomials; asserted to
+/// 1e-12), 9.1e-14 with esdirk (asserted to 3e-13) and 1.8e-9 with bdf, whose
+/// first steps are of order 1 and 2 (asserted to 6e-9), FMI 2.0 and 3.0
+/// alike.
 #[test]
 fn bouncing_ball_bounces_at_the_state_event() {
-    for standard in ["fmi2", "fmi3"] {
-        let Some((fmu, mut a)) = open(standard, "BouncingBall", Integrator::default()) else {
+    for (standard, method, bound) in ["fmi2", "fmi3"].into_iter().flat_map(|s| {
+        [
+            (s, Method::Rk45, 1e-12),
+            (s, Method::Bdf, 6e-9),
+            (s, Method::Esdirk, 3e-13),
+        ]
+    }) {
+        let integrator = Integrator {
+            method,
+            ..Integrator::default()
+        };
+        let Some((fmu, mut a)) = open(standard, "BouncingBall", integrator) else {
             return;
         };
         initialize(&mut a, Some(1e-10), 3.0);
@@ -87,26 +108,39 @@ fn bouncing_ball_bounces_at_the_state_event() {
             }
         }
         let (t_after, v_after) = crossed.expect("a bounce within 1 s");
-        assert!((t_after - 0.46).abs() < 1e-12, "{standard}: {t_after}");
+        assert!(
+            (t_after - 0.46).abs() < 1e-12,
+            "{standard} {method:?}: {t_after}"
+        );
         // v after the step = −e·v_before + g·(t_after − t_bounce).
         let expected = -0.7 * v_before - 9.81 * (t_after - t_bounce);
+        let error = (v_after - expected).abs();
+        eprintln!("{standard} {method:?}: v after the bounce off by {error:.1e}");
         assert!(
-            (v_after - expected).abs() < 1e-12,
-            "{standard}: v = {v_after}, expected {expected}"
+            error < bound,
+            "{standard} {method:?}: v = {v_after}, expected {expected}"
         );
         assert!(real(&mut a, h) > 0.0);
         assert!(a.event_indicators()[0] > 0.0);
     }
 }
 
-/// Two instances of the same FMU stepped alike give the same bits: every
-/// step restarts the integrator from its point with the same initial step.
+/// Two instances of the same FMU stepped alike give the same bits, with
+/// every method: every step restarts the integrator from its point with the
+/// same initial step.
 #[test]
 fn steps_are_reproducible_bit_for_bit() {
-    for standard in ["fmi2", "fmi3"] {
+    for (standard, (_, method)) in ["fmi2", "fmi3"]
+        .into_iter()
+        .flat_map(|s| Method::ALL.map(|m| (s, m)))
+    {
         let mut runs = Vec::new();
         for _ in 0..2 {
-            let Some((fmu, mut a)) = open(standard, "VanDerPol", Integrator::default()) else {
+            let integrator = Integrator {
+                method,
+                ..Integrator::default()
+            };
+            let Some((fmu, mut a)) = open(standard, "VanDerPol", integrator) else {
                 return;
             };
             initialize(&mut a, Some(1e-6), 20.0);
@@ -120,7 +154,7 @@ fn steps_are_reproducible_bit_for_bit() {
             }
             runs.push(rows);
         }
-        assert_eq!(runs[0], runs[1], "{standard}");
+        assert_eq!(runs[0], runs[1], "{standard} {method:?}");
     }
 }
 
@@ -190,7 +224,11 @@ fn nan_derivatives_are_one_error_line() {
 /// time, the method and the tolerance.
 #[test]
 fn an_integrator_that_cannot_go_on_is_one_error_line() {
-    let Some((fmu, mut a)) = open("fmi2", "Dahlquist", Integrator::default()) else {
+    let rk45 = Integrator {
+        method: Method::Rk45,
+        ..Integrator::default()
+    };
+    let Some((fmu, mut a)) = open("fmi2", "Dahlquist", rk45) else {
         return;
     };
     a.setup(Some(1e-10), 0.0, Some(1.0)).unwrap();
@@ -204,6 +242,41 @@ fn an_integrator_that_cannot_go_on_is_one_error_line() {
         line.contains("'Dahlquist'") && line.contains("rk45") && !line.contains('\n'),
         "{line}"
     );
+}
+
+/// An implicit method that cannot go on (bdf and esdirk held to a largest
+/// step of 1e-7 s over a step of 0.1 s: more than the 100,000 steps one call
+/// may take) is one line naming the instance, the time, the method and the
+/// cause.
+#[test]
+fn an_implicit_method_that_cannot_go_on_is_one_error_line() {
+    for method in [Method::Bdf, Method::Esdirk] {
+        let integrator = Integrator {
+            method,
+            max_step: Some(1e-7),
+            ..Integrator::default()
+        };
+        let Some((_, mut a)) = open("fmi3", "Dahlquist", integrator) else {
+            return;
+        };
+        initialize(&mut a, Some(1e-6), 1.0);
+        let e = a.step(0.0, 0.1).unwrap_err();
+        let line = e.to_string();
+        assert!(matches!(e, Error::ModelExchange { .. }), "{e:?}");
+        assert!(
+            line.contains("'Dahlquist'")
+                && line.contains(&format!("({}, rtol 0.000001", method.name()))
+                && line.contains("needs more than 100000 steps")
+                && !line.contains('\n'),
+            "{line}"
+        );
+        eprintln!("{line}");
+        // The time of the failure: 100,000 steps of 1e-7 s.
+        let Error::ModelExchange { time, .. } = e else {
+            unreachable!()
+        };
+        assert!((time - 0.01).abs() < 1e-9, "{line}");
+    }
 }
 
 /// FMI 3.0 clocks are refused for model exchange in one line, before the FMU

@@ -119,6 +119,17 @@ me_functions! {
     fmi3GetNominalsOfContinuousStates: unsafe extern "C" fn(I, *mut f64, usize) -> S3,
     fmi3GetNumberOfEventIndicators: unsafe extern "C" fn(I, *mut usize) -> S3,
     fmi3GetNumberOfContinuousStates: unsafe extern "C" fn(I, *mut usize) -> S3,
+    fmi3GetDirectionalDerivative: unsafe extern "C" fn(
+        I,
+        *const fmi3ValueReference,
+        usize,
+        *const fmi3ValueReference,
+        usize,
+        *const f64,
+        usize,
+        *mut f64,
+        usize,
+    ) -> S3,
 }
 
 /// The error for a model-exchange instance of a library without `symbol`.

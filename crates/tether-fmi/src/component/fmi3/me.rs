@@ -146,4 +146,45 @@ impl RawInstance3 {
         })?;
         Ok(n)
     }
+
+    /// `fmi3GetDirectionalDerivative` of scalar variables: `sensitivity =
+    /// ∂unknowns/∂knowns · seed` (nSeed = the number of knowns, nSensitivity
+    /// the number of unknowns).
+    pub(crate) fn fmi3GetDirectionalDerivative(
+        &mut self,
+        unknowns: &[fmi3ValueReference],
+        knowns: &[fmi3ValueReference],
+        seed: &[f64],
+        sensitivity: &mut [f64],
+    ) -> Result<()> {
+        const F: &str = "fmi3GetDirectionalDerivative";
+        let (what, expected, got) = if seed.len() != knowns.len() {
+            ("the seed slice", knowns.len(), seed.len())
+        } else {
+            ("the sensitivity slice", unknowns.len(), sensitivity.len())
+        };
+        if expected != got {
+            return Err(crate::error::Error::LengthMismatch {
+                function: F,
+                instance: self.name().to_owned(),
+                what,
+                expected,
+                got,
+            });
+        }
+        // SAFETY: each array has the length passed with it (checked above).
+        self.call_me(F, |f, c| unsafe {
+            (f.fmi3GetDirectionalDerivative)(
+                c,
+                unknowns.as_ptr(),
+                unknowns.len(),
+                knowns.as_ptr(),
+                knowns.len(),
+                seed.as_ptr(),
+                seed.len(),
+                sensitivity.as_mut_ptr(),
+                sensitivity.len(),
+            )
+        })
+    }
 }

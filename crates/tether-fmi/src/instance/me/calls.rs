@@ -6,6 +6,7 @@ use crate::component::fmi2::EventInfo;
 use crate::error::Result;
 use crate::instance::{Fmi3Instance, LocalInstance};
 use crate::interface::FmuInstance;
+use crate::model_description::ValueReference;
 
 /// The model-exchange calls of one instance (its values and life cycle are
 /// those of [`FmuInstance`]).
@@ -33,6 +34,16 @@ pub(crate) trait MeCalls: FmuInstance {
     /// `CompletedIntegratorStep` with `noSetFMUStatePriorToCurrentPoint`:
     /// (enter event mode, terminate simulation).
     fn completed_integrator_step(&mut self, no_set_prior: bool) -> Result<(bool, bool)>;
+    /// `GetDirectionalDerivative` of scalar variables: `sensitivity =
+    /// ∂unknowns/∂knowns · seed` (the FMU declares
+    /// `providesDirectionalDerivative(s)`).
+    fn get_directional_derivative(
+        &mut self,
+        unknowns: &[ValueReference],
+        knowns: &[ValueReference],
+        seed: &[f64],
+        sensitivity: &mut [f64],
+    ) -> Result<()>;
     /// The function names, for messages: (derivatives, new discrete states,
     /// completed integrator step).
     fn names(&self) -> (&'static str, &'static str, &'static str);
@@ -84,6 +95,17 @@ impl MeCalls for LocalInstance {
             .raw()
             .fmi2CompletedIntegratorStep(no_set_prior)
     }
+    fn get_directional_derivative(
+        &mut self,
+        unknowns: &[ValueReference],
+        knowns: &[ValueReference],
+        seed: &[f64],
+        sensitivity: &mut [f64],
+    ) -> Result<()> {
+        self.instance_mut()
+            .raw()
+            .fmi2GetDirectionalDerivative(unknowns, knowns, seed, sensitivity)
+    }
     fn names(&self) -> (&'static str, &'static str, &'static str) {
         (
             "fmi2GetDerivatives",
@@ -132,6 +154,16 @@ impl MeCalls for Fmi3Instance {
     }
     fn completed_integrator_step(&mut self, no_set_prior: bool) -> Result<(bool, bool)> {
         self.raw_mut().fmi3CompletedIntegratorStep(no_set_prior)
+    }
+    fn get_directional_derivative(
+        &mut self,
+        unknowns: &[ValueReference],
+        knowns: &[ValueReference],
+        seed: &[f64],
+        sensitivity: &mut [f64],
+    ) -> Result<()> {
+        self.raw_mut()
+            .fmi3GetDirectionalDerivative(unknowns, knowns, seed, sensitivity)
     }
     fn names(&self) -> (&'static str, &'static str, &'static str) {
         (

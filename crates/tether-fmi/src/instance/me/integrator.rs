@@ -12,6 +12,10 @@
 //! starts from its initial point with the same initial step (the integrator's
 //! own choice from (t0, x0)) and no history, so a repeated step is
 //! bit-identical.
+//!
+//! `bdf` (the default) and `esdirk`, the implicit methods of the `diffsol`
+//! crate, are in [`implicit`]: the same scaled states, tolerances, callback
+//! after each accepted step and restarts.
 
 use std::cell::RefCell;
 
@@ -23,11 +27,19 @@ use super::dopri5::{self, Dopri5, Failure};
 use super::inputs::InputPolynomial;
 use crate::error::{Error, Result};
 
+mod implicit;
+
 /// The integration method of a model-exchange instance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
-    /// Dormand–Prince 5(4) with error control ([`dopri5`]).
+    /// Variable-order BDF (NDF) with a Newton iteration, for stiff models
+    /// (`diffsol::Bdf`).
     #[default]
+    Bdf,
+    /// The ESDIRK34 singly diagonally implicit Runge–Kutta method, order 3
+    /// with an embedded error estimate (`diffsol::Sdirk`).
+    Esdirk,
+    /// Dormand–Prince 5(4) with error control (`ode_solvers::Dopri5`).
     Rk45,
     /// Dormand–Prince 8(5,3) with error control (`ode_solvers::Dop853`).
     Dop853,
@@ -35,10 +47,14 @@ pub enum Method {
 
 impl Method {
     /// Every method by its key name.
-    pub const ALL: [(&'static str, Method); 2] =
-        [("rk45", Method::Rk45), ("dop853", Method::Dop853)];
+    pub const ALL: [(&'static str, Method); 4] = [
+        ("bdf", Method::Bdf),
+        ("esdirk", Method::Esdirk),
+        ("rk45", Method::Rk45),
+        ("dop853", Method::Dop853),
+    ];
 
-    /// The method called `name` (`rk45`, `dop853`).
+    /// The method called `name` (`bdf`, `esdirk`, `rk45`, `dop853`).
     pub fn parse(name: &str) -> Option<Method> {
         Method::ALL
             .iter()
@@ -49,6 +65,8 @@ impl Method {
     /// The key name.
     pub fn name(self) -> &'static str {
         match self {
+            Method::Bdf => "bdf",
+            Method::Esdirk => "esdirk",
             Method::Rk45 => "rk45",
             Method::Dop853 => "dop853",
         }
@@ -321,6 +339,13 @@ fn solve(
 ) -> Result<f64> {
     let h_max = settings.max_step.min(tau1 - tau0);
     let failure = match settings.method {
+        // diffsol's failures are left in `rhs.failure`, as the FMU's are.
+        Method::Bdf | Method::Esdirk => {
+            let (tau, end) = implicit::solve(settings, rhs, tau0, tau1, y0);
+            y.clear();
+            y.extend_from_slice(&end);
+            return rhs.failure.take().map_or(Ok(tau), Err);
+        }
         Method::Rk45 => {
             let options = dopri5::Options {
                 rtol: settings.rtol,

@@ -44,8 +44,11 @@
 //! changes, the instance enters event mode, sets it and runs the event
 //! iteration at its time (an event like any other).
 //!
-//! What this part does not do yet: serialized states, input derivatives,
-//! output derivatives and directional derivatives.
+//! The implicit methods (`bdf`, the default, and `esdirk`) take the Jacobian
+//! of the derivatives from the FMU's directional derivatives where its
+//! `ModelExchange` element declares them, else from finite differences.
+//!
+//! Output derivatives are not offered.
 
 mod calls;
 mod dopri5;
