@@ -257,38 +257,54 @@ pub fn describe(md: &ModelDescription) -> String {
     }
     line(String::new());
     line("Tether methods".into());
+    // Where the co-simulation interface falls short, `fmi_type = "auto"`
+    // runs model exchange (docs/system-file.md, "Model exchange").
+    let me = md.model_exchange.is_some();
+    let through_me = "yes, through model exchange (fmi_type = \"auto\")";
     let rollback = cs.can_get_and_set_fmu_state;
     line(format!(
         "  predictor/corrector (baumgarte, weighted)  {}",
-        if md.co_simulation.is_none() {
-            "no: needs co-simulation"
-        } else if rollback {
+        if md.co_simulation.is_some() && rollback {
             "yes"
+        } else if me {
+            through_me
         } else if fmi3 {
             "no: needs canGetAndSetFMUState"
         } else {
             "no: needs canGetAndSetFMUstate"
         }
     ));
+    let polynomials = tether_master::polynomial_inputs::summary(md);
     line(format!(
         "  coupling polynomials k > 0                 {}",
-        tether_master::polynomial_inputs::summary(md)
+        if (md.co_simulation.is_some() && polynomials.starts_with("yes")) || !me {
+            polynomials
+        } else {
+            through_me.to_string()
+        }
     ));
     line(format!(
         "  explicit                                   {}",
         if md.co_simulation.is_some() {
             "yes"
         } else {
-            "no: needs co-simulation"
+            through_me
         }
     ));
-    if md.model_exchange.is_some() {
+    if let Some(model_exchange) = &md.model_exchange {
         line(format!(
             "  tether simulate --fmi-type model-exchange  yes: built-in integrator ({}), \
                  time, state and step events",
             tether_fmi::Method::ALL.map(|(name, _)| name).join(", ")
         ));
-        line("  model exchange coupled in a system         no: not yet".into());
+        line(format!(
+            "  model exchange coupled in a system         yes: fmi_type = \"model_exchange\"; rollback {}, polynomials on every input",
+            if model_exchange.can_get_and_set_fmu_state {
+                "with FMU states"
+            } else {
+                "from its states while no event falls in a step"
+            }
+        ));
     }
     let markers = markers(md);
     if !markers.is_empty() {

@@ -168,6 +168,17 @@ fn swap(text: String, from: &str, to: &str) -> String {
     text.replacen(from, to, 1)
 }
 
+/// Mass 2 held to its co-simulation interface (`fmi_type = "auto"` would run
+/// the workspace oscillator's model exchange where co-simulation lacks a
+/// capability: `auto_runs_model_exchange_where_co_simulation_lacks_a_capability`).
+fn co_simulation(text: String) -> String {
+    swap(
+        text,
+        "name = \"mass2\"\n",
+        "name = \"mass2\"\nfmi_type = \"co_simulation\"\n",
+    )
+}
+
 // ---------------------------------------------------------------- FMUs
 
 // The library's refusal of each broken or hostile FMU (the exact error variant, every
@@ -1248,7 +1259,7 @@ fn rollback_without_can_get_and_set_fmu_state_is_one_error_line() {
             r#"canGetAndSetFMUstate="false""#,
         )
     });
-    let sys = system_with(dir.path(), Some(&fmu), |t| t);
+    let sys = system_with(dir.path(), Some(&fmu), co_simulation);
     match setup_err(&sys) {
         MasterError::MissingCapability { capability, .. } => {
             assert_eq!(capability, "canGetAndSetFMUstate")
@@ -1256,6 +1267,67 @@ fn rollback_without_can_get_and_set_fmu_state_is_one_error_line() {
         other => panic!("{other:?}"),
     }
     run_error(&sys, &["'mass2'", "canGetAndSetFMUstate", "baumgarte"]);
+}
+
+/// Each capability the method needs and the oscillator's co-simulation
+/// interface is edited to lack: with `fmi_type = "auto"` mass 2 runs model
+/// exchange instead, and a note names the instance and the capability.
+#[test]
+fn auto_runs_model_exchange_where_co_simulation_lacks_a_capability() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, extra, needed_by) in [
+        (
+            "canGetAndSetFMUstate",
+            "",
+            "the predictor/corrector method baumgarte",
+        ),
+        (
+            "canHandleVariableCommunicationStepSize",
+            "--step-rtol",
+            "adaptive steps ([step_control])",
+        ),
+        (
+            "canInterpolateInputs",
+            "--order",
+            "coupling polynomials of degree k > 0",
+        ),
+    ] {
+        // The flag of the CoSimulation element only.
+        let fmu = edited_oscillator(dir.path(), flag, |xml| {
+            xml.lines()
+                .map(|line| match line.contains("<CoSimulation") {
+                    true => {
+                        line.replace(&format!(r#"{flag}="true""#), &format!(r#"{flag}="false""#))
+                    }
+                    false => line.to_string(),
+                })
+                .collect::<Vec<_>>()
+                .join("\n")
+        });
+        let sys = system_with(dir.path(), Some(&fmu), |t| t);
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", "out.csv"];
+        match extra {
+            "--step-rtol" => args.extend(["--step-rtol", "1e-4"]),
+            "--order" => args.extend(["--order", "1"]),
+            _ => {}
+        }
+        let out = tether(&args, dir.path());
+        let text = String::from_utf8_lossy(&out.stderr).replace("\n  ", " ");
+        assert_eq!(out.status.code(), Some(0), "{flag}: {text}");
+        let capability = if flag == "canInterpolateInputs" {
+            "inputs that take polynomials"
+        } else {
+            flag
+        };
+        let note = format!(
+            "note: 'mass2' runs model exchange (fmi_type = \"auto\"): its co-simulation interface lacks {capability}, which {needed_by} needs"
+        );
+        assert!(text.contains(&note), "{flag}: {text}");
+        assert!(
+            !text.contains("'mass1' runs model exchange"),
+            "{flag}: {text}"
+        );
+    }
 }
 
 #[test]
@@ -1267,7 +1339,7 @@ fn adaptive_steps_without_variable_step_sizes_are_one_error_line() {
             r#"canHandleVariableCommunicationStepSize="false""#,
         )
     });
-    let sys = system_with(dir.path(), Some(&fmu), |t| t);
+    let sys = system_with(dir.path(), Some(&fmu), co_simulation);
     // Fixed steps run; adaptive ones are refused naming the instance.
     let out = tether(&["run", sys.to_str().unwrap(), "--quiet"], dir.path());
     assert_eq!(out.status.code(), Some(0), "{out:?}");
@@ -1288,7 +1360,11 @@ fn adaptive_steps_without_variable_step_sizes_are_one_error_line() {
         )
     });
     let sys = system_with(dir.path(), Some(&nostate), |t| {
-        swap(t, "[coupling]", "[step_control]\nrtol = 1e-4\n\n[coupling]")
+        co_simulation(swap(
+            t,
+            "[coupling]",
+            "[step_control]\nrtol = 1e-4\n\n[coupling]",
+        ))
     });
     run_error(&sys, &["'mass2'", "canGetAndSetFMUstate"]);
     // The explicit method has no error estimate.
@@ -1319,7 +1395,7 @@ fn input_polynomials_without_can_interpolate_inputs_are_one_error_line() {
         )
     });
     let sys = system_with(dir.path(), Some(&fmu), |t| {
-        swap(t, "order = 0", "order = 1")
+        co_simulation(swap(t, "order = 0", "order = 1"))
     });
     match setup_err(&sys) {
         MasterError::NoPolynomialInput { reason, .. } => {
@@ -1335,12 +1411,12 @@ fn input_polynomials_without_can_interpolate_inputs_are_one_error_line() {
              the FMU does not declare canInterpolateInputs; use order = 0",
         ],
     );
+    // `tether info` says the FMU takes them through model exchange.
     let out = tether(&["info", fmu.to_str().unwrap()], dir.path());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains(
-            "coupling polynomials k > 0                 no: k > 0 needs inputs that take \
-             polynomials; the FMU does not declare canInterpolateInputs\n"
+            "coupling polynomials k > 0                 yes, through model exchange (fmi_type = \"auto\")\n"
         ),
         "{text}"
     );

@@ -58,7 +58,7 @@ fn info_shows_what_each_interface_allows() {
             "event indicators                       1\n",
             flag,
             "tether simulate --fmi-type model-exchange  yes: built-in integrator (bdf, esdirk, rk45, dop853)",
-            "model exchange coupled in a system         no: not yet",
+            "model exchange coupled in a system         yes: fmi_type = \"model_exchange\"; rollback with FMU states, polynomials on every input",
         ] {
             assert!(
                 text.contains(expected),
@@ -77,7 +77,9 @@ fn a_model_exchange_only_fmu_runs_as_model_exchange_by_default() {
     assert!(
         text.contains("FMI         2.0 model exchange\n")
             && text.contains("none: the FMU offers model exchange only")
-            && text.contains("predictor/corrector (baumgarte, weighted)  no: needs co-simulation"),
+            && text.contains("predictor/corrector (baumgarte, weighted)  yes, through model exchange (fmi_type = \"auto\")")
+            && text.contains("explicit                                   yes, through model exchange")
+            && text.contains("rollback from its states while no event falls in a step"),
         "{text}"
     );
     let csv = dir.path().join("saw.csv");
