@@ -277,7 +277,11 @@ pub fn describe(md: &ModelDescription) -> String {
     let polynomials = tether_master::polynomial_inputs::summary(md);
     line(format!(
         "  coupling polynomials k > 0                 {}",
-        if (md.co_simulation.is_some() && polynomials.starts_with("yes")) || !me {
+        // `auto` switches on the FMU's declaration, not on single inputs.
+        if (md.co_simulation.is_some()
+            && tether_master::polynomial_inputs::fmu_refusal(md).is_none())
+            || !me
+        {
             polynomials
         } else {
             through_me.to_string()

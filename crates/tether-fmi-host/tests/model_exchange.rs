@@ -159,7 +159,7 @@ fn an_integrator_that_cannot_reach_the_tolerance_is_the_same_line_isolated() {
         &e,
         &[
             "model-exchange instance 'saw' stopped at t = 0.",
-            "the integrator (rk45, rtol 0.00000001",
+            "the integrator (bdf, rtol 0.00000001",
             "cannot reach the tolerance",
         ],
     );

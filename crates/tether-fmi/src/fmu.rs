@@ -5,7 +5,7 @@ use std::sync::{Arc, PoisonError, RwLock};
 
 use crate::archive::{self, ExtractLimits, FmuDir};
 use crate::error::{Error, Result};
-use crate::instance::Integrator;
+use crate::integrator::Integrator;
 use crate::library::binary_path;
 use crate::model_description::{self, ModelDescription};
 use crate::shared::FmuShared;

@@ -62,6 +62,7 @@ mod error;
 pub mod exit_hook;
 mod fmu;
 mod instance;
+mod integrator;
 mod interface;
 mod library;
 mod logger;

@@ -56,7 +56,7 @@ mod inputs;
 mod integrator;
 mod state;
 
-pub use integrator::{Integrator, Method};
+pub use crate::integrator::{Integrator, Method};
 
 use calls::MeCalls;
 use inputs::InputPolynomial;
