@@ -356,7 +356,9 @@ class ModelExchange:
         self._put_states(reached)
         step_event = False
         if self.needs_completed:
-            step_event, terminate = self.model.completedIntegratorStep()
+            # A rollback may set a state from before this point.
+            step_event, terminate = self.model.completedIntegratorStep(
+                noSetFMUStatePriorToCurrentPoint=False)
             if terminate:
                 raise RunError(f"instance '{self.name}' asked to terminate the simulation at t = {reached}")
         return reached, state_event or step_event

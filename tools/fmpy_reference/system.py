@@ -339,7 +339,12 @@ def _from_document(doc):
             raise RunError(f"instance '{inst.name}': fmi_type = \"{fmi_type}\": expected \"auto\", "
                            f"\"co_simulation\" or \"model_exchange\"")
         inst.fmi_type = FMI_TYPES[fmi_type]
-        inst.integrator = _integrator(inst.name, t.take("integrator", "table", {}))
+        integrator = t.take("integrator", "table", None)
+        if integrator is not None:
+            inst.integrator = _integrator(inst.name, integrator)
+            if inst.fmi_type == "co_simulation":
+                raise RunError(f"instance '{inst.name}': integrator: applies to model exchange, "
+                               f"and fmi_type is \"co_simulation\"")
         t.done()
         system.instances.append(inst)
     for i, raw in enumerate(top.take("constraint", "array", [])):
