@@ -1,5 +1,6 @@
 """fmpy reference for `tether run`: the same system file, the same coupling
-equations, with fmpy's FMU2Slave as the FMI host.
+equations, with fmpy as the FMI host (model-exchange instances integrated by
+fmpy's CVode).
 
     python tools/fmpy_reference SYSTEM.toml [--method baumgarte|weighted|explicit]
         [--index 1|2|3] [--beta B] [--gamma G] [--a A] [--b B] [--mu MU] [--order K] [--epsilon E]
