@@ -1,5 +1,6 @@
 """fmpy reference for `tether run`: the same system file, the same coupling
-equations, with fmpy's FMU2Slave as the FMI host.
+equations, with fmpy as the FMI host (model-exchange instances integrated by
+fmpy's CVode).
 
     python tools/fmpy_reference SYSTEM.toml [--method baumgarte|weighted|explicit]
         [--index 1|2|3] [--beta B] [--gamma G] [--a A] [--b B] [--mu MU] [--order K] [--epsilon E]
@@ -116,7 +117,7 @@ def run(args):
     clock = time.perf_counter()
     master = Master(system)
     if not args.quiet:
-        for note in master.signals.loop_notes():
+        for note in [h.note for h in master.hosts if h.note] + master.signals.loop_notes():
             print(f"note: {note}", file=sys.stderr)
     failure = None
     try:
@@ -153,7 +154,8 @@ def run(args):
                       f"{c['not_converged']} steps not converged", file=sys.stderr)
             for h in master.hosts:
                 c = h.counters
-                print(f"  {h.name}: {c.do_steps} fmi2DoStep, {c.state_gets} fmi2GetFMUstate, "
+                steps = "model-exchange steps (CVode)" if h.model_exchange else "fmi2DoStep"
+                print(f"  {h.name}: {c.do_steps} {steps}, {c.state_gets} fmi2GetFMUstate, "
                       f"{c.state_sets} fmi2SetFMUstate", file=sys.stderr)
             print(f"  wall time {time.perf_counter() - clock:.2f} s; results: {out}", file=sys.stderr)
     finally:

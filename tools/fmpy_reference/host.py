@@ -1,9 +1,11 @@
-"""FMU instances driven through fmpy's FMU2Slave (FMI 2.0) or FMU3Slave (FMI 3.0):
-start values, coupled inputs (value and input derivatives), outputs and output
-derivatives, FMU states."""
+"""FMU instances driven through fmpy's FMU2Slave (FMI 2.0) or FMU3Slave (FMI 3.0),
+or through the model-exchange interface with an integrator of the reference's
+own (model_exchange.py): start values, coupled inputs (value and input
+derivatives), outputs and output derivatives, FMU states."""
 
 import atexit
 import os
+import re
 import shutil
 from ctypes import byref
 from xml.etree import ElementTree
@@ -13,6 +15,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
 from errors import RunError
+from model_exchange import Capabilities, ModelExchange
 
 # The type names of a Real variable: FMI 2.0 and FMI 3.0.
 REAL = ("Real", "Float64")
@@ -138,6 +141,76 @@ def intermediate_update_inputs(unzipped, md):
             and e.find("Dimension") is None]
 
 
+class Needs:
+    """What the system's method needs of one instance (Tether's rule, for
+    fmi_type = "auto"): rollback (and who needs it), steps of varying size,
+    inputs that take polynomials."""
+
+    def __init__(self, rollback=None, variable_steps=False, polynomial_inputs=False):
+        self.rollback = rollback
+        self.variable_steps = variable_steps
+        self.polynomial_inputs = polynomial_inputs
+
+    @staticmethod
+    def of(system, name):
+        constrained = is_constrained(system, name)
+        if system.step_control is not None:
+            rollback = "adaptive steps ([step_control])"
+        elif system.signal_iterations is not None:
+            rollback = "[signals] iterations"
+        elif constrained and system.method.kind != "explicit":
+            rollback = f"the predictor/corrector method {system.method.kind}"
+        else:
+            rollback = None
+        return Needs(rollback, system.step_control is not None, constrained and system.order > 0)
+
+    def lacking(self, rollback, variable_steps, polynomial_inputs):
+        """The first capability short of these needs, with who needs it."""
+        if self.rollback and not rollback:
+            return "canGetAndSetFMUstate", self.rollback
+        if self.variable_steps and not variable_steps:
+            return "canHandleVariableCommunicationStepSize", "adaptive steps ([step_control])"
+        if self.polynomial_inputs and not polynomial_inputs:
+            return "inputs that take polynomials", "coupling polynomials of degree k > 0"
+        return None
+
+
+def is_constrained(system, name):
+    """Whether a constraint, joint or coupling variable names instance `name`
+    (as `name.` at the start of a word)."""
+    prefix = re.compile(r"(?<![\w.])" + re.escape(name) + r"\.")
+    texts = []
+    for c in system.constraints:
+        texts += [c.position, c.velocity, c.acceleration, c.drives]
+    for j in system.joints:
+        texts += [j.i, j.j]
+    for v in system.variables:
+        texts += [v.drives, v.value]
+    return any(t is not None and prefix.search(t) for t in texts)
+
+
+def choose(spec, md, needs):
+    """Whether the instance runs model exchange, and a note when "auto" chose
+    it: as `fmi_type` says; for "auto" co-simulation, unless the FMU offers
+    only model exchange, or its co-simulation interface lacks a capability the
+    method needs of the instance and its model-exchange interface does not."""
+    kind = getattr(spec, "fmi_type", "auto")
+    if kind != "auto":
+        return kind == "model_exchange", None
+    cs, me = md.coSimulation, md.modelExchange
+    if me is None:
+        return False, None
+    if cs is None:
+        return True, f"'{spec.name}' runs model exchange: its FMU offers no co-simulation"
+    polynomials = bool(cs.canInterpolateInputs or getattr(cs, "providesIntermediateUpdate", False))
+    cs_lacks = needs.lacking(cs.canGetAndSetFMUstate, cs.canHandleVariableCommunicationStepSize, polynomials)
+    if cs_lacks is None or needs.lacking(me.canGetAndSetFMUstate, True, True) is not None:
+        return False, None
+    capability, by = cs_lacks
+    return True, (f"'{spec.name}' runs model exchange (fmi_type = \"auto\"): its co-simulation "
+                  f"interface lacks {capability}, which {by} needs")
+
+
 _NOT_SETTABLE = {"output", "local", "independent", "calculatedParameter"}
 
 
@@ -163,10 +236,11 @@ class Host:
 
     _unpacked = {}
 
-    def __init__(self, spec, experiment):
-        """Instantiate, set up the experiment ``(start, stop, tolerance)``,
-        then set the start values, as Tether does (FMI 2.0: some FMUs reset
-        their parameters in fmi2SetupExperiment)."""
+    def __init__(self, spec, experiment, needs=None):
+        """Instantiate for the interface `spec.fmi_type` and `needs` choose
+        (choose()), set up the experiment ``(start, stop, tolerance)``, then
+        set the start values, as Tether does (FMI 2.0: some FMUs reset their
+        parameters in fmi2SetupExperiment)."""
         self.name = spec.name
         path = spec.fmu
         if not os.path.exists(path):
@@ -175,10 +249,13 @@ class Host:
             md = read_model_description(path)
         except Exception as e:  # fmpy raises several types for unreadable FMUs
             raise RunError(f"instance '{self.name}': cannot read {path}: {_one_line(e)}") from None
-        if md.coSimulation is None:
+        self.model_exchange, self.note = choose(spec, md, needs or Needs())
+        if self.model_exchange and md.modelExchange is None:
+            raise RunError(f"instance '{self.name}': {path} is not a model-exchange FMU")
+        if not self.model_exchange and md.coSimulation is None:
             raise RunError(f"instance '{self.name}': {path} is not a co-simulation FMU")
         self.md = md
-        self.cs = md.coSimulation
+        self.cs = Capabilities(md.modelExchange) if self.model_exchange else md.coSimulation
         self.variables = {v.name: v for v in md.modelVariables}
         if os.path.isdir(path):
             unzipped = path
@@ -191,14 +268,18 @@ class Host:
                 atexit.register(shutil.rmtree, Host._unpacked[key], ignore_errors=True)
             unzipped = Host._unpacked[key]
         self.fmi3 = md.fmiVersion.startswith("3.")
-        slave = FMU3Reference if self.fmi3 else FMU2Slave
-        self.fmu = slave(guid=md.guid, unzipDirectory=unzipped,
-                         modelIdentifier=self.cs.modelIdentifier, instanceName=self.name)
-        if self.fmi3:
-            self.polynomial_inputs = intermediate_update_inputs(unzipped, md)
-            self.fmu.instantiate(self.polynomial_inputs)
+        if self.model_exchange:
+            # Instantiated for model exchange with its integrator.
+            self.fmu = ModelExchange(md, unzipped, self.name, getattr(spec, "integrator", None))
         else:
-            self.fmu.instantiate()
+            slave = FMU3Reference if self.fmi3 else FMU2Slave
+            self.fmu = slave(guid=md.guid, unzipDirectory=unzipped,
+                             modelIdentifier=self.cs.modelIdentifier, instanceName=self.name)
+            if self.fmi3:
+                self.polynomial_inputs = intermediate_update_inputs(unzipped, md)
+                self.fmu.instantiate(self.polynomial_inputs)
+            else:
+                self.fmu.instantiate()
         start, stop, tolerance = experiment
         self.fmu.setupExperiment(tolerance=tolerance, startTime=start, stopTime=stop)
         self.recorded = [v for v in md.modelVariables if v.causality == "output" and v.type in REAL]
@@ -217,7 +298,9 @@ class Host:
 
     def can_interpolate(self):
         """Polynomial inputs at all: FMI 2.0 canInterpolateInputs, FMI 3.0
-        providesIntermediateUpdate."""
+        providesIntermediateUpdate, model exchange always."""
+        if self.model_exchange:
+            return True
         if self.fmi3:
             return bool(getattr(self.cs, "providesIntermediateUpdate", False))
         return bool(self.cs.canInterpolateInputs)
@@ -225,6 +308,8 @@ class Host:
     def interpolates(self, vr):
         """Whether input vr takes a polynomial (FMI 3.0: declared
         intermediateUpdate="true")."""
+        if self.model_exchange:
+            return True
         return self.can_interpolate() and (not self.fmi3 or vr in self.polynomial_inputs)
 
     def variable(self, name):

@@ -14,7 +14,7 @@ import polynomials as poly
 import joints as jointkinds
 import rows as rowkinds
 from errors import RunError
-from host import REAL, Host, describe
+from host import REAL, Host, Needs, describe
 from linalg import solve
 from signals import Signals
 
@@ -32,7 +32,7 @@ class Master:
         stop = self.t0 + self.steps * self.h if self.control is None else system.stop
         try:
             for spec in system.instances:
-                self.hosts.append(Host(spec, (self.t0, stop, system.tolerance)))
+                self.hosts.append(Host(spec, (self.t0, stop, system.tolerance), Needs.of(system, spec.name)))
             self._wire()
             self.signals = Signals(system, self.hosts)
             if self.control is not None and not self.unknowns:

@@ -11,6 +11,10 @@ from dataclasses import dataclass, field
 
 from errors import RunError
 
+# The integrator methods of a model-exchange instance a system file may name
+# (Tether's); the reference integrates with CVode whichever is named.
+METHODS = ("rk45", "dop853")
+
 
 @dataclass
 class Method:
@@ -45,6 +49,32 @@ class Instance:
     name: str
     fmu: str
     parameters: dict = field(default_factory=dict)
+    # "auto" | "co_simulation" | "model_exchange" (`fmi_type`, any accepted spelling).
+    fmi_type: str = "auto"
+    # `integrator = { method, rtol, atol, max_step }` of a model-exchange instance.
+    integrator: dict = field(default_factory=dict)
+
+
+# Every spelling of `fmi_type`: Tether's and fmpy's.
+FMI_TYPES = {"auto": "auto", "any": "auto", "co_simulation": "co_simulation", "CoSimulation": "co_simulation",
+             "model_exchange": "model_exchange", "ModelExchange": "model_exchange",
+             "model-exchange": "model_exchange"}
+
+
+def _integrator(name, raw):
+    t = _Table(f"instance '{name}': integrator", raw)
+    method = t.take("method", "string", None)
+    if method is not None and method not in METHODS:
+        raise RunError(f"instance '{name}': integrator: method = \"{method}\": unknown "
+                       f"(known: {', '.join(METHODS)})")
+    settings = {"method": method}
+    for key in ("rtol", "atol", "max_step"):
+        v = t.take(key, "number", None)
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise RunError(f"instance '{name}': integrator: {key} = {_number(v)}: expected a finite number > 0")
+        settings[key] = v
+    t.done()
+    return settings
 
 
 @dataclass
@@ -304,6 +334,17 @@ def _from_document(doc):
             if not isinstance(value, (bool, int, float, str)):
                 raise RunError(f"instance '{inst.name}': parameter `{key}` must be a number, boolean or string")
         inst.parameters = params
+        fmi_type = t.take("fmi_type", "string", "auto")
+        if fmi_type not in FMI_TYPES:
+            raise RunError(f"instance '{inst.name}': fmi_type = \"{fmi_type}\": expected \"auto\", "
+                           f"\"co_simulation\" or \"model_exchange\"")
+        inst.fmi_type = FMI_TYPES[fmi_type]
+        integrator = t.take("integrator", "table", None)
+        if integrator is not None:
+            inst.integrator = _integrator(inst.name, integrator)
+            if inst.fmi_type == "co_simulation":
+                raise RunError(f"instance '{inst.name}': integrator: applies to model exchange, "
+                               f"and fmi_type is \"co_simulation\"")
         t.done()
         system.instances.append(inst)
     for i, raw in enumerate(top.take("constraint", "array", [])):
