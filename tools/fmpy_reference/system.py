@@ -13,7 +13,7 @@ from errors import RunError
 
 # The integrator methods of a model-exchange instance a system file may name
 # (Tether's); the reference integrates with CVode whichever is named.
-METHODS = ("rk45", "dop853")
+METHODS = ("bdf", "esdirk", "rk45", "dop853")
 
 
 @dataclass
