@@ -13,19 +13,7 @@ fn double_pendulum_errors(method: Method, stop: f64) -> Vec<f64> {
     HS.iter()
         .map(|&h| {
             let spec = with(example("double_pendulum.toml"), method, 0, h, stop);
-            let rec = run(&spec).expect("double pendulum runs");
-            let times = rec.times.clone();
-            let reference = double_pendulum::reference(&times);
-            max_error(
-                &rec,
-                &[
-                    "link1.B.r[1]",
-                    "link1.B.r[2]",
-                    "link2.B.r[1]",
-                    "link2.B.r[2]",
-                ],
-                |k, name| reference[k].column(name).expect("reference column"),
-            )
+            double_pendulum_error(&run(&spec).expect("double pendulum runs"))
         })
         .collect()
 }

@@ -54,9 +54,10 @@ fn forced(f: f64, x0: f64, v0: f64, tau: f64) -> f64 {
     xs + (-delta * tau).exp() * (a * (wd * tau).cos() + b * (wd * tau).sin())
 }
 
-#[test]
-fn a_force_step_between_steps_follows_the_closed_form() {
-    let mut sim = Simulation::new(&system()).unwrap();
+/// A force step F = 40 at t = 0.2 on mass 3 of `spec`, run to 0.5: the
+/// simulation and the largest |x − closed form| after the step.
+fn force_step(spec: &SystemSpec) -> (Simulation, f64) {
+    let mut sim = Simulation::new(spec).unwrap();
     while sim.time() < 0.2 - 1e-12 {
         sim.step().unwrap();
     }
@@ -65,19 +66,28 @@ fn a_force_step_between_steps_follows_the_closed_form() {
         sim.value("mass3.x").unwrap(),
         sim.value("mass3.v").unwrap(),
     );
-    let f = 40.0;
-    sim.set_parameter("mass3.F", &StartValue::Real(f)).unwrap();
+    sim.set_parameter("mass3.F", &StartValue::Real(FORCE))
+        .unwrap();
     let mut worst: f64 = 0.0;
     while sim.time() < 0.5 - 1e-12 {
         sim.step().unwrap();
         let x = sim.value("mass3.x").unwrap();
-        worst = worst.max((x - forced(f, x1, v1, sim.time() - t1)).abs());
+        worst = worst.max((x - forced(FORCE, x1, v1, sim.time() - t1)).abs());
     }
+    (sim, worst)
+}
+
+/// The force of [`force_step`].
+const FORCE: f64 = 40.0;
+
+#[test]
+fn a_force_step_between_steps_follows_the_closed_form() {
+    let (sim, worst) = force_step(&system());
     // The response moves the mass by ~f/c = 0.05; the FMU integrates exactly.
     assert!(worst < 1e-12, "max |x - closed form| = {worst:e}");
     let a = sim.value("mass3.a").unwrap();
     let (x, v) = (sim.value("mass3.x").unwrap(), sim.value("mass3.v").unwrap());
-    assert!((a - (f - C3 * x - D3 * v) / M3).abs() < 1e-9, "a = {a}");
+    assert!((a - (FORCE - C3 * x - D3 * v) / M3).abs() < 1e-9, "a = {a}");
 }
 
 #[test]
@@ -182,23 +192,7 @@ fn a_force_step_on_model_exchange_instances_follows_the_closed_form() {
             ..Default::default()
         });
     }
-    let mut sim = Simulation::new(&spec).unwrap();
-    while sim.time() < 0.2 - 1e-12 {
-        sim.step().unwrap();
-    }
-    let (t1, x1, v1) = (
-        sim.time(),
-        sim.value("mass3.x").unwrap(),
-        sim.value("mass3.v").unwrap(),
-    );
-    let f = 40.0;
-    sim.set_parameter("mass3.F", &StartValue::Real(f)).unwrap();
-    let mut worst: f64 = 0.0;
-    while sim.time() < 0.5 - 1e-12 {
-        sim.step().unwrap();
-        let x = sim.value("mass3.x").unwrap();
-        worst = worst.max((x - forced(f, x1, v1, sim.time() - t1)).abs());
-    }
+    let (_, worst) = force_step(&spec);
     eprintln!("model exchange: max |x - closed form| = {worst:e}");
     assert!(worst < 1e-9, "max |x - closed form| = {worst:e}");
 }

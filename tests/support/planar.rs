@@ -55,6 +55,22 @@ pub fn fitted_order(hs: &[f64], errors: &[f64]) -> f64 {
     sxy / sxx
 }
 
+/// The double pendulum's largest marker-position error (the free ends of
+/// both links) against the monolithic reference at the recorded times.
+pub fn double_pendulum_error(rec: &MemoryRecorder) -> f64 {
+    let reference = crate::reference::double_pendulum::reference(&rec.times);
+    max_error(
+        rec,
+        &[
+            "link1.B.r[1]",
+            "link1.B.r[2]",
+            "link2.B.r[1]",
+            "link2.B.r[2]",
+        ],
+        |k, name| reference[k].column(name).expect("reference column"),
+    )
+}
+
 /// Max over time of the difference of `columns` from the reference.
 pub fn max_error(
     rec: &MemoryRecorder,

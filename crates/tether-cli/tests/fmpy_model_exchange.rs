@@ -41,8 +41,7 @@
 
 mod common;
 
-use common::read_csv;
-use std::ffi::OsStr;
+use common::{fmpy_model_exchange, read_csv};
 use std::path::Path;
 use std::process::Command;
 
@@ -235,31 +234,7 @@ fn model_exchange_agrees_with_fmpy_on_the_reference_fmus() {
             return;
         };
         let theirs = dir.path().join(format!("fmpy-{standard}-{model}.csv"));
-        let (stop_text, step_text) = (stop.to_string(), step.to_string());
-        let start_text = start_of(&fmu).to_string();
-        let py: Vec<&OsStr> = vec![
-            fmu.as_os_str(),
-            theirs.as_os_str(),
-            OsStr::new("--start"),
-            OsStr::new(&start_text),
-            OsStr::new("--stop"),
-            OsStr::new(&stop_text),
-            OsStr::new("--step"),
-            OsStr::new(&step_text),
-            OsStr::new("--fmi-type"),
-            OsStr::new("ModelExchange"),
-            OsStr::new("--solver"),
-            OsStr::new("CVode"),
-            OsStr::new("--relative-tolerance"),
-            OsStr::new("1e-10"),
-        ];
-        let out = tether_tests::fmpy::run_script("simulate.py", &py).expect("run fmpy");
-        assert!(
-            out.status.success(),
-            "{standard} {model}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let (h2, r2) = read_csv(&theirs);
+        let (h2, r2) = fmpy_model_exchange(&fmu, &theirs, (start_of(&fmu), stop, step), &[]);
         let theirs_events = fmpy_events(&r2);
         for (method, bounds) in METHODS.into_iter().zip(bounds) {
             let Some((bound, event_bound)) = bounds else {

@@ -43,12 +43,11 @@
 mod common;
 
 use std::collections::HashMap;
-use std::ffi::OsStr;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::Mutex;
 
-use common::read_csv;
+use common::fmpy_model_exchange;
 use tether_fmi::{Fmu, FmuInstance, Integrator, MeInstance, Method};
 
 const MU: f64 = 1000.0;
@@ -205,30 +204,8 @@ fn deviation(ours: &[[f64; 3]], theirs: &[[f64; 3]]) -> f64 {
 /// fmpy's model-exchange run (CVode, rtol 1e-10) on the same grid.
 fn fmpy(fmu: &Path, dir: &Path, standard: &str) -> Vec<[f64; 3]> {
     let out_path = dir.join(format!("fmpy-{standard}.csv"));
-    let (stop, step, mu) = (STOP.to_string(), STEP.to_string(), format!("mu={MU}"));
-    let args: Vec<&OsStr> = vec![
-        fmu.as_os_str(),
-        out_path.as_os_str(),
-        OsStr::new("--stop"),
-        OsStr::new(&stop),
-        OsStr::new("--step"),
-        OsStr::new(&step),
-        OsStr::new("--set"),
-        OsStr::new(&mu),
-        OsStr::new("--fmi-type"),
-        OsStr::new("ModelExchange"),
-        OsStr::new("--solver"),
-        OsStr::new("CVode"),
-        OsStr::new("--relative-tolerance"),
-        OsStr::new("1e-10"),
-    ];
-    let out = tether_tests::fmpy::run_script("simulate.py", &args).expect("run fmpy");
-    assert!(
-        out.status.success(),
-        "{standard}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let (header, rows) = read_csv(&out_path);
+    let mu = format!("mu={MU}");
+    let (header, rows) = fmpy_model_exchange(fmu, &out_path, (0.0, STOP, STEP), &[&mu]);
     let column = |n: &str| header.iter().position(|h| h == n).unwrap();
     let (c0, c1) = (column("x0"), column("x1"));
     rows.iter().map(|r| [r[0], r[c0], r[c1]]).collect()

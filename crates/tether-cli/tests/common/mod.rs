@@ -68,3 +68,41 @@ pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
         .collect();
     (header, rows)
 }
+
+/// fmpy's model-exchange run of `fmu` (`simulate_fmu(..., fmi_type=
+/// "ModelExchange", solver="CVode", relative_tolerance=1e-10)`, through
+/// tests/fmpy/simulate.py) on the grid `start`, `start + step`, … `stop`
+/// with `--set` values `sets`, into `out`: its header and rows.
+pub fn fmpy_model_exchange(
+    fmu: &Path,
+    out: &Path,
+    (start, stop, step): (f64, f64, f64),
+    sets: &[&str],
+) -> (Vec<String>, Vec<Vec<f64>>) {
+    let grid = [start, stop, step].map(|v| v.to_string());
+    let mut args: Vec<&std::ffi::OsStr> = vec![fmu.as_os_str(), out.as_os_str()];
+    for (flag, value) in ["--start", "--stop", "--step"].iter().zip(&grid) {
+        args.extend([std::ffi::OsStr::new(flag), std::ffi::OsStr::new(value)]);
+    }
+    for set in sets {
+        args.extend([std::ffi::OsStr::new("--set"), std::ffi::OsStr::new(set)]);
+    }
+    for arg in [
+        "--fmi-type",
+        "ModelExchange",
+        "--solver",
+        "CVode",
+        "--relative-tolerance",
+        "1e-10",
+    ] {
+        args.push(std::ffi::OsStr::new(arg));
+    }
+    let run = tether_tests::fmpy::run_script("simulate.py", &args).expect("run fmpy");
+    assert!(
+        run.status.success(),
+        "{}: {}",
+        fmu.display(),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    read_csv(out)
+}

@@ -518,6 +518,12 @@ fn integration_error(rhs: &Rhs<'_>, settings: &Settings, failure: Failure) -> Er
             "the model became stiff for this explicit method".to_string(),
         ),
     };
+    integrator_stopped(rhs, settings, tau, &what)
+}
+
+/// One line naming the instance, the time `t0 + tau`, the integrator's
+/// settings and `what` stopped it.
+fn integrator_stopped(rhs: &Rhs<'_>, settings: &Settings, tau: f64, what: &str) -> Error {
     Error::ModelExchange {
         instance: rhs.fmu.borrow().name().to_owned(),
         time: rhs.t0 + tau,

@@ -394,16 +394,7 @@ fn solver_error(rhs: &Rhs<'_>, settings: &Settings, tau: f64, e: &DiffsolError) 
         }
         other => format!("failed: {}", one_line(&other.to_string())),
     };
-    Error::ModelExchange {
-        instance: rhs.fmu.borrow().name().to_owned(),
-        time: rhs.t0 + tau,
-        cause: format!(
-            "the integrator ({}, rtol {}, atol {} × nominals) {what}",
-            settings.method.name(),
-            settings.rtol,
-            settings.atol
-        ),
-    }
+    super::integrator_stopped(rhs, settings, tau, &what)
 }
 
 #[cfg(test)]
