@@ -450,14 +450,6 @@ impl MeInstance {
                 .into(),
         }
     }
-
-    fn unsupported(&self, function: &'static str, what: &str) -> Error {
-        Error::InvalidArgument {
-            function,
-            instance: self.inner.name().to_owned(),
-            message: format!("{what} of a model-exchange instance is not supported yet"),
-        }
-    }
 }
 
 impl FmuInstance for MeInstance {
@@ -584,7 +576,13 @@ impl FmuInstance for MeInstance {
         _orders: &[i32],
         _out: &mut [f64],
     ) -> Result<()> {
-        Err(self.unsupported("get_output_derivatives", "reading output derivatives"))
+        Err(Error::InvalidArgument {
+            function: "get_output_derivatives",
+            instance: self.inner.name().to_owned(),
+            message: "a model-exchange instance has no output derivatives \
+                      (its capabilities say order 0)"
+                .into(),
+        })
     }
     fn step(&mut self, t: f64, h: f64) -> Result<()> {
         self.advance(t, h)
