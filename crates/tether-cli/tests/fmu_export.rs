@@ -235,29 +235,15 @@ fn an_ssp_exports_with_its_root_connectors_as_the_interface() {
 /// (tests/fmpy/exported_fmu.py, all its checks).
 #[test]
 fn an_exported_system_with_an_isolated_member_runs_from_the_fmu_alone() {
-    let osc = oscillator();
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("examples/rigid_pair_export.toml")).unwrap();
-    let text = text
-        .replace("\"../target/fmus/oscillator.fmu\"", &format!("{osc:?}"))
-        .replace(
+    let (fmu, ours) = export_and_run(dir.path(), "isolated", |text| {
+        let text = text.replace(
             "name = \"mass2\"\n",
             "name = \"mass2\"\nisolation = \"process\"\n",
         );
-    assert!(text.contains("isolation = \"process\""));
-    let system = dir.path().join("isolated.toml");
-    std::fs::write(&system, text).unwrap();
-    let fmu = dir.path().join("isolated.fmu");
-    let ours = dir.path().join("run.csv");
-    let system_arg = system.to_str().unwrap();
-    success(&tether(
-        &["fmu", "export", system_arg, "--out", fmu.to_str().unwrap()],
-        dir.path(),
-    ));
-    success(&tether(
-        &["run", system_arg, "--out", ours.to_str().unwrap()],
-        dir.path(),
-    ));
+        assert!(text.contains("isolation = \"process\""));
+        text
+    });
     let mut archive = zip::ZipArchive::new(std::fs::File::open(&fmu).unwrap()).unwrap();
     let names: Vec<String> = (0..archive.len())
         .map(|i| archive.by_index(i).unwrap().name().unwrap().to_string())
@@ -292,29 +278,16 @@ fn an_exported_system_with_an_isolated_member_runs_from_the_fmu_alone() {
 /// in a fresh instance, is identical.
 #[test]
 fn an_exported_system_of_model_exchange_members_runs_in_fmpy_bit_for_bit() {
-    let osc = oscillator();
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(root().join("examples/rigid_pair_export.toml")).unwrap();
     let me = "fmi_type = \"model_exchange\"\nintegrator = { method = \"rk45\", rtol = 1e-10 }\n";
-    let text = text
-        .replace("\"../target/fmus/oscillator.fmu\"", &format!("{osc:?}"))
-        .replace("name = \"mass1\"\n", &format!("name = \"mass1\"\n{me}"))
-        .replace("name = \"mass2\"\n", &format!("name = \"mass2\"\n{me}"));
-    assert_eq!(text.matches("model_exchange").count(), 2);
-    let system = dir.path().join("me.toml");
-    std::fs::write(&system, text).unwrap();
-    let fmu = dir.path().join("me.fmu");
-    let ours = dir.path().join("run.csv");
+    let (fmu, ours) = export_and_run(dir.path(), "me", |text| {
+        let text = text
+            .replace("name = \"mass1\"\n", &format!("name = \"mass1\"\n{me}"))
+            .replace("name = \"mass2\"\n", &format!("name = \"mass2\"\n{me}"));
+        assert_eq!(text.matches("model_exchange").count(), 2);
+        text
+    });
     let theirs = dir.path().join("fmpy.csv");
-    let system_arg = system.to_str().unwrap();
-    success(&tether(
-        &["fmu", "export", system_arg, "--out", fmu.to_str().unwrap()],
-        dir.path(),
-    ));
-    success(&tether(
-        &["run", system_arg, "--out", ours.to_str().unwrap()],
-        dir.path(),
-    ));
     fmpy_checks(
         "exported_fmu.py",
         &[fmu.as_os_str(), theirs.as_os_str()],
@@ -325,6 +298,29 @@ fn an_exported_system_of_model_exchange_members_runs_in_fmpy_bit_for_bit() {
         ],
     );
     same_columns(&ours, &theirs, &PAIR_COLUMNS, 1001);
+}
+
+/// examples/rigid_pair_export.toml on the workspace oscillator, through
+/// `edit`, as `<dir>/<name>.toml`: exported to `<dir>/<name>.fmu` and run by
+/// `tether run` into `<dir>/run.csv`; the FMU's and the CSV's paths.
+fn export_and_run(dir: &Path, name: &str, edit: impl Fn(String) -> String) -> (PathBuf, PathBuf) {
+    let osc = oscillator();
+    let text = std::fs::read_to_string(root().join("examples/rigid_pair_export.toml")).unwrap();
+    let text = edit(text.replace("\"../target/fmus/oscillator.fmu\"", &format!("{osc:?}")));
+    let system = dir.join(format!("{name}.toml"));
+    std::fs::write(&system, text).unwrap();
+    let fmu = dir.join(format!("{name}.fmu"));
+    let ours = dir.join("run.csv");
+    let system_arg = system.to_str().unwrap();
+    success(&tether(
+        &["fmu", "export", system_arg, "--out", fmu.to_str().unwrap()],
+        dir,
+    ));
+    success(&tether(
+        &["run", system_arg, "--out", ours.to_str().unwrap()],
+        dir,
+    ));
+    (fmu, ours)
 }
 
 /// The rigid pair with `export` as its [export] table.

@@ -27,8 +27,7 @@
 
 mod common;
 
-use common::read_csv;
-use std::ffi::OsStr;
+use common::{fmpy_model_exchange, read_csv};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -152,27 +151,8 @@ fn model_exchange_builds_agree_with_fmpy() {
             let ours = dir.path().join("tether.csv");
             let theirs = dir.path().join("fmpy.csv");
             tether(&fmu, &ours, stop, step, &ME);
-            let py: Vec<&OsStr> = [
-                fmu.as_os_str(),
-                theirs.as_os_str(),
-                OsStr::new("--stop"),
-                OsStr::new(stop),
-                OsStr::new("--step"),
-                OsStr::new(step),
-                OsStr::new("--fmi-type"),
-                OsStr::new("ModelExchange"),
-                OsStr::new("--solver"),
-                OsStr::new("CVode"),
-                OsStr::new("--relative-tolerance"),
-                OsStr::new("1e-10"),
-            ]
-            .to_vec();
-            let out = tether_tests::fmpy::run_script("simulate.py", &py).expect("run fmpy");
-            assert!(
-                out.status.success(),
-                "{model} {standard}: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
+            let grid = (0.0, stop.parse().unwrap(), step.parse().unwrap());
+            fmpy_model_exchange(&fmu, &theirs, grid, &[]);
             let d = deviation(&ours, &theirs);
             println!(
                 "{model} {standard}: Tether model exchange vs fmpy (CVode), max |Δ|/peak {d:.2e}"

@@ -166,6 +166,7 @@ const FUNCTIONS: &[&str] = &[
     "fmi3UpdateDiscreteStates",
     "fmi3EnterContinuousTimeMode",
     "fmi3CompletedIntegratorStep",
+    "fmi3GetDirectionalDerivative",
 ];
 
 /// The FMI function operation `code` calls on a co-simulation instance of
@@ -933,6 +934,9 @@ mod tests {
             "fmi3UpdateDiscreteStates",
             "fmi3EnterContinuousTimeMode",
             "fmi3CompletedIntegratorStep",
+            // The implicit methods' Jacobian.
+            "fmi2GetDirectionalDerivative",
+            "fmi3GetDirectionalDerivative",
         ] {
             assert_eq!(function_name(name), name);
         }
