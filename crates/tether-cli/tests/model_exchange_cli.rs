@@ -246,3 +246,46 @@ fn an_fmu_requesting_the_end_ends_the_model_exchange_run() {
     let text = std::fs::read_to_string(&csv).unwrap();
     assert!(text.ends_with("9.0,10.0\n"), "{text}");
 }
+
+/// The stiff Reference FMU Roberts (its archive lists `extra/` twice, each
+/// copy the same): the default bdf runs it to its stop time, 1e8; rk45
+/// stops as the model turns stiff, t ≈ 1.8, in one line naming it.
+#[test]
+fn roberts_runs_with_bdf_and_stops_rk45_as_stiff() {
+    let Some(fmu) = reference("fmi3", "Roberts") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("roberts.csv");
+    let args = |method: &'static str| {
+        vec![
+            os("simulate"),
+            fmu.as_os_str(),
+            os("--fmi-type"),
+            os("model-exchange"),
+            os("--tolerance"),
+            os("1e-8"),
+            os("--integrator"),
+            os(method),
+            os("--out"),
+            csv.as_os_str(),
+        ]
+    };
+    succeeded(&tether(&args("method=bdf")));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(
+        text.lines().last().unwrap().starts_with("100000000"),
+        "{text}"
+    );
+    let err = error_line(&tether(&args("method=rk45")));
+    let t: f64 = err
+        .split("stopped at t = ")
+        .nth(1)
+        .and_then(|rest| rest.split(':').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(
+        err.contains("'Roberts'") && err.contains("became stiff") && (1.0..3.0).contains(&t),
+        "{err}"
+    );
+}
